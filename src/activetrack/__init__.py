@@ -1,0 +1,43 @@
+"""activetrack: multi-robot active target tracking with range and bearing sensors.
+
+The core (this package) holds the paper's mathematics and no RL: target motion models
+(eq. 1-2), the range-bearing measurement model (eq. 4-10), the EKF (eq. 3, 11), the
+covariance objective (eq. 12, 17-19), the analytic single-sensor optimum (Section IV-A),
+the planning problem and scenario presets. The layers ``activetrack.envs``,
+``activetrack.baselines`` and ``activetrack.train`` build on it, in that order.
+"""
+
+from activetrack.ekf import ExtendedKalmanFilter
+from activetrack.motion import (
+    LinearMotionModel,
+    constant_acceleration,
+    constant_velocity,
+    from_continuous,
+    from_matrices,
+)
+from activetrack.objective import (
+    lemma2_rotation,
+    posterior_position_covariance,
+    posterior_trace,
+)
+from activetrack.problem import Planner, PlanningProblem
+from activetrack.scenarios import PRESETS, Scenario, make_scenario
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "PRESETS",
+    "ExtendedKalmanFilter",
+    "LinearMotionModel",
+    "PlanningProblem",
+    "Planner",
+    "Scenario",
+    "constant_acceleration",
+    "constant_velocity",
+    "from_continuous",
+    "from_matrices",
+    "lemma2_rotation",
+    "make_scenario",
+    "posterior_position_covariance",
+    "posterior_trace",
+]

@@ -1,0 +1,43 @@
+"""Closed-form 2x2 linear algebra, batched over leading axes.
+
+The planners evaluate the 2x2 posterior information of eq. (17) millions of times;
+closed forms are exact and avoid LAPACK call overhead on tiny matrices.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from activetrack.validation import FloatArray
+
+
+def det2(A: FloatArray) -> FloatArray:
+    """Return the determinants of ``A`` with shape (..., 2, 2)."""
+    return A[..., 0, 0] * A[..., 1, 1] - A[..., 0, 1] * A[..., 1, 0]
+
+
+def inv2(A: FloatArray) -> FloatArray:
+    """Return the inverses of ``A`` with shape (..., 2, 2) (adjugate over determinant)."""
+    out = np.empty_like(A)
+    d = det2(A)
+    out[..., 0, 0] = A[..., 1, 1] / d
+    out[..., 1, 1] = A[..., 0, 0] / d
+    out[..., 0, 1] = -A[..., 0, 1] / d
+    out[..., 1, 0] = -A[..., 1, 0] / d
+    return out
+
+
+def trace_inv2(A: FloatArray) -> FloatArray:
+    """Return ``tr(A^{-1})`` for 2x2 ``A``: ``tr(A) / det(A)``."""
+    return (A[..., 0, 0] + A[..., 1, 1]) / det2(A)
+
+
+def rotation(phi: float | FloatArray) -> FloatArray:
+    """Return the rotation matrix ``C(phi)`` (shape (..., 2, 2)) used throughout the paper."""
+    c, s = np.cos(phi), np.sin(phi)
+    return np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)
+
+
+def symmetrize(A: FloatArray) -> FloatArray:
+    """Return ``(A + A^T) / 2`` over the last two axes."""
+    return 0.5 * (A + np.swapaxes(A, -1, -2))

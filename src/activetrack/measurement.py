@@ -1,0 +1,67 @@
+"""Range-bearing measurement model, eq. (4)-(10).
+
+Sensor ``i`` at ``p_S_i`` with orientation ``phi_i`` measures the distance and bearing
+to the target at ``p_T``: ``d_i = ||p_T - p_S_i||``,
+``theta_i = atan2(dy, dx) - phi_i`` (eq. 4), with noise ``R_i = diag(sigma_d_i^2,
+sigma_theta_i^2)``. The Jacobian rows with respect to the target position are eq. (9):
+``h_d = -p / ||p||`` and ``h_theta = J p / (p^T p)``, with ``p = p_S - p_T`` (eq. 10) and
+``J = C(-pi/2)``. All functions broadcast over leading batch axes; the sensor axis is the
+second to last.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from activetrack.validation import FloatArray
+
+#: ``J = C(-pi/2)`` of eq. (9).
+J = np.array([[0.0, 1.0], [-1.0, 0.0]])
+
+
+def wrap_angle(angle: FloatArray | float) -> FloatArray:
+    """Return ``angle`` wrapped to ``[-pi, pi)``."""
+    return (np.asarray(angle) + np.pi) % (2.0 * np.pi) - np.pi
+
+
+def range_bearing(
+    target_pos: FloatArray, sensor_pos: FloatArray, orientation: FloatArray | float = 0.0
+) -> FloatArray:
+    """Return noise-free ``[d_i, theta_i]`` of eq. (4), shape (..., M, 2), bearing wrapped.
+
+    ``target_pos`` has shape (..., 2), ``sensor_pos`` (..., M, 2), ``orientation`` (..., M).
+    """
+    delta = target_pos[..., None, :] - sensor_pos
+    d = np.hypot(delta[..., 0], delta[..., 1])
+    theta = wrap_angle(np.arctan2(delta[..., 1], delta[..., 0]) - orientation)
+    return np.stack([d, theta], axis=-1)
+
+
+def jacobian(target_pos: FloatArray, sensor_pos: FloatArray) -> FloatArray:
+    """Return the per-sensor Jacobians ``[h_d^T; h_theta^T]`` of eq. (9), shape (..., M, 2, 2).
+
+    Derivatives are with respect to the target position; the velocity columns of eq. (6)
+    are zero and left out.
+    """
+    p = sensor_pos - target_pos[..., None, :]
+    n2 = p[..., 0] ** 2 + p[..., 1] ** 2
+    n = np.sqrt(n2)
+    h_d = -p / n[..., None]
+    h_theta = np.stack([p[..., 1], -p[..., 0]], axis=-1) / n2[..., None]
+    return np.stack([h_d, h_theta], axis=-2)
+
+
+def sample(
+    target_pos: FloatArray,
+    sensor_pos: FloatArray,
+    sigma_d2: FloatArray,
+    sigma_theta2: FloatArray,
+    rng: np.random.Generator,
+    orientation: FloatArray | float = 0.0,
+) -> FloatArray:
+    """Return noisy measurements of eq. (4), shape (..., M, 2), bearing wrapped."""
+    z = range_bearing(target_pos, sensor_pos, orientation)
+    std = np.stack(np.broadcast_arrays(np.sqrt(sigma_d2), np.sqrt(sigma_theta2)), axis=-1)
+    z = z + rng.standard_normal(z.shape) * std
+    z[..., 1] = wrap_angle(z[..., 1])
+    return z

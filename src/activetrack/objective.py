@@ -1,0 +1,117 @@
+"""The planning objective: trace of the posterior position covariance, eq. (12), (17)-(19).
+
+By Lemma 1 the posterior position covariance after all sensors measure is
+``(P11^{-1} + sum_i H_i^T R_i^{-1} H_i)^{-1}`` (eq. 12), where each sensor at relative
+position ``p_i = p_S_i - p_T_hat`` contributes the information
+``p p^T / (sigma_d^2 p^T p) + J p p^T J^T / (sigma_theta^2 (p^T p)^2)`` (eq. 17).
+Lemma 2 rotates the prior information into its eigenbasis (eq. 18).
+
+Every function is vectorized over a leading batch axis of relative positions
+(shape (..., M, 2)): exhaustive search evaluates millions of candidate configurations.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from activetrack.linalg2 import inv2, rotation, trace_inv2
+from activetrack.validation import (
+    FloatArray,
+    as_finite,
+    check_trailing_shape,
+    positive,
+    spd,
+)
+
+
+def sensor_information(
+    rel: FloatArray, sigma_d2: FloatArray, sigma_theta2: FloatArray
+) -> FloatArray:
+    """Return each sensor's position information ``H_i^T R_i^{-1} H_i`` (eq. 17), (..., M, 2, 2).
+
+    Unchecked kernel: ``rel`` must be non-zero and finite, variances positive.
+    """
+    x, y = rel[..., 0], rel[..., 1]
+    xx, xy, yy = x * x, x * y, y * y
+    n2 = xx + yy
+    wd = 1.0 / (sigma_d2 * n2)
+    wt = 1.0 / (sigma_theta2 * n2 * n2)
+    a = wd * xx + wt * yy
+    b = (wd - wt) * xy
+    c = wd * yy + wt * xx
+    return np.stack([np.stack([a, b], -1), np.stack([b, c], -1)], -2)
+
+
+def total_information(
+    prior_info: FloatArray, rel: FloatArray, sigma_d2: FloatArray, sigma_theta2: FloatArray
+) -> FloatArray:
+    """Return the posterior position information ``P11^{-1} + sum_i info_i`` (..., 2, 2)."""
+    return prior_info + sensor_information(rel, sigma_d2, sigma_theta2).sum(axis=-3)
+
+
+def _check(prior_cov: ArrayLike, rel: ArrayLike, sigma_d2: ArrayLike, sigma_theta2: ArrayLike):
+    prior_cov = check_trailing_shape("prior_cov", spd("prior_cov", prior_cov), (2, 2))
+    rel = check_trailing_shape("rel_positions", as_finite("rel_positions", rel), (2,))
+    if rel.ndim < 2:
+        raise ValueError(f"rel_positions must have shape (..., M, 2), got {rel.shape}")
+    if np.any(np.hypot(rel[..., 0], rel[..., 1]) == 0.0):
+        raise ValueError(
+            "rel_positions must be non-zero: a sensor exactly on the target has no bearing"
+        )
+    m = rel.shape[-2]
+    sd2 = positive("sigma_d2", sigma_d2)
+    st2 = positive("sigma_theta2", sigma_theta2)
+    for name, s in (("sigma_d2", sd2), ("sigma_theta2", st2)):
+        if s.ndim > 0 and s.shape[-1] != m:
+            raise ValueError(
+                f"{name} must be a scalar or have {m} entries (one per sensor), got {s.shape}"
+            )
+    return prior_cov, rel, sd2, st2
+
+
+def posterior_position_covariance(
+    prior_cov: ArrayLike, rel_positions: ArrayLike, sigma_d2: ArrayLike, sigma_theta2: ArrayLike
+) -> FloatArray:
+    """Return the posterior position covariance of eq. (12)/(17), shape (..., 2, 2).
+
+    Args:
+        prior_cov: predicted position covariance ``P(k+1|k)_11``, shape (2, 2) or (..., 2, 2).
+        rel_positions: next sensor positions minus the predicted target position, (..., M, 2).
+        sigma_d2: range noise variances, scalar or (M,).
+        sigma_theta2: bearing noise variances, scalar or (M,).
+    """
+    prior_cov, rel, sd2, st2 = _check(prior_cov, rel_positions, sigma_d2, sigma_theta2)
+    return inv2(total_information(inv2(prior_cov), rel, sd2, st2))
+
+
+def posterior_trace(
+    prior_cov: ArrayLike, rel_positions: ArrayLike, sigma_d2: ArrayLike, sigma_theta2: ArrayLike
+) -> FloatArray:
+    """Return the objective of eq. (17): the trace of :func:`posterior_position_covariance`."""
+    prior_cov, rel, sd2, st2 = _check(prior_cov, rel_positions, sigma_d2, sigma_theta2)
+    return trace_inv2(total_information(inv2(prior_cov), rel, sd2, st2))
+
+
+def lemma2_rotation(prior_info: ArrayLike) -> tuple[FloatArray, FloatArray]:
+    """Return ``(phi0, lambdas)`` with ``prior_info = C(phi0) diag(l1, l2) C(-phi0)``, l1 >= l2.
+
+    Lemma 2: in the frame ``s = C(-phi0) p`` the prior information is diagonal and the
+    objective keeps its form (eq. 18). Batched over leading axes.
+    """
+    A = np.asarray(prior_info, dtype=np.float64)
+    a, b, c = A[..., 0, 0], A[..., 0, 1], A[..., 1, 1]
+    phi0 = 0.5 * np.arctan2(2.0 * b, a - c)  # eigenvector angle of the larger eigenvalue
+    mean = 0.5 * (a + c)
+    rad = np.hypot(0.5 * (a - c), b)
+    return phi0, np.stack([mean + rad, mean - rad], axis=-1)
+
+
+def to_eigenframe(phi0: FloatArray | float, p: FloatArray) -> FloatArray:
+    """Return ``s = C(-phi0) p`` for points ``p`` of shape (..., 2)."""
+    return np.einsum("...ij,...j->...i", rotation(-np.asarray(phi0)), p)
+
+
+def from_eigenframe(phi0: FloatArray | float, s: FloatArray) -> FloatArray:
+    """Return ``p = C(phi0) s`` for points ``s`` of shape (..., 2)."""
+    return np.einsum("...ij,...j->...i", rotation(np.asarray(phi0)), s)

@@ -1,0 +1,94 @@
+"""Input checks shared by the public API.
+
+Every public function validates its arguments here so that a user's typo raises a
+``ValueError`` naming the parameter and the allowed range, instead of failing deep
+inside numpy. Hot loops call the unchecked private kernels directly.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+FloatArray = NDArray[np.float64]
+
+
+def as_finite(name: str, value: ArrayLike, shape: Sequence[int | None] | None = None) -> FloatArray:
+    """Return ``value`` as a float64 array, checking that it is finite and of ``shape``.
+
+    ``shape`` may contain ``None`` for a free dimension; a leading ``...`` is not supported,
+    use :func:`check_trailing_shape` for batched inputs.
+    """
+    try:
+        arr = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{name} must be numeric, got {value!r}") from exc
+    if shape is not None:
+        if arr.ndim != len(shape) or any(
+            s is not None and s != a for s, a in zip(shape, arr.shape, strict=True)
+        ):
+            want = "(" + ", ".join("n" if s is None else str(s) for s in shape) + ")"
+            raise ValueError(f"{name} must have shape {want}, got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} must be finite (no NaN or inf), got {value!r}")
+    return arr
+
+
+def check_trailing_shape(name: str, arr: FloatArray, trailing: tuple[int, ...]) -> FloatArray:
+    """Return ``arr`` after checking that its last dimensions equal ``trailing``."""
+    if arr.ndim < len(trailing) or arr.shape[arr.ndim - len(trailing) :] != trailing:
+        raise ValueError(
+            f"{name} must have shape (..., {', '.join(map(str, trailing))}), got {arr.shape}"
+        )
+    return arr
+
+
+def positive(name: str, value: ArrayLike, *, allow_zero: bool = False) -> FloatArray:
+    """Return ``value`` as a finite float64 array whose entries are > 0 (or >= 0)."""
+    arr = as_finite(name, value)
+    bad = arr < 0 if allow_zero else arr <= 0
+    if np.any(bad):
+        bound = ">= 0" if allow_zero else "> 0"
+        raise ValueError(f"{name} must be {bound}, got {value!r}")
+    return arr
+
+
+def per_sensor(name: str, value: ArrayLike, n: int, *, allow_zero: bool = False) -> FloatArray:
+    """Return a positive per-sensor parameter broadcast to shape ``(n,)``."""
+    arr = positive(name, value, allow_zero=allow_zero)
+    if arr.ndim == 0:
+        return np.full(n, float(arr))
+    if arr.shape != (n,):
+        raise ValueError(f"{name} must be a scalar or have shape ({n},), got {arr.shape}")
+    return arr
+
+
+def spd(name: str, value: ArrayLike, *, rtol: float = 1e-9) -> FloatArray:
+    """Return ``value`` checked to be a finite, symmetric, positive definite matrix (batched ok)."""
+    arr = as_finite(name, value)
+    if arr.ndim < 2 or arr.shape[-1] != arr.shape[-2]:
+        raise ValueError(f"{name} must be a square matrix (..., n, n), got shape {arr.shape}")
+    scale = np.max(np.abs(arr), axis=(-2, -1), keepdims=True)
+    asym = np.abs(arr - np.swapaxes(arr, -1, -2))
+    if np.any(asym > rtol * np.maximum(scale, 1e-300)):
+        raise ValueError(f"{name} must be symmetric")
+    try:
+        np.linalg.cholesky(0.5 * (arr + np.swapaxes(arr, -1, -2)))
+    except np.linalg.LinAlgError as exc:
+        raise ValueError(f"{name} must be positive definite") from exc
+    return arr
+
+
+def psd(name: str, value: ArrayLike, *, rtol: float = 1e-9) -> FloatArray:
+    """Return ``value`` checked to be a finite, symmetric, positive semidefinite matrix."""
+    arr = as_finite(name, value)
+    if arr.ndim != 2 or arr.shape[0] != arr.shape[1]:
+        raise ValueError(f"{name} must be a square matrix, got shape {arr.shape}")
+    scale = max(float(np.max(np.abs(arr))), 1e-300)
+    if np.any(np.abs(arr - arr.T) > rtol * scale):
+        raise ValueError(f"{name} must be symmetric")
+    if np.min(np.linalg.eigvalsh(arr)) < -1e-10 * scale:
+        raise ValueError(f"{name} must be positive semidefinite")
+    return arr
