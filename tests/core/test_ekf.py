@@ -1,0 +1,162 @@
+"""EKF: Lemma 1, equality with the textbook update, consistency by Monte Carlo, wrapping."""
+
+import numpy as np
+import pytest
+from scipy import stats
+
+import activetrack as at
+from activetrack import ekf, measurement, motion
+from tests.core.helpers import random_spd, textbook_update
+
+
+@pytest.mark.parametrize(
+    "model", [at.constant_velocity(10.0, 0.1), at.constant_acceleration(2.0, 0.1)]
+)
+@pytest.mark.parametrize("seed", range(5))
+def test_lemma1_full_update_position_block_equals_eq12(model, seed):
+    rng = np.random.default_rng(seed)
+    n, m = model.dim, 1 + seed % 4
+    x = rng.standard_normal(n) * 3
+    P = random_spd(rng, n, scale=2.0)
+    sensors = x[:2] + rng.uniform(-15, 15, (m, 2))
+    sd2, st2 = rng.uniform(0.1, 4, m), rng.uniform(0.01, 1, m)
+    z = measurement.sample(x[:2], sensors, sd2, st2, rng)
+    _, P_full = textbook_update(x, P, z, sensors, sd2, st2)
+    eq12 = at.posterior_position_covariance(P[:2, :2], sensors - x[:2], sd2, st2)
+    np.testing.assert_allclose(P_full[:2, :2], eq12, rtol=1e-10, atol=1e-12)
+
+
+@pytest.mark.parametrize("seed", range(10))
+def test_update_equals_textbook_kalman_update(seed):
+    rng = np.random.default_rng(100 + seed)
+    n = 4 if seed % 2 else 6
+    m = 1 + seed % 5
+    x = rng.standard_normal(n)
+    P = random_spd(rng, n)
+    sensors = x[:2] + rng.uniform(-10, 10, (m, 2))
+    sd2, st2 = rng.uniform(0.1, 4, m), rng.uniform(0.01, 1, m)
+    z = measurement.sample(x[:2] + 0.3, sensors, sd2, st2, rng)
+    x_ref, P_ref = textbook_update(x, P, z, sensors, sd2, st2)
+    x_new, P_new = ekf.update(x, P, z, sensors, sd2, st2)
+    np.testing.assert_allclose(x_new, x_ref, rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(P_new, P_ref, rtol=1e-9, atol=1e-12)
+    np.testing.assert_array_equal(P_new, P_new.T)
+    assert np.all(np.linalg.eigvalsh(P_new) > 0)
+
+
+def test_batched_update_matches_loop():
+    rng = np.random.default_rng(7)
+    B, m = 6, 3
+    x = rng.standard_normal((B, 4))
+    P = np.stack([random_spd(rng, 4) for _ in range(B)])
+    sensors = x[:, None, :2] + rng.uniform(-10, 10, (B, m, 2))
+    z = measurement.sample(x[:, :2], sensors, 1.0, 0.1, rng)
+    xb, Pb = ekf.update(x, P, z, sensors, np.ones(m), np.full(m, 0.1))
+    for b in range(B):
+        xr, Pr = textbook_update(x[b], P[b], z[b], sensors[b], np.ones(m), np.full(m, 0.1))
+        np.testing.assert_allclose(xb[b], xr, rtol=1e-10, atol=1e-12)
+        np.testing.assert_allclose(Pb[b], Pr, rtol=1e-9, atol=1e-12)
+
+
+def test_subset_update_equals_update_with_those_sensors_only():
+    rng = np.random.default_rng(3)
+    x, P = rng.standard_normal(4), random_spd(rng, 4)
+    sensors = x[:2] + rng.uniform(-10, 10, (4, 2))
+    sd2, st2 = rng.uniform(0.5, 2, 4), rng.uniform(0.05, 0.5, 4)
+    z = measurement.sample(x[:2], sensors, sd2, st2, rng)
+    keep = np.array([True, False, True, False])
+    x_ref, P_ref = textbook_update(x, P, z[keep], sensors[keep], sd2[keep], st2[keep])
+    f = at.ExtendedKalmanFilter(at.constant_velocity(1.0, 0.1), x, P)
+    f.update(z, sensors, sd2, st2, sensors=[0, 2])
+    np.testing.assert_allclose(f.x, x_ref, rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(f.P, P_ref, rtol=1e-9, atol=1e-12)
+    g = at.ExtendedKalmanFilter(at.constant_velocity(1.0, 0.1), x, P)
+    g.update(z, sensors, sd2, st2, sensors=keep)
+    np.testing.assert_allclose(g.P, f.P)
+
+
+def test_bearing_innovation_is_wrapped():
+    # Target at the origin, sensor on the +x axis: true bearing from sensor is pi.
+    x = np.array([0.0, 1e-3, 0.0, 0.0])
+    P = np.diag([1.0, 1.0, 1.0, 1.0])
+    sensor = np.array([[10.0, 0.0]])
+    z = np.array([[10.0, -np.pi + 0.001]])  # the same direction as pi - 0.001
+    x_new, _ = ekf.update(x, P, z, sensor, np.array([1.0]), np.array([0.01]))
+    assert np.linalg.norm(x_new[:2] - x[:2]) < 0.1
+
+
+def test_joseph_form_keeps_covariance_spd_under_tiny_noise():
+    rng = np.random.default_rng(5)
+    x, P = np.zeros(4), np.diag([1e4, 1e4, 1e4, 1e4])
+    sensors = np.array([[30.0, 1.0], [-2.0, 40.0], [5.0, -25.0]])
+    for _ in range(100):
+        z = measurement.sample(x[:2], sensors, 1e-8, 1e-10, rng)
+        x, P = ekf.update(x, P, z, sensors, np.full(3, 1e-8), np.full(3, 1e-10))
+        x, P = motion.predict(x, P, np.eye(4), np.zeros((4, 4)))
+        assert np.all(P == P.T)
+        assert np.all(np.linalg.eigvalsh(P) > 0)
+
+
+def test_nees_of_static_network_is_consistent():
+    """200 Monte Carlo runs: the run-averaged position NEES lies in the 95% chi-square band."""
+    runs, steps = 200, 40
+    model = at.constant_velocity(1.0, 0.1)
+    sensors = np.array([[15.0, 5.0], [-10.0, 12.0], [3.0, -18.0]])
+    sd2, st2 = np.array([0.5, 0.5, 1.0]), np.array([0.01, 0.02, 0.01])
+    P0 = np.diag([4.0, 4.0, 1.0, 1.0])
+    rng = np.random.default_rng(2024)
+    x_true = np.zeros((runs, 4))
+    x_true[:, 2:] = [1.0, -0.5]
+    x_hat = x_true + rng.standard_normal((runs, 4)) @ np.linalg.cholesky(P0).T
+    P = np.broadcast_to(P0, (runs, 4, 4)).copy()
+    nees = np.empty((steps, runs))
+    for k in range(steps):
+        x_hat, P = motion.predict(x_hat, P, model.Phi, model.Q)
+        x_true = model.sample_next(x_true, rng)
+        z = measurement.sample(x_true[:, :2], sensors, sd2, st2, rng)
+        x_hat, P = ekf.update(x_hat, P, z, sensors, sd2, st2)
+        nees[k] = ekf.position_nees(x_true, x_hat, P)
+    lo, hi = stats.chi2.ppf([0.025, 0.975], 2 * runs) / runs
+    per_step = nees.mean(axis=1)
+    assert lo <= nees.mean() <= hi
+    assert np.mean((per_step >= lo) & (per_step <= hi)) >= 0.85
+
+
+@pytest.mark.parametrize(
+    "kwargs, field",
+    [
+        ({"sigma_d2": 0.0}, "sigma_d2"),
+        ({"sigma_theta2": -1.0}, "sigma_theta2"),
+        ({"z": np.full((2, 2), np.nan)}, "z"),
+        ({"z": np.zeros((3, 2))}, "z"),
+        ({"sensor_pos": np.zeros((2, 3))}, "sensor_pos"),
+        ({"sensor_pos": np.array([[0.0, 0.0], [5.0, 5.0]])}, "sensor_pos"),
+        ({"sensors": [5]}, "sensors"),
+    ],
+)
+def test_filter_update_rejects_bad_input(kwargs, field):
+    f = at.ExtendedKalmanFilter(at.constant_velocity(1.0, 0.1), np.zeros(4), np.eye(4))
+    args = {
+        "z": np.ones((2, 2)),
+        "sensor_pos": np.array([[10.0, 0.0], [0.0, 10.0]]),
+        "sigma_d2": 1.0,
+        "sigma_theta2": 0.1,
+    }
+    args.update(kwargs)
+    with pytest.raises(ValueError, match=field):
+        f.update(**args)
+
+
+@pytest.mark.parametrize(
+    "x0, P0, field",
+    [
+        (np.zeros(3), np.eye(4), "x0"),
+        (np.zeros(4), np.eye(3), "P0"),
+        (np.zeros(4), np.diag([1.0, -1.0, 1.0, 1.0]), "P0"),
+        (np.zeros(4), np.eye(4) + np.triu(np.ones((4, 4)), 1), "P0"),
+        (np.array([0.0, np.inf, 0, 0]), np.eye(4), "x0"),
+    ],
+)
+def test_filter_rejects_bad_initial_state(x0, P0, field):
+    with pytest.raises(ValueError, match=field):
+        at.ExtendedKalmanFilter(at.constant_velocity(1.0, 0.1), x0, P0)

@@ -1,0 +1,62 @@
+"""Range-bearing model: eq. (4) against trigonometry, eq. (9) against finite differences."""
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from activetrack import measurement
+
+coord = st.floats(-50, 50, allow_nan=False)
+
+
+@settings(max_examples=200, deadline=None)
+@given(tx=coord, ty=coord, sx=coord, sy=coord, phi=st.floats(-3, 3))
+def test_jacobian_matches_central_differences(tx, ty, sx, sy, phi):
+    target = np.array([tx, ty])
+    sensor = np.array([[sx, sy]])
+    if np.hypot(tx - sx, ty - sy) < 0.5:
+        return
+    H = measurement.jacobian(target, sensor)[0]
+    h = 1e-6
+    fd = np.empty((2, 2))
+    for j in range(2):
+        e = np.zeros(2)
+        e[j] = h
+        zp = measurement.range_bearing(target + e, sensor, phi)[0]
+        zm = measurement.range_bearing(target - e, sensor, phi)[0]
+        diff = zp - zm
+        diff[1] = measurement.wrap_angle(diff[1])
+        fd[:, j] = diff / (2 * h)
+    np.testing.assert_allclose(H, fd, rtol=1e-6, atol=1e-8)
+
+
+def test_range_bearing_known_geometry():
+    # target due north of the sensor, sensor facing east: bearing pi/2, distance 5
+    z = measurement.range_bearing(np.array([3.0, 9.0]), np.array([[3.0, 4.0]]), 0.0)[0]
+    np.testing.assert_allclose(z, [5.0, np.pi / 2])
+    # facing north: bearing 0
+    z = measurement.range_bearing(np.array([3.0, 9.0]), np.array([[3.0, 4.0]]), np.pi / 2)[0]
+    np.testing.assert_allclose(z, [5.0, 0.0], atol=1e-15)
+
+
+def test_wrap_angle_range():
+    a = np.linspace(-20, 20, 10001)
+    w = measurement.wrap_angle(a)
+    assert np.all(w >= -np.pi) and np.all(w < np.pi)
+    np.testing.assert_allclose(np.sin(w), np.sin(a), atol=1e-12)
+    np.testing.assert_allclose(np.cos(w), np.cos(a), atol=1e-12)
+    assert measurement.wrap_angle(np.pi) == -np.pi
+
+
+def test_sampled_noise_moments():
+    rng = np.random.default_rng(0)
+    target = np.array([0.0, 0.0])
+    sensors = np.array([[10.0, 0.0], [0.0, -20.0]])
+    sd2, st2 = np.array([2.0, 0.5]), np.array([0.01, 0.04])
+    z = measurement.sample(np.broadcast_to(target, (100_000, 2)), sensors, sd2, st2, rng)
+    truth = measurement.range_bearing(target, sensors)
+    err = z - truth
+    err[..., 1] = measurement.wrap_angle(err[..., 1])
+    np.testing.assert_allclose(err.mean(0), 0, atol=0.02)
+    np.testing.assert_allclose(err.var(0)[:, 0], sd2, rtol=0.03)
+    np.testing.assert_allclose(err.var(0)[:, 1], st2, rtol=0.03)
