@@ -43,28 +43,61 @@ def update(
 
     Shapes: ``x`` (..., n), ``P`` (..., n, n), ``z`` and ``sensor_pos`` (..., M, 2),
     variances and ``orientation`` broadcastable to (..., M), ``mask`` (..., M) bool or None.
+    Written with elementwise 2x2 algebra because the batched environment runs it on
+    thousands of filters per call.
     """
-    pos = x[..., :2]
-    H = measurement.jacobian(pos, sensor_pos)  # (..., M, 2, 2): rows h_d^T, h_theta^T
-    nu = z - measurement.range_bearing(pos, sensor_pos, orientation)
-    nu[..., 1] = measurement.wrap_angle(nu[..., 1])
-    w = np.stack(
-        np.broadcast_arrays(1.0 / np.asarray(sigma_d2), 1.0 / np.asarray(sigma_theta2)), -1
-    )
+    px = sensor_pos[..., 0] - x[..., None, 0]  # p = p_S - p_T_hat, eq. (10)
+    py = sensor_pos[..., 1] - x[..., None, 1]
+    n2 = px * px + py * py
+    dist = np.sqrt(n2)
+    nu_d = z[..., 0] - dist
+    nu_t = measurement.wrap_angle(z[..., 1] - np.arctan2(-py, -px) + orientation)
+    wd = 1.0 / np.asarray(sigma_d2, dtype=np.float64)
+    wt = 1.0 / np.asarray(sigma_theta2, dtype=np.float64)
     if mask is not None:
-        w = w * np.asarray(mask, dtype=np.float64)[..., None]
-    w = np.broadcast_to(w, nu.shape)
-    # Y = sum_i H_i^T R_i^{-1} H_i and b = sum_i H_i^T R_i^{-1} nu_i.
-    Y = np.einsum("...mki,...mk,...mkj->...ij", H, w, H)
-    b = np.einsum("...mki,...mk->...i", H, w * nu)
-    Pc = P[..., :, :2]
-    eye2 = np.eye(2)
-    N = inv2(eye2 + P[..., :2, :2] @ Y)
-    Nt = np.swapaxes(N, -1, -2)
-    x_post = x + np.einsum("...ij,...j->...i", Pc @ Nt, b)
-    L = np.broadcast_to(np.eye(x.shape[-1]), P.shape).copy()
-    L[..., :, :2] -= Pc @ (Nt @ Y)
-    P_post = L @ P @ np.swapaxes(L, -1, -2) + Pc @ (Nt @ Y @ N) @ np.swapaxes(Pc, -1, -2)
+        wd = wd * mask
+        wt = wt * mask
+    # Y = sum_i H_i^T R_i^{-1} H_i (eq. 12) with h_d = -p/|p|, h_theta = J p/|p|^2 (eq. 9).
+    a = wd / n2
+    c = wt / (n2 * n2)
+    yxx = (a * px * px + c * py * py).sum(-1)
+    yxy = ((a - c) * px * py).sum(-1)
+    yyy = (a * py * py + c * px * px).sum(-1)
+    # b = H_e^T R^{-1} nu.
+    e = wd * nu_d / dist
+    f = wt * nu_t / n2
+    bx = (py * f - px * e).sum(-1)
+    by = -(py * e + px * f).sum(-1)
+    # N = (I + P11 Y)^{-1}, in closed form.
+    p00, p01, p11 = P[..., 0, 0], P[..., 0, 1], P[..., 1, 1]
+    m00 = 1.0 + p00 * yxx + p01 * yxy
+    m01 = p00 * yxy + p01 * yyy
+    m10 = p01 * yxx + p11 * yxy
+    m11 = 1.0 + p01 * yxy + p11 * yyy
+    det = m00 * m11 - m01 * m10
+    n00, n01, n10, n11 = m11 / det, -m01 / det, -m10 / det, m00 / det
+    Pc0, Pc1 = P[..., :, 0], P[..., :, 1]
+    # K nu = P[:, :2] N^T b.
+    vx = n00 * bx + n10 * by
+    vy = n01 * bx + n11 * by
+    x_post = x + Pc0 * vx[..., None] + Pc1 * vy[..., None]
+    # Joseph form expanded: P+ = P - Pc D Pc^T with D = A + A^T - A P11 A^T - B,
+    # A = K H restricted to the position block = N^T Y, B = K R K^T core = N^T Y N.
+    a00, a01 = n00 * yxx + n10 * yxy, n00 * yxy + n10 * yyy
+    a10, a11 = n01 * yxx + n11 * yxy, n01 * yxy + n11 * yyy
+    b00, b01, b11 = a00 * n00 + a01 * n10, a00 * n01 + a01 * n11, a10 * n01 + a11 * n11
+    # A P11 A^T
+    t00, t01 = a00 * p00 + a01 * p01, a00 * p01 + a01 * p11
+    t10, t11 = a10 * p00 + a11 * p01, a10 * p01 + a11 * p11
+    q00 = t00 * a00 + t01 * a01
+    q01 = t00 * a10 + t01 * a11
+    q11 = t10 * a10 + t11 * a11
+    d00 = 2.0 * a00 - q00 - b00
+    d01 = a01 + a10 - q01 - b01
+    d11 = 2.0 * a11 - q11 - b11
+    w0 = Pc0 * d00[..., None] + Pc1 * d01[..., None]
+    w1 = Pc0 * d01[..., None] + Pc1 * d11[..., None]
+    P_post = P - (w0[..., :, None] * Pc0[..., None, :] + w1[..., :, None] * Pc1[..., None, :])
     return x_post, symmetrize(P_post)
 
 

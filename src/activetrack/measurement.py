@@ -21,7 +21,9 @@ J = np.array([[0.0, 1.0], [-1.0, 0.0]])
 
 def wrap_angle(angle: FloatArray | float) -> FloatArray:
     """Return ``angle`` wrapped to ``[-pi, pi)``."""
-    return (np.asarray(angle) + np.pi) % (2.0 * np.pi) - np.pi
+    a = np.asarray(angle)
+    # floor is several times faster than np.mod on large arrays
+    return a - (2.0 * np.pi) * np.floor((a + np.pi) / (2.0 * np.pi))
 
 
 def range_bearing(
