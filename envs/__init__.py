@@ -1,0 +1,69 @@
+"""Reinforcement-learning environments for multi-robot active target tracking.
+
+- :func:`parallel_env` / :func:`env`: the PettingZoo parallel and AEC games, one agent per
+  sensor (:mod:`activetrack.envs.tracking_env`);
+- :class:`CentralizedTrackingEnv`: the Gymnasium single-agent view, registered as
+  ``activetrack/ActiveTracking-v0`` when this package is imported;
+- :func:`apply_actions`, :func:`actions_to_reach` and :mod:`activetrack.envs.features`:
+  the pure batched kernels the environments are assembled from;
+- :func:`record_video`: an episode as a GIF/MP4.
+
+Configuration is the core :class:`activetrack.Scenario`: ``scenario="paper"`` or
+``"homogeneous"`` plus any field override, e.g.
+``parallel_env(scenario="homogeneous", n_sensors=8, rho=1.5)``.
+
+Importing the package only registers the ids (entry-point strings); the environment
+modules load on first use of a name below (PEP 562), so registering is cheap.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
+from .registration import ENV_ID, register_envs
+
+if TYPE_CHECKING:
+    from .centralized import CentralizedTrackingEnv
+    from .dynamics import actions_to_reach, apply_actions
+    from .tracking_env import TrackingParallelEnv, env, parallel_env, raw_env
+    from .video import record_video
+
+_LAZY = {
+    "CentralizedTrackingEnv": ".centralized",
+    "TrackingParallelEnv": ".tracking_env",
+    "actions_to_reach": ".dynamics",
+    "apply_actions": ".dynamics",
+    "env": ".tracking_env",
+    "parallel_env": ".tracking_env",
+    "raw_env": ".tracking_env",
+    "record_video": ".video",
+}
+
+__all__ = [
+    "ENV_ID",
+    "CentralizedTrackingEnv",
+    "TrackingParallelEnv",
+    "actions_to_reach",
+    "apply_actions",
+    "env",
+    "parallel_env",
+    "raw_env",
+    "record_video",
+    "register_envs",
+]
+
+
+def __getattr__(name: str) -> Any:
+    if name in _LAZY:
+        value = getattr(importlib.import_module(_LAZY[name], __name__), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(__all__)
+
+
+register_envs()

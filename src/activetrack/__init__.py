@@ -41,3 +41,18 @@ __all__ = [
     "posterior_position_covariance",
     "posterior_trace",
 ]
+
+
+def _register_envs() -> None:
+    """Register ``activetrack/ActiveTracking-v0`` with Gymnasium (and PettingZoo's registry).
+
+    Only entry-point strings are registered: no environment code is imported here.
+    """
+    try:
+        from activetrack.envs.registration import register_envs
+    except ImportError:  # the envs layer or its dependencies are not installed
+        return
+    register_envs()
+
+
+_register_envs()

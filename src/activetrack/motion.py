@@ -72,7 +72,12 @@ def predict(
 ) -> tuple[FloatArray, FloatArray]:
     """Return the propagated mean and symmetric covariance of eq. (3) (batched, unchecked)."""
     x_pred = x @ Phi.T
-    P_pred = Phi @ P @ Phi.T + Q
+    n = Phi.shape[0]
+    batch = P.shape[:-2]
+    # Two plain GEMMs over the whole batch: stacked (n, n) matmuls are several times slower.
+    PPhiT = (P.reshape(-1, n) @ Phi.T).reshape(-1, n, n)  # P Phi^T
+    # Phi (P Phi^T) = ((P Phi^T)^T Phi^T)^T = (Phi P^T Phi^T)^T; P is symmetric.
+    P_pred = (np.swapaxes(PPhiT, -1, -2).reshape(-1, n) @ Phi.T).reshape(*batch, n, n) + Q
     return x_pred, 0.5 * (P_pred + np.swapaxes(P_pred, -1, -2))
 
 

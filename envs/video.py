@@ -1,0 +1,103 @@
+"""Record one tracking episode as an animated GIF or an MP4 (imageio).
+
+Example::
+
+    from activetrack.envs import record_video
+
+    record_video("episode.gif", seed=0)  # random actions, paper scenario
+    record_video("gsr.gif", policy=GSRPolicy(seed=0), seed=0, n_sensors=3)
+
+GIF needs only Pillow; MP4 needs an imageio video backend (``pip install imageio[ffmpeg]``).
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import pathlib
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from .tracking_env import TrackingParallelEnv
+
+Policy = Callable[[TrackingParallelEnv], dict[str, Any]]
+
+
+def record_video(
+    path: str | pathlib.Path,
+    policy: Policy | Any | None = None,
+    *,
+    env: TrackingParallelEnv | None = None,
+    seed: int | None = None,
+    fps: float | None = None,
+    max_steps: int | None = None,
+    **config: Any,
+) -> pathlib.Path:
+    """Run one episode, render every step, and write the frames to ``path``.
+
+    Args:
+        path: output file; ``.gif`` (always available) or ``.mp4``/``.webm``/... (needs
+            ``imageio[ffmpeg]`` or ``imageio[pyav]``).
+        policy: ``None`` for uniform random actions (drawn from the agents' action spaces,
+            seeded with ``seed``), a callable ``policy(env) -> {agent: action}``, or an
+            object with such an ``act(env)`` method (e.g. ``GSRPolicy``).
+        env: a parallel env made with ``render_mode="rgb_array"``; by default one is built
+            from ``config`` (``scenario=`` and any Scenario field).
+        seed: the episode seed passed to ``reset``.
+        fps: frames per second (default: the env's ``render_fps``, real time).
+        max_steps: stop after this many steps (default: the whole episode).
+
+    Returns:
+        The path written.
+    """
+    path = pathlib.Path(path)
+    if env is None:
+        env = TrackingParallelEnv(render_mode="rgb_array", **config)
+    elif config:
+        raise ValueError(f"pass either env or configuration keywords, not both: {sorted(config)}")
+    base = env.unwrapped
+    if base.render_mode != "rgb_array":
+        raise ValueError(f"env must have render_mode='rgb_array', got {base.render_mode!r}")
+    if policy is None:
+        act = _random_policy(base, seed)
+    else:
+        act = getattr(policy, "act", policy)
+        if not callable(act):
+            raise ValueError("policy must be None, a callable policy(env), or have act(env)")
+    env.reset(seed=seed)
+    frames = [env.render()]
+    steps = 0
+    while base.agents and (max_steps is None or steps < max_steps):
+        env.step(act(env))
+        frames.append(env.render())
+        steps += 1
+    _write(path, frames, fps or base.metadata["render_fps"])
+    return path
+
+
+def _random_policy(env: TrackingParallelEnv, seed: int | None) -> Policy:
+    for i, agent in enumerate(env.possible_agents):
+        env.action_space(agent).seed(None if seed is None else seed + i)
+
+    def act(e: TrackingParallelEnv) -> dict[str, Any]:
+        return {a: e.action_space(a).sample() for a in e.agents}
+
+    return act
+
+
+def _write(path: pathlib.Path, frames: list[np.ndarray], fps: float) -> None:
+    import imageio.v3 as iio
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    stack = np.stack(frames)
+    if path.suffix.lower() == ".gif":
+        # Pillow's GIF writer takes the frame duration in milliseconds; loop forever.
+        iio.imwrite(path, stack, duration=1000.0 / fps, loop=0)
+        return
+    if not any(importlib.util.find_spec(m) for m in ("imageio_ffmpeg", "av")):
+        raise RuntimeError(
+            f"cannot write a {path.suffix!r} video without a video backend: "
+            "pip install 'imageio[ffmpeg]' (or 'imageio[pyav]'), or write a '.gif' instead"
+        )
+    iio.imwrite(path, stack, fps=fps)
