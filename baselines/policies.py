@@ -26,8 +26,8 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from activetrack.envs.dynamics import actions_to_reach
 
+from activetrack.envs.dynamics import actions_to_reach
 from activetrack.problem import Planner, PlanningProblem
 from activetrack.validation import FloatArray
 

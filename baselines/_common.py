@@ -1,0 +1,87 @@
+"""Helpers shared by the baseline planners: per-sensor modes and random test problems.
+
+Every planner treats two kinds of sensor as *fixed* (not optimized):
+
+- ``r_i = 0``: the sensor cannot move and stays where it is;
+- ``||c_i|| + r_i < rho_i``: no reachable point keeps the minimum distance of eq. (16);
+  the sensor goes to :func:`activetrack.geometry.unreachable_fallback`, the reachable
+  point farthest from the target (the least violation of eq. 16).
+
+All other sensors are *free*: their next position is searched on the curve ADB of
+Lemma 3 (:func:`activetrack.geometry.facing_boundary`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from activetrack import geometry
+from activetrack.problem import PlanningProblem
+from activetrack.validation import FloatArray
+
+
+def sensor_modes(problem: PlanningProblem) -> tuple[np.ndarray, FloatArray]:
+    """Return ``(free, fixed_rel)``: which sensors are optimized, and the others' positions.
+
+    ``fixed_rel`` (M, 2) holds, relative to the predicted target, the next position of every
+    fixed sensor (rows of free sensors hold their current position and are not used).
+
+    Raises:
+        ValueError: a free sensor with ``rho = 0`` can reach the predicted target (the
+            objective has no minimum there), or a fixed sensor sits exactly on it.
+    """
+    c = problem.rel_sensors
+    r, rho = problem.r, problem.rho
+    nc = np.hypot(c[:, 0], c[:, 1])
+    stay = r <= 0.0
+    unreachable = ~stay & (nc + r < rho)
+    free = ~stay & ~unreachable
+    degenerate = free & (rho <= 0.0) & (nc <= r)
+    if np.any(degenerate):
+        raise ValueError(
+            f"rho must be > 0 for sensors {np.flatnonzero(degenerate).tolist()}: the predicted "
+            "target is within their reach and the information grows without bound near it"
+        )
+    fixed_rel = np.where(unreachable[:, None], geometry.unreachable_fallback(c, r), c)
+    on_target = ~free & (np.hypot(fixed_rel[:, 0], fixed_rel[:, 1]) == 0.0)
+    if np.any(on_target):
+        raise ValueError(
+            f"sensors {np.flatnonzero(on_target).tolist()} cannot move (r = 0) and sit exactly "
+            "on the predicted target, where the bearing is undefined"
+        )
+    return free, fixed_rel
+
+
+def random_problem(
+    rng: np.random.Generator,
+    n_sensors: int = 3,
+    *,
+    distance: tuple[float, float] = (1.0, 4.0),
+    r: float = 1.0,
+    rho: float = 2.0,
+) -> PlanningProblem:
+    """Return a random one-step planning problem in which ``rho`` is often active.
+
+    The predicted target is at the origin; the prior covariance has eigenvalues drawn
+    log-uniformly in [0.05, 20] and a random orientation; sensors lie at distances drawn
+    uniformly in ``distance`` (with r = 1, rho = 2 and the default range every sensor can
+    keep the minimum distance, and for two thirds of them (``||c|| < r + rho``) it is active
+    in Cases II, III or 4 of Fig. 3), with range variances in [0.5, 5] m^2 and bearing
+    variances in [0.05, 1] rad^2.
+    """
+    eig = np.exp(rng.uniform(np.log(0.05), np.log(20.0), 2))
+    phi = rng.uniform(0.0, np.pi)
+    rot = np.array([[np.cos(phi), -np.sin(phi)], [np.sin(phi), np.cos(phi)]])
+    prior_cov = rot @ np.diag(eig) @ rot.T
+    dist = rng.uniform(*distance, n_sensors)
+    ang = rng.uniform(0.0, 2.0 * np.pi, n_sensors)
+    sensors = dist[:, None] * np.stack([np.cos(ang), np.sin(ang)], -1)
+    return PlanningProblem(
+        prior_cov=0.5 * (prior_cov + prior_cov.T),
+        target=np.zeros(2),
+        sensors=sensors,
+        r=r,
+        rho=rho,
+        sigma_d2=rng.uniform(0.5, 5.0, n_sensors),
+        sigma_theta2=rng.uniform(0.05, 1.0, n_sensors),
+    )

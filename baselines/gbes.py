@@ -1,0 +1,277 @@
+"""Grid-based exhaustive search (GBES), the benchmark planner of Section V.
+
+Each free sensor's curve ADB (Lemma 3, :func:`activetrack.geometry.facing_boundary`) is
+discretized into points at most ``spacing`` apart (the paper uses pi/200 m) and the
+combination of grid points minimizing the objective of eq. (17),
+``tr((P11^{-1} + sum_i info_i)^{-1})``, is found exactly: the returned configuration is
+the grid optimum (up to floating-point ties).
+
+Speed comes from two facts. The information is additive, so every candidate's 2x2 entries
+``(a, b, c)`` are computed once and a configuration costs a few additions and
+``(A + C) / (AC - B^2)``. And the search is a branch and bound with exact bounds: each
+sensor's candidates are grouped into blocks of ``block`` consecutive points, and since
+``phi(Y) = tr(Y^{-1})`` is convex on positive definite matrices, its tangent plane at the
+sum ``Y0`` of the blocks' mean information is below it everywhere; that linear bound
+separates over the sensors, so its minimum over a block combination costs ``M * block``
+operations instead of ``block^M`` (``_BlockSearch._bounds``). A block combination is
+skipped only when its bound exceeds the best configuration found (with a 1e-10 relative
+margin for rounding), so nothing better than the reported optimum is ever skipped. With
+``prune=False`` every combination is evaluated. Both paths work in memory-bounded
+batches. On the ``paper`` preset (about 7e6 combinations per step at pi/200) a step takes
+a few milliseconds and evaluates 0.15% of the combinations on average (1.3% at most).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from activetrack import geometry
+from activetrack.baselines._common import sensor_modes
+from activetrack.objective import sensor_information
+from activetrack.problem import PlanningProblem
+from activetrack.validation import FloatArray
+
+#: Relative margin of the bound test: a block combination is pruned only if its lower
+#: bound exceeds the incumbent by this factor, which covers the rounding of both.
+_PRUNE_RTOL = 1e-10
+
+
+@dataclass(frozen=True)
+class GBESResult:
+    """What one GBES search returns.
+
+    Attributes:
+        positions: the next absolute positions (M, 2).
+        value: their objective, eq. (17).
+        n_combinations: the size of the grid product that was searched.
+        n_evaluated: how many configurations were actually evaluated (the rest were
+            excluded by the exact bound).
+    """
+
+    positions: FloatArray
+    value: float
+    n_combinations: int
+    n_evaluated: int
+
+
+@dataclass
+class GBES:
+    """Grid-based exhaustive search over the curves ADB of all sensors (Section V).
+
+    Attributes:
+        spacing: largest distance between neighbouring grid points on a curve ADB (m);
+            the paper uses ``pi / 200``.
+        max_combinations: the search refuses (ValueError) grids with more combinations.
+        block: grid points per block of the branch and bound (>= 1).
+        prune: if False, evaluate every combination (no bounds; slower, same answer).
+        batch_elements: configurations evaluated per vectorized batch (memory bound).
+        last_result: the :class:`GBESResult` of the latest :meth:`plan` call.
+    """
+
+    spacing: float = math.pi / 200.0
+    max_combinations: float = 5e8
+    block: int = 16
+    prune: bool = True
+    batch_elements: int = 1 << 17
+    last_result: GBESResult | None = field(default=None, init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        if not (isinstance(self.spacing, (int, float)) and math.isfinite(self.spacing)) or (
+            self.spacing <= 0
+        ):
+            raise ValueError(f"spacing must be a finite number > 0 (metres), got {self.spacing!r}")
+        if not self.max_combinations >= 1:
+            raise ValueError(f"max_combinations must be >= 1, got {self.max_combinations!r}")
+        for name in ("block", "batch_elements"):
+            value = getattr(self, name)
+            if not isinstance(value, (int, np.integer)) or value < 1:
+                raise ValueError(f"{name} must be an integer >= 1, got {value!r}")
+
+    # Grid ---------------------------------------------------------------------------------
+    def candidates(self, problem: PlanningProblem) -> list[FloatArray]:
+        """Return each sensor's grid of next positions relative to the target, (K_i, 2)."""
+        free, fixed_rel = sensor_modes(problem)
+        c = problem.rel_sensors
+        out = []
+        for i in range(problem.n_sensors):
+            if not free[i]:
+                out.append(fixed_rel[i : i + 1].copy())
+                continue
+            arcs = geometry.facing_boundary(c[i], float(problem.r[i]), float(problem.rho[i]))
+            pts = geometry.discretize(arcs, self.spacing)
+            # Adjacent arcs share their end points (A and B of Fig. 3): drop the repeats.
+            keep = np.ones(len(pts), dtype=bool)
+            keep[1:] = np.any(np.abs(np.diff(pts, axis=0)) > 1e-12, axis=1)
+            out.append(pts[keep])
+        return out
+
+    def n_combinations(self, problem: PlanningProblem) -> int:
+        """Return the number of grid combinations of ``problem`` (product of grid sizes)."""
+        return math.prod(len(p) for p in self.candidates(problem))
+
+    # Planning -----------------------------------------------------------------------------
+    def plan(self, problem: PlanningProblem, rng: np.random.Generator | None = None) -> FloatArray:
+        """Return the grid-optimal next absolute positions, shape (M, 2)."""
+        return self.search(problem).positions
+
+    def search(self, problem: PlanningProblem) -> GBESResult:
+        """Return the grid optimum of ``problem`` with search statistics.
+
+        Raises:
+            ValueError: the grid has more than ``max_combinations`` combinations.
+        """
+        cands = self.candidates(problem)
+        sizes = [len(p) for p in cands]
+        total = math.prod(sizes)
+        if total > self.max_combinations:
+            raise ValueError(
+                f"GBES grid has {total:.3g} combinations ({' x '.join(map(str, sizes))} points "
+                f"at spacing {self.spacing:.4g} m), more than max_combinations="
+                f"{self.max_combinations:.3g}; raise max_combinations or the spacing"
+            )
+        rel, n_eval = grid_optimum(problem, cands, self.block, self.batch_elements, self.prune)
+        positions = rel + problem.target
+        result = GBESResult(positions, float(problem.trace(positions)), total, n_eval)
+        self.last_result = result
+        return result
+
+
+def grid_optimum(
+    problem: PlanningProblem,
+    candidates: list[FloatArray],
+    block: int = 16,
+    batch_elements: int = 1 << 17,
+    prune: bool = True,
+) -> tuple[FloatArray, int]:
+    """Return the best combination of per-sensor candidates and the evaluation count.
+
+    ``candidates[i]`` (K_i, 2) are sensor ``i``'s candidate positions relative to the
+    predicted target; the result (M, 2) is relative too. Exact over the candidates.
+    """
+    feats = [
+        _entries(sensor_information(p, problem.sigma_d2[i], problem.sigma_theta2[i]))
+        for i, p in enumerate(candidates)
+    ]
+    search = _BlockSearch(feats, _entries(problem.prior_info), block, batch_elements)
+    idx, n_eval = search.run(prune)
+    return np.stack([candidates[i][k] for i, k in enumerate(idx)]), n_eval
+
+
+def _entries(info: FloatArray) -> FloatArray:
+    """Return the independent entries ``(a, b, c)`` of 2x2 symmetric matrices, (..., 3)."""
+    return np.stack([info[..., 0, 0], info[..., 0, 1], info[..., 1, 1]], -1)
+
+
+def _trace_inv(a: FloatArray, b: FloatArray, c: FloatArray) -> FloatArray:
+    """Return ``tr([[a, b], [b, c]]^{-1}) = (a + c) / (ac - b^2)``."""
+    return (a + c) / (a * c - b * b)
+
+
+class _BlockSearch:
+    """Exact branch and bound over block combinations (see the module docstring)."""
+
+    def __init__(self, feats: list[FloatArray], prior: FloatArray, block: int, batch: int):
+        self.prior = prior
+        self.sizes = [len(f) for f in feats]
+        self.bsize = [min(block, k) for k in self.sizes]
+        self.nblocks = [-(-k // b) for k, b in zip(self.sizes, self.bsize, strict=True)]
+        self.blocks = []  # per sensor 3 x (n_blocks, block) entries, last block padded by repeats
+        self.means = []  # per sensor (n_blocks, 3): the blocks' mean information
+        self.devs = []  # per sensor 3 x (n_blocks, block): entries minus their block's mean
+        for f, b, nb in zip(feats, self.bsize, self.nblocks, strict=True):
+            pad = np.concatenate([f, np.repeat(f[-1:], nb * b - len(f), axis=0)])
+            blk = pad.reshape(nb, b, 3)
+            mean = blk.mean(axis=1)
+            # Entry-major copies (3 contiguous (n_blocks, block) arrays) vectorize best.
+            self.blocks.append([np.ascontiguousarray(blk[..., e]) for e in range(3)])
+            self.means.append(mean)
+            self.devs.append(
+                [np.ascontiguousarray(blk[..., e] - mean[:, e : e + 1]) for e in range(3)]
+            )
+        self.per_combo = math.prod(self.bsize)
+        self.batch = max(1, batch // self.per_combo)
+        self.n_block_combos = math.prod(self.nblocks)
+        self.chunk = max(1, min(self.n_block_combos, 1 << 18))
+        self.best = math.inf
+        self.best_idx: tuple[int, ...] | None = None
+        self.n_eval = 0
+
+    def run(self, prune: bool) -> tuple[tuple[int, ...], int]:
+        """Return the optimal candidate index of every sensor and the evaluation count."""
+        if not prune:
+            for lo in range(0, self.n_block_combos, self.batch):
+                hi = min(lo + self.batch, self.n_block_combos)
+                self._evaluate(np.arange(lo, hi))
+            return self.best_idx, self.n_eval
+        # Pass 1: a good incumbent from the lowest-bound block combination of each chunk.
+        cached = None
+        seeds = []
+        for lo in range(0, self.n_block_combos, self.chunk):
+            flat, lb = self._bounds(lo)
+            seeds.append(flat[np.argmin(lb)])
+            if lo == 0 and len(flat) == self.n_block_combos:
+                cached = (flat, lb)
+        self._evaluate(np.asarray(seeds))
+        # Pass 2: evaluate, in order of increasing bound, what the bound cannot exclude.
+        for lo in range(0, self.n_block_combos, self.chunk):
+            flat, lb = cached if cached is not None else self._bounds(lo)
+            keep = lb <= self.best * (1.0 + _PRUNE_RTOL)
+            flat, lb = flat[keep], lb[keep]
+            order = np.argsort(lb, kind="stable")
+            flat, lb = flat[order], lb[order]
+            for start in range(0, len(flat), self.batch):
+                if lb[start] > self.best * (1.0 + _PRUNE_RTOL):
+                    break
+                self._evaluate(flat[start : start + self.batch])
+        return self.best_idx, self.n_eval
+
+    def _bounds(self, lo: int) -> tuple[np.ndarray, FloatArray]:
+        """Return block combinations ``lo ...`` (flat indices) and their lower bounds.
+
+        ``phi(Y) = tr(Y^{-1})`` is convex on positive definite matrices, so at the sum
+        ``Y0`` of the blocks' mean information, ``phi(Y) >= phi(Y0) + <grad, Y - Y0>`` with
+        ``grad = -Y0^{-2}``. ``Y - Y0`` is a sum of per-sensor deviations from the block
+        means, so the bound's minimum over a block combination is a sum of per-sensor minima
+        over ``block`` points each, instead of ``block^M`` configurations.
+        """
+        flat = np.arange(lo, min(lo + self.chunk, self.n_block_combos))
+        idx = np.unravel_index(flat, self.nblocks)
+        y0 = self.prior + sum(mu[i] for mu, i in zip(self.means, idx, strict=True))
+        a, b, c = y0[:, 0], y0[:, 1], y0[:, 2]
+        det = a * c - b * b
+        lb = (a + c) / det
+        # Y0^{-1} = [[c, -b], [-b, a]] / det; the gradient is minus its square.
+        p, q, s = c / det, -b / det, a / det
+        ga, gb, gc = -(p * p + q * q), -2.0 * q * (p + s), -(s * s + q * q)
+        for dev, i in zip(self.devs, idx, strict=True):
+            lin = ga[:, None] * dev[0][i] + gb[:, None] * dev[1][i] + gc[:, None] * dev[2][i]
+            lb = lb + lin.min(axis=1)
+        return flat, lb
+
+    def _evaluate(self, flat: np.ndarray) -> None:
+        """Evaluate every configuration of the block combinations ``flat``; update the best."""
+        if len(flat) == 0:
+            return
+        idx = np.unravel_index(flat, self.nblocks)
+        m = len(self.blocks)
+        tot = [None, None, None]
+        for i in range(m):
+            shape = [len(flat)] + [1] * m
+            shape[1 + i] = self.bsize[i]
+            for e in range(3):
+                term = self.blocks[i][e][idx[i]].reshape(shape)
+                tot[e] = term + self.prior[e] if tot[e] is None else tot[e] + term
+        val = _trace_inv(*tot)
+        self.n_eval += val.size
+        k = int(np.argmin(val))
+        v = float(val.flat[k])
+        if v < self.best:
+            pos = np.unravel_index(k, val.shape)
+            self.best = v
+            self.best_idx = tuple(
+                min(int(idx[i][pos[0]]) * self.bsize[i] + int(pos[1 + i]), self.sizes[i] - 1)
+                for i in range(m)
+            )

@@ -1,0 +1,242 @@
+"""Closed-loop simulation runner and Monte Carlo evaluation of planners (Section V).
+
+One run follows :mod:`activetrack.tracking` exactly: ``initial_conditions``, then at every
+step the EKF prediction (eq. 3), the planning problem of eq. (15)-(17) built from it, the
+planner's choice of next positions, and ``advance`` (move the sensors, move the true target
+by eq. 2, measure by eq. 4, update by eq. 11).
+
+Random streams: the world (initial conditions, process and measurement noise) draws from
+``np.random.default_rng(seed)`` — ``n + 2M`` standard normals per step, the same draws the
+environments make from the same seed — and the planner from a separate
+``np.random.default_rng([seed, 1])``, so a planner's own randomness never shifts the world's.
+
+Metrics per step (steps 1..n_steps, posteriors): trace of the position covariance (the
+objective of eq. 17), position error, position NEES and planning time; per run: mean
+trace, RMSE and mean NEES.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy import stats
+
+from activetrack import ekf, motion, tracking
+from activetrack.problem import Planner, PlanningProblem
+from activetrack.scenarios import Scenario
+from activetrack.validation import FloatArray
+
+
+@dataclass(frozen=True, eq=False)
+class RunRecord:
+    """One closed-loop run.
+
+    Per-step arrays have one entry per completed step (``n_steps`` unless the run stopped
+    early on ``scenario.max_trace``); trajectories have one more (step 0 first).
+
+    Attributes:
+        seed: the run's seed.
+        trace: trace of the posterior position covariance ``P(k|k)_11``.
+        error: position error ``||p_T(k) - p_T_hat(k|k)||``.
+        nees: position NEES ``e^T P(k|k)_11^{-1} e``.
+        plan_time: wall-clock planning time (s).
+        violation: largest constraint violation of the planned positions (m; 0 = feasible).
+        true_states, estimates: (K + 1, n) true target states and posterior estimates.
+        sensors: (K + 1, M, 2) sensor positions.
+        position_covs: (K + 1, 2, 2) posterior position covariances.
+        terminated: whether the run stopped early because the trace exceeded ``max_trace``.
+    """
+
+    seed: int
+    trace: FloatArray
+    error: FloatArray
+    nees: FloatArray
+    plan_time: FloatArray
+    violation: FloatArray
+    true_states: FloatArray
+    estimates: FloatArray
+    sensors: FloatArray
+    position_covs: FloatArray
+    terminated: bool = False
+
+    @property
+    def mean_trace(self) -> float:
+        """Return the mean posterior position trace over the run's steps."""
+        return float(np.mean(self.trace))
+
+    @property
+    def rmse(self) -> float:
+        """Return the root mean square position error over the run's steps."""
+        return float(np.sqrt(np.mean(self.error**2)))
+
+    @property
+    def mean_nees(self) -> float:
+        """Return the mean position NEES over the run's steps (2 for a consistent filter)."""
+        return float(np.mean(self.nees))
+
+
+def simulate(scenario: Scenario, planner: Planner, seed: int) -> RunRecord:
+    """Return one closed-loop run of ``planner`` on ``scenario`` with world seed ``seed``."""
+    world = np.random.default_rng(seed)
+    plan_rng = np.random.default_rng([seed, 1])
+    params = tracking.LoopParams.from_scenario(scenario)
+    x_true, x_hat, P, sensors = tracking.initial_conditions(scenario, world)
+    m = scenario.n_sensors
+    true_states, estimates = [x_true], [x_hat]
+    sensor_hist, covs = [sensors], [P[:2, :2]]
+    trace, error, nees, plan_time, violation = [], [], [], [], []
+    terminated = False
+    for _ in range(scenario.n_steps):
+        x_pred, P_pred = motion.predict(x_hat, P, params.Phi, params.Q)
+        problem = PlanningProblem(
+            prior_cov=P_pred[:2, :2],
+            target=x_pred[:2],
+            sensors=sensors,
+            r=params.r,
+            rho=params.rho,
+            sigma_d2=params.sigma_d2,
+            sigma_theta2=params.sigma_theta2,
+        )
+        t0 = time.perf_counter()
+        nxt = np.asarray(planner.plan(problem, plan_rng), dtype=np.float64)
+        plan_time.append(time.perf_counter() - t0)
+        if nxt.shape != (m, 2) or not np.all(np.isfinite(nxt)):
+            raise ValueError(
+                f"planner {planner!r} returned next positions of shape {nxt.shape} (must be "
+                f"({m}, 2), finite)"
+            )
+        violation.append(float(np.max(problem.violation(nxt))))
+        noise = world.standard_normal(params.n_noise)
+        x_true, _z, x_hat, P = tracking.advance(params, x_true, x_pred, P_pred, nxt, noise)
+        sensors = nxt
+        tr = float(P[0, 0] + P[1, 1])
+        trace.append(tr)
+        error.append(float(np.hypot(*(x_true[:2] - x_hat[:2]))))
+        nees.append(float(ekf.position_nees(x_true, x_hat, P)))
+        true_states.append(x_true)
+        estimates.append(x_hat)
+        sensor_hist.append(sensors)
+        covs.append(P[:2, :2])
+        if scenario.max_trace is not None and tr > scenario.max_trace:
+            terminated = True
+            break
+    return RunRecord(
+        seed=int(seed),
+        trace=np.array(trace),
+        error=np.array(error),
+        nees=np.array(nees),
+        plan_time=np.array(plan_time),
+        violation=np.array(violation),
+        true_states=np.array(true_states),
+        estimates=np.array(estimates),
+        sensors=np.array(sensor_hist),
+        position_covs=np.array(covs),
+        terminated=terminated,
+    )
+
+
+def mean_ci(values: FloatArray, level: float = 0.95) -> tuple[float, float, float]:
+    """Return ``(mean, low, high)``: the mean and its Student-t confidence interval."""
+    v = np.asarray(values, dtype=np.float64)
+    mean = float(np.mean(v))
+    if v.size < 2:
+        return mean, mean, mean
+    half = float(stats.t.ppf(0.5 + level / 2, v.size - 1) * np.std(v, ddof=1) / np.sqrt(v.size))
+    return mean, mean - half, mean + half
+
+
+@dataclass(eq=False)
+class MonteCarloResult:
+    """Per-run statistics of one planner over seeds ``seed, seed + 1, ...``.
+
+    Attributes:
+        name: the planner's label.
+        seeds: the runs' seeds.
+        mean_trace, rmse, nees: per-run mean trace, RMSE and mean NEES, shape (runs,).
+        plan_times: every step's planning time (s), all runs concatenated.
+        max_violation: largest constraint violation over all steps and runs (m).
+        n_terminated: runs stopped early on ``max_trace``.
+        records: the kept :class:`RunRecord` objects (by default the first run's only).
+    """
+
+    name: str
+    seeds: list[int]
+    mean_trace: FloatArray
+    rmse: FloatArray
+    nees: FloatArray
+    plan_times: FloatArray
+    max_violation: float
+    n_terminated: int
+    records: list[RunRecord] = field(default_factory=list)
+
+    def summary(self) -> dict[str, Any]:
+        """Return JSON-friendly summary statistics with 95% intervals of the means."""
+        out: dict[str, Any] = {"runs": len(self.seeds)}
+        for key, values in (
+            ("mean_trace", self.mean_trace),
+            ("rmse", self.rmse),
+            ("nees", self.nees),
+        ):
+            mean, lo, hi = mean_ci(values)
+            out[key] = mean
+            out[f"{key}_ci95"] = [lo, hi]
+        out["plan_time_ms_median"] = float(np.median(self.plan_times) * 1e3)
+        out["plan_time_ms_mean"] = float(np.mean(self.plan_times) * 1e3)
+        out["plan_time_ms_max"] = float(np.max(self.plan_times) * 1e3)
+        out["max_violation"] = self.max_violation
+        out["n_terminated"] = self.n_terminated
+        out["seeds"] = [self.seeds[0], self.seeds[-1]]
+        return out
+
+
+def run_monte_carlo(
+    scenario: Scenario,
+    planners: Mapping[str, Planner],
+    runs: int,
+    seed: int = 0,
+    *,
+    progress: bool = True,
+    keep_records: int = 1,
+) -> dict[str, MonteCarloResult]:
+    """Return each planner's :class:`MonteCarloResult` over seeds ``seed .. seed + runs - 1``.
+
+    All planners face the same seeds (the same initial conditions and the same noise
+    draws), so their differences are paired. ``keep_records`` first runs keep their full
+    trajectories (for plotting). A tqdm progress bar counts runs unless ``progress`` is False.
+    """
+    if not isinstance(runs, (int, np.integer)) or runs < 1:
+        raise ValueError(f"runs must be an integer >= 1, got {runs!r}")
+    if not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise ValueError(f"seed must be an integer >= 0, got {seed!r}")
+    if not planners:
+        raise ValueError("planners must name at least one planner")
+    from tqdm.auto import tqdm
+
+    seeds = [int(seed) + k for k in range(runs)]
+    results = {}
+    bar = tqdm(total=runs * len(planners), disable=not progress, unit="run", leave=False)
+    try:
+        for name, planner in planners.items():
+            bar.set_description(name)
+            recs = []
+            for s in seeds:
+                recs.append(simulate(scenario, planner, s))
+                bar.update()
+            results[name] = MonteCarloResult(
+                name=name,
+                seeds=seeds,
+                mean_trace=np.array([r.mean_trace for r in recs]),
+                rmse=np.array([r.rmse for r in recs]),
+                nees=np.array([r.mean_nees for r in recs]),
+                plan_times=np.concatenate([r.plan_time for r in recs]),
+                max_violation=float(max(np.max(r.violation) for r in recs)),
+                n_terminated=sum(r.terminated for r in recs),
+                records=recs[: max(0, keep_records)],
+            )
+    finally:
+        bar.close()
+    return results
