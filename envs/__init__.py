@@ -6,6 +6,7 @@
   ``activetrack/ActiveTracking-v0`` when this package is imported;
 - :func:`apply_actions`, :func:`actions_to_reach` and :mod:`activetrack.envs.features`:
   the pure batched kernels the environments are assembled from;
+- :class:`BatchedActiveTracking`: N copies over a leading axis, a Gymnasium ``VectorEnv``;
 - :func:`record_video`: an episode as a GIF/MP4.
 
 Configuration is the core :class:`activetrack.Scenario`: ``scenario="paper"`` or
@@ -24,12 +25,14 @@ from typing import TYPE_CHECKING, Any
 from .registration import ENV_ID, register_envs
 
 if TYPE_CHECKING:
+    from .batched import BatchedActiveTracking
     from .centralized import CentralizedTrackingEnv
     from .dynamics import actions_to_reach, apply_actions
     from .tracking_env import TrackingParallelEnv, env, parallel_env, raw_env
     from .video import record_video
 
 _LAZY = {
+    "BatchedActiveTracking": ".batched",
     "CentralizedTrackingEnv": ".centralized",
     "TrackingParallelEnv": ".tracking_env",
     "actions_to_reach": ".dynamics",
@@ -41,6 +44,7 @@ _LAZY = {
 }
 
 __all__ = [
+    "BatchedActiveTracking",
     "ENV_ID",
     "CentralizedTrackingEnv",
     "TrackingParallelEnv",

@@ -203,10 +203,14 @@ class BatchedActiveTracking(VectorEnv):
         if a.shape == (N, 2 * m):
             a = a.reshape(N, m, 2)
         if a.shape != (N, m, 2):
-            raise ValueError(f"actions must have shape ({N}, {m}, 2) or ({N}, {2 * m}), got {a.shape}")
+            raise ValueError(
+                f"actions must have shape ({N}, {m}, 2) or ({N}, {2 * m}), got {a.shape}"
+            )
         if not np.isfinite(a).all():
             bad = np.argwhere(~np.isfinite(a).all(-1))
-            raise ValueError(f"actions must be finite (no NaN or inf); bad (copy, agent): {bad[:5].tolist()}")
+            raise ValueError(
+                f"actions must be finite (no NaN or inf); bad (copy, agent): {bad[:5].tolist()}"
+            )
 
         resetting = self._autoreset if self.autoreset_mode == AutoresetMode.NEXT_STEP else None
         p = self.params
@@ -217,7 +221,9 @@ class BatchedActiveTracking(VectorEnv):
         if empty.any():
             self._draw_noise(np.flatnonzero(empty))
         noise = self._noise[np.arange(N), self.noise_block - np.maximum(self._noise_left, 1)]
-        x_true, _, x_post, P_post = advance(p, self.x_true, self.x_pred, self.P_pred, sensors, noise)
+        x_true, _, x_post, P_post = advance(
+            p, self.x_true, self.x_pred, self.P_pred, sensors, noise
+        )
         live = slice(None) if resetting is None or not resetting.any() else ~resetting
         self._noise_left[live] -= 1
         self.x_true[live], self.x_hat[live], self.P[live] = x_true[live], x_post[live], P_post[live]

@@ -22,11 +22,19 @@ from activetrack.objective import (
 )
 from activetrack.problem import Planner, PlanningProblem
 from activetrack.scenarios import PRESETS, Scenario, make_scenario
+from activetrack.solver import (
+    BatchSolution,
+    SingleSensorSolution,
+    solve_single_sensor,
+    solve_single_sensor_batch,
+)
 
 __version__ = "0.1.0"
 
 __all__ = [
     "PRESETS",
+    "BatchSolution",
+    "SingleSensorSolution",
     "ExtendedKalmanFilter",
     "LinearMotionModel",
     "PlanningProblem",
@@ -40,6 +48,8 @@ __all__ = [
     "make_scenario",
     "posterior_position_covariance",
     "posterior_trace",
+    "solve_single_sensor",
+    "solve_single_sensor_batch",
 ]
 
 

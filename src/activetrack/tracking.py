@@ -37,6 +37,15 @@ class LoopParams:
     r: FloatArray
     rho: FloatArray
 
+    @property
+    def noise_std(self) -> FloatArray:
+        """Return the (M, 2) measurement noise standard deviations ``[sigma_d, sigma_theta]``."""
+        std = self.__dict__.get("_std")
+        if std is None:
+            std = np.stack([np.sqrt(self.sigma_d2), np.sqrt(self.sigma_theta2)], -1)
+            object.__setattr__(self, "_std", std)
+        return std
+
     @classmethod
     def from_scenario(cls, sc: Scenario) -> LoopParams:
         """Return the loop arrays of ``sc``."""
@@ -93,9 +102,8 @@ def advance(
     """
     n = x_true.shape[-1]
     x_next = x_true @ params.Phi.T + noise[..., :n] @ params.noise_factor.T
-    std = np.stack([np.sqrt(params.sigma_d2), np.sqrt(params.sigma_theta2)], -1)
     z = measurement.range_bearing(x_next[..., :2], sensors, params.orientation)
-    z = z + noise[..., n:].reshape(*noise.shape[:-1], -1, 2) * std
+    z += noise[..., n:].reshape(*noise.shape[:-1], -1, 2) * params.noise_std
     z[..., 1] = measurement.wrap_angle(z[..., 1])
     x_post, P_post = ekf.update(
         x_pred, P_pred, z, sensors, params.sigma_d2, params.sigma_theta2, params.orientation

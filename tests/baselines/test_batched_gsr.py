@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+
 from activetrack.baselines import GSR
 from activetrack.baselines._common import random_problem
 from activetrack.baselines.batched_gsr import BatchedGSR, BatchedGSRPolicy

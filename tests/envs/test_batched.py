@@ -27,7 +27,10 @@ def run_singles(singles, actions):
     return np.stack(obs), np.array(rew), np.array(term), np.array(trunc)
 
 
-@pytest.mark.parametrize("scenario, overrides", [("paper", {"n_steps": 7}), ("homogeneous", {"n_steps": 5, "n_sensors": 2})])
+@pytest.mark.parametrize(
+    "scenario, overrides",
+    [("paper", {"n_steps": 7}), ("homogeneous", {"n_steps": 5, "n_sensors": 2})],
+)
 def test_batched_reproduces_single_envs_across_autoresets(scenario, overrides):
     N, seed = 5, 42
     batched = BatchedActiveTracking(N, scenario=scenario, noise_block=3, **overrides)
@@ -65,7 +68,9 @@ def test_same_step_autoreset_reports_final_observation():
         obs, rew, term, trunc, infos = b.step(a)
         last = [e.step(a[i]) for i, e in enumerate(singles)]
     assert trunc.all() and not term.any()
-    np.testing.assert_allclose(np.stack(list(infos["final_obs"])), np.stack([x[0] for x in last]), **TOL)
+    np.testing.assert_allclose(
+        np.stack(list(infos["final_obs"])), np.stack([x[0] for x in last]), **TOL
+    )
     np.testing.assert_allclose(rew, [x[1] for x in last], **TOL)
     first = np.stack([e.reset()[0] for e in singles])
     np.testing.assert_allclose(obs, first, **TOL)  # already the next episode's start
