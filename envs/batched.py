@@ -73,7 +73,9 @@ class BatchedActiveTracking(VectorEnv):
             self.autoreset_mode = AutoresetMode(autoreset_mode)
         except ValueError:
             modes = [m.value for m in AutoresetMode]
-            raise ValueError(f"autoreset_mode must be one of {modes}, got {autoreset_mode!r}")
+            raise ValueError(
+                f"autoreset_mode must be one of {modes}, got {autoreset_mode!r}"
+            ) from None
         sc = make_scenario(scenario, **overrides)
         self.scenario = sc
         self.num_envs = int(num_envs)
@@ -143,7 +145,7 @@ class BatchedActiveTracking(VectorEnv):
 
     # Reset ----------------------------------------------------------------------------------
     def _reset_copies(self, idx: np.ndarray) -> None:
-        """Draw new episodes for copies ``idx`` (as :func:`activetrack.tracking.initial_conditions`)."""
+        """Draw new episodes for copies ``idx`` (as ``tracking.initial_conditions`` does)."""
         sc, m = self.scenario, self.n_sensors
         gaussian = sc.target_init == "gaussian"
         u = np.empty((len(idx), m, 2))

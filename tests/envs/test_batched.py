@@ -64,7 +64,7 @@ def test_same_step_autoreset_reports_final_observation():
     for i, e in enumerate(singles):
         e.reset(seed=7 + i)
     a = np.zeros((N, 6))
-    for step in range(4):
+    for _ in range(4):
         obs, rew, term, trunc, infos = b.step(a)
         last = [e.step(a[i]) for i, e in enumerate(singles)]
     assert trunc.all() and not term.any()
