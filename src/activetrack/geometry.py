@@ -46,7 +46,11 @@ class Arc:
 
 def case_of(c: FloatArray, r: float, rho: float) -> int:
     """Return the geometric case of Fig. 3 (1, 2, 3) or 4 when ``||c|| <= r``."""
-    nc = float(np.hypot(c[0], c[1]))
+    return case_from_norm(float(np.hypot(c[0], c[1])), r, rho)
+
+
+def case_from_norm(nc: float, r: float, rho: float) -> int:
+    """Return the geometric case of Fig. 3 from ``||c||``, ``r`` and ``rho``."""
     if nc <= r:
         return 4
     if rho <= nc - r:

@@ -65,6 +65,7 @@ from activetrack._coefficients import (
     circle_reduction,
     sylvester_gammas,
 )
+from activetrack.geometry import case_from_norm
 from activetrack.validation import FloatArray
 
 RHO_FLOOR = 1e-9  # minimum rho / r used internally (see the module docstring)
@@ -212,15 +213,7 @@ def _case(nc, r, rho):
     )
 
 
-def _case_scalar(nc: float, r: float, rho: float) -> int:
-    """Return the geometric case (1-4) of Fig. 3 for one problem."""
-    if nc <= r:
-        return 4
-    if rho <= nc - r:
-        return 1
-    if rho * rho >= nc * nc - r * r:
-        return 2
-    return 3
+_case_scalar = case_from_norm  # the geometric case (1-4) of Fig. 3 for one problem
 
 
 _COMPANION_TEMPLATE = np.asfortranarray(np.eye(10, k=-1))
