@@ -43,10 +43,10 @@ def apply_actions(
     """
     a = actions
     a2 = a * a
-    long = a2[..., 0] + a2[..., 1] > _LONG2
+    n2 = a2[..., 0] + a2[..., 1]
+    long = n2 > _LONG2
     if np.count_nonzero(long):  # outside the unit disk: keep the direction, cap the length
-        n = np.sqrt(np.where(long, a2[..., 0] + a2[..., 1], 1.0))
-        a = a / n[..., None]
+        a = a / np.sqrt(np.where(long, n2, 1.0))[..., None]
     r = np.asarray(r, dtype=np.float64)
     new = sensors + a * r[..., None]
     q = new - target_pred[..., None, :]

@@ -72,7 +72,8 @@ def sensor_constants(
 
 def target_features(x_pred: FloatArray, P_pred: FloatArray, dt: float, L: float) -> FloatArray:
     """Return the target block from the prediction ``(x_hat(k+1|k), P(k+1|k))``, (..., 5)."""
-    pxx, pyy, pxy = P_pred[..., 0, 0], P_pred[..., 1, 1], P_pred[..., 0, 1]
+    # ``[()]``: NumPy scalars for a single prediction (cheaper arithmetic), views for a batch.
+    pxx, pyy, pxy = P_pred[..., 0, 0][()], P_pred[..., 1, 1][()], P_pred[..., 0, 1][()]
     out = np.empty(x_pred.shape[:-1] + (TARGET_DIM,))
     out[..., 0] = 0.5 * np.log(pxx / L**2)
     out[..., 1] = 0.5 * np.log(pyy / L**2)
@@ -108,10 +109,9 @@ def observations(target: FloatArray, sensor: FloatArray, order: np.ndarray) -> n
     # Agent i sees sensors i, i+1, ... (mod M): a contiguous window of the doubled list.
     # Slicing windows is ~5x faster than fancy indexing with ``order`` on large batches.
     doubled = np.concatenate([sensor, sensor], axis=-2)
-    lead = sensor.shape[:-2]
-    for i in range(m):
-        window = doubled[..., order[i, 0] : order[i, 0] + m, :]
-        out[..., i, TARGET_DIM:] = window.reshape(lead + (m * SENSOR_DIM,))
+    shape = sensor.shape[:-2] + (m * SENSOR_DIM,)
+    for i, start in enumerate(order[:, 0].tolist()):
+        out[..., i, TARGET_DIM:] = doubled[..., start : start + m, :].reshape(shape)
     return out
 
 

@@ -40,4 +40,4 @@ def rotation(phi: float | FloatArray) -> FloatArray:
 
 def symmetrize(A: FloatArray) -> FloatArray:
     """Return ``(A + A^T) / 2`` over the last two axes."""
-    return 0.5 * (A + np.swapaxes(A, -1, -2))
+    return 0.5 * (A + A.mT)

@@ -17,13 +17,13 @@ from activetrack.validation import FloatArray
 
 #: ``J = C(-pi/2)`` of eq. (9).
 J = np.array([[0.0, 1.0], [-1.0, 0.0]])
+_TWO_PI = 2.0 * np.pi
 
 
 def wrap_angle(angle: FloatArray | float) -> FloatArray:
     """Return ``angle`` wrapped to ``[-pi, pi)``."""
-    a = np.asarray(angle)
     # floor is several times faster than np.mod on large arrays
-    return a - (2.0 * np.pi) * np.floor((a + np.pi) / (2.0 * np.pi))
+    return angle - _TWO_PI * np.floor((angle + np.pi) / _TWO_PI)
 
 
 def range_bearing(
@@ -34,9 +34,11 @@ def range_bearing(
     ``target_pos`` has shape (..., 2), ``sensor_pos`` (..., M, 2), ``orientation`` (..., M).
     """
     delta = target_pos[..., None, :] - sensor_pos
-    d = np.hypot(delta[..., 0], delta[..., 1])
-    theta = wrap_angle(np.arctan2(delta[..., 1], delta[..., 0]) - orientation)
-    return np.stack([d, theta], axis=-1)
+    dx, dy = delta[..., 0], delta[..., 1]
+    out = np.empty(delta.shape)
+    np.hypot(dx, dy, out=out[..., 0])
+    out[..., 1] = wrap_angle(np.arctan2(dy, dx) - orientation)
+    return out
 
 
 def jacobian(target_pos: FloatArray, sensor_pos: FloatArray) -> FloatArray:

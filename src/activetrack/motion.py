@@ -77,8 +77,8 @@ def predict(
     # Two plain GEMMs over the whole batch: stacked (n, n) matmuls are several times slower.
     PPhiT = (P.reshape(-1, n) @ Phi.T).reshape(-1, n, n)  # P Phi^T
     # Phi (P Phi^T) = ((P Phi^T)^T Phi^T)^T = (Phi P^T Phi^T)^T; P is symmetric.
-    P_pred = (np.swapaxes(PPhiT, -1, -2).reshape(-1, n) @ Phi.T).reshape(*batch, n, n) + Q
-    return x_pred, 0.5 * (P_pred + np.swapaxes(P_pred, -1, -2))
+    P_pred = (PPhiT.mT.reshape(-1, n) @ Phi.T).reshape(*batch, n, n) + Q
+    return x_pred, 0.5 * (P_pred + P_pred.mT)
 
 
 def van_loan(
