@@ -283,8 +283,8 @@ def _add_train(sub: argparse._SubParsersAction) -> None:
             )
         q.set_defaults(func=_cmd_train)
 
-    imitation("bc", "behaviour cloning of GSR", episodes=40, epochs=60, iterations=1)
-    imitation("dagger", "DAgger with GSR labels", episodes=40, epochs=30, iterations=4)
+    imitation("bc", "behaviour cloning of GSR", episodes=100, epochs=100, iterations=1)
+    imitation("dagger", "DAgger with GSR labels", episodes=100, epochs=40, iterations=5)
 
     q = methods.add_parser(
         "ppo",
@@ -309,6 +309,12 @@ def _add_train(sub: argparse._SubParsersAction) -> None:
     q.add_argument("--batch-size", type=_positive_int, default=512)
     q.add_argument("--n-epochs", type=_positive_int, default=10)
     q.add_argument("--lr", type=_positive_float, default=3e-4, help="learning rate")
+    q.add_argument(
+        "--lr-schedule",
+        choices=("constant", "linear"),
+        default="constant",
+        help="linear: decay to 0 over the run (default constant)",
+    )
     q.add_argument("--gamma", type=float, default=0.99)
     q.add_argument("--gae-lambda", type=float, default=0.95)
     q.add_argument("--clip-range", type=float, default=0.2)

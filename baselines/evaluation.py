@@ -1,0 +1,346 @@
+"""Evaluation of policies (the planners' expert policies or learned ones) on held-out seeds.
+
+Every policy runs in the PettingZoo environment on the same episodes: episode ``j``
+resets with seed ``seed + j``, so all policies face the same initial conditions and the
+same process and measurement noise (the environment draws ``n + 2M`` normals per step
+whatever the actions), and their differences are paired.
+
+Per episode (steps 1..n_steps, as in :mod:`activetrack.baselines.simulation`): the mean
+trace of the posterior position covariance, the RMSE of the position estimate and the
+return (sum of rewards). Per policy: the means with Student-t 95% intervals, and the ratio
+of its mean trace to GSR's with a paired bootstrap 95% interval. GSR is always evaluated
+(the ratio's reference) even when it is not asked for; it is then reported separately.
+
+A policy is anything with ``act(env) -> {agent: action}`` (e.g.
+:class:`~activetrack.baselines.policies.GSRPolicy`), or a name: ``gsr``, ``gsr-restarts``
+(GSR with mirror restarts), ``gbes``, ``rm``,
+or the path of a trained ``policy.zip`` (loaded lazily through
+:func:`activetrack.train.policy_io.load_policy`: baselines never imports ``train`` at
+module level).
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from activetrack.baselines.simulation import mean_ci
+
+#: Names that resolve to the planners' expert policies.
+EXPERT_NAMES = ("gsr", "gsr-restarts", "gbes", "rm")
+
+
+@dataclass(eq=False)
+class PolicyEvaluation:
+    """Per-episode metrics of one policy over seeds ``seeds``.
+
+    Attributes:
+        policy: the policy's label (as given on the command line).
+        seeds: the episodes' seeds.
+        mean_trace, rmse, returns: per-episode mean trace (m^2), RMSE (m) and return.
+        requested: False for GSR when it was only added as the ratio's reference.
+    """
+
+    policy: str
+    seeds: list[int]
+    mean_trace: np.ndarray
+    rmse: np.ndarray
+    returns: np.ndarray
+    requested: bool = True
+
+    def summary(self, reference: PolicyEvaluation | None = None) -> dict[str, Any]:
+        """Return the JSON summary; the ratio is to ``reference``'s mean trace (GSR)."""
+        mt, mt_lo, mt_hi = mean_ci(self.mean_trace)
+        rm, rm_lo, rm_hi = mean_ci(self.rmse)
+        ret, ret_lo, ret_hi = mean_ci(self.returns)
+        out: dict[str, Any] = {
+            "policy": self.policy,
+            "mean_trace": mt,
+            "mean_trace_ci95": [mt_lo, mt_hi],
+            "rmse": rm,
+            "rmse_ci95": [rm_lo, rm_hi],
+            "mean_return": ret,
+            "mean_return_ci95": [ret_lo, ret_hi],
+            "ratio_to_gsr": None,
+            "ratio_to_gsr_ci95": None,
+            "episodes": len(self.seeds),
+            "seeds": [self.seeds[0], self.seeds[-1]],
+            "requested": self.requested,
+        }
+        if reference is not None:
+            out["ratio_to_gsr"] = mt / float(np.mean(reference.mean_trace))
+            out["ratio_to_gsr_ci95"] = list(paired_ratio_ci(self.mean_trace, reference.mean_trace))
+        return out
+
+
+def paired_ratio_ci(
+    values: np.ndarray, reference: np.ndarray, n_boot: int = 2000, level: float = 0.95
+) -> tuple[float, float]:
+    """Return a paired bootstrap interval of ``mean(values) / mean(reference)``.
+
+    Episodes are resampled jointly (the same seeds for both), which keeps the pairing.
+    The bootstrap generator is fixed, so the interval is reproducible.
+    """
+    values, reference = np.asarray(values, float), np.asarray(reference, float)
+    if values.shape != reference.shape:
+        raise ValueError("paired ratio needs the same episodes for both policies")
+    rng = np.random.default_rng(0)
+    idx = rng.integers(0, values.size, size=(n_boot, values.size))
+    ratios = values[idx].mean(1) / reference[idx].mean(1)
+    lo, hi = np.quantile(ratios, [0.5 - level / 2, 0.5 + level / 2])
+    return float(lo), float(hi)
+
+
+def resolve_policy(spec: Any) -> Any:
+    """Return a policy object (with ``act(env)``) for a name, a policy file path or an object."""
+    if not isinstance(spec, (str, Path)):
+        if not hasattr(spec, "act"):
+            raise TypeError(f"a policy needs an act(env) method, got {type(spec).__name__}")
+        return spec
+    name = str(spec)
+    if name.lower() in EXPERT_NAMES:
+        from activetrack.baselines import policies
+
+        return {
+            "gsr": policies.GSRPolicy,
+            "gsr-restarts": lambda: policies.GSRPolicy(restarts=True),
+            "gbes": policies.GBESPolicy,
+            "rm": policies.RMPolicy,
+        }[name.lower()]()
+    path = Path(name)
+    if not path.is_file():
+        raise ValueError(
+            f"unknown policy {name!r}: use one of {list(EXPERT_NAMES)} or the path of a "
+            "policy.zip written by 'activetrack train'"
+        )
+    from activetrack.train.policy_io import load_policy  # lazy: train sits above baselines
+
+    return load_policy(path)
+
+
+def _reset_policy(policy: Any, seed: int) -> None:
+    """Reseed a stochastic policy for the episode with seed ``seed``, if it can be.
+
+    The expert policies' ``reset(seed)`` seeds their planner generator as the simulation
+    runner does (``default_rng([seed, 1])``), so random motion is reproducible and
+    independent of the order of the episodes.
+    """
+    reset = getattr(policy, "reset", None)
+    if callable(reset):
+        reset(seed)
+
+
+def run_episode(env: Any, policy: Any, seed: int) -> tuple[float, float, float]:
+    """Return ``(mean_trace, rmse, return)`` of one episode of ``policy`` from ``seed``."""
+    _reset_policy(policy, seed)
+    env.reset(seed=seed)
+    traces, errors, total = [], [], 0.0
+    first = env.possible_agents[0]
+    while env.agents:
+        _, rewards, _, _, infos = env.step(policy.act(env))
+        traces.append(infos[first]["trace"])
+        errors.append(infos[first]["position_error"])
+        total += float(rewards[first])
+    errors_arr = np.asarray(errors)
+    return float(np.mean(traces)), float(np.sqrt(np.mean(errors_arr**2))), total
+
+
+def check_compatible(policy: Any, env: Any, label: str) -> None:
+    """Raise ValueError if a learned policy's observation size does not fit ``env``."""
+    meta = getattr(policy, "meta", None)
+    if not meta or "observation_space" not in meta:
+        return
+    size = int(np.prod(meta["observation_space"]["shape"]))
+    per_agent = env.observation_space(env.possible_agents[0]).shape[0]
+    expected = per_agent * (env.n_sensors if meta.get("view") == "centralized" else 1)
+    if size != expected:
+        raise ValueError(
+            f"{label}: trained on observations of size {size}, this scenario has {expected} "
+            f"(trained on scenario {meta.get('scenario', {}).get('name')!r})"
+        )
+
+
+def evaluate(
+    policies: Sequence[Any] | Mapping[str, Any],
+    scenario: Any = "paper",
+    episodes: int = 100,
+    seed: int = 1000,
+    progress: bool = True,
+    **overrides: Any,
+) -> list[PolicyEvaluation]:
+    """Return one :class:`PolicyEvaluation` per policy (GSR first added if it is missing).
+
+    ``policies`` is a list of specs (names, paths or objects; labels are ``str(spec)``
+    for names and paths, the class name otherwise) or a mapping from label to spec.
+    """
+    from tqdm.auto import tqdm
+
+    from activetrack.envs import parallel_env
+
+    if episodes < 1:
+        raise ValueError(f"episodes must be >= 1, got {episodes}")
+    if isinstance(policies, Mapping):
+        items = list(policies.items())
+    else:
+        items = [(str(p) if isinstance(p, (str, Path)) else type(p).__name__, p) for p in policies]
+    if not items:
+        raise ValueError("give at least one policy")
+    labels = [label for label, _ in items]
+    if len(set(labels)) != len(labels):
+        raise ValueError(f"policy labels must be distinct, got {labels}")
+    has_gsr = any(isinstance(s, str) and s.lower() == "gsr" for _, s in items)
+    if not has_gsr:  # the ratio's reference, computed anyway and marked as not requested
+        items.append(("gsr", "gsr"))
+    seeds = [seed + j for j in range(episodes)]
+    env = parallel_env(scenario, **overrides)
+    results = []
+    bar = tqdm(total=episodes * len(items), disable=not progress, unit="ep", leave=False)
+    try:
+        for index, (label, spec) in enumerate(items):
+            policy = resolve_policy(spec)
+            check_compatible(policy, env, label)
+            bar.set_description(label)
+            rows = []
+            for s in seeds:
+                rows.append(run_episode(env, policy, s))
+                bar.update()
+            arr = np.asarray(rows)
+            requested = has_gsr or index < len(items) - 1
+            results.append(
+                PolicyEvaluation(label, seeds, arr[:, 0], arr[:, 1], arr[:, 2], requested)
+            )
+    finally:
+        bar.close()
+        env.close()
+    return results
+
+
+def _gsr_of(results: Sequence[PolicyEvaluation]) -> PolicyEvaluation:
+    for r in results:
+        if r.policy.lower() == "gsr":
+            return r
+    raise ValueError("the results hold no GSR evaluation")
+
+
+def summaries(results: Sequence[PolicyEvaluation]) -> list[dict[str, Any]]:
+    """Return the JSON summary of each result, with its ratio to GSR's mean trace."""
+    ref = _gsr_of(results)
+    return [r.summary(ref) for r in results]
+
+
+def format_table(rows: Sequence[dict[str, Any]]) -> str:
+    """Return the summaries as a plain-text table (GSR added only for the ratio is marked)."""
+    head = (
+        f"{'policy':<34} {'mean trace [95% CI]':>26} {'RMSE':>7} {'return':>8} {'ratio to GSR':>22}"
+    )
+    lines = [head, "-" * len(head)]
+    for r in rows:
+        name = r["policy"] + ("" if r["requested"] else " (reference)")
+        if len(name) > 34:
+            name = "..." + name[-31:]
+        lo, hi = r["mean_trace_ci95"]
+        trace = f"{r['mean_trace']:.4f} [{lo:.4f}, {hi:.4f}]"
+        ratio = "-"
+        if r["ratio_to_gsr"] is not None:
+            rlo, rhi = r["ratio_to_gsr_ci95"]
+            ratio = f"{r['ratio_to_gsr']:.3f} [{rlo:.3f}, {rhi:.3f}]"
+        lines.append(
+            f"{name:<34} {trace:>26} {r['rmse']:>7.3f} {r['mean_return']:>8.2f} {ratio:>22}"
+        )
+    return "\n".join(lines)
+
+
+def short_label(label: str) -> str:
+    """Return ``DIR/policy.zip`` for a long policy path (the last folder and the file)."""
+    path = Path(label)
+    if label.endswith(".zip") and path.parent.name:
+        return f"{path.parent.name}/{path.name}"
+    return label
+
+
+def plot_results(results: Sequence[PolicyEvaluation], path: str | Path, title: str = "") -> Path:
+    """Write a box plot of the per-episode mean traces (one box per policy); return the path."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(1.6 + 1.3 * len(results), 4.0))
+    labels = [short_label(r.policy) for r in results]
+    ax.boxplot([r.mean_trace for r in results], showmeans=True)
+    ax.set_xticks(range(1, len(results) + 1), labels, rotation=20, ha="right")
+    gsr = float(np.mean(_gsr_of(results).mean_trace))
+    ax.axhline(gsr, color="tab:green", ls="--", lw=1, label=f"GSR mean {gsr:.4f}")
+    ax.set_ylabel("episode mean trace of P(k|k)_11 [m^2]")
+    ax.set_title(title or f"{len(results[0].seeds)} held-out episodes")
+    ax.legend(loc="upper right", fontsize=8)
+    fig.tight_layout()
+    path = Path(path)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+def write_results(
+    results: Sequence[PolicyEvaluation],
+    out_dir: str | Path,
+    meta: dict[str, Any] | None = None,
+    plot: bool = True,
+) -> dict[str, Path]:
+    """Write ``results.json`` (a list, one object per policy), ``episodes.json`` and the plot.
+
+    Returns the written paths by name. ``meta`` (scenario, seeds...) goes to
+    ``episodes.json`` along with every episode's metrics.
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = {"results": out / "results.json", "episodes": out / "episodes.json"}
+    paths["results"].write_text(json.dumps(summaries(results), indent=2))
+    per_episode = {
+        "meta": meta or {},
+        "policies": {
+            r.policy: {
+                "seeds": r.seeds,
+                "mean_trace": r.mean_trace.tolist(),
+                "rmse": r.rmse.tolist(),
+                "return": r.returns.tolist(),
+            }
+            for r in results
+        },
+    }
+    paths["episodes"].write_text(json.dumps(per_episode, indent=2))
+    if plot:
+        paths["plot"] = plot_results(results, out / "mean_trace.png")
+    return paths
+
+
+def run_evaluation(
+    policies: Sequence[str],
+    scenario: str = "paper",
+    episodes: int = 100,
+    seed: int = 1000,
+    out_dir: str | Path | None = None,
+    plot: bool = True,
+    progress: bool = True,
+    **overrides: Any,
+) -> list[dict[str, Any]]:
+    """Evaluate, print the table, write ``out_dir`` if given; return the JSON summaries.
+
+    The command ``activetrack evaluate`` is this function.
+    """
+    results = evaluate(policies, scenario, episodes, seed, progress, **overrides)
+    rows = summaries(results)
+    print(f"scenario {scenario!r}, {episodes} episodes, seeds {seed}..{seed + episodes - 1}")
+    print(format_table(rows))
+    if not results[-1].requested:
+        print("gsr was not requested: it was evaluated on the same seeds as the ratio's reference")
+    if out_dir is not None:
+        meta = {"scenario": scenario, "overrides": overrides, "episodes": episodes, "seed": seed}
+        paths = write_results(results, out_dir, meta, plot=plot)
+        print("wrote " + ", ".join(str(p) for p in paths.values()))
+    return rows

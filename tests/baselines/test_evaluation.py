@@ -1,0 +1,139 @@
+"""Evaluation of policies on held-out seeds, checked against the simulation runner."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from activetrack.baselines import GSR, RandomMotion
+from activetrack.baselines.evaluation import (
+    evaluate,
+    format_table,
+    paired_ratio_ci,
+    run_evaluation,
+    summaries,
+    write_results,
+)
+from activetrack.baselines.simulation import simulate
+from scipy import stats
+
+from activetrack import make_scenario
+
+SEED, EPISODES = 1000, 4
+
+
+@pytest.fixture(scope="module")
+def rm_and_gsr():
+    return evaluate(["rm"], "paper", EPISODES, SEED, progress=False)
+
+
+def test_episodes_match_the_simulation_runner(rm_and_gsr):
+    """The env-based evaluation reproduces simulate() on the same seeds (GSR added last)."""
+    rm, gsr = rm_and_gsr
+    assert [r.policy for r in rm_and_gsr] == ["rm", "gsr"]
+    assert rm.requested and not gsr.requested
+    sc = make_scenario("paper")
+    for planner, res in ((RandomMotion(), rm), (GSR(), gsr)):
+        assert res.seeds == [SEED + j for j in range(EPISODES)]
+        recs = [simulate(sc, planner, s) for s in res.seeds]
+        np.testing.assert_allclose(res.mean_trace, [r.mean_trace for r in recs], rtol=1e-10)
+        np.testing.assert_allclose(res.rmse, [r.rmse for r in recs], rtol=1e-10)
+        # The return is minus the summed trace (reward_scale 1, 50 steps).
+        np.testing.assert_allclose(res.returns, [-r.trace.sum() for r in recs], rtol=1e-10)
+    assert np.mean(rm.mean_trace) > np.mean(gsr.mean_trace)
+
+
+def test_summary_statistics_are_independent_computations(rm_and_gsr):
+    rows = summaries(rm_and_gsr)
+    rm, gsr = rm_and_gsr
+    r = rows[0]
+    assert r["policy"] == "rm"
+    half = stats.t.ppf(0.975, EPISODES - 1) * np.std(rm.mean_trace, ddof=1) / np.sqrt(EPISODES)
+    assert r["mean_trace"] == pytest.approx(np.mean(rm.mean_trace))
+    assert r["mean_trace_ci95"] == pytest.approx([r["mean_trace"] - half, r["mean_trace"] + half])
+    assert r["rmse"] == pytest.approx(np.mean(rm.rmse))
+    assert r["mean_return"] == pytest.approx(np.mean(rm.returns))
+    assert r["ratio_to_gsr"] == pytest.approx(np.mean(rm.mean_trace) / np.mean(gsr.mean_trace))
+    lo, hi = r["ratio_to_gsr_ci95"]
+    assert lo <= r["ratio_to_gsr"] <= hi
+    assert rows[1]["ratio_to_gsr"] == 1.0 and rows[1]["ratio_to_gsr_ci95"] == [1.0, 1.0]
+    table = format_table(rows)
+    assert "gsr (reference)" in table and table.count("\n") == 3
+
+
+def test_paired_ratio_interval():
+    rng = np.random.default_rng(0)
+    ref = rng.uniform(1, 3, 200)
+    assert paired_ratio_ci(ref, ref) == (1.0, 1.0)
+    lo, hi = paired_ratio_ci(1.1 * ref + rng.normal(0, 0.05, 200), ref)
+    assert lo < 1.1 < hi and hi - lo < 0.05  # pairing removes the between-episode spread
+
+
+class TowardsTarget:
+    """Every sensor heads straight for the predicted target at full speed."""
+
+    def act(self, env):
+        problem = env.planning_problem()
+        c = problem.rel_sensors
+        a = -c / np.linalg.norm(c, axis=1, keepdims=True)
+        return dict(zip(env.possible_agents, a, strict=True))
+
+
+def test_policy_objects_and_mapping_labels():
+    res = evaluate({"towards": TowardsTarget(), "gsr": "gsr"}, "paper", 2, SEED, progress=False)
+    assert [r.policy for r in res] == ["towards", "gsr"]
+    assert all(r.requested for r in res)
+    # Deterministic policy, same seeds: the same numbers again.
+    again = evaluate({"towards": TowardsTarget()}, "paper", 2, SEED, progress=False)
+    np.testing.assert_array_equal(again[0].mean_trace, res[0].mean_trace)
+
+
+def test_write_results_and_cli_function(tmp_path, capsys):
+    rows = run_evaluation(["gsr", "rm"], "paper", 3, SEED, out_dir=tmp_path, progress=False)
+    out = capsys.readouterr().out
+    assert "rm" in out and "reference" not in out
+    data = json.loads((tmp_path / "results.json").read_text())
+    assert isinstance(data, list) and [d["policy"] for d in data] == ["gsr", "rm"]
+    for d in data:
+        assert {
+            "policy",
+            "mean_trace",
+            "mean_trace_ci95",
+            "rmse",
+            "mean_return",
+            "ratio_to_gsr",
+        } <= d.keys()
+    assert data == json.loads(json.dumps(rows))
+    episodes = json.loads((tmp_path / "episodes.json").read_text())
+    assert episodes["policies"]["rm"]["seeds"] == [SEED, SEED + 1, SEED + 2]
+    assert (tmp_path / "mean_trace.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_errors(tmp_path):
+    with pytest.raises(ValueError, match="unknown policy"):
+        evaluate(["nope"], "paper", 1, SEED, progress=False)
+    with pytest.raises(TypeError, match="act"):
+        evaluate([object()], "paper", 1, SEED, progress=False)
+    with pytest.raises(ValueError, match="distinct"):
+        evaluate(["rm", "rm"], "paper", 1, SEED, progress=False)
+    with pytest.raises(ValueError, match="episodes"):
+        evaluate(["rm"], "paper", 0, SEED, progress=False)
+
+
+def test_no_training_stack_at_import():
+    code = (
+        "import sys, activetrack.baselines.evaluation; "
+        "bad = [m for m in ('activetrack.train', 'torch', 'stable_baselines3', 'matplotlib') "
+        "if m in sys.modules]; print(bad); sys.exit(1 if bad else 0)"
+    )
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+
+
+def test_write_results_without_plot(rm_and_gsr, tmp_path):
+    paths = write_results(rm_and_gsr, tmp_path, plot=False)
+    assert set(paths) == {"results", "episodes"}
+    assert not (tmp_path / "mean_trace.png").exists()

@@ -1,0 +1,286 @@
+"""Imitation of the GSR expert: behaviour cloning and DAgger, in plain torch.
+
+The expert is :class:`activetrack.baselines.policies.GSRPolicy`: at every step it solves
+the planning problem of the environment (``env.planning_problem()``) and returns each
+sensor's normalized displacement. With parameter sharing every (agent, step) pair is one
+sample ``(observation, expert action)``; the *label budget* counts them.
+
+- **BC** rolls out the expert for ``episodes`` episodes and regresses the network's mean
+  action on the expert's (mean squared error), for ``epochs`` passes.
+- **DAgger** (Ross et al., 2011) spends the same number of episodes over ``iterations``
+  rounds: round 0 is expert rollouts (BC), round ``i >= 1`` rolls out the mixture that
+  executes the expert's action with probability ``beta_i = beta ** i`` at each step and the
+  learner's otherwise, labels every visited state with the expert, aggregates and retrains.
+  With one round it is BC.
+
+The network is an SB3 ``ActorCriticPolicy`` (:mod:`activetrack.train.networks`); only its
+actor (features -> actor MLP -> ``action_net``) is trained, so ``PPO(...).policy`` can load
+its state dict and fine-tune it. Training episodes use seeds drawn from ``seed`` in
+``[TRAIN_SEED_LOW, 2**31)``, far from the evaluation seeds (1000 and up by default).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+import torch
+from stable_baselines3.common.policies import ActorCriticPolicy
+
+from activetrack.train.networks import DEFAULT_NET, NetConfig, build_policy, mean_action
+from activetrack.train.utils import DEFAULT_THREADS, configure_torch, seed_everything
+
+#: Training episodes use seeds at or above this, disjoint from held-out evaluation seeds.
+TRAIN_SEED_LOW = 1_000_000
+
+
+@dataclass
+class Dataset:
+    """Aggregated ``(observation, expert action)`` samples, float32."""
+
+    obs: np.ndarray
+    actions: np.ndarray
+
+    @classmethod
+    def empty(cls, obs_dim: int, act_dim: int = 2) -> Dataset:
+        """Return a dataset with no samples."""
+        return cls(np.zeros((0, obs_dim), np.float32), np.zeros((0, act_dim), np.float32))
+
+    def __len__(self) -> int:
+        return int(self.obs.shape[0])
+
+    def extend(self, other: Dataset) -> Dataset:
+        """Return the concatenation of ``self`` and ``other``."""
+        return Dataset(
+            np.concatenate([self.obs, other.obs]), np.concatenate([self.actions, other.actions])
+        )
+
+
+@dataclass
+class ImitationConfig:
+    """Budget and optimizer of BC/DAgger.
+
+    Attributes:
+        episodes: expert-labelled episodes in total (the label budget is
+            ``episodes * n_steps * M`` samples), shared by all DAgger rounds.
+        epochs: passes over the data for BC; for DAgger, passes after *each* round.
+        iterations: DAgger rounds (1 = BC).
+        beta: DAgger's expert-mixing decay: round i executes the expert with prob ``beta**i``.
+        batch_size, lr, weight_decay: Adam on the mean squared error of the mean action;
+            the learning rate decays to 10% by a cosine schedule over each training call.
+        net: the network architecture.
+    """
+
+    episodes: int = 100
+    epochs: int = 100
+    iterations: int = 1
+    beta: float = 0.5
+    batch_size: int = 256
+    lr: float = 1e-3
+    weight_decay: float = 0.0
+    net: NetConfig = field(default_factory=lambda: DEFAULT_NET)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Return JSON-friendly values."""
+        d = asdict(self)
+        d["net"] = self.net.to_dict()
+        return d
+
+
+def train_seeds(seed: int, n: int) -> list[int]:
+    """Return ``n`` distinct training-episode seeds drawn from ``seed`` (all >= TRAIN_SEED_LOW)."""
+    rng = np.random.default_rng([seed, 0x1A])
+    seeds: dict[int, None] = {}  # insertion-ordered set
+    while len(seeds) < n:
+        for s in rng.integers(TRAIN_SEED_LOW, 2**31, size=n - len(seeds)):
+            seeds[int(s)] = None
+    return list(seeds)
+
+
+def rollout_labels(
+    env: Any,
+    expert: Any,
+    seeds: list[int],
+    learner: Callable[[np.ndarray], np.ndarray] | None = None,
+    beta: float = 1.0,
+    rng: np.random.Generator | None = None,
+) -> tuple[Dataset, list[float]]:
+    """Return the expert-labelled states visited on ``seeds`` and each episode's mean trace.
+
+    At every step the expert labels all agents' observations; the team then executes the
+    expert's actions with probability ``beta`` (or always, without a ``learner``) and the
+    learner's otherwise (``learner`` maps observations (M, D) to actions (M, 2)).
+    """
+    rng = rng if rng is not None else np.random.default_rng()
+    obs_list, act_list, traces = [], [], []
+    for s in seeds:
+        obs_dict, _ = env.reset(seed=s)
+        episode_trace = []
+        while env.agents:
+            agents = list(env.agents)
+            obs = np.stack([obs_dict[a] for a in agents])
+            labels = expert.act(env)
+            expert_actions = np.stack([np.asarray(labels[a], np.float32) for a in agents])
+            obs_list.append(obs)
+            act_list.append(expert_actions)
+            if learner is None or rng.random() < beta:
+                actions = expert_actions
+            else:
+                actions = learner(obs)
+            obs_dict, _, _, _, infos = env.step({a: actions[j] for j, a in enumerate(agents)})
+            episode_trace.append(infos[agents[0]]["trace"])
+        traces.append(float(np.mean(episode_trace)))
+    data = Dataset(np.concatenate(obs_list).astype(np.float32), np.concatenate(act_list))
+    return data, traces
+
+
+def fit(
+    policy: ActorCriticPolicy,
+    data: Dataset,
+    epochs: int,
+    batch_size: int = 256,
+    lr: float = 1e-3,
+    weight_decay: float = 0.0,
+    generator: torch.Generator | None = None,
+    log: Callable[[str, float, int], None] | None = None,
+    step0: int = 0,
+) -> list[float]:
+    """Train the actor's mean action on ``data`` by MSE; return the mean loss of each epoch."""
+    obs = torch.as_tensor(data.obs)
+    target = torch.as_tensor(data.actions)
+    n = len(data)
+    batches_per_epoch = max(1, int(np.ceil(n / batch_size)))
+    opt = torch.optim.Adam(
+        [p for p in policy.parameters() if p.requires_grad], lr=lr, weight_decay=weight_decay
+    )
+    sched = torch.optim.lr_scheduler.CosineAnnealingLR(
+        opt, T_max=max(1, epochs * batches_per_epoch), eta_min=0.1 * lr
+    )
+    policy.train()
+    losses = []
+    for epoch in range(epochs):
+        perm = torch.randperm(n, generator=generator)
+        total = 0.0
+        for b in range(batches_per_epoch):
+            idx = perm[b * batch_size : (b + 1) * batch_size]
+            loss = torch.nn.functional.mse_loss(mean_action(policy, obs[idx]), target[idx])
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+            sched.step()
+            total += float(loss.detach()) * len(idx)
+        losses.append(total / n)
+        if log is not None:
+            log("imitation/mse", losses[-1], step0 + epoch)
+    policy.eval()
+    return losses
+
+
+def learner_fn(policy: ActorCriticPolicy) -> Callable[[np.ndarray], np.ndarray]:
+    """Return ``obs (M, D) -> clipped deterministic actions (M, 2)`` of ``policy``."""
+
+    def act(obs: np.ndarray) -> np.ndarray:
+        return policy.predict(obs, deterministic=True)[0]
+
+    return act
+
+
+@dataclass
+class ImitationResult:
+    """What :func:`train_imitation` returns.
+
+    Attributes:
+        policy: the trained SB3 ``ActorCriticPolicy``.
+        data: the aggregated dataset (its size is the label budget spent).
+        losses: the final MSE of each training call (one per round).
+        rollout_traces: per round, the mean trace of the rollouts that collected its data.
+        seconds: wall-clock time.
+    """
+
+    policy: ActorCriticPolicy
+    data: Dataset
+    losses: list[float]
+    rollout_traces: list[float]
+    seconds: float
+
+
+def train_imitation(
+    scenario: Any = "paper",
+    seed: int = 0,
+    config: ImitationConfig | None = None,
+    tensorboard_dir: str | None = None,
+    progress: bool = False,
+    expert: Any | None = None,
+    threads: int = DEFAULT_THREADS,
+    **overrides: Any,
+) -> ImitationResult:
+    """Return a policy trained by BC (``iterations == 1``) or DAgger on the expert's labels.
+
+    ``scenario`` and ``overrides`` configure the parallel env as in
+    :func:`activetrack.envs.parallel_env`. The expert defaults to ``GSRPolicy()``; any
+    object with ``act(env)`` works. ``threads`` torch threads (1: see
+    :mod:`activetrack.train.utils`). Deterministic for a given ``seed``.
+    """
+    from activetrack.envs import parallel_env
+
+    cfg = config or ImitationConfig()
+    if cfg.iterations < 1 or cfg.episodes < cfg.iterations:
+        raise ValueError("need iterations >= 1 and episodes >= iterations")
+    configure_torch(threads)
+    t0 = time.perf_counter()
+    rng = seed_everything(seed)
+    gen = torch.Generator().manual_seed(seed)
+    env = parallel_env(scenario, **overrides)
+    agent = env.possible_agents[0]
+    policy = build_policy(env.observation_space(agent), env.action_space(agent), cfg.net, cfg.lr)
+    if expert is None:
+        from activetrack.baselines.policies import GSRPolicy
+
+        expert = GSRPolicy()
+
+    writer = None
+    if tensorboard_dir is not None:
+        from torch.utils.tensorboard import SummaryWriter
+
+        writer = SummaryWriter(tensorboard_dir)
+    log = writer.add_scalar if writer is not None else None
+
+    # Split the episode budget as evenly as possible over the rounds.
+    seeds = train_seeds(seed, cfg.episodes)
+    splits = np.array_split(np.arange(cfg.episodes), cfg.iterations)
+    data = Dataset.empty(env.observation_space(agent).shape[0])
+    losses, traces = [], []
+    from tqdm.auto import tqdm
+
+    for i, idx in enumerate(tqdm(splits, desc="imitation rounds", disable=not progress)):
+        round_seeds = [seeds[j] for j in idx]
+        if i == 0:
+            new, tr = rollout_labels(env, expert, round_seeds)
+        else:
+            new, tr = rollout_labels(
+                env, expert, round_seeds, learner_fn(policy), beta=cfg.beta**i, rng=rng
+            )
+        data = data.extend(new)
+        traces.append(float(np.mean(tr)))
+        epoch_losses = fit(
+            policy,
+            data,
+            cfg.epochs,
+            cfg.batch_size,
+            cfg.lr,
+            cfg.weight_decay,
+            gen,
+            log,
+            step0=i * cfg.epochs,
+        )
+        losses.append(epoch_losses[-1])
+        if log is not None:
+            log("imitation/rollout_mean_trace", traces[-1], i)
+            log("imitation/samples", len(data), i)
+    if writer is not None:
+        writer.close()
+    env.close()
+    return ImitationResult(policy, data, losses, traces, time.perf_counter() - t0)
