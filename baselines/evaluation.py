@@ -264,24 +264,38 @@ def short_label(label: str) -> str:
 
 
 def plot_results(results: Sequence[PolicyEvaluation], path: str | Path, title: str = "") -> Path:
-    """Write a box plot of the per-episode mean traces (one box per policy); return the path."""
+    """Write box plots of the per-episode mean traces and their ratios to GSR; return the path.
+
+    Left: each episode's mean trace; right: each episode's mean trace over GSR's on the same
+    seed (the paired comparison). Both on a log scale, so that random motion (about 4x GSR)
+    and the policies within a few percent of GSR are readable together.
+    """
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import NullFormatter, ScalarFormatter
 
-    fig, ax = plt.subplots(figsize=(1.6 + 1.3 * len(results), 4.0))
+    gsr = _gsr_of(results)
     labels = [short_label(r.policy) for r in results]
+    ticks = range(1, len(results) + 1)
+    fig, (ax, bx) = plt.subplots(1, 2, figsize=(2.5 + 1.5 * len(results), 4.4))
     ax.boxplot([r.mean_trace for r in results], showmeans=True)
-    ax.set_xticks(range(1, len(results) + 1), labels, rotation=20, ha="right")
-    gsr = float(np.mean(_gsr_of(results).mean_trace))
-    ax.axhline(gsr, color="tab:green", ls="--", lw=1, label=f"GSR mean {gsr:.4f}")
+    ax.axhline(float(np.mean(gsr.mean_trace)), color="tab:green", ls="--", lw=1, label="GSR mean")
     ax.set_ylabel("episode mean trace of P(k|k)_11 [m^2]")
-    ax.set_title(title or f"{len(results[0].seeds)} held-out episodes")
-    ax.legend(loc="upper right", fontsize=8)
+    bx.boxplot([r.mean_trace / gsr.mean_trace for r in results], showmeans=True)
+    bx.axhline(1.0, color="tab:green", ls="--", lw=1, label="GSR")
+    bx.set_ylabel("episode mean trace / GSR's (same seed)")
+    for axis in (ax, bx):
+        axis.set_yscale("log")
+        axis.yaxis.set_major_formatter(ScalarFormatter())
+        axis.yaxis.set_minor_formatter(NullFormatter())
+        axis.set_xticks(ticks, labels, rotation=25, ha="right")
+        axis.legend(loc="upper right", fontsize=8)
+    fig.suptitle(title or f"{len(results[0].seeds)} held-out episodes (triangles: means)")
     fig.tight_layout()
     path = Path(path)
-    fig.savefig(path, dpi=120)
+    fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
 

@@ -87,8 +87,9 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
     parser.add_argument("--json", help="also write the figures to this JSON file")
     args = parser.parse_args(argv)
 
-    from activetrack.envs import parallel_env
     from mpe2 import simple_spread_v3
+
+    from activetrack.envs import parallel_env
 
     def tracking(render: bool) -> Callable[[], Any]:
         return lambda: parallel_env(scenario="paper", render_mode="rgb_array" if render else None)

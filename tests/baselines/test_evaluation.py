@@ -8,6 +8,9 @@ import sys
 
 import numpy as np
 import pytest
+from scipy import stats
+
+from activetrack import make_scenario
 from activetrack.baselines import GSR, RandomMotion
 from activetrack.baselines.evaluation import (
     evaluate,
@@ -18,9 +21,6 @@ from activetrack.baselines.evaluation import (
     write_results,
 )
 from activetrack.baselines.simulation import simulate
-from scipy import stats
-
-from activetrack import make_scenario
 
 SEED, EPISODES = 1000, 4
 

@@ -17,10 +17,10 @@ import re
 import gymnasium as gym
 import numpy as np
 import pytest
-from activetrack.baselines.policies import PlannerPolicy
-from activetrack.envs import ENV_ID, env, parallel_env
 
 from activetrack import make_scenario
+from activetrack.baselines.policies import PlannerPolicy
+from activetrack.envs import ENV_ID, env, parallel_env
 
 simulation = pytest.importorskip("activetrack.baselines.simulation")
 

@@ -10,9 +10,10 @@ import warnings
 
 import gymnasium as gym
 import pytest
-from activetrack.envs import ENV_ID, env, parallel_env
 from gymnasium.utils.env_checker import check_env
 from pettingzoo.test import api_test, parallel_api_test, parallel_seed_test, seed_test
+
+from activetrack.envs import ENV_ID, env, parallel_env
 
 ALLOWED = re.compile(
     r"observation space (maximum|minimum) value is -?infinity"

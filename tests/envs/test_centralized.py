@@ -6,6 +6,7 @@ import pickle
 import gymnasium as gym
 import numpy as np
 import pytest
+
 from activetrack.envs import ENV_ID, CentralizedTrackingEnv, parallel_env
 
 

@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+
 from activetrack.envs.dynamics import actions_to_reach, apply_actions
 
 

@@ -1,6 +1,7 @@
 """The observation kernels are batch-aware: a batch equals its elements one by one."""
 
 import numpy as np
+
 from activetrack.envs import features, parallel_env
 
 

@@ -8,6 +8,7 @@ import gymnasium as gym
 import numpy as np
 import pettingzoo
 import pytest
+
 from activetrack.envs import ENV_ID, TrackingParallelEnv, register_envs
 
 

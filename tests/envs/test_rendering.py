@@ -5,6 +5,7 @@ import warnings
 import imageio.v3 as iio
 import numpy as np
 import pytest
+
 from activetrack.envs import parallel_env, record_video
 from activetrack.envs.rendering import TrackingRenderer, ellipse
 
@@ -66,6 +67,7 @@ def test_human_mode_headless_does_not_crash():
 def test_human_mode_draws_on_a_pyplot_figure(monkeypatch):
     # Exercise the window code path on the non-interactive Agg backend.
     import matplotlib.pyplot as plt
+
     from activetrack.envs import rendering
 
     monkeypatch.setattr(rendering, "_interactive_backend", lambda: True)

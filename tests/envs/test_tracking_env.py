@@ -5,11 +5,11 @@ import pickle
 
 import numpy as np
 import pytest
-from activetrack.envs import parallel_env
-from activetrack.envs.features import decode_sensors, decode_target
 from gymnasium.utils import seeding
 
 from activetrack import make_scenario
+from activetrack.envs import parallel_env
+from activetrack.envs.features import decode_sensors, decode_target
 
 from .reference import ReferenceLoop
 
