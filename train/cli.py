@@ -2,8 +2,9 @@
 
 Each writes ``OUT/policy.zip`` (loadable by ``activetrack evaluate --policy``), plus
 ``OUT/config.json`` and TensorBoard logs in ``OUT/tb``; PPO also writes ``model.zip`` and
-``checkpoints/``. Arguments left at ``None`` keep the defaults of
-:class:`~activetrack.train.imitation.ImitationConfig` / :class:`~activetrack.train.ppo.PPOConfig`.
+``checkpoints/``. The parser's defaults equal those of
+:class:`~activetrack.train.imitation.ImitationConfig` and :class:`~activetrack.train.ppo.PPOConfig`
+(DAgger has its own rounds and epochs; ``tests/train/test_cli.py`` checks the rest).
 """
 
 from __future__ import annotations

@@ -121,6 +121,24 @@ def test_evaluate_loads_trained_policies(trained, tmp_path, capsys):
     assert (tmp_path / "mean_trace.png").is_file()
 
 
+def test_evaluate_rejects_a_policy_of_another_team_size(trained, capsys):
+    bc = str(trained / "bc" / "policy.zip")
+    code = main(
+        [
+            "evaluate",
+            "--scenario",
+            "homogeneous",
+            "--policy",
+            bc,
+            "--episodes",
+            "1",
+            "--no-progress",
+        ]
+    )
+    assert code == 2
+    assert "trained on observations of size 23, this scenario has 29" in capsys.readouterr().err
+
+
 def _subparser(parser: argparse.ArgumentParser, *names: str) -> argparse.ArgumentParser:
     for name in names:
         action = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
