@@ -20,6 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from activetrack.geometry import project_feasible
+from activetrack.linalg2 import as_complex
 from activetrack.validation import FloatArray
 
 #: Relative tolerance of the unit-disk and minimum-distance tests.
@@ -50,9 +51,7 @@ def apply_actions(
     r = np.asarray(r, dtype=np.float64)
     new = sensors + a * r[..., None]
     q = new - target_pred[..., None, :]
-    q2 = q * q
-    limit = np.asarray(rho, dtype=np.float64) * _INSIDE
-    inside = q2[..., 0] + q2[..., 1] < limit * limit
+    inside = np.abs(as_complex(q)) < np.asarray(rho, dtype=np.float64) * _INSIDE
     if np.count_nonzero(inside):
         inside &= r > 0.0  # a sensor that cannot move (r = 0) stays, even inside rho
         c = sensors - target_pred[..., None, :]

@@ -23,10 +23,19 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from activetrack import measurement
-from activetrack.linalg2 import inv2, symmetrize
+from activetrack.linalg2 import as_complex, inv2, symmetrize
 from activetrack.motion import LinearMotionModel
 from activetrack.motion import predict as predict  # re-exported: eq. (3)
 from activetrack.validation import FloatArray, as_finite, per_sensor, spd
+
+
+def _numbers(a: np.ndarray) -> np.ndarray | float | complex:
+    """Return ``a`` as a Python number if it is 0-d (one filter), else unchanged.
+
+    The 2x2 algebra below then runs on Python numbers for a single filter, several times
+    cheaper than on 0-d arrays or NumPy scalars, and on whole arrays for a batch.
+    """
+    return a.item() if a.ndim == 0 else a
 
 
 def update(
@@ -43,52 +52,55 @@ def update(
 
     Shapes: ``x`` (..., n), ``P`` (..., n, n), ``z`` and ``sensor_pos`` (..., M, 2),
     variances and ``orientation`` broadcastable to (..., M), ``mask`` (..., M) bool or None.
-    Written with elementwise 2x2 algebra because the batched environment runs it on
-    thousands of filters per call.
+    Written with elementwise 2x2 algebra (the sensor offsets as complex numbers, so one
+    filter costs few NumPy calls) because the batched environment runs it on thousands of
+    filters per call and the single environment once per step.
     """
-    # Offsets d = p_T_hat - p_S = -p of eq. (10), (..., M, 2).
-    d = x[..., None, :2] - sensor_pos
-    dx, dy = d[..., 0], d[..., 1]
-    n2 = dx * dx + dy * dy
-    dist = np.sqrt(n2)
-    nu_d = z[..., 0] - dist
-    nu_t = measurement.wrap_angle(z[..., 1] - np.arctan2(dy, dx) + orientation)
+    # Offsets d = p_T_hat - p_S = -p of eq. (10) as complex numbers dx + i dy, (..., M).
+    d = as_complex(x[..., :2])[..., None] - as_complex(sensor_pos)
+    dist = np.abs(d)
+    n2 = dist * dist
+    nu_t = measurement.wrap_angle(z[..., 1] - np.arctan2(d.imag, d.real) + orientation)
     wd = 1.0 / sigma_d2
     wt = 1.0 / sigma_theta2
     if mask is not None:
         wd = wd * mask
         wt = wt * mask
     # Y = sum_i H_i^T R_i^{-1} H_i (eq. 12) with h_d = -p/|p|, h_theta = J p/|p|^2 (eq. 9):
-    # since p p^T + (J p)(J p)^T = |p|^2 I, Y = sum_i g_i p p^T + (sum_i h_i) I with
-    # h = w_theta / |p|^2 and g = (w_d - h) / |p|^2. And b = H_e^T R^{-1} nu =
-    # sum_i e_i d + f_i J^T d with e = w_d nu_d / |p|, f = h nu_theta (d = -p). (Stacking
-    # the six sums into one array was faster for one filter but slower for large batches.)
+    # since p p^T + (J p)(J p)^T = |p|^2 I, Y = sum_i g_i d d^T + (sum_i h_i) I with
+    # h = w_theta / |p|^2 and g = (w_d - h) / |p|^2; and d d^T = (|d|^2 I + [[Re d^2,
+    # Im d^2], [Im d^2, -Re d^2]]) / 2 with sum_i g_i |d_i|^2 = sum_i (w_d - h)_i. The
+    # gradient term b = H_e^T R^{-1} nu = sum_i e_i d + f_i J^T d (e = w_d nu_d / |p|,
+    # f = h nu_theta) is Re + i Im of sum_i (e_i + i f_i) d_i. All sums are one reduction
+    # over the rows [h + i w_d, g d^2, (e + i f) d] (..., 3, M).
     h = wt / n2
-    g = (wd - h) / n2
-    e = wd * nu_d / dist
-    f = h * nu_t
-    # ``[()]`` turns the 0-d sums of a single filter into NumPy scalars, whose arithmetic
-    # is several times cheaper than that of 0-d arrays (a plain view for a batch).
-    gx, gy = g * dx, g * dy
-    hs = h.sum(-1)[()]
-    yxx = (gx * dx).sum(-1)[()] + hs
-    yyy = (gy * dy).sum(-1)[()] + hs
-    yxy = (gx * dy).sum(-1)[()]
-    bx = (e * dx - f * dy).sum(-1)[()]
-    by = (e * dy + f * dx).sum(-1)[()]
+    terms = np.empty(d.shape[:-1] + (3, d.shape[-1]), dtype=np.complex128)
+    terms.real[..., 0, :] = h
+    terms.imag[..., 0, :] = wd
+    np.multiply((wd - h) / n2, d * d, out=terms[..., 1, :])
+    ef = terms[..., 2, :]
+    np.divide(wd * (z[..., 0] - dist), dist, out=ef.real)
+    np.multiply(h, nu_t, out=ef.imag)
+    ef *= d
+    sums = terms.sum(-1)
+    s0, gsum, bsum = _numbers(sums[..., 0]), _numbers(sums[..., 1]), _numbers(sums[..., 2])
+    hs, swd = s0.real, s0.imag
+    half = 0.5 * (swd + hs)
+    yxx = half + 0.5 * gsum.real
+    yyy = half - 0.5 * gsum.real
+    yxy = 0.5 * gsum.imag
+    bx, by = bsum.real, bsum.imag
     # N = (I + P11 Y)^{-1}, in closed form.
-    p00, p01, p11 = P[..., 0, 0][()], P[..., 0, 1][()], P[..., 1, 1][()]
+    p00, p01, p11 = _numbers(P[..., 0, 0]), _numbers(P[..., 0, 1]), _numbers(P[..., 1, 1])
     m00 = 1.0 + p00 * yxx + p01 * yxy
     m01 = p00 * yxy + p01 * yyy
     m10 = p01 * yxx + p11 * yxy
     m11 = 1.0 + p01 * yxy + p11 * yyy
     det = m00 * m11 - m01 * m10
     n00, n01, n10, n11 = m11 / det, -m01 / det, -m10 / det, m00 / det
-    Pc0, Pc1 = P[..., :, 0], P[..., :, 1]
     # K nu = P[:, :2] N^T b.
     vx = n00 * bx + n10 * by
     vy = n01 * bx + n11 * by
-    x_post = x + Pc0 * vx[..., None] + Pc1 * vy[..., None]
     # Joseph form expanded: P+ = P - Pc D Pc^T with D = A + A^T - A P11 A^T - B,
     # A = K H restricted to the position block = N^T Y, B = K R K^T core = N^T Y N.
     a00, a01 = n00 * yxx + n10 * yxy, n00 * yxy + n10 * yyy
@@ -100,12 +112,16 @@ def update(
     q00 = t00 * a00 + t01 * a01
     q01 = t00 * a10 + t01 * a11
     q11 = t10 * a10 + t11 * a11
-    d00 = 2.0 * a00 - q00 - b00
-    d01 = a01 + a10 - q01 - b01
-    d11 = 2.0 * a11 - q11 - b11
-    w0 = Pc0 * d00[..., None] + Pc1 * d01[..., None]
-    w1 = Pc0 * d01[..., None] + Pc1 * d11[..., None]
-    P_post = P - (w0[..., :, None] * Pc0[..., None, :] + w1[..., :, None] * Pc1[..., None, :])
+    # One product Pc [N^T b | D] (..., n, 3) gives the state correction and Pc D.
+    V = np.empty(np.shape(vx) + (2, 3))
+    V[..., 0, 0], V[..., 1, 0] = vx, vy
+    V[..., 0, 1] = 2.0 * a00 - q00 - b00
+    V[..., 0, 2] = V[..., 1, 1] = a01 + a10 - q01 - b01
+    V[..., 1, 2] = 2.0 * a11 - q11 - b11
+    Pc = P[..., :, :2]
+    W = Pc @ V
+    x_post = x + W[..., 0]
+    P_post = P - W[..., 1:] @ Pc.mT
     return x_post, symmetrize(P_post)
 
 

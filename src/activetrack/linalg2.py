@@ -38,6 +38,18 @@ def rotation(phi: float | FloatArray) -> FloatArray:
     return np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)
 
 
+def as_complex(v: FloatArray) -> np.ndarray:
+    """Return 2-vectors ``v`` (..., 2) as complex numbers ``x + i y``, shape (...).
+
+    A view when the last axis is contiguous float64 (no copy), else a new array. One
+    complex operation replaces two or three real ones on the coordinates, which matters
+    when the arrays are small and every NumPy call costs about a microsecond.
+    """
+    if v.dtype == np.float64 and v.strides[-1] == v.itemsize:
+        return v.view(np.complex128)[..., 0]
+    return v[..., 0] + 1j * v[..., 1]
+
+
 def symmetrize(A: FloatArray) -> FloatArray:
     """Return ``(A + A^T) / 2`` over the last two axes."""
     return 0.5 * (A + A.mT)

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from activetrack.linalg2 import as_complex
 from activetrack.validation import FloatArray
 
 #: ``J = C(-pi/2)`` of eq. (9).
@@ -27,17 +28,24 @@ def wrap_angle(angle: FloatArray | float) -> FloatArray:
 
 
 def range_bearing(
-    target_pos: FloatArray, sensor_pos: FloatArray, orientation: FloatArray | float = 0.0
+    target_pos: FloatArray,
+    sensor_pos: FloatArray,
+    orientation: FloatArray | float = 0.0,
+    *,
+    wrap: bool = True,
 ) -> FloatArray:
-    """Return noise-free ``[d_i, theta_i]`` of eq. (4), shape (..., M, 2), bearing wrapped.
+    """Return noise-free ``[d_i, theta_i]`` of eq. (4), shape (..., M, 2).
 
     ``target_pos`` has shape (..., 2), ``sensor_pos`` (..., M, 2), ``orientation`` (..., M).
+    The bearing is wrapped to ``[-pi, pi)`` unless ``wrap=False`` (then it is
+    ``atan2(dy, dx) - phi_i``, for callers that add noise and wrap once afterwards).
     """
-    delta = target_pos[..., None, :] - sensor_pos
-    dx, dy = delta[..., 0], delta[..., 1]
-    out = np.empty(delta.shape)
-    np.hypot(dx, dy, out=out[..., 0])
-    out[..., 1] = wrap_angle(np.arctan2(dy, dx) - orientation)
+    delta = as_complex(target_pos[..., None, :] - sensor_pos)
+    out = np.empty(delta.shape + (2,))
+    np.abs(delta, out=out[..., 0])
+    np.subtract(np.arctan2(delta.imag, delta.real), orientation, out=out[..., 1])
+    if wrap:
+        out[..., 1] = wrap_angle(out[..., 1])
     return out
 
 

@@ -103,14 +103,16 @@ class Scenario:
 
     @property
     def initial_cov(self) -> FloatArray:
-        """Return P0 as a full matrix."""
-        P0 = as_finite("P0", self.P0)
-        n = self.model.dim
-        if P0.shape == (n,):
-            P0 = np.diag(P0)
-        if P0.shape != (n, n):
-            raise ValueError(f"P0 must have shape ({n},) or ({n}, {n}), got {P0.shape}")
-        return spd("P0", P0)
+        """Return P0 as a full matrix (a fresh copy; validated once)."""
+        if "P0" not in self._cache:
+            P0 = as_finite("P0", self.P0)
+            n = self.model.dim
+            if P0.shape == (n,):
+                P0 = np.diag(P0)
+            if P0.shape != (n, n):
+                raise ValueError(f"P0 must have shape ({n},) or ({n}, {n}), got {P0.shape}")
+            self._cache["P0"] = spd("P0", P0)
+        return self._cache["P0"].copy()
 
     def per_sensor(self, name: str) -> FloatArray:
         """Return the per-sensor parameter ``name`` as an (M,) array."""

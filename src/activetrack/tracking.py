@@ -84,7 +84,7 @@ def initial_conditions(
         x_true = x_hat + np.linalg.cholesky(P0) @ rng.standard_normal(x_hat.shape[0])
     else:
         x_true = np.asarray(sc.x0, dtype=np.float64).copy()
-    return x_true, x_hat, P0.copy(), sensors
+    return x_true, x_hat, P0, sensors
 
 
 def advance(
@@ -102,9 +102,9 @@ def advance(
     """
     n = x_true.shape[-1]
     x_next = x_true @ params.Phi.T + noise[..., :n] @ params.noise_factor.T
-    z = measurement.range_bearing(x_next[..., :2], sensors, params.orientation)
+    z = measurement.range_bearing(x_next[..., :2], sensors, params.orientation, wrap=False)
     z += noise[..., n:].reshape(*noise.shape[:-1], -1, 2) * params.noise_std
-    z[..., 1] = measurement.wrap_angle(z[..., 1])
+    z[..., 1] = measurement.wrap_angle(z[..., 1])  # wrapped once, after the noise
     x_post, P_post = ekf.update(
         x_pred, P_pred, z, sensors, params.sigma_d2, params.sigma_theta2, params.orientation
     )

@@ -1,5 +1,7 @@
 """Range-bearing model: eq. (4) against trigonometry, eq. (9) against finite differences."""
 
+import math
+
 import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -60,3 +62,23 @@ def test_sampled_noise_moments():
     np.testing.assert_allclose(err.mean(0), 0, atol=0.02)
     np.testing.assert_allclose(err.var(0)[:, 0], sd2, rtol=0.03)
     np.testing.assert_allclose(err.var(0)[:, 1], st2, rtol=0.03)
+
+
+def test_range_bearing_batched_against_scalar_trigonometry_and_unwrapped_option():
+    rng = np.random.default_rng(7)
+    targets = rng.uniform(-30, 30, (50, 2))
+    sensors = rng.uniform(-30, 30, (50, 4, 2))
+    phi = rng.uniform(-3, 3, (50, 4))
+    z = measurement.range_bearing(targets, sensors, phi)
+    raw = measurement.range_bearing(targets, sensors, phi, wrap=False)
+    for b in range(50):
+        for i in range(4):
+            dx, dy = targets[b] - sensors[b, i]
+            assert abs(z[b, i, 0] - math.hypot(dx, dy)) <= 1e-12 * math.hypot(dx, dy)
+            assert abs(raw[b, i, 1] - (math.atan2(dy, dx) - phi[b, i])) <= 1e-14
+    np.testing.assert_array_equal(raw[..., 0], z[..., 0])
+    np.testing.assert_array_equal(measurement.wrap_angle(raw[..., 1]), z[..., 1])
+    # a non-contiguous sensor array (every other column) gives the same answer
+    wide = np.zeros((50, 4, 4))
+    wide[..., ::2] = sensors
+    np.testing.assert_array_equal(measurement.range_bearing(targets, wide[..., ::2], phi), z)

@@ -65,3 +65,14 @@ def test_advance_is_one_step_of_the_textbook_loop():
     x_ref, P_ref = textbook_update(x_pred, P_pred, z, sensors, params.sigma_d2, params.sigma_theta2)
     np.testing.assert_allclose(x_post, x_ref, rtol=1e-10)
     np.testing.assert_allclose(P_post, P_ref, rtol=1e-9)
+
+
+def test_initial_cov_is_a_fresh_copy_of_p0():
+    sc = at.make_scenario("paper", P0=(4.0, 9.0, 1.0, 1.0))
+    P0 = sc.initial_cov
+    np.testing.assert_array_equal(P0, np.diag([4.0, 9.0, 1.0, 1.0]))
+    P0[0, 0] = -1.0  # a caller that mutates its copy does not change the scenario
+    assert sc.initial_cov[0, 0] == 4.0
+    _, _, P_episode, _ = tracking.initial_conditions(sc, np.random.default_rng(0))
+    P_episode[1, 1] = 0.0
+    assert sc.initial_cov[1, 1] == 9.0
