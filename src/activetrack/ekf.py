@@ -74,7 +74,8 @@ def update(
     # f = h nu_theta) is Re + i Im of sum_i (e_i + i f_i) d_i. All sums are one reduction
     # over the rows [h + i w_d, g d^2, (e + i f) d] (..., 3, M).
     h = wt / n2
-    terms = np.empty(d.shape[:-1] + (3, d.shape[-1]), dtype=np.complex128)
+    m = d.shape[-1]
+    terms = np.empty(d.shape[:-1] + (3, m), dtype=np.complex128)
     terms.real[..., 0, :] = h
     terms.imag[..., 0, :] = wd
     np.multiply((wd - h) / n2, d * d, out=terms[..., 1, :])
@@ -82,7 +83,8 @@ def update(
     np.divide(wd * (z[..., 0] - dist), dist, out=ef.real)
     np.multiply(h, nu_t, out=ef.imag)
     ef *= d
-    sums = terms.sum(-1)
+    # A matrix-vector product with ones: NumPy's sum over a short last axis is ~9x slower.
+    sums = (terms.reshape(-1, m) @ np.ones(m, dtype=np.complex128)).reshape(terms.shape[:-1])
     s0, gsum, bsum = _numbers(sums[..., 0]), _numbers(sums[..., 1]), _numbers(sums[..., 2])
     hs, swd = s0.real, s0.imag
     half = 0.5 * (swd + hs)
@@ -121,7 +123,7 @@ def update(
     Pc = P[..., :, :2]
     W = Pc @ V
     x_post = x + W[..., 0]
-    P_post = P - W[..., 1:] @ Pc.mT
+    P_post = P - W[..., 1:] @ P[..., :2, :]  # Pc^T: P is symmetric; rows multiply faster
     return x_post, symmetrize(P_post)
 
 
