@@ -25,7 +25,7 @@ from activetrack.validation import FloatArray
 
 #: Relative tolerance of the unit-disk and minimum-distance tests.
 TOL = 1e-12
-_LONG2 = (1.0 + TOL) ** 2
+_LONG = 1.0 + TOL
 _INSIDE = 1.0 - TOL
 
 
@@ -42,12 +42,11 @@ def apply_actions(
     ``rho`` broadcastable to (..., M). ``projected`` (..., M) marks the moves that were
     moved out of the ``rho`` disk. Inputs are not validated (finite values assumed).
     """
-    a = actions
-    a2 = a * a
-    n2 = a2[..., 0] + a2[..., 1]
-    long = n2 > _LONG2
+    a = np.asarray(actions, dtype=np.float64)
+    norm = np.abs(as_complex(a))
+    long = norm > _LONG
     if np.count_nonzero(long):  # outside the unit disk: keep the direction, cap the length
-        a = a / np.sqrt(np.where(long, n2, 1.0))[..., None]
+        a = a / np.where(long, norm, 1.0)[..., None]
     r = np.asarray(r, dtype=np.float64)
     new = sensors + a * r[..., None]
     q = new - target_pred[..., None, :]
@@ -76,11 +75,10 @@ def actions_to_reach(next_positions: FloatArray, sensors: FloatArray, r: FloatAr
     moving = r > 0.0
     safe = np.where(moving, r, 1.0)
     a = np.where(moving, (next_positions - sensors) / safe, 0.0)
-    a2 = a * a
-    n2 = (a2[..., 0] + a2[..., 1])[..., None]  # the same sum as in apply_actions
-    capped = n2 > _LONG2
+    norm = np.abs(as_complex(a))[..., None]  # the same norm as in apply_actions
+    capped = norm > _LONG
     if capped.any():
-        a = np.where(capped, a / np.sqrt(np.where(capped, n2, 1.0)), a)
+        a = np.where(capped, a / np.where(capped, norm, 1.0), a)
     free = moving & ~capped
     for _ in range(8):
         err = next_positions - (sensors + a * r)

@@ -22,9 +22,14 @@ _TWO_PI = 2.0 * np.pi
 
 
 def wrap_angle(angle: FloatArray | float) -> FloatArray:
-    """Return ``angle`` wrapped to ``[-pi, pi)``."""
+    """Return ``angle`` wrapped to ``[-pi, pi)`` (a new array for array input)."""
+    a = np.asarray(angle, dtype=np.float64)
+    # Bearings and innovations are mostly in range already: one test costs fewer NumPy
+    # calls than the wrap itself for the single environment's few angles.
+    if a.ndim and not np.count_nonzero(np.abs(a) >= np.pi):
+        return a.copy()
     # floor is several times faster than np.mod on large arrays
-    return angle - _TWO_PI * np.floor((angle + np.pi) / _TWO_PI)
+    return a - _TWO_PI * np.floor((a + np.pi) / _TWO_PI)
 
 
 def range_bearing(

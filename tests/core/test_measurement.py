@@ -48,6 +48,12 @@ def test_wrap_angle_range():
     np.testing.assert_allclose(np.sin(w), np.sin(a), atol=1e-12)
     np.testing.assert_allclose(np.cos(w), np.cos(a), atol=1e-12)
     assert measurement.wrap_angle(np.pi) == -np.pi
+    inside = np.array([-np.pi, -1.0, 0.0, 3.1])
+    out = measurement.wrap_angle(inside)
+    np.testing.assert_array_equal(out, inside)
+    assert not np.shares_memory(out, inside)
+    np.testing.assert_array_equal(measurement.wrap_angle(np.array([np.pi, 0.5])), [-np.pi, 0.5])
+    assert np.isnan(measurement.wrap_angle(np.array([np.nan, 0.0]))[0])
 
 
 def test_sampled_noise_moments():
