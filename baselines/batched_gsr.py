@@ -2,13 +2,23 @@
 
 The same algorithm as :class:`activetrack.baselines.GSR` without restarts, with one
 difference only in how it is computed: each step of a sweep solves sensor ``i`` of
-*every* copy at once through :func:`activetrack.solver.solve_single_sensor_batch` (one
-stacked eigenvalue call for all companion matrices). Per copy it follows the scalar rules
-exactly: warm start from the current positions (a sensor inside its ``rho`` disk from its
-projection), an update is kept only if it lowers the trace, a sensor whose problem has
-not changed since its last solve is skipped, and a copy stops when a sweep improves its
-trace by at most ``tol`` (relative), when no sensor is left to re-solve, or after
-``max_sweeps``. Copies that have stopped are left out of later solves.
+*every* copy at once with the vectorized kernel of
+:func:`activetrack.solver.solve_single_sensor_batch` (stacked companion matrices). Per
+copy it follows the scalar rules exactly: warm start from the current positions (a
+sensor inside its ``rho`` disk from its projection), an update is kept only if it lowers
+the trace, a sensor whose problem has not changed since its last solve is skipped, and a
+copy stops when a sweep improves its trace by at most ``tol`` (relative), when no sensor
+is left to re-solve, or after ``max_sweeps``. Copies that have stopped are left out of
+later solves.
+
+Between sweeps a sensor's subproblem changes only by the other sensors' moves, so the
+roots of its degree-10 polynomial f3 (eq. 33) move little: each copy keeps, per sensor,
+the roots of its last solve and hands them to the solver as starting points for its
+root finding (in the first sweep the solver seeds rows from other rows of the call). A
+row so started is used only when certified to have the same roots, each to within 1e-10
+(see :mod:`activetrack.solver`); every other row takes the companion-matrix eigenvalues
+as before. This changes how the roots are computed, not what GSR computes: the values
+agree with the eigenvalue path to rounding (``warm_roots=False`` forces the eigenvalues).
 
 This is how an expert labels a whole batched environment per call
 (:class:`BatchedGSRPolicy`).
@@ -24,7 +34,7 @@ import numpy as np
 from activetrack import geometry
 from activetrack.linalg2 import inv2
 from activetrack.objective import sensor_information
-from activetrack.solver import solve_single_sensor_batch
+from activetrack.solver import CircleRoots, _solve_batch_unchecked
 from activetrack.validation import FloatArray
 
 
@@ -50,16 +60,22 @@ class BatchedGSR:
     Attributes:
         tol: relative improvement per sweep below which a copy stops (>= 0).
         max_sweeps: at most this many sweeps per copy (>= 1).
+        warm_roots: find the roots of f3 from starting points (the sensor's previous
+            solve; in the first sweep other copies'), used only where certified (see the
+            module docstring); False: the companion-matrix eigenvalues always.
     """
 
     tol: float = 1e-9
     max_sweeps: int = 100
+    warm_roots: bool = True
 
     def __post_init__(self) -> None:
         if not (isinstance(self.tol, (int, float)) and math.isfinite(self.tol)) or self.tol < 0:
             raise ValueError(f"tol must be a finite number >= 0, got {self.tol!r}")
         if not isinstance(self.max_sweeps, (int, np.integer)) or self.max_sweeps < 1:
             raise ValueError(f"max_sweeps must be an integer >= 1, got {self.max_sweeps!r}")
+        if not isinstance(self.warm_roots, (bool, np.bool_)):
+            raise ValueError(f"warm_roots must be a bool, got {self.warm_roots!r}")
 
     def plan_batch(
         self,
@@ -91,9 +107,12 @@ class BatchedGSR:
         active = free.any(axis=1)
         sweeps = np.zeros(B, dtype=np.int64)
         f1 = f0.copy()
+        # Per sensor, each copy's roots of f3 from its last solve (NaN: none yet).
+        roots = np.full((M, B, 10), np.nan, dtype=np.complex128) if self.warm_roots else None
+        swap = np.zeros((M, B), dtype=bool)
         while active.any():
             f_before = f1.copy()
-            self._sweep(prior, c, r, rho, sd2, st2, free, s, info, f1, stale, active)
+            self._sweep(prior, c, r, rho, sd2, st2, free, s, info, f1, stale, active, roots, swap)
             sweeps += active
             stop = (
                 (sweeps >= self.max_sweeps)
@@ -104,8 +123,13 @@ class BatchedGSR:
         return BatchedGSRResult(s + target[:, None, :], f1, sweeps)
 
     @staticmethod
-    def _sweep(prior, c, r, rho, sd2, st2, free, s, info, cur, stale, active) -> None:
-        """Run one Gauss-Seidel sweep in place on the ``active`` copies (eq. 38)."""
+    def _sweep(prior, c, r, rho, sd2, st2, free, s, info, cur, stale, active, roots, swap) -> None:
+        """Run one Gauss-Seidel sweep in place on the ``active`` copies (eq. 38).
+
+        ``roots`` (M, B, 10) and ``swap`` (M, B) are each sensor's roots of f3 from its
+        last solve and their variable, the solver's starting points, updated in place
+        (``roots=None``: none, companion eigenvalues only).
+        """
         total = prior + info.sum(axis=1)  # rebuilt every sweep, as the scalar GSR does
         cur[active] = _trace_inv(total[active])
         M = s.shape[1]
@@ -114,9 +138,15 @@ class BatchedGSR:
             if idx.size == 0:
                 continue
             others = total[idx] - info[idx, i]
-            sol = solve_single_sensor_batch(
-                others, c[idx, i], r[idx, i], rho[idx, i], sd2[idx, i], st2[idx, i], check=False
+            guess = None
+            if roots is not None:
+                guess = CircleRoots(roots[i][idx], swap[i][idx], np.zeros(idx.size, dtype=bool))
+            sol, used = _solve_batch_unchecked(
+                others, c[idx, i], r[idx, i], rho[idx, i], sd2[idx, i], st2[idx, i], guess
             )
+            if roots is not None:
+                roots[i][idx] = used.roots
+                swap[i][idx] = used.swap
             new_s = sol.s
             stale[idx, i] = False
             new_info = sensor_information(new_s, sd2[idx, i], st2[idx, i])

@@ -45,6 +45,23 @@ Deviations from and additions to the paper (deliberate):
   well and the roots of f3 crowd and lose accuracy), also the nearest point D and the arc
   ends A, B. A polished point is kept only if it is feasible and better, so the answer is
   never worse than the best candidate evaluated.
+- Warm-started roots of f3 (the batched solver only, through the private
+  ``_solve_batch_unchecked(..., guess)``, which the batched GSR uses; the public
+  functions never take this path). The companion-matrix eigenvalues stay the method of
+  record: the shortcut replaces them in a row only when its result is *certified* to be
+  the same roots. From a start of 10 approximate roots, Weierstrass (Durand-Kerner)
+  steps run; the row is certified when the Gerschgorin inclusion disks of all 10 roots
+  (rounding included) each lie entirely inside or entirely outside the acceptance region
+  (``|imag| <= 1e-2``, ``|real| <= 1 + 1e-2``), the inside ones are pairwise disjoint (so
+  the region holds exactly one root per inside disk), and each of those roots is pinned
+  to within 1e-10 (units of ``r``) by a Newton inclusion disk lying in its own
+  (``_certified_roots``). Then its accepted roots are f3's true accepted roots to 1e-10,
+  which the eigenvalues give to their rounding. The starts: the row's roots from the
+  caller's previous solve of a nearby problem in the same variable (``swap``), e.g. the
+  same sensor one Gauss-Seidel step earlier; for rows without one, when there are at
+  least 256, one in 8 takes the eigenvalues and the others start from the roots of the
+  nearest of those (log-coefficient distance, same variable). A row not certified within
+  6 steps, and every row of a call with fewer than 32 such rows, takes the eigenvalues.
 - Infeasible (``||c|| + r < rho``): returns ``c + r c / ||c||`` (the x axis if ``c = 0``) with
   ``feasible=False``. ``r = 0`` returns ``c`` (feasible iff ``||c|| >= rho``). ``case`` is
   always the geometric case (1-4) of ``(||c||, r, rho)``.
@@ -120,6 +137,23 @@ class BatchSolution:
     feasible: np.ndarray
 
 
+@dataclass(frozen=True)
+class CircleRoots:
+    """The roots of f3 (eq. 33) behind a batch of solutions, for warm starts (private).
+
+    Attributes:
+        roots: (B, 10) complex roots in the polynomial's scaled, centred variable; NaN in
+            rows without a speed-circle polynomial.
+        swap: (B,) bool, which coordinate the variable is (the ``swap`` of the solver).
+        certified: (B,) bool, rows whose roots came from the certified warm start
+            (ignored in a guess).
+    """
+
+    roots: np.ndarray
+    swap: np.ndarray
+    certified: np.ndarray
+
+
 # ---------------------------------------------------------------------------------------
 # Shared arithmetic kernels (floats or numpy arrays), eigenbasis, normalized units.
 # ---------------------------------------------------------------------------------------
@@ -169,8 +203,11 @@ def _circle_derivatives(l1, l2, a, b, c1, c2, co, si):
     return f, f1, f2
 
 
-def _companion(gam: FloatArray) -> FloatArray:
-    """Return the companion matrices (..., 10, 10) of f3 with coefficients ``gam`` (..., 11).
+_SHIFT = np.eye(10, k=-1)  # the companion matrix below its first row
+
+
+def _monic(gam: FloatArray) -> FloatArray:
+    """Return ``q`` (..., 10): f3 with coefficients ``gam`` (..., 11) is ``z^10 + sum q_k z^k``.
 
     The polynomial is first scaled by its largest coefficient; a vanishing leading
     coefficient (a root at infinity) is replaced by a tiny one, which only moves that
@@ -180,11 +217,22 @@ def _companion(gam: FloatArray) -> FloatArray:
     g = gam / np.where(scale > 0.0, scale, 1.0)
     lead = g[..., 10]
     lead = np.where(np.abs(lead) < 1e-15, np.where(lead < 0.0, -1e-15, 1e-15), lead)
-    comp = np.zeros(gam.shape[:-1] + (10, 10))
-    comp[..., 0, :] = -g[..., 9::-1] / lead[..., None]
-    idx = np.arange(9)
-    comp[..., idx + 1, idx] = 1.0
+    return g[..., :10] / lead[..., None]
+
+
+def _companion_monic(q: FloatArray) -> FloatArray:
+    """Return the companion matrices (..., 10, 10) of ``z^10 + sum q_k z^k`` (``q`` (..., 10))."""
+    comp = np.broadcast_to(_SHIFT, q.shape[:-1] + (10, 10)).copy()
+    comp[..., 0, :] = -q[..., ::-1]
     return comp
+
+
+def _companion(gam: FloatArray) -> FloatArray:
+    """Return the companion matrices (..., 10, 10) of f3 with coefficients ``gam`` (..., 11).
+
+    Normalized as in :func:`_monic` (scaled; a vanishing leading coefficient made tiny).
+    """
+    return _companion_monic(_monic(gam))
 
 
 def _accept_roots(ev: np.ndarray) -> tuple[FloatArray, np.ndarray]:
@@ -192,6 +240,255 @@ def _accept_roots(ev: np.ndarray) -> tuple[FloatArray, np.ndarray]:
     re = ev.real
     ok = (np.abs(ev.imag) <= _IM_TOL) & (np.abs(re) <= 1.0 + _RE_TOL) & np.isfinite(re)
     return np.clip(re, -1.0, 1.0), ok
+
+
+_WARM_ITERS = 6  # Weierstrass steps from a warm start before falling back to eigvals
+# A round of Weierstrass steps costs ~0.1 ms plus ~1 us a row, an eigenvalue solve ~25 us
+# a row: fewer rows than these are cheaper by eigenvalues (to start, to go on).
+_WARM_MIN_ROWS = 32
+_WARM_MIN_LEFT = 16
+_WARM_RADIUS = 1e-10  # an accepted root must be certified to within this
+_PIN_ITERS = 3  # Newton steps that pin the roots inside the acceptance box
+# Rounding (Higham, Accuracy and Stability, 2nd ed., Sec. 5.1, and Lemma 3.5: a complex
+# multiply errs by at most sqrt(2) gamma_2): Horner's rule on n = 10 complex steps errs
+# by at most ~3.9 n eps sum |q_k| |z|^k = 4.3e-15 sum |q_k| |z|^k (_HORNER_ERR, 2.3x
+# that), its derivative recurrence by at most twice that times sum k |q_k| |z|^(k-1).
+# The product of 9 differences errs by ~32 eps relative, each radius formula by a few
+# eps (_PROD_ERR). The comparisons with the box get an absolute slack of
+# _BOX_ERR (1 + |z|) for the rounding of |Re z| +- radius.
+_HORNER_ERR = 1e-14
+_PROD_ERR = 1e-13
+_BOX_ERR = 1e-15
+
+
+def _weierstrass(q: FloatArray, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Return ``(p(z_i), prod_{j != i} (z_i - z_j))``, each (n, m), for ``z`` (n, m).
+
+    Layout: one polynomial per column, ``p = z^n + sum_k q[k] z^k`` with ``q`` (n, m).
+    Their ratio is the Weierstrass correction ``W_i``.
+    """
+    n = z.shape[0]
+    p = z + q[n - 1]
+    for k in range(n - 2, -1, -1):
+        p *= z
+        p += q[k]
+    z2 = np.concatenate([z, z])  # z2[s:s + n] is z rolled by s
+    prod = z - z2[1 : n + 1]
+    diff = np.empty_like(z)
+    for shift in range(2, n):
+        np.subtract(z, z2[shift : shift + n], out=diff)
+        prod *= diff
+    return p, prod
+
+
+def _abs_horner(abs_q: FloatArray, az: FloatArray) -> FloatArray:
+    """Return ``sum_k |q_k| |z|^k`` (``q_n = 1``) from ``abs_q`` (n, ...) and ``az = |z|``.
+
+    The scale of Horner's rounding error at ``z``; ``abs_q[k]`` broadcasts against ``az``.
+    """
+    n = abs_q.shape[0]
+    acc = az + abs_q[n - 1]
+    for k in range(n - 2, -1, -1):
+        acc *= az
+        acc += abs_q[k]
+    return acc
+
+
+def _inclusion_radii(
+    abs_q: FloatArray, z: np.ndarray, w: np.ndarray, prod: np.ndarray
+) -> FloatArray:
+    """Return radii ``R_i >= n |W_i|`` (n, m) that also cover rounding.
+
+    ``w = p / prod`` and ``prod`` as from :func:`_weierstrass` at ``z``; ``abs_q`` (n, m)
+    is ``|q|`` (Horner's rounding error scale, :func:`_abs_horner`).
+    """
+    n = z.shape[0]
+    radius = _abs_horner(abs_q, np.abs(z))
+    radius *= _HORNER_ERR
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        radius /= np.abs(prod)
+        radius += np.abs(w)
+    radius *= n * (1.0 + _PROD_ERR)
+    return radius
+
+
+def _classify(z: np.ndarray, radius: FloatArray) -> tuple[np.ndarray, np.ndarray]:
+    """Return ``(ok, inside)`` for the disks ``|x - z_i| <= radius_i`` (n, m).
+
+    ``inside`` (n, m): the disk lies in the acceptance box of :func:`_accept_roots`
+    (``|imag| <= _IM_TOL``, ``|real| <= 1 + _RE_TOL``). ``ok`` (m,): every disk of the
+    column lies entirely inside or entirely outside the box and the inside ones are
+    pairwise disjoint (an inside and an outside disk cannot meet). NaN fails.
+    """
+    n = z.shape[0]
+    are, aim = np.abs(z.real), np.abs(z.imag)
+    # Signed excess over the box: inside iff <= -radius, outside iff > radius.
+    excess = np.maximum(aim - _IM_TOL, are - (1.0 + _RE_TOL))
+    are += aim
+    are += 1.0
+    are *= _BOX_ERR
+    radius = radius + are  # slack for the rounding of the comparisons
+    inside = excess <= -radius
+    settled = excess > radius
+    settled |= inside
+    ok = np.all(settled, axis=0)
+    count = inside.sum(axis=0)
+    # Two inside disks must not meet. Most columns have two: compare first and last.
+    two = np.flatnonzero(ok & (count == 2))
+    if two.size:
+        first = np.argmax(inside[:, two], axis=0)
+        last = n - 1 - np.argmax(inside[::-1, two], axis=0)
+        gap = np.abs(z[first, two] - z[last, two])
+        ok[two] = gap > radius[first, two] + radius[last, two]
+    # More: all pairs (i, i + s mod n), s = 1..n/2.
+    cols = np.flatnonzero(ok & (count > 2))
+    if cols.size:
+        zc, rc, ic = z[:, cols], radius[:, cols], inside[:, cols]
+        z2 = np.concatenate([zc, zc])
+        r2 = np.concatenate([rc, rc])
+        i2 = np.concatenate([ic, ic])
+        meet = np.zeros(zc.shape, dtype=bool)
+        for shift in range(1, n // 2 + 1):
+            sl = slice(shift, shift + n)
+            meet |= (np.abs(zc - z2[sl]) <= rc + r2[sl]) & i2[sl]
+        ok[cols] = ~np.any(meet & ic, axis=0)
+    return ok, inside
+
+
+def _pin(
+    q: FloatArray, x: np.ndarray, centre: np.ndarray, radius: FloatArray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Return ``(x, ok)``: Newton-refined roots (K,) and whether each is pinned.
+
+    Root ``k`` of polynomial ``q[:, k]`` (``z^n + sum_j q[j, k] z^j``, ``q`` (n, K)) is
+    known to be the only root in the disk ``|x - centre_k| <= radius_k``. Since
+    ``p'/p (x) = sum_j 1 / (x - r_j)``, some root lies within ``n |p(x) / p'(x)|`` of any
+    ``x``; when that disk (with rounding) fits in the known one, it holds that root. ``ok``
+    when it does and is no wider than ``_WARM_RADIUS``; up to ``_PIN_ITERS`` Newton steps.
+    The returned root is within ``1.1 _WARM_RADIUS`` of the true one.
+    """
+    n = q.shape[0]
+    # Error scales sum |q_k| a^k and sum k |q_k| a^(k-1) at a = |centre| + radius, which
+    # bound those at any x in the known disk (the only x that can be accepted).
+    a = np.abs(centre) + radius
+    abs_q = np.abs(q)
+    bp = a + abs_q[n - 1]
+    bd = np.ones_like(a)
+    for k in range(n - 2, -1, -1):
+        bd *= a
+        bd += bp
+        bp *= a
+        bp += abs_q[k]
+    err_p, err_d = _HORNER_ERR * bp, (2.0 * _HORNER_ERR) * bd
+    ok = np.zeros(x.shape, dtype=bool)
+    x = x.copy()
+    act = np.arange(x.size)
+    xa, qa, ca, ra = x, q, centre, radius
+    for it in range(_PIN_ITERS):
+        p = xa + qa[n - 1]
+        dp = np.ones_like(xa)
+        for k in range(n - 2, -1, -1):
+            dp *= xa
+            dp += p
+            p *= xa
+            p += qa[k]
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            # n |p / p'| with |p| bounded above and |p'| below, rounding included.
+            den = np.abs(dp) - err_d
+            rho = (n * (1.0 + _PROD_ERR)) * (np.abs(p) + err_p) / den
+            step = p / dp
+        inner = (np.abs(xa - ca) + rho) * (1.0 + _PROD_ERR) <= ra
+        good = (den > 0.0) & (rho <= _WARM_RADIUS) & inner
+        # The root is within rho of xa; xa - step (|step| <= rho / n) is within 1.1 rho
+        # of it and still in the known disk.
+        x[act[good]] = xa[good] - step[good]
+        ok[act[good]] = True
+        keep = ~good
+        if it == _PIN_ITERS - 1 or not keep.any():
+            break
+        act, xa, qa = act[keep], xa[keep] - step[keep], qa.compress(keep, axis=1)
+        ca, ra, err_p, err_d = ca[keep], ra[keep], err_p[keep], err_d[keep]
+    return x, ok
+
+
+def _certified_roots(q: FloatArray, guess: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Return ``(z, ok)``: the roots (m, 10) of ``z^10 + sum q_k z^k`` (``q`` (m, 10)).
+
+    From ``guess`` (m, 10), e.g. the roots of a nearby polynomial, Weierstrass (Durand-
+    Kerner) steps ``z_i <- z_i - W_i`` run (quadratic convergence near simple roots) until
+    a row is certified, at most ``_WARM_ITERS`` steps (fewer once under
+    ``_WARM_MIN_LEFT`` rows are left). The certificate, in two parts:
+
+    1. Which roots are accepted. With the Weierstrass corrections
+       ``W_i = p(z_i) / prod_{j != i} (z_i - z_j)``, Lagrange interpolation gives
+       ``p(x) = prod_j (x - z_j) (1 + sum_i W_i / (x - z_i))``, the characteristic
+       polynomial of ``diag(z) - W 1^T``; by Gerschgorin's theorem every root of ``p``
+       lies in a disk ``|x - z_i + W_i| <= (n - 1) |W_i|``, hence in ``|x - z_i| <= R_i``
+       (:func:`_inclusion_radii`: ``R_i >= n |W_i|`` with rounding), and a union of k
+       disks disjoint from the others holds exactly k roots. When every disk lies
+       entirely inside or outside the acceptance box of :func:`_accept_roots` and the
+       inside ones are disjoint (:func:`_classify`), the box holds exactly one root per
+       inside disk.
+    2. Where they are: each inside root is within ``R_i`` of ``z_i``; where ``R_i`` is
+       wider than ``_WARM_RADIUS`` it is pinned by :func:`_pin` (Newton from
+       ``z_i - W_i``, an inclusion disk inside ``R_i``).
+
+    Then the returned ``z`` (the pinned roots; ``z_i - W_i`` outside the box) classify as
+    the true roots do. Rows not ``ok`` hold garbage.
+    """
+    qt = q_all = np.ascontiguousarray(q.T)
+    abs_qt = np.abs(qt)
+    z = np.ascontiguousarray(guess.T, dtype=np.complex128)
+    out = np.empty_like(z)
+    ok = np.zeros(z.shape[1], dtype=bool)
+    act = np.arange(z.shape[1])
+    to_pin = []  # (column, root row, centre, radius) of accepted roots wider than wanted
+    for it in range(_WARM_ITERS + 1):
+        p, prod = _weierstrass(qt, z)
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            w = p / prod
+        radius = _inclusion_radii(abs_qt, z, w, prod)
+        good, inside = _classify(z, radius)
+        cols = np.flatnonzero(good)
+        if cols.size:
+            ri, ci = np.nonzero(inside[:, cols] & (radius[:, cols] > _WARM_RADIUS))
+            col = cols[ci]
+            to_pin.append((act[col], ri, z[ri, col], radius[ri, col]))
+        z -= w
+        if cols.size:
+            out[:, act[cols]] = z[:, cols]
+            ok[act[cols]] = True
+        keep = ~good & np.all(np.isfinite(z), axis=0)
+        if it == _WARM_ITERS or np.count_nonzero(keep) < _WARM_MIN_LEFT:
+            break
+        if not keep.all():
+            act = act[keep]
+            z, qt, abs_qt = (a.compress(keep, axis=1) for a in (z, qt, abs_qt))
+    if to_pin:
+        # All at once: Newton from z_i - W_i (now in out), within the known disks.
+        col, ri, centre, radius = (np.concatenate(v) for v in zip(*to_pin, strict=True))
+        x, pinned = _pin(q_all[:, col], out[ri, col], centre, radius)
+        out[ri, col] = x
+        ok[col[~pinned]] = False  # a column is done when all its inside roots are pinned
+    return out.T, ok
+
+
+def _accepted_first(v: FloatArray, ok: np.ndarray) -> tuple[FloatArray, np.ndarray]:
+    """Return ``(v, ok)`` cut to the accepted entries of each row, in order, (m, kmax).
+
+    ``kmax`` is the most any row accepts; shorter rows are padded with ``ok = False``.
+    """
+    rows = np.arange(v.shape[0])
+    rest = ok.copy()
+    kmax = int(np.max(np.count_nonzero(ok, axis=1)))
+    out_v = np.empty((v.shape[0], kmax))
+    out_ok = np.empty((v.shape[0], kmax), dtype=bool)
+    for j in range(kmax):
+        first = np.argmax(rest, axis=1)  # the first accepted entry left (0 if none)
+        out_v[:, j] = v[rows, first]
+        out_ok[:, j] = rest[rows, first]
+        rest[rows, first] = False
+    return out_v, out_ok
 
 
 def _eig_frame(p11: float, p12: float, p22: float) -> tuple[float, float, float, float]:
@@ -517,7 +814,8 @@ def solve_single_sensor_batch(
     """Return the solutions of ``B`` independent single-sensor problems, vectorized.
 
     Same mathematics as :func:`solve_single_sensor`; all companion matrices are stacked
-    and their eigenvalues computed in one ``np.linalg.eigvals`` call.
+    and their eigenvalues computed in one ``np.linalg.eigvals`` call (up to 8 problems
+    are solved one by one by :func:`solve_single_sensor`'s kernel, which is faster there).
 
     Args:
         prior_info: (B, 2, 2) prior information matrices (symmetric positive definite).
@@ -557,7 +855,7 @@ def solve_single_sensor_batch(
                 bound = "> 0" if pos else ">= 0"
                 raise ValueError(f"{name} must be finite and {bound}, got {value!r}")
         args.append(np.broadcast_to(arr, (n,)).astype(np.float64))
-    return _solve_batch_unchecked(P, cc, *args)
+    return _solve_batch_unchecked(P, cc, *args)[0]
 
 
 def _eigvals_stacked(comp: FloatArray) -> np.ndarray:
@@ -624,6 +922,136 @@ def _newton_batch(
     return f, x, y
 
 
+_SEED_MIN_ROWS = 256  # rows without a guess needed before seeding them from the batch
+_SEED_EVERY = 8  # of those, one in this many takes eigenvalues and seeds its neighbours
+_SEED_PROBE = 64  # seeded rows tried first; the rest only if at least
+_SEED_PROBE_OK = 0.5  # this fraction of them is certified
+
+
+def _nearest_seed(
+    q: FloatArray, swap: np.ndarray, seeds: np.ndarray, rows: np.ndarray
+) -> np.ndarray:
+    """Return, for each of ``rows``, the nearest of ``seeds`` with the same ``swap`` (or -1).
+
+    Distance: Euclidean in ``sign(q) log(1 + |q|)`` (the monic coefficients, (m, 10)),
+    where nearby polynomials have nearby roots; k-d tree search.
+    """
+    from scipy.spatial import cKDTree  # here: importing scipy.spatial costs ~0.1 s
+
+    feat = np.sign(q) * np.log1p(np.abs(q))
+    out = np.full(rows.size, -1, dtype=np.int64)
+    for value in (False, True):
+        have = seeds[swap[seeds] == value]
+        need = np.flatnonzero(swap[rows] == value)
+        if have.size and need.size:
+            _, k = cKDTree(feat[have]).query(feat[rows[need]])
+            out[need] = have[k]
+    return out
+
+
+def _circle_roots(
+    q: FloatArray,
+    swap: np.ndarray,
+    bad: np.ndarray,
+    guess: CircleRoots | None,
+    idx: np.ndarray,
+    certified: np.ndarray,
+) -> np.ndarray:
+    """Return the roots (m, 10) of the monic f3 ``q`` (m, 10) of rows ``idx``.
+
+    Without ``guess``: the companion-matrix eigenvalues, the method of record. With it,
+    rows with a usable guess (finite, same variable ``swap``) try
+    :func:`_certified_roots`; when at least ``_SEED_MIN_ROWS`` rows have none, one in
+    ``_SEED_EVERY`` of them takes the eigenvalues and the others start from their
+    nearest such seed's roots (:func:`_nearest_seed`), if the first ``_SEED_PROBE`` of
+    them certify well enough (a batch of dissimilar problems makes poor seeds). Certified
+    rows are marked in ``certified`` (length B, by ``idx``); all others take the
+    eigenvalues.
+    """
+    if guess is None:
+        return _eigvals_stacked(_companion_monic(q))
+    m = q.shape[0]
+    ev = np.empty(q.shape, dtype=np.complex128)
+    done = np.zeros(m, dtype=bool)
+    start = guess.roots[idx]
+    warm = (guess.swap[idx] == swap) & ~bad & np.all(np.isfinite(start), axis=1)
+    cold = np.flatnonzero(~warm & ~bad)
+    if cold.size >= _SEED_MIN_ROWS:
+        seeds = cold[::_SEED_EVERY]
+        ev[seeds] = _eigvals_stacked(_companion_monic(q[seeds]))
+        done[seeds] = True
+        rows = np.setdiff1d(cold, seeds, assume_unique=True)
+        near = _nearest_seed(q, swap, seeds, rows)
+        keep = near >= 0
+        keep[keep] = np.all(np.isfinite(ev[near[keep]]), axis=1)
+        rows, near = rows[keep], near[keep]
+        start[rows] = ev[near]
+        # Seeds are only as good as the batch is homogeneous: try a few rows first.
+        probe = rows[:_SEED_PROBE]
+        if probe.size:
+            z, ok = _certified_roots(q[probe], start[probe])
+            ev[probe[ok]] = z[ok]
+            done[probe[ok]] = True
+            certified[idx[probe[ok]]] = True
+            if ok.mean() >= _SEED_PROBE_OK:
+                warm[rows[_SEED_PROBE:]] = True
+    use = np.flatnonzero(warm)
+    if use.size >= _WARM_MIN_ROWS:
+        z, ok = _certified_roots(q[use], start[use])
+        ev[use[ok]] = z[ok]
+        done[use[ok]] = True
+        certified[idx[use[ok]]] = True
+    rest = np.flatnonzero(~done)
+    if rest.size:
+        ev[rest] = _eigvals_stacked(_companion_monic(q[rest]))
+    return ev
+
+
+_SCALAR_ROWS = 8  # up to this many rows the scalar solver is faster than the vectorized
+
+
+def _solve_rows_scalar(
+    P: FloatArray,
+    c: FloatArray,
+    r: FloatArray,
+    rho: FloatArray,
+    sigma_d2: FloatArray,
+    sigma_theta2: FloatArray,
+) -> tuple[BatchSolution, CircleRoots]:
+    """Return :func:`_solve_batch_unchecked`'s result for a few rows, solved one by one.
+
+    Each row is :func:`_solve_unchecked` (the same method; a vectorized call costs ~1 ms
+    of numpy overhead whatever its size). No roots are returned (NaN).
+    """
+    n = P.shape[0]
+    sols = [
+        _solve_unchecked(
+            float(P[i, 0, 0]),
+            0.5 * float(P[i, 0, 1] + P[i, 1, 0]),
+            float(P[i, 1, 1]),
+            float(c[i, 0]),
+            float(c[i, 1]),
+            float(r[i]),
+            float(rho[i]),
+            float(sigma_d2[i]),
+            float(sigma_theta2[i]),
+        )
+        for i in range(n)
+    ]
+    sol = BatchSolution(
+        s=np.array([q.s for q in sols]).reshape(n, 2),
+        value=np.array([q.value for q in sols], dtype=np.float64),
+        case=np.array([q.case for q in sols], dtype=np.int64),
+        feasible=np.array([q.feasible for q in sols], dtype=bool),
+    )
+    roots = CircleRoots(
+        np.full((n, 10), np.nan, dtype=np.complex128),
+        np.zeros(n, dtype=bool),
+        np.zeros(n, dtype=bool),
+    )
+    return sol, roots
+
+
 def _solve_batch_unchecked(
     P: FloatArray,
     c: FloatArray,
@@ -631,9 +1059,19 @@ def _solve_batch_unchecked(
     rho: FloatArray,
     sigma_d2: FloatArray,
     sigma_theta2: FloatArray,
-) -> BatchSolution:
-    """Return the batched solution for validated arrays of shapes (B,2,2), (B,2), (B,)x4."""
+    guess: CircleRoots | None = None,
+) -> tuple[BatchSolution, CircleRoots]:
+    """Return the batched solution for validated arrays of shapes (B,2,2), (B,2), (B,)x4.
+
+    Also returns the roots of f3 used per row (NaN off the speed circle, and for calls of
+    up to ``_SCALAR_ROWS`` rows, which are solved one by one). Without ``guess`` the
+    roots are the companion-matrix eigenvalues. With it (the roots returned by an
+    earlier call on nearby problems, row by row) rows may take certified roots instead,
+    as :func:`_circle_roots` says; the result is the same to rounding.
+    """
     n = P.shape[0]
+    if n <= _SCALAR_ROWS:
+        return _solve_rows_scalar(P, c, r, rho, sigma_d2, sigma_theta2)
     p11, p22 = P[:, 0, 0], P[:, 1, 1]
     p12 = 0.5 * (P[:, 0, 1] + P[:, 1, 0])
     phi0 = 0.5 * np.arctan2(2.0 * p12, p11 - p22)
@@ -663,22 +1101,34 @@ def _solve_batch_unchecked(
     need_circle = ~special & (ncn > 1.0) & (rh2 < ncn * ncn - 1.0)
     need_arc = ~special & (rh >= ncn - 1.0)
 
-    cand_x, cand_y, cand_ok = [], [], []
+    roots_out = np.full((n, 10), np.nan, dtype=np.complex128)
+    swap_out = np.zeros(n, dtype=bool)
+    certified = np.zeros(n, dtype=bool)
+    # Candidate blocks (x, y, f0 or inf where not a candidate), each (n, k), joined below.
+    cand_x, cand_y, cand_f = [], [], []
     # Speed-circle candidates (cases I, III): companion-matrix roots of f3 (eq. 33).
     idx = np.flatnonzero(need_circle)
+    every = idx.size == n  # GSR's usual batch: no row needs scattering
     n_circle = 0
     if idx.size:
-        swap = np.abs(C1[idx]) > np.abs(C2[idx])
-        ia, ib = np.where(swap, L2[idx], L1[idx]), np.where(swap, L1[idx], L2[idx])
-        ca, cb = np.where(swap, C2[idx], C1[idx]), np.where(swap, C1[idx], C2[idx])
-        hk = circle_reduction(*alpha_beta(ia, ib, A[idx], Bn[idx], ca, cb), ca, cb)
+        L1i, L2i, Ai, Bi = L1[idx], L2[idx], A[idx], Bn[idx]
+        C1i, C2i = C1[idx], C2[idx]
+        swap = np.abs(C1i) > np.abs(C2i)
+        ia, ib = np.where(swap, L2i, L1i), np.where(swap, L1i, L2i)
+        ca, cb = np.where(swap, C2i, C1i), np.where(swap, C1i, C2i)
+        hk = circle_reduction(*alpha_beta(ia, ib, Ai, Bi, ca, cb), ca, cb)
         gam = np.stack(sylvester_gammas(*hk), axis=-1)
         bad = ~np.all(np.isfinite(gam), axis=-1)
         gam[bad] = 0.0
         gam[bad, 10] = 1.0  # no finite polynomial: all roots at zero, masked below
-        ev = _eigvals_stacked(_companion(gam))
+        q = _monic(gam)
+        ev = _circle_roots(q, swap, bad, guess, idx, certified)
+        roots_out[idx] = np.where(bad[:, None], np.nan, ev)
+        swap_out[idx] = swap
         v, ok = _accept_roots(ev)
         ok &= ~bad[:, None]
+        # Only the accepted roots matter (most rows accept 2 of the 10): keep their columns.
+        v, ok = _accepted_first(v, ok)
         w = np.sqrt(np.maximum(0.0, 1.0 - v * v))
         # f1 on the circle is g0(v) + g1(v) * (+-w): the sign(s) where it vanishes are
         # critical points (Newton starts); both signs are candidates regardless.
@@ -691,78 +1141,97 @@ def _solve_batch_unchecked(
         ok2 = np.concatenate([ok, ok], axis=1)
         crit = np.concatenate([ep <= _SIGN_RATIO * em, em <= _SIGN_RATIO * ep], axis=1)
         sw = swap[:, None]
-        X = np.where(sw, w2, v2)
-        Y = np.where(sw, v2, w2)
-        k = X.shape[1]
-        xs = np.zeros((n, k))
-        ys = np.zeros((n, k))
-        oks = np.zeros((n, k), dtype=bool)
-        xs[idx] = C1[idx, None] + X
-        ys[idx] = C2[idx, None] + Y
-        oks[idx] = ok2
-        cand_x.append(xs)
-        cand_y.append(ys)
-        cand_ok.append(oks & (xs * xs + ys * ys >= lo[col]))
-        n_circle = k
+        X = C1i[:, None] + np.where(sw, w2, v2)
+        Y = C2i[:, None] + np.where(sw, v2, w2)
+        ok2 &= X * X + Y * Y >= lo[idx, None]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            F = _f0(L1i[:, None], L2i[:, None], Ai[:, None], Bi[:, None], X, Y)
+        F = np.where(ok2 & np.isfinite(F), F, np.inf)
+        n_circle = X.shape[1]
+        if every:
+            cand_x.append(X)
+            cand_y.append(Y)
+            cand_f.append(F)
+        else:
+            xs = np.zeros((n, n_circle))
+            ys = np.zeros((n, n_circle))
+            fs = np.full((n, n_circle), np.inf)
+            xs[idx], ys[idx], fs[idx] = X, Y, F
+            cand_x.append(xs)
+            cand_y.append(ys)
+            cand_f.append(fs)
     d_col = n_circle
-    # Nearest point D of the speed circle (case I).
-    t = 1.0 - 1.0 / np.where(ncn > 0.0, ncn, 1.0)
-    cand_x.append((C1 * t)[col])
-    cand_y.append((C2 * t)[col])
-    cand_ok.append((need_circle & (ncn - 1.0 >= rh))[col])
-    # rho-arc candidates (cases II, III, 4): axis points inside the speed disk (eq. 36-37).
-    zero = np.zeros(n)
-    ax = np.stack([rh, -rh, zero, zero], axis=1)
-    ay = np.stack([zero, zero, rh, -rh], axis=1)
-    inside = (ax - C1[col]) ** 2 + (ay - C2[col]) ** 2 <= 1.0 + _FEAS_TOL
-    cand_x.append(ax)
-    cand_y.append(ay)
-    cand_ok.append(inside & need_arc[col])
-    # Arc ends A, B: intersections of the two circles.
-    meet = need_arc & (ncn > 0.0) & (rh >= np.abs(ncn - 1.0))
-    safe = np.where(ncn > 0.0, ncn, 1.0)
-    along = (rh2 - 1.0 + ncn * ncn) / (2.0 * safe)
-    h = np.sqrt(np.maximum(0.0, rh2 - along * along))
-    ux, uy = C1 / safe, C2 / safe
-    cand_x.append(np.stack([along * ux - h * uy, along * ux + h * uy], axis=1))
-    cand_y.append(np.stack([along * uy + h * ux, along * uy - h * ux], axis=1))
-    cand_ok.append(np.stack([meet, meet], axis=1))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        # Nearest point D of the speed circle (case I).
+        t = 1.0 - 1.0 / np.where(ncn > 0.0, ncn, 1.0)
+        dx, dy = C1 * t, C2 * t
+        fd = _f0(L1, L2, A, Bn, dx, dy)
+        ok_d = need_circle & (ncn - 1.0 >= rh) & np.isfinite(fd)
+        cand_x.append(dx[col])
+        cand_y.append(dy[col])
+        cand_f.append(np.where(ok_d, fd, np.inf)[col])
+        if np.any(need_arc):
+            # rho-arc candidates (cases II, III, 4): axis points inside the speed disk
+            # (eq. 36-37), then the arc ends A, B: intersections of the two circles.
+            zero = np.zeros(n)
+            ax = np.stack([rh, -rh, zero, zero], axis=1)
+            ay = np.stack([zero, zero, rh, -rh], axis=1)
+            inside = (ax - C1[col]) ** 2 + (ay - C2[col]) ** 2 <= 1.0 + _FEAS_TOL
+            meet = need_arc & (ncn > 0.0) & (rh >= np.abs(ncn - 1.0))
+            safe = np.where(ncn > 0.0, ncn, 1.0)
+            along = (rh2 - 1.0 + ncn * ncn) / (2.0 * safe)
+            h = np.sqrt(np.maximum(0.0, rh2 - along * along))
+            ux, uy = C1 / safe, C2 / safe
+            bx_ = np.stack([along * ux - h * uy, along * ux + h * uy], axis=1)
+            by_ = np.stack([along * uy + h * ux, along * uy - h * ux], axis=1)
+            for x_, y_, ok_ in (
+                (ax, ay, inside & need_arc[col]),
+                (bx_, by_, np.stack([meet, meet], axis=1)),
+            ):
+                f_ = _f0(L1[col], L2[col], A[col], Bn[col], x_, y_)
+                cand_x.append(x_)
+                cand_y.append(y_)
+                cand_f.append(np.where(ok_ & np.isfinite(f_), f_, np.inf))
 
     xs = np.concatenate(cand_x, axis=1)
     ys = np.concatenate(cand_y, axis=1)
-    oks = np.concatenate(cand_ok, axis=1)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        fs = _f0(L1[col], L2[col], A[col], Bn[col], xs, ys)
-    fs = np.where(oks & np.isfinite(fs), fs, np.inf)
+    fs = np.concatenate(cand_f, axis=1)
     rows = np.arange(n)
     j = np.argmin(fs, axis=1)
     best_f = fs[rows, j]
     bx, by = xs[rows, j], ys[rows, j]
 
     # Polish on the speed circle (damped Newton on df0/dt), rows in idx only: from the
-    # best root candidates, from D and, in case III, from the arc ends A, B.
+    # best root candidates, from D and, in case III, from the arc ends A, B. All starts
+    # run in one batch; their results are then taken in order (strictly better wins).
     if idx.size:
-        k_ab = xs.shape[1] - 2
-        sharp = np.maximum(ncn[idx] - 1.0, rh[idx]) < _SHARP
         starts = []
+        sharp = np.maximum(ncn[idx] - 1.0, rh[idx]) < _SHARP
         if np.any(sharp):
-            for col_j in (d_col, k_ab, k_ab + 1):
+            ab = (xs.shape[1] - 2, xs.shape[1] - 1) if np.any(need_arc) else ()
+            for col_j in (d_col, *ab):
                 starts.append(np.where(sharp, col_j, -1))
         if n_circle:
             fcrit = np.where(crit, fs[idx, :n_circle], np.inf)
-            order = np.argsort(fcrit, axis=1)[:, :_N_POLISH]
             rows_i = np.arange(idx.size)
-            for m in range(order.shape[1]):
-                jm = order[:, m]
+            for _ in range(min(_N_POLISH, n_circle)):  # the best, then the next best
+                jm = np.argmin(fcrit, axis=1)
                 starts.append(np.where(np.isfinite(fcrit[rows_i, jm]), jm, -1))
-        sub = (L1[idx], L2[idx], A[idx], Bn[idx], C1[idx], C2[idx], lo[idx])
-        for jj in starts:
-            f = np.where(jj >= 0, fs[idx, jj], np.inf)  # -1: no start in that row
-            f, x, y = _newton_batch(sub, f, xs[idx, jj], ys[idx, jj])
-            win = f < best_f[idx]
-            best_f[idx] = np.where(win, f, best_f[idx])
-            bx[idx] = np.where(win, x, bx[idx])
-            by[idx] = np.where(win, y, by[idx])
+                fcrit[rows_i, jm] = np.inf
+        if starts:
+            jj = np.stack(starts)  # (starts, rows of idx); -1: no start there
+            ii = np.broadcast_to(idx, jj.shape)
+            f0s = np.where(jj >= 0, fs[ii, jj], np.inf).ravel()
+            sub = tuple(np.tile(q[idx], len(starts)) for q in (L1, L2, A, Bn, C1, C2, lo))
+            f, x, y = _newton_batch(sub, f0s, xs[ii, jj].ravel(), ys[ii, jj].ravel())
+            f, x, y = (q.reshape(jj.shape) for q in (f, x, y))
+            bfi, bxi, byi = best_f[idx], bx[idx], by[idx]
+            for k in range(len(starts)):
+                win = f[k] < bfi
+                bfi = np.where(win, f[k], bfi)
+                bxi = np.where(win, x[k], bxi)
+                byi = np.where(win, y[k], byi)
+            best_f[idx], bx[idx], by[idx] = bfi, bxi, byi
 
     ex, ey = bx * rr, by * rr
     s = np.stack([cph * ex - sph * ey, sph * ex + cph * ey], axis=1)
@@ -783,7 +1252,8 @@ def _solve_batch_unchecked(
         with np.errstate(divide="ignore", invalid="ignore"):
             vk = _f0(l1[k], l2[k], a[k], b[k], exk, eyk)
         value[k] = np.where(origin, 1.0 / (l1[k] + a[k]), vk)
-    return BatchSolution(s=s, value=value, case=case, feasible=feasible)
+    sol = BatchSolution(s=s, value=value, case=case, feasible=feasible)
+    return sol, CircleRoots(roots_out, swap_out, certified)
 
 
 # ---------------------------------------------------------------------------------------
