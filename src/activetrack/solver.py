@@ -355,6 +355,19 @@ def _classify(z: np.ndarray, radius: FloatArray) -> tuple[np.ndarray, np.ndarray
     return ok, inside
 
 
+def _horner_with_derivative(q: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Return ``(p(x), p'(x))`` for ``p = z^n + sum_k q[k] z^k`` (``q`` (n, ...), Horner)."""
+    n = q.shape[0]
+    p = x + q[n - 1]
+    dp = np.ones_like(p)
+    for k in range(n - 2, -1, -1):
+        dp *= x
+        dp += p
+        p *= x
+        p += q[k]
+    return p, dp
+
+
 def _pin(
     q: FloatArray, x: np.ndarray, centre: np.ndarray, radius: FloatArray
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -370,28 +383,14 @@ def _pin(
     n = q.shape[0]
     # Error scales sum |q_k| a^k and sum k |q_k| a^(k-1) at a = |centre| + radius, which
     # bound those at any x in the known disk (the only x that can be accepted).
-    a = np.abs(centre) + radius
-    abs_q = np.abs(q)
-    bp = a + abs_q[n - 1]
-    bd = np.ones_like(a)
-    for k in range(n - 2, -1, -1):
-        bd *= a
-        bd += bp
-        bp *= a
-        bp += abs_q[k]
+    bp, bd = _horner_with_derivative(np.abs(q), np.abs(centre) + radius)
     err_p, err_d = _HORNER_ERR * bp, (2.0 * _HORNER_ERR) * bd
     ok = np.zeros(x.shape, dtype=bool)
     x = x.copy()
     act = np.arange(x.size)
     xa, qa, ca, ra = x, q, centre, radius
     for it in range(_PIN_ITERS):
-        p = xa + qa[n - 1]
-        dp = np.ones_like(xa)
-        for k in range(n - 2, -1, -1):
-            dp *= xa
-            dp += p
-            p *= xa
-            p += qa[k]
+        p, dp = _horner_with_derivative(qa, xa)
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             # n |p / p'| with |p| bounded above and |p'| below, rounding included.
             den = np.abs(dp) - err_d
