@@ -17,8 +17,10 @@ the roots of its last solve and hands them to the solver as starting points for 
 root finding (in the first sweep the solver seeds rows from other rows of the call). A
 row so started is used only when certified to have the same roots, each to within 1e-10
 (see :mod:`activetrack.solver`); every other row takes the companion-matrix eigenvalues
-as before. This changes how the roots are computed, not what GSR computes: the values
-agree with the eigenvalue path to rounding (``warm_roots=False`` forces the eigenvalues).
+as before. This changes how the roots are computed, not the method: each solve agrees
+with the eigenvalue path to rounding (``warm_roots=False`` forces the eigenvalues), though
+a last-bit difference can change a copy's sweep count by one, as a 1-ulp change of its
+input can.
 
 This is how an expert labels a whole batched environment per call
 (:class:`BatchedGSRPolicy`).

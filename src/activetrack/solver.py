@@ -813,8 +813,7 @@ def solve_single_sensor_batch(
     """Return the solutions of ``B`` independent single-sensor problems, vectorized.
 
     Same mathematics as :func:`solve_single_sensor`; all companion matrices are stacked
-    and their eigenvalues computed in one ``np.linalg.eigvals`` call (up to 8 problems
-    are solved one by one by :func:`solve_single_sensor`'s kernel, which is faster there).
+    and their eigenvalues computed in one ``np.linalg.eigvals`` call.
 
     Args:
         prior_info: (B, 2, 2) prior information matrices (symmetric positive definite).
@@ -1017,7 +1016,7 @@ def _solve_rows_scalar(
     sigma_d2: FloatArray,
     sigma_theta2: FloatArray,
 ) -> tuple[BatchSolution, CircleRoots]:
-    """Return :func:`_solve_batch_unchecked`'s result for a few rows, solved one by one.
+    """Return the scalar solver's solutions of a few rows, in the batch layout.
 
     Each row is :func:`_solve_unchecked` (the same method; a vectorized call costs ~1 ms
     of numpy overhead whatever its size). No roots are returned (NaN).
@@ -1062,14 +1061,16 @@ def _solve_batch_unchecked(
 ) -> tuple[BatchSolution, CircleRoots]:
     """Return the batched solution for validated arrays of shapes (B,2,2), (B,2), (B,)x4.
 
-    Also returns the roots of f3 used per row (NaN off the speed circle, and for calls of
-    up to ``_SCALAR_ROWS`` rows, which are solved one by one). Without ``guess`` the
-    roots are the companion-matrix eigenvalues. With it (the roots returned by an
-    earlier call on nearby problems, row by row) rows may take certified roots instead,
-    as :func:`_circle_roots` says; the result is the same to rounding.
+    Also returns the roots of f3 used per row (NaN off the speed circle). Without
+    ``guess`` the roots are the companion-matrix eigenvalues. With it (the roots returned
+    by an earlier call on nearby problems, row by row) rows may take certified roots
+    instead, as :func:`_circle_roots` says; the result is the same to rounding; and a
+    call of up to ``_SCALAR_ROWS`` rows is solved row by row by the scalar kernel
+    (faster there; no roots returned). The public batch solver passes no ``guess``, so
+    its answers never depend on the batch size.
     """
     n = P.shape[0]
-    if n <= _SCALAR_ROWS:
+    if guess is not None and n <= _SCALAR_ROWS:
         return _solve_rows_scalar(P, c, r, rho, sigma_d2, sigma_theta2)
     p11, p22 = P[:, 0, 0], P[:, 1, 1]
     p12 = 0.5 * (P[:, 0, 1] + P[:, 1, 0])

@@ -511,3 +511,24 @@ def test_derivation_script_regenerates_the_coefficients():
     ).stdout
     committed = (ROOT / "src" / "activetrack" / "_coefficients.py").read_text()
     assert out == committed
+
+
+def test_batch_answers_do_not_depend_on_the_batch_size():
+    # A symmetric problem with two mirror-image optima (found in review): every batch
+    # size must pick the same one, as the rows of a larger batch do.
+    P = np.diag([139.4522929371407, 0.0015904259448963074])
+    c = np.array([12.114480024579207, 0.0])
+    args = (5.798948603381108, 1.6355187202997734, 0.0033688090712900255, 55.554388898101045)
+    sols = [
+        solve_single_sensor_batch(np.stack([P] * b), np.stack([c] * b), *args) for b in (1, 8, 9)
+    ]
+    for sol in sols[1:]:
+        np.testing.assert_array_equal(sol.s[0], sols[0].s[0])
+    rng = np.random.default_rng(12)
+    L = rng.standard_normal((40, 2, 2))
+    priors = L @ L.transpose(0, 2, 1) + 0.1 * np.eye(2)
+    cs = rng.uniform(-8, 8, (40, 2))
+    whole = solve_single_sensor_batch(priors, cs, 1.0, 1.5, 0.5, 0.05)
+    part = solve_single_sensor_batch(priors[:5], cs[:5], 1.0, 1.5, 0.5, 0.05)
+    np.testing.assert_allclose(part.s, whole.s[:5], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(part.value, whole.value[:5], rtol=1e-14)
