@@ -268,10 +268,7 @@ def _weierstrass(q: FloatArray, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     Their ratio is the Weierstrass correction ``W_i``.
     """
     n = z.shape[0]
-    p = z + q[n - 1]
-    for k in range(n - 2, -1, -1):
-        p *= z
-        p += q[k]
+    p = _horner(q, z)
     z2 = np.concatenate([z, z])  # z2[s:s + n] is z rolled by s
     prod = z - z2[1 : n + 1]
     diff = np.empty_like(z)
@@ -281,17 +278,14 @@ def _weierstrass(q: FloatArray, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return p, prod
 
 
-def _abs_horner(abs_q: FloatArray, az: FloatArray) -> FloatArray:
-    """Return ``sum_k |q_k| |z|^k`` (``q_n = 1``) from ``abs_q`` (n, ...) and ``az = |z|``.
-
-    The scale of Horner's rounding error at ``z``; ``abs_q[k]`` broadcasts against ``az``.
-    """
-    n = abs_q.shape[0]
-    acc = az + abs_q[n - 1]
+def _horner(q: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """Return ``p(x)`` for ``p = z^n + sum_k q[k] z^k`` (``q`` (n, ...) broadcasts with ``x``)."""
+    n = q.shape[0]
+    p = x + q[n - 1]
     for k in range(n - 2, -1, -1):
-        acc *= az
-        acc += abs_q[k]
-    return acc
+        p *= x
+        p += q[k]
+    return p
 
 
 def _inclusion_radii(
@@ -300,10 +294,11 @@ def _inclusion_radii(
     """Return radii ``R_i >= n |W_i|`` (n, m) that also cover rounding.
 
     ``w = p / prod`` and ``prod`` as from :func:`_weierstrass` at ``z``; ``abs_q`` (n, m)
-    is ``|q|`` (Horner's rounding error scale, :func:`_abs_horner`).
+    is ``|q|`` (for Horner's rounding error scale).
     """
     n = z.shape[0]
-    radius = _abs_horner(abs_q, np.abs(z))
+    # Horner's rounding error scale sum_k |q_k| |z|^k.
+    radius = _horner(abs_q, np.abs(z))
     radius *= _HORNER_ERR
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         radius /= np.abs(prod)
