@@ -524,6 +524,10 @@ def test_batch_answers_do_not_depend_on_the_batch_size():
     ]
     for sol in sols[1:]:
         np.testing.assert_array_equal(sol.s[0], sols[0].s[0])
+    # ... and it is the optimum: an independent dense search of the feasible boundary
+    best = float(brute_force(P, c, *args))
+    assert sols[0].value[0] <= best * (1 + 1e-9)
+    assert abs(np.hypot(*(sols[0].s[0] - c)) - args[0]) <= 1e-9 * args[0]  # on the speed circle
     rng = np.random.default_rng(12)
     L = rng.standard_normal((40, 2, 2))
     priors = L @ L.transpose(0, 2, 1) + 0.1 * np.eye(2)
