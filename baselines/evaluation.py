@@ -97,10 +97,16 @@ def paired_ratio_ci(
 
 
 def resolve_policy(spec: Any) -> Any:
-    """Return a policy object (with ``act(env)``) for a name, a policy file path or an object."""
+    """Return a policy object for a name, a policy file path or an object.
+
+    An object is an expert (``plan(problem) -> positions``) or maps observations to
+    actions (``act(observations) -> {agent: action}``).
+    """
     if not isinstance(spec, (str, Path)):
-        if not hasattr(spec, "act"):
-            raise TypeError(f"a policy needs an act(env) method, got {type(spec).__name__}")
+        if not (callable(getattr(spec, "plan", None)) or callable(getattr(spec, "act", None))):
+            raise TypeError(
+                f"a policy needs plan(problem) or act(observations), got {type(spec).__name__}"
+            )
         return spec
     name = str(spec)
     if name.lower() in EXPERT_NAMES:
@@ -137,12 +143,14 @@ def _reset_policy(policy: Any, seed: int) -> None:
 
 def run_episode(env: Any, policy: Any, seed: int) -> tuple[float, float, float]:
     """Return ``(mean_trace, rmse, return)`` of one episode of ``policy`` from ``seed``."""
+    from activetrack.envs import policy_step
+
     _reset_policy(policy, seed)
-    env.reset(seed=seed)
+    obs, _ = env.reset(seed=seed)
     traces, errors, total = [], [], 0.0
     first = env.possible_agents[0]
     while env.agents:
-        _, rewards, _, _, infos = env.step(policy.act(env))
+        obs, rewards, _, _, infos = policy_step(env, policy, obs)
         traces.append(infos[first]["trace"])
         errors.append(infos[first]["position_error"])
         total += float(rewards[first])

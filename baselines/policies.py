@@ -1,10 +1,10 @@
-"""The planners of Section V as policies acting in the tracking environments (experts).
+"""The planners of Section V as expert policies for the tracking environments.
 
-A :class:`PlannerPolicy` reads the environment's raw planning problem (the prediction
-``x_hat(k+1|k), P(k+1|k)`` and the team, eq. 15-17), asks its planner for the sensors'
-next positions, and returns the actions that reach them exactly
-(:func:`activetrack.envs.actions_to_reach`: ``a_i = (p_next_i - p_i) / r_i``). The
-planner draws from the policy's own generator, seeded like the simulation runner's
+An expert reads the environment's planning problem (the prediction ``x_hat(k+1|k),
+P(k+1|k)`` and the team, eq. 15-17; with a leading batch axis for the batched
+environment) and returns the sensors' next absolute positions, which the environment
+executes directly (``step_positions``): no actions, no round trip. The planner draws from
+the policy's own generator, seeded like the simulation runner's
 (``np.random.default_rng([seed, 1])``), so an episode run through the environment with
 ``reset(seed=s)`` and a policy made with ``seed=s`` reproduces
 :func:`activetrack.baselines.simulation.simulate` with seed ``s`` exactly.
@@ -12,13 +12,18 @@ planner draws from the policy's own generator, seeded like the simulation runner
 Example::
 
     from activetrack import envs
-    from activetrack.baselines.policies import GSRPolicy
+    from activetrack.baselines import GSRPolicy
 
     env = envs.parallel_env(scenario="paper")
-    policy = GSRPolicy(seed=0)
+    expert = GSRPolicy(seed=0)
     obs, infos = env.reset(seed=0)
     while env.agents:
-        obs, rewards, terms, truncs, infos = env.step(policy.act(env))
+        obs, rewards, terms, truncs, infos = env.step_positions(
+            expert.plan(env.planning_problem())
+        )
+
+Users who need the actions behind an expert's positions (imitation labels) get them from
+:func:`activetrack.sensor_motion.actions_to_reach`.
 """
 
 from __future__ import annotations
@@ -27,20 +32,15 @@ from typing import Any
 
 import numpy as np
 
-from activetrack.envs.dynamics import actions_to_reach
 from activetrack.problem import Planner, PlanningProblem
 from activetrack.validation import FloatArray
 
 
 class PlannerPolicy:
-    """Act in a tracking environment with any :class:`~activetrack.Planner`.
-
-    Works with the parallel env, the AEC env and the centralized Gymnasium env (wrapped
-    or not: it uses ``env.unwrapped``). Call it once per step: every call plans (and
-    may draw from the planner generator).
+    """Any :class:`~activetrack.Planner` as an expert: planning problems to next positions.
 
     Args:
-        planner: the planner; ``plan(problem, rng) -> (M, 2)`` absolute next positions.
+        planner: the planner; ``plan(problem, rng) -> (..., M, 2)`` absolute next positions.
         seed: seeds the planner generator as ``np.random.default_rng([seed, 1])``, the
             simulation runner's; ``None`` for fresh entropy.
     """
@@ -53,32 +53,17 @@ class PlannerPolicy:
         """Re-seed the planner generator (as the runner does for world seed ``seed``)."""
         self.rng = np.random.default_rng() if seed is None else np.random.default_rng([seed, 1])
 
-    def plan(self, env: Any) -> tuple[PlanningProblem, FloatArray]:
-        """Return the env's current planning problem and the planner's next positions."""
-        problem = env.unwrapped.planning_problem()
+    def plan(self, problem: PlanningProblem) -> FloatArray:
+        """Return the next absolute positions for ``problem``, shape (..., M, 2), float64."""
         nxt = np.asarray(self.planner.plan(problem, self.rng), dtype=np.float64)
-        if nxt.shape != (problem.n_sensors, 2):
+        if nxt.shape != problem.sensors.shape:
             raise ValueError(
                 f"planner {self.planner!r} returned shape {nxt.shape}, "
-                f"expected ({problem.n_sensors}, 2)"
+                f"expected {problem.sensors.shape}"
             )
-        return problem, nxt
+        return nxt
 
-    def actions(self, env: Any) -> FloatArray:
-        """Return every sensor's action, shape (M, 2), float64."""
-        problem, nxt = self.plan(env)
-        return actions_to_reach(nxt, problem.sensors, problem.r)
-
-    def act(self, env: Any) -> dict[str, FloatArray]:
-        """Return ``{agent: action}`` for the parallel (or AEC) environment."""
-        a = self.actions(env)
-        return dict(zip(env.unwrapped.possible_agents, a, strict=True))
-
-    def joint_action(self, env: Any) -> FloatArray:
-        """Return the centralized env's joint action, shape (2M,), float64."""
-        return self.actions(env).reshape(-1)
-
-    __call__ = act
+    __call__ = plan
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}({self.planner!r})"
@@ -88,7 +73,7 @@ class GSRPolicy(PlannerPolicy):
     """Gauss-Seidel relaxation (Section IV-B) as a policy; ``planner_kwargs`` go to ``GSR``."""
 
     def __init__(self, seed: int | None = None, **planner_kwargs: Any) -> None:
-        from activetrack.baselines import GSR  # late: baselines may import this module
+        from activetrack.baselines.gsr import GSR
 
         super().__init__(GSR(**planner_kwargs), seed)
 
@@ -97,7 +82,7 @@ class GBESPolicy(PlannerPolicy):
     """Grid-based exhaustive search (Section V) as a policy; kwargs go to ``GBES``."""
 
     def __init__(self, seed: int | None = None, **planner_kwargs: Any) -> None:
-        from activetrack.baselines import GBES
+        from activetrack.baselines.gbes import GBES
 
         super().__init__(GBES(**planner_kwargs), seed)
 
@@ -106,6 +91,6 @@ class RMPolicy(PlannerPolicy):
     """Random motion on the curves ADB (Section V) as a policy."""
 
     def __init__(self, seed: int | None = None, **planner_kwargs: Any) -> None:
-        from activetrack.baselines import RandomMotion
+        from activetrack.baselines.random_motion import RandomMotion
 
         super().__init__(RandomMotion(**planner_kwargs), seed)

@@ -1,9 +1,9 @@
 """Closed-loop simulation runner and Monte Carlo evaluation of planners (Section V).
 
-One run follows :mod:`activetrack.tracking` exactly: ``initial_conditions``, then at every
-step the EKF prediction (eq. 3), the planning problem of eq. (15)-(17) built from it, the
-planner's choice of next positions, and ``advance`` (move the sensors, move the true target
-by eq. 2, measure by eq. 4, update by eq. 11).
+One run is a planner driving the core's closed loop, :class:`activetrack.world.World`
+(one copy): at every step the world's planning problem of eq. (15)-(17) (from the
+prediction of eq. 3), the planner's next positions, and the world's step (move the
+sensors, move the true target by eq. 2, measure by eq. 4, update by eq. 11, predict).
 
 Random streams: the world (initial conditions, process and measurement noise) draws from
 ``np.random.default_rng(seed)`` — ``n + 2M`` standard normals per step, the same draws the
@@ -23,12 +23,11 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from scipy import stats
 
-from activetrack import ekf, motion, tracking
-from activetrack.problem import Planner, PlanningProblem
+from activetrack.problem import Planner
 from activetrack.scenarios import Scenario
 from activetrack.validation import FloatArray
+from activetrack.world import World
 
 
 @dataclass(frozen=True, eq=False)
@@ -81,26 +80,16 @@ class RunRecord:
 
 def simulate(scenario: Scenario, planner: Planner, seed: int) -> RunRecord:
     """Return one closed-loop run of ``planner`` on ``scenario`` with world seed ``seed``."""
-    world = np.random.default_rng(seed)
+    world = World(scenario, 1)
+    world.reset(seeds=[seed])
     plan_rng = np.random.default_rng([seed, 1])
-    params = tracking.LoopParams.from_scenario(scenario)
-    x_true, x_hat, P, sensors = tracking.initial_conditions(scenario, world)
-    m = scenario.n_sensors
-    true_states, estimates = [x_true], [x_hat]
-    sensor_hist, covs = [sensors], [P[:2, :2]]
+    m = world.n_sensors
+    true_states, estimates = [world.x_true[0].copy()], [world.x_hat[0].copy()]
+    sensor_hist, covs = [world.sensors[0].copy()], [world.P[0, :2, :2].copy()]
     trace, error, nees, plan_time, violation = [], [], [], [], []
-    terminated = False
-    for _ in range(scenario.n_steps):
-        x_pred, P_pred = motion.predict(x_hat, P, params.Phi, params.Q)
-        problem = PlanningProblem(
-            prior_cov=P_pred[:2, :2],
-            target=x_pred[:2],
-            sensors=sensors,
-            r=params.r,
-            rho=params.rho,
-            sigma_d2=params.sigma_d2,
-            sigma_theta2=params.sigma_theta2,
-        )
+    terminated = truncated = False
+    while not (terminated or truncated):
+        problem = world.planning_problem(0)
         t0 = time.perf_counter()
         nxt = np.asarray(planner.plan(problem, plan_rng), dtype=np.float64)
         plan_time.append(time.perf_counter() - t0)
@@ -110,20 +99,14 @@ def simulate(scenario: Scenario, planner: Planner, seed: int) -> RunRecord:
                 f"({m}, 2), finite)"
             )
         violation.append(float(np.max(problem.violation(nxt))))
-        noise = world.standard_normal(params.n_noise)
-        x_true, _z, x_hat, P = tracking.advance(params, x_true, x_pred, P_pred, nxt, noise)
-        sensors = nxt
-        tr = float(P[0, 0] + P[1, 1])
-        trace.append(tr)
-        error.append(float(np.hypot(*(x_true[:2] - x_hat[:2]))))
-        nees.append(float(ekf.position_nees(x_true, x_hat, P)))
-        true_states.append(x_true)
-        estimates.append(x_hat)
-        sensor_hist.append(sensors)
-        covs.append(P[:2, :2])
-        if scenario.max_trace is not None and tr > scenario.max_trace:
-            terminated = True
-            break
+        _, terminated, truncated = world.step(nxt[None])
+        trace.append(float(world.trace[0]))
+        error.append(float(world.position_error(0)))
+        nees.append(float(world.position_nees(0)))
+        true_states.append(world.x_true[0].copy())
+        estimates.append(world.x_hat[0].copy())
+        sensor_hist.append(world.sensors[0].copy())
+        covs.append(world.P[0, :2, :2].copy())
     return RunRecord(
         seed=int(seed),
         trace=np.array(trace),
@@ -135,12 +118,14 @@ def simulate(scenario: Scenario, planner: Planner, seed: int) -> RunRecord:
         estimates=np.array(estimates),
         sensors=np.array(sensor_hist),
         position_covs=np.array(covs),
-        terminated=terminated,
+        terminated=bool(terminated),
     )
 
 
 def mean_ci(values: FloatArray, level: float = 0.95) -> tuple[float, float, float]:
     """Return ``(mean, low, high)``: the mean and its Student-t confidence interval."""
+    from scipy import stats  # lazy: scipy.stats costs ~0.5 s at import
+
     v = np.asarray(values, dtype=np.float64)
     mean = float(np.mean(v))
     if v.size < 2:

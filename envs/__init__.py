@@ -28,7 +28,7 @@ if TYPE_CHECKING:
     from .batched import BatchedActiveTracking
     from .centralized import CentralizedTrackingEnv
     from .dynamics import actions_to_reach, apply_actions
-    from .tracking_env import TrackingParallelEnv, env, parallel_env, raw_env
+    from .tracking_env import TrackingParallelEnv, env, parallel_env, policy_step, raw_env
     from .video import record_video
 
 _LAZY = {
@@ -39,6 +39,7 @@ _LAZY = {
     "apply_actions": ".dynamics",
     "env": ".tracking_env",
     "parallel_env": ".tracking_env",
+    "policy_step": ".tracking_env",
     "raw_env": ".tracking_env",
     "record_video": ".video",
 }
@@ -52,6 +53,7 @@ __all__ = [
     "apply_actions",
     "env",
     "parallel_env",
+    "policy_step",
     "raw_env",
     "record_video",
     "register_envs",

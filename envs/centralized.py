@@ -29,8 +29,9 @@ from gymnasium import spaces
 
 from activetrack.problem import PlanningProblem
 from activetrack.scenarios import Scenario
+from activetrack.validation import FloatArray
 
-from .tracking_env import RENDER_MODES, TrackingParallelEnv
+from .tracking_env import RENDER_MODES, TrackingParallelEnv, check_no_options, positions_array
 
 
 class CentralizedTrackingEnv(gym.Env):
@@ -67,6 +68,7 @@ class CentralizedTrackingEnv(gym.Env):
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[np.ndarray, dict[str, Any]]:
         """Start an episode (``seed`` as in the parallel env: ``default_rng(seed)``)."""
+        check_no_options(options)
         obs = self.env.reset_arrays(seed)
         # Gymnasium's np_random is the episode generator itself.
         self._np_random = self.env.np_random
@@ -78,13 +80,32 @@ class CentralizedTrackingEnv(gym.Env):
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         """Move the team by the joint action ``(2M,)``, advance one step, and observe."""
-        a = np.asarray(action, dtype=np.float64)
-        if a.shape != (2 * self.n_sensors,) or np.count_nonzero(np.isfinite(a)) != a.size:
+        self.env._running_agents()
+        a = np.asarray(action)
+        if (
+            a.shape != (2 * self.n_sensors,)
+            or a.dtype.kind not in "iuf"
+            or np.count_nonzero(np.isfinite(a)) != a.size
+        ):
             raise ValueError(self._bad_action(action))
-        obs, reward, terminated, truncated = self.env.step_arrays(a.reshape(self.n_sensors, 2))
+        a = a.astype(np.float64, copy=False).reshape(self.n_sensors, 2)
+        return self._out(*self.env.step_arrays(a))
+
+    def step_positions(self, positions: FloatArray) -> tuple[np.ndarray, float, bool, bool, dict]:
+        """Move the sensors to absolute next positions (M, 2) or (2M,) (an expert's plan)."""
+        agents = self.env._running_agents()
+        p = np.asarray(positions)
+        p = positions_array(p.reshape(-1, 2) if p.shape == (2 * self.n_sensors,) else p, agents)
+        return self._out(*self.env._advance(self.env.world.step, p))
+
+    def _out(self, obs: np.ndarray, reward: float, terminated: bool, truncated: bool):
         if self.render_mode == "human":
             self.render()
         return obs.reshape(-1), reward, terminated, truncated, self._info(terminated)
+
+    def observe(self) -> np.ndarray:
+        """Return the current joint observation ``(M (5 + 6M),)`` (what reset/step returned)."""
+        return self.env.world.observe(0).reshape(-1)
 
     def _info(self, exceeded: bool) -> dict[str, Any]:
         e = self.env
@@ -98,9 +119,14 @@ class CentralizedTrackingEnv(gym.Env):
         }
 
     def _bad_action(self, action: Any) -> str:
-        a = np.asarray(action, dtype=np.float64)
+        try:
+            a = np.asarray(action)
+        except (TypeError, ValueError):
+            return f"action must be {2 * self.n_sensors} real numbers, got {action!r}"
         if a.shape != (2 * self.n_sensors,):
             return f"action must have shape ({2 * self.n_sensors},), got {a.shape}"
+        if a.dtype.kind not in "iuf":
+            return f"action must be real numbers, got dtype {a.dtype}"
         bad = np.flatnonzero(~np.isfinite(a.reshape(self.n_sensors, 2)).all(-1))
         names = [self.env.possible_agents[i] for i in bad]
         return f"action of agent(s) {names} must be finite (no NaN or inf), got {a.tolist()}"

@@ -10,16 +10,28 @@ timeline:
    ``rho_i`` disk around the *predicted* target (eq. 13-16,
    :func:`~activetrack.envs.dynamics.apply_actions`);
 3. the true target moves (eq. 2), every sensor measures (eq. 4), the EKF updates
-   (eq. 11): :func:`activetrack.tracking.advance`, with the step's ``n + 2M`` standard
-   normals drawn from the episode generator, in the same order as the simulation runner;
+   (eq. 11), with the step's ``n + 2M`` standard normals drawn from the episode
+   generator, in the same order as the simulation runner;
 4. every agent gets the reward ``-reward_scale * tr P(k+1|k+1)_11``: minus the paper's
    objective (eq. 12, 17) with the default ``reward_scale = 1``;
 5. the estimate is predicted again for the next observation.
 
 After ``scenario.n_steps`` steps every agent is truncated; if ``scenario.max_trace`` is
 set, the episode terminates as soon as the trace exceeds it. Observations are
-described in :mod:`activetrack.envs.features`. The class only assembles dicts around
-pure batched functions, which the batched environment reuses.
+described in :mod:`activetrack.observation`. The loop itself is the core's
+:class:`activetrack.world.World` (one copy); this class only adds the PettingZoo
+interface: spaces, dicts, rendering.
+
+An expert steps the environment with its planned positions, no actions needed::
+
+    from activetrack.baselines import GSRPolicy
+
+    expert = GSRPolicy(seed=0)
+    obs, infos = env.reset(seed=0)
+    while env.agents:
+        obs, rewards, terminations, truncations, infos = env.step_positions(
+            expert.plan(env.planning_problem())
+        )
 
 Example::
 
@@ -34,7 +46,7 @@ Example::
 
 from __future__ import annotations
 
-import math
+import warnings
 from typing import Any
 
 import gymnasium
@@ -43,17 +55,23 @@ from gymnasium import spaces
 from pettingzoo import ParallelEnv
 from pettingzoo.utils.conversions import parallel_to_aec
 
-from activetrack.motion import predict
+from activetrack import observation
 from activetrack.problem import PlanningProblem
 from activetrack.scenarios import Scenario, make_scenario
-from activetrack.tracking import LoopParams, advance, initial_conditions
 from activetrack.validation import FloatArray
+from activetrack.world import World
 
-from . import features
-from .dynamics import apply_actions
 from .rendering import EpisodeHistory, TrackingRenderer
 
 RENDER_MODES = ("human", "rgb_array")
+
+StepReturn = tuple[
+    dict[str, np.ndarray],
+    dict[str, float],
+    dict[str, bool],
+    dict[str, bool],
+    dict[str, dict[str, Any]],
+]
 
 
 class TrackingParallelEnv(ParallelEnv):
@@ -66,7 +84,7 @@ class TrackingParallelEnv(ParallelEnv):
 
     Spaces: every agent acts in ``Box(-1, 1, (2,), float32)`` (float64 accepted): its
     displacement as a fraction of its reach ``r_i``; longer vectors are scaled onto the
-    unit disk. It observes ``Box(float32, (5 + 6M,))`` (:mod:`~activetrack.envs.features`).
+    unit disk. It observes ``Box(float32, (5 + 6M,))`` (:mod:`activetrack.observation`).
     :meth:`state` is the ``6 + 6M`` global state for centralized critics.
 
     Infos (per agent, plain Python values): ``step`` k, ``trace`` the posterior
@@ -74,8 +92,10 @@ class TrackingParallelEnv(ParallelEnv):
     ``projected`` whether this agent's move was pushed out of its ``rho`` disk this step,
     ``n_projected`` how often in the episode, ``max_trace_exceeded`` the termination flag.
 
-    Raw quantities for experts: :meth:`planning_problem`, and the attributes ``x_true``,
-    ``x_hat``/``P`` (posterior), ``x_pred``/``P_pred`` (prediction) and ``sensors``.
+    For experts: :meth:`planning_problem` (the raw problem of eq. 15-17) and
+    :meth:`step_positions` (step with absolute next positions). :meth:`observe` returns the
+    current observations. The state ``x_true``, ``x_hat``/``P`` (posterior),
+    ``x_pred``/``P_pred`` (prediction) and ``sensors`` are copies of :attr:`world`'s.
     """
 
     metadata: dict[str, Any] = {
@@ -93,29 +113,18 @@ class TrackingParallelEnv(ParallelEnv):
                 f"render_mode must be None or one of {RENDER_MODES}, got {render_mode!r}"
             )
         sc = make_scenario(scenario, **overrides)
+        self.world = World(sc, 1)
         self.scenario = sc
         self.render_mode = render_mode
         self.metadata = {**type(self).metadata, "render_fps": max(1, round(1.0 / sc.dt))}
-        self.params = LoopParams.from_scenario(sc)
+        self.params = self.world.params
         m = sc.n_sensors
         self.n_sensors = m
         self.possible_agents = [f"sensor_{i}" for i in range(m)]
         self.agents: list[str] = []
-        self.length_scale = features.length_scale(sc)
-        self._constants = features.sensor_constants(
-            self.params.sigma_d2,
-            self.params.sigma_theta2,
-            self.params.r,
-            self.params.rho,
-            self.length_scale,
-        )
-        self._order = features.cyclic_order(m)
-        self._n_noise = self.params.n_noise
-        self._dt = float(sc.dt)
-        self._scale = float(sc.reward_scale)
-        self._max_trace = np.inf if sc.max_trace is None else float(sc.max_trace)
+        self.length_scale = self.world.length_scale
 
-        low, high = features.observation_bounds(m)
+        low, high = observation.observation_bounds(m)
         # One space object per agent, returned as is (PettingZoo seeds them separately);
         # the dicts are also exposed as attributes for libraries that still read them.
         self.observation_spaces = {
@@ -124,19 +133,13 @@ class TrackingParallelEnv(ParallelEnv):
         self.action_spaces = {
             a: spaces.Box(-1.0, 1.0, (2,), dtype=np.float32) for a in self.possible_agents
         }
-        slow, shigh = features.state_bounds(m)
+        slow, shigh = observation.state_bounds(m)
         self.state_space = spaces.Box(slow, shigh, dtype=np.float32)
 
-        self._rng: np.random.Generator | None = None
         self._history = EpisodeHistory() if render_mode is not None else None
         self._renderer: TrackingRenderer | None = None
-        self.k = 0
-        self.x_true = self.x_hat = self.P = self.x_pred = self.P_pred = self.sensors = None
-        self.n_projected = np.zeros(m, dtype=np.int64)
-        self.last_projected = np.zeros(m, dtype=bool)
-        self.trace = float("nan")
-        self._target_feat: FloatArray | None = None
-        self._sensor_feat: FloatArray | None = None
+        self._started = False
+        self._obs: np.ndarray | None = None
 
     # Spaces -----------------------------------------------------------------------------
     def observation_space(self, agent: str) -> spaces.Box:
@@ -150,9 +153,29 @@ class TrackingParallelEnv(ParallelEnv):
     @property
     def np_random(self) -> np.random.Generator:
         """Return the episode generator (created from fresh entropy if never seeded)."""
-        if self._rng is None:
-            self._rng = np.random.default_rng()
-        return self._rng
+        return self.world.rng(0)
+
+    # State of the one copy (views of the world) -----------------------------------------
+    # Copies, so that a reference a user keeps does not change with the next step.
+    x_true = property(lambda self: self.world.x_true[0].copy(), doc="True target state x(k).")
+    x_hat = property(lambda self: self.world.x_hat[0].copy(), doc="Posterior mean x_hat(k|k).")
+    P = property(lambda self: self.world.P[0].copy(), doc="Posterior covariance P(k|k).")
+    x_pred = property(lambda self: self.world.x_pred[0].copy(), doc="Prediction x_hat(k+1|k).")
+    P_pred = property(lambda self: self.world.P_pred[0].copy(), doc="Prediction P(k+1|k).")
+    sensors = property(lambda self: self.world.sensors[0].copy(), doc="Sensor positions (M, 2).")
+    k = property(lambda self: int(self.world.k[0]), doc="Steps taken in the episode.")
+    trace = property(lambda self: float(self.world.trace[0]), doc="tr P(k|k)_11 (m^2).")
+    n_projected = property(
+        lambda self: self.world.n_projected[0].copy(), doc="Projections per agent this episode."
+    )
+    last_projected = property(
+        lambda self: self.world.projected[0].copy(), doc="Which agents were projected this step."
+    )
+
+    @property
+    def position_error(self) -> float:
+        """Return the true estimation error ``||p_T(k) - p_hat_T(k|k)||`` (m)."""
+        return float(self.world.position_error(0))
 
     # Core loop ---------------------------------------------------------------------------
     def reset(
@@ -161,80 +184,74 @@ class TrackingParallelEnv(ParallelEnv):
         """Start an episode; ``seed`` makes it reproducible bit for bit.
 
         The generator is ``np.random.default_rng(seed)`` (the simulation runner's world
-        generator); with ``seed=None`` the previous generator continues.
+        generator); with ``seed=None`` the previous generator continues. This environment
+        takes no ``options``.
         """
+        check_no_options(options)
         obs = self.reset_arrays(seed)
-        trace = self.trace
-        err = self.position_error
-        infos = {
-            a: {
-                "step": 0,
-                "trace": trace,
-                "position_error": err,
-                "projected": False,
-                "n_projected": 0,
-                "max_trace_exceeded": False,
-            }
-            for a in self.agents
-        }
+        infos = {a: self._info(i, False) for i, a in enumerate(self.agents)}
         if self.render_mode == "human":
             self.render()
         return dict(zip(self.agents, obs, strict=True)), infos
 
     def reset_arrays(self, seed: int | None = None) -> np.ndarray:
         """Start an episode; return all observations as one (M, 5 + 6M) float32 array."""
-        if seed is not None or self._rng is None:
-            self._rng = np.random.default_rng(seed)
-        x_true, x_hat, P, sensors = initial_conditions(self.scenario, self._rng)
-        self.x_true, self.x_hat, self.P, self.sensors = x_true, x_hat, P, sensors
-        self.x_pred, self.P_pred = predict(x_hat, P, self.params.Phi, self.params.Q)
-        self.k = 0
-        self.n_projected = np.zeros(self.n_sensors, dtype=np.int64)
-        self.last_projected = np.zeros(self.n_sensors, dtype=bool)
-        self.trace = float(P[0, 0] + P[1, 1])
+        self.world.reset(seeds=None if seed is None else [seed])
+        self._started = True
         self.agents = self.possible_agents[:]
         if self._history is not None:
+            w = self.world
             self._history.clear()
-            self._history.append(0, x_true, x_hat, P, sensors, x_hat)
+            self._history.append(0, w.x_true[0], w.x_hat[0], w.P[0], w.sensors[0], w.x_hat[0])
             if self._renderer is not None:
                 self._renderer.reset()
-        return self._observe()
+        self._obs = self.world.observe(0)
+        return self._obs
 
-    def step(
-        self, actions: dict[str, Any]
-    ) -> tuple[
-        dict[str, np.ndarray],
-        dict[str, float],
-        dict[str, bool],
-        dict[str, bool],
-        dict[str, dict[str, Any]],
-    ]:
+    def step(self, actions: dict[str, Any]) -> StepReturn:
         """Move every sensor by its action, advance the world one step, and observe."""
-        agents = self.agents
-        if not agents:
-            raise RuntimeError("the episode is over (no live agents): call reset() first")
-        try:
-            a = np.array([actions[ag] for ag in agents], dtype=np.float64)
-        except (KeyError, ValueError, TypeError):
-            raise ValueError(_bad_action_message(actions, agents)) from None
-        if a.shape != (len(agents), 2) or np.count_nonzero(np.isfinite(a)) != a.size:
-            raise ValueError(_bad_action_message(actions, agents))
-        obs, reward, terminated, truncated = self.step_arrays(a)
-        proj = self.last_projected.tolist()
-        nproj = self.n_projected.tolist()
-        trace = self.trace
-        err = self.position_error
-        infos = {
-            ag: {
-                "step": self.k,
-                "trace": trace,
-                "position_error": err,
-                "projected": proj[i],
-                "n_projected": nproj[i],
-                "max_trace_exceeded": terminated,
-            }
-            for i, ag in enumerate(agents)
-        }
+        agents = self._running_agents()
+        return self._dicts(agents, *self.step_arrays(actions_array(actions, agents)))
+
+    def step_positions(self, positions: dict[str, Any] | FloatArray) -> StepReturn:
+        """Move the sensors to absolute next positions (an expert's plan) and advance.
+
+        ``positions``: (M, 2) in agent order, or ``{agent: (2,)}``. A move beyond reach or
+        into a ``rho`` disk is mended as :func:`activetrack.sensor_motion.move_to` says; a
+        planner's feasible positions are executed exactly.
+        """
+        agents = self._running_agents()
+        p = positions_array(positions, agents)
+        return self._dicts(agents, *self._advance(self.world.step, p))
+
+    def step_arrays(self, actions: FloatArray) -> tuple[np.ndarray, float, bool, bool]:
+        """Advance one step from (M, 2) finite actions; return ``(obs, reward, term, trunc)``.
+
+        The array-level core of :meth:`step` (no dicts, no validation), also used by the
+        centralized Gymnasium view; like :meth:`step` it empties ``agents`` when the episode
+        ends. ``obs`` is (M, 5 + 6M) float32.
+        """
+        return self._advance(self.world.step_actions, actions)
+
+    def _advance(self, step: Any, moves: FloatArray) -> tuple[np.ndarray, float, bool, bool]:
+        """Run the world's ``step`` (positions or actions) and return the array results."""
+        w = self.world
+        planned_from = w.x_pred[0].copy() if self._history is not None else None
+        res = step(moves[None])
+        terminated, truncated = bool(res.terminated), bool(res.truncated)
+        if self._history is not None:
+            self._history.append(
+                w.k[0], w.x_true[0], w.x_hat[0], w.P[0], w.sensors[0], planned_from
+            )
+        if terminated or truncated:
+            self.agents = []  # PettingZoo: finished agents leave the list
+        self._obs = w.observe(0)
+        return self._obs, float(res.reward), terminated, truncated
+
+    def _dicts(
+        self, agents: list[str], obs: np.ndarray, reward: float, terminated: bool, truncated: bool
+    ) -> StepReturn:
+        infos = {a: self._info(i, terminated) for i, a in enumerate(agents)}
         out = (
             dict(zip(agents, obs, strict=True)),
             dict.fromkeys(agents, reward),
@@ -246,69 +263,44 @@ class TrackingParallelEnv(ParallelEnv):
             self.render()
         return out
 
-    def step_arrays(self, actions: FloatArray) -> tuple[np.ndarray, float, bool, bool]:
-        """Advance one step from (M, 2) finite actions; return ``(obs, reward, term, trunc)``.
+    def _info(self, i: int, exceeded: bool) -> dict[str, Any]:
+        w = self.world
+        return {
+            "step": int(w.k[0]),
+            "trace": float(w.trace[0]),
+            "position_error": float(w.position_error(0)),
+            "projected": bool(w.projected[0, i]),
+            "n_projected": int(w.n_projected[0, i]),
+            "max_trace_exceeded": exceeded,
+        }
 
-        The array-level core of :meth:`step` (no dicts, no validation), also used by the
-        centralized Gymnasium view; like :meth:`step` it empties ``agents`` when the episode
-        ends. ``obs`` is (M, 5 + 6M) float32.
-        """
-        p = self.params
-        x_pred = self.x_pred
-        sensors, projected = apply_actions(actions, self.sensors, x_pred[:2], p.r, p.rho)
-        noise = self._rng.standard_normal(self._n_noise)
-        x_true, _, x_post, P_post = advance(p, self.x_true, x_pred, self.P_pred, sensors, noise)
-        self.k += 1
-        self.x_true, self.x_hat, self.P, self.sensors = x_true, x_post, P_post, sensors
-        self.last_projected = projected
-        self.n_projected += projected
-        trace = float(P_post[0, 0] + P_post[1, 1])
-        self.trace = trace
-        if self._history is not None:
-            self._history.append(self.k, x_true, x_post, P_post, sensors, x_pred)
-        self.x_pred, self.P_pred = predict(x_post, P_post, p.Phi, p.Q)
-        terminated = trace > self._max_trace  # False when max_trace is None (inf)
-        truncated = self.k >= self.scenario.n_steps
-        if terminated or truncated:
-            self.agents = []  # PettingZoo: finished agents leave the list
-        return self._observe(), -self._scale * trace, bool(terminated), truncated
-
-    def _observe(self) -> np.ndarray:
-        L = self.length_scale
-        self._target_feat = features.target_features(self.x_pred, self.P_pred, self._dt, L)
-        self._sensor_feat = features.sensor_features(
-            self.sensors, self.x_pred[:2], self._constants, L
-        )
-        return features.observations(self._target_feat, self._sensor_feat, self._order)
+    def _running_agents(self) -> list[str]:
+        if not self.agents:
+            raise RuntimeError("the episode is over (no live agents): call reset() first")
+        return self.agents
 
     # Extras ------------------------------------------------------------------------------
-    @property
-    def position_error(self) -> float:
-        """Return the true estimation error ``||p_T(k) - p_hat_T(k|k)||`` (m)."""
-        xt, xh = self.x_true, self.x_hat
-        return math.hypot(xt[0] - xh[0], xt[1] - xh[1])
+    def observe(self, agent: str | None = None) -> dict[str, np.ndarray] | np.ndarray:
+        """Return the current observations: ``{agent: obs}`` of the live agents, or one
+        agent's observation (what :meth:`reset`/:meth:`step` returned last)."""
+        if not self._started:
+            raise RuntimeError("call reset() before observe()")
+        obs = self.world.observe(0)
+        if agent is not None:
+            return obs[self.possible_agents.index(agent)]
+        return dict(zip(self.agents, obs, strict=False))
 
     def state(self) -> np.ndarray:
-        """Return the global state (6 + 6M float32, :mod:`~activetrack.envs.features`)."""
-        if self._target_feat is None:
+        """Return the global state (6 + 6M float32, :mod:`activetrack.observation`)."""
+        if not self._started:
             raise RuntimeError("call reset() before state()")
-        elapsed = self.k / self.scenario.n_steps
-        return features.global_state(self._target_feat, self._sensor_feat, elapsed)
+        return self.world.state(0)
 
     def planning_problem(self) -> PlanningProblem:
         """Return the current step's raw, unnormalized planning problem (eq. 15-17)."""
-        if self.x_pred is None:
+        if not self._started:
             raise RuntimeError("call reset() before planning_problem()")
-        p = self.params
-        return PlanningProblem(
-            prior_cov=self.P_pred[:2, :2],
-            target=self.x_pred[:2],
-            sensors=self.sensors,
-            r=p.r,
-            rho=p.rho,
-            sigma_d2=p.sigma_d2,
-            sigma_theta2=p.sigma_theta2,
-        )
+        return self.world.planning_problem(0)
 
     def render(self) -> np.ndarray | None:
         """Draw the episode so far (Fig. 4 style); an RGB array in ``rgb_array`` mode."""
@@ -342,22 +334,98 @@ class TrackingParallelEnv(ParallelEnv):
         return f"activetrack_v0({self.scenario.name}, M={self.n_sensors})"
 
 
-def _bad_action_message(actions: Any, agents: list[str]) -> str:
-    """Return the error message that names the first agent with a bad action."""
+def check_no_options(options: dict[str, Any] | None, valid: tuple[str, ...] = ()) -> None:
+    """Warn about keys of ``options`` that are not in ``valid`` (they are ignored).
+
+    A warning, not an error: PettingZoo's API test resets with ``options={"options": 1}``.
+    """
+    if options is None:
+        return
+    if not isinstance(options, dict):
+        raise ValueError(f"options must be a dict or None, got {type(options).__name__}")
+    unknown = sorted(str(k) for k in options if k not in valid)
+    if unknown:
+        warnings.warn(
+            f"reset() ignores unknown options {unknown} (valid: {list(valid)})",
+            UserWarning,
+            stacklevel=3,
+        )
+
+
+def actions_array(actions: dict[str, Any], agents: list[str], what: str = "action") -> FloatArray:
+    """Return the agents' actions as a finite float64 (M, 2) array, or raise ValueError."""
+    try:
+        a = np.array([actions[ag] for ag in agents])
+    except (KeyError, ValueError, TypeError):
+        raise ValueError(_bad_action_message(actions, agents, what)) from None
+    if (
+        a.shape != (len(agents), 2)
+        or a.dtype.kind not in "iuf"  # no bool, complex, object or string actions
+        or np.count_nonzero(np.isfinite(a)) != a.size
+    ):
+        raise ValueError(_bad_action_message(actions, agents, what))
+    return a.astype(np.float64, copy=False)
+
+
+def positions_array(positions: dict[str, Any] | FloatArray, agents: list[str]) -> FloatArray:
+    """Return next positions as a finite float64 (M, 2) array, or raise ValueError."""
+    if isinstance(positions, dict):
+        return actions_array(positions, agents, "position")
+    p = np.asarray(positions)
+    if p.dtype.kind not in "iuf":
+        raise ValueError(f"positions must be real numbers, got {positions!r}")
+    p = p.astype(np.float64, copy=False)
+    if p.shape != (len(agents), 2):
+        raise ValueError(f"positions must have shape ({len(agents)}, 2), got {p.shape}")
+    if not np.isfinite(p).all():
+        raise ValueError(f"positions must be finite (no NaN or inf), got {p.tolist()}")
+    return p
+
+
+def _bad_action_message(actions: Any, agents: list[str], what: str = "action") -> str:
+    """Return the error message that names the first agent with a bad action (or position)."""
     if not isinstance(actions, dict):
-        return f"actions must be a dict from agent to action, got {type(actions).__name__}"
+        return f"{what}s must be a dict from agent to {what}, got {type(actions).__name__}"
     for ag in agents:
         if ag not in actions:
-            return f"missing action for agent {ag!r} (live agents: {agents})"
-        try:
-            a = np.asarray(actions[ag], dtype=np.float64)
-        except (TypeError, ValueError):
-            return f"action of agent {ag!r} must be numeric, got {actions[ag]!r}"
+            return f"missing {what} for agent {ag!r} (live agents: {agents})"
+        a = np.asarray(actions[ag]) if _array_like(actions[ag]) else None
+        if a is None or a.dtype.kind not in "iuf":
+            return f"{what} of agent {ag!r} must be 2 real numbers, got {actions[ag]!r}"
         if a.shape != (2,):
-            return f"action of agent {ag!r} must have shape (2,), got {a.shape}"
+            return f"{what} of agent {ag!r} must have shape (2,), got {a.shape}"
         if not np.all(np.isfinite(a)):
-            return f"action of agent {ag!r} must be finite (no NaN or inf), got {a.tolist()}"
-    return "invalid actions"
+            return f"{what} of agent {ag!r} must be finite (no NaN or inf), got {a.tolist()}"
+    extra = sorted(set(map(str, actions)) - set(agents))
+    return f"{what}s given for agents that are not live: {extra}" if extra else f"invalid {what}s"
+
+
+def _array_like(value: Any) -> bool:
+    """Return whether ``np.asarray(value)`` works (ragged sequences raise)."""
+    try:
+        np.asarray(value)
+    except (ValueError, TypeError):
+        return False
+    return True
+
+
+def policy_step(env: Any, policy: Any, observations: dict[str, np.ndarray]) -> StepReturn:
+    """Step a parallel env (or one wrapping it) by ``policy``; return what ``step`` returns.
+
+    An expert (an object with ``plan(problem) -> positions``, e.g.
+    :class:`activetrack.baselines.GSRPolicy`) plans from :meth:`planning_problem` and is
+    executed with :meth:`step_positions`; any other policy maps the observations to actions:
+    ``policy.act(observations)`` or ``policy(observations)``, ``{agent: action}``.
+    """
+    base = env.unwrapped
+    if callable(getattr(policy, "plan", None)):
+        return base.step_positions(policy.plan(base.planning_problem()))
+    act = getattr(policy, "act", policy)
+    if not callable(act):
+        raise TypeError(
+            f"a policy needs plan(problem) or act(observations), got {type(policy).__name__}"
+        )
+    return env.step(act(observations))
 
 
 def parallel_env(

@@ -5,7 +5,7 @@ Example::
     from activetrack.envs import record_video
 
     record_video("episode.gif", seed=0)  # random actions, paper scenario
-    record_video("gsr.gif", policy=GSRPolicy(seed=0), seed=0, n_sensors=3)
+    record_video("gsr.gif", policy=GSRPolicy(seed=0), seed=0, n_sensors=3)  # an expert
 
 GIF needs only Pillow; MP4 needs an imageio video backend (``pip install imageio[ffmpeg]``).
 """
@@ -19,9 +19,9 @@ from typing import Any
 
 import numpy as np
 
-from .tracking_env import TrackingParallelEnv
+from .tracking_env import TrackingParallelEnv, policy_step
 
-Policy = Callable[[TrackingParallelEnv], dict[str, Any]]
+Policy = Callable[[dict[str, np.ndarray]], dict[str, Any]]
 
 
 def record_video(
@@ -40,8 +40,9 @@ def record_video(
         path: output file; ``.gif`` (always available) or ``.mp4``/``.webm``/... (needs
             ``imageio[ffmpeg]`` or ``imageio[pyav]``).
         policy: ``None`` for uniform random actions (drawn from the agents' action spaces,
-            seeded with ``seed``), a callable ``policy(env) -> {agent: action}``, or an
-            object with such an ``act(env)`` method (e.g. ``GSRPolicy``).
+            seeded with ``seed``), an expert with ``plan(problem) -> positions`` (e.g.
+            ``GSRPolicy``), or a map from observations to actions: a callable
+            ``policy(observations) -> {agent: action}`` or an object with such an ``act``.
         env: a parallel env made with ``render_mode="rgb_array"``; by default one is built
             from ``config`` (``scenario=`` and any Scenario field).
         seed: the episode seed passed to ``reset``.
@@ -60,16 +61,14 @@ def record_video(
     if base.render_mode != "rgb_array":
         raise ValueError(f"env must have render_mode='rgb_array', got {base.render_mode!r}")
     if policy is None:
-        act = _random_policy(base, seed)
-    else:
-        act = getattr(policy, "act", policy)
-        if not callable(act):
-            raise ValueError("policy must be None, a callable policy(env), or have act(env)")
-    env.reset(seed=seed)
+        policy = _random_policy(base, seed)
+    elif not (callable(getattr(policy, "plan", None)) or callable(getattr(policy, "act", policy))):
+        raise ValueError("policy must be None, an expert with plan(problem), or map observations")
+    obs, _ = env.reset(seed=seed)
     frames = [env.render()]
     steps = 0
     while base.agents and (max_steps is None or steps < max_steps):
-        env.step(act(env))
+        obs, *_ = policy_step(env, policy, obs)
         frames.append(env.render())
         steps += 1
     _write(path, frames, fps or base.metadata["render_fps"])
@@ -80,8 +79,8 @@ def _random_policy(env: TrackingParallelEnv, seed: int | None) -> Policy:
     for i, agent in enumerate(env.possible_agents):
         env.action_space(agent).seed(None if seed is None else seed + i)
 
-    def act(e: TrackingParallelEnv) -> dict[str, Any]:
-        return {a: e.action_space(a).sample() for a in e.agents}
+    def act(observations: dict[str, np.ndarray]) -> dict[str, Any]:
+        return {a: env.action_space(a).sample() for a in observations}
 
     return act
 

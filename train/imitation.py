@@ -1,8 +1,9 @@
 """Imitation of the GSR expert: behaviour cloning and DAgger, in plain torch.
 
 The expert is :class:`activetrack.baselines.policies.GSRPolicy`: at every step it solves
-the planning problem of the environment (``env.planning_problem()``) and returns each
-sensor's normalized displacement. With parameter sharing every (agent, step) pair is one
+the planning problem of the environment (``env.planning_problem()``) and returns the
+sensors' next positions; the label of each agent is the action that reaches its position
+(:func:`activetrack.sensor_motion.actions_to_reach`). With parameter sharing every (agent, step) pair is one
 sample ``(observation, expert action)``; the *label budget* counts them.
 
 - **BC** rolls out the expert for ``episodes`` episodes and regresses the network's mean
@@ -30,6 +31,7 @@ import numpy as np
 import torch
 from stable_baselines3.common.policies import ActorCriticPolicy
 
+from activetrack.sensor_motion import actions_to_reach
 from activetrack.train.networks import DEFAULT_NET, NetConfig, build_policy, mean_action
 from activetrack.train.utils import DEFAULT_THREADS, configure_torch, seed_everything
 
@@ -122,15 +124,17 @@ def rollout_labels(
         while env.agents:
             agents = list(env.agents)
             obs = np.stack([obs_dict[a] for a in agents])
-            labels = expert.act(env)
-            expert_actions = np.stack([np.asarray(labels[a], np.float32) for a in agents])
+            # The expert plans positions; its label is the action that reaches them.
+            problem = env.planning_problem()
+            planned = expert.plan(problem)
+            labels = actions_to_reach(planned, problem.sensors, problem.r).astype(np.float32)
             obs_list.append(obs)
-            act_list.append(expert_actions)
+            act_list.append(labels)
             if learner is None or rng.random() < beta:
-                actions = expert_actions
+                obs_dict, _, _, _, infos = env.step_positions(planned)
             else:
                 actions = learner(obs)
-            obs_dict, _, _, _, infos = env.step({a: actions[j] for j, a in enumerate(agents)})
+                obs_dict, _, _, _, infos = env.step(dict(zip(agents, actions, strict=True)))
             episode_trace.append(infos[agents[0]]["trace"])
         traces.append(float(np.mean(episode_trace)))
     data = Dataset(np.concatenate(obs_list).astype(np.float32), np.concatenate(act_list))
@@ -221,7 +225,7 @@ def train_imitation(
 
     ``scenario`` and ``overrides`` configure the parallel env as in
     :func:`activetrack.envs.parallel_env`. The expert defaults to ``GSRPolicy()``; any
-    object with ``act(env)`` works. ``threads`` torch threads (1: see
+    object with ``plan(problem) -> positions`` works. ``threads`` torch threads (1: see
     :mod:`activetrack.train.utils`). Deterministic for a given ``seed``.
     """
     from activetrack.envs import parallel_env

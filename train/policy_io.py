@@ -85,24 +85,8 @@ def save_policy(
     return path
 
 
-def current_observations(env: Any) -> np.ndarray:
-    """Return all agents' current observations (M, D) of a tracking parallel env.
-
-    Recomputed from the env's public prediction and sensor positions with the env's own
-    feature functions, so they equal the observations the env last returned.
-    """
-    from activetrack.envs import features
-
-    L = env.length_scale
-    p = env.params
-    target = features.target_features(env.x_pred, env.P_pred, float(env.scenario.dt), L)
-    constants = features.sensor_constants(p.sigma_d2, p.sigma_theta2, p.r, p.rho, L)
-    sensor = features.sensor_features(env.sensors, env.x_pred[:2], constants, L)
-    return features.observations(target, sensor, features.cyclic_order(env.n_sensors))
-
-
 class LearnedPolicy:
-    """A trained network as a policy: ``predict(obs)`` on arrays, ``act(env)`` on a parallel env.
+    """A trained network as a policy: ``predict(obs)`` on arrays, ``act(observations)`` on dicts.
 
     Attributes:
         policy: the SB3 ``ActorCriticPolicy`` (eval mode, CPU).
@@ -125,10 +109,10 @@ class LearnedPolicy:
         actions, _ = self.policy.predict(np.asarray(obs, dtype=np.float32), deterministic=True)
         return actions
 
-    def act(self, env: Any) -> dict[str, np.ndarray]:
-        """Return every live agent's action for the parallel env's current observations."""
-        agents = list(env.agents)
-        stacked = current_observations(env)
+    def act(self, observations: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """Return every agent's action for the parallel env's observations ``{agent: obs}``."""
+        agents = list(observations)
+        stacked = np.stack([observations[a] for a in agents])
         if self.view == "shared":
             actions = self.predict(stacked)
         else:

@@ -173,9 +173,9 @@ def validation_trace(
     env = parallel_env(scenario, **overrides)
     traces = []
     for s in range(VALIDATION_SEED, VALIDATION_SEED + episodes):
-        env.reset(seed=s)
+        obs, _ = env.reset(seed=s)
         while env.agents:
-            _, _, _, _, infos = env.step(learned.act(env))
+            obs, _, _, _, infos = env.step(learned.act(obs))
             traces.append(infos[env.possible_agents[0]]["trace"])
     policy.train(was_training)
     return float(np.mean(traces))

@@ -1,16 +1,10 @@
-"""The closed tracking loop of Section V as pure, batchable functions.
+"""The step kernel of the closed tracking loop (Section V), pure and batchable.
 
-One time step, in the paper's order: from the prediction ``x_hat(k+1|k), P(k+1|k)`` a
-planner chooses the sensors' next positions; then :func:`advance` moves the true target
-with process noise (eq. 2), draws every sensor's distance and bearing (eq. 4), updates
-the EKF (eq. 11) and returns the posterior; :func:`~activetrack.motion.predict` gives the
-next prediction (eq. 3).
-
-Randomness: each step consumes exactly ``n + 2M`` standard normals from the episode's
-generator (``n`` process, then ``2M`` measurement noise, sensor-major), so that the
-simulation runner, the single environment and the batched environment reproduce one
-another draw for draw from the same seed. :func:`initial_conditions` consumes ``2M``
-uniforms for the sensors, then ``n`` normals if the target's start is drawn.
+:func:`advance` is one step after the sensors have moved: the true target moves with
+process noise (eq. 2), every sensor draws its distance and bearing (eq. 4) and the EKF
+updates (eq. 11). :class:`LoopParams` holds the scenario's arrays it uses. The stateful
+loop around it (initial conditions, random streams, scoring, episode ends, prediction)
+is :class:`activetrack.world.World`.
 """
 
 from __future__ import annotations
@@ -65,26 +59,6 @@ class LoopParams:
     def n_noise(self) -> int:
         """Return the number of standard normals one step consumes: n + 2M."""
         return self.Phi.shape[0] + 2 * self.sigma_d2.shape[0]
-
-
-def initial_conditions(
-    sc: Scenario, rng: np.random.Generator
-) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-    """Return ``(x_true(0), x_hat(0|0), P(0|0), sensors(0))`` drawn for one episode."""
-    m = sc.n_sensors
-    u = rng.random((m, 2))
-    radius = sc.sensor_radius * np.sqrt(u[:, 0])  # uniform by area
-    angle = 2.0 * np.pi * u[:, 1]
-    sensors = np.asarray(sc.sensor_center) + radius[:, None] * np.stack(
-        [np.cos(angle), np.sin(angle)], -1
-    )
-    x_hat = np.asarray(sc.x0_hat, dtype=np.float64).copy()
-    P0 = sc.initial_cov
-    if sc.target_init == "gaussian":
-        x_true = x_hat + np.linalg.cholesky(P0) @ rng.standard_normal(x_hat.shape[0])
-    else:
-        x_true = np.asarray(sc.x0, dtype=np.float64).copy()
-    return x_true, x_hat, P0, sensors
 
 
 def advance(

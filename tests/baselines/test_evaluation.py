@@ -73,13 +73,11 @@ def test_paired_ratio_interval():
 
 
 class TowardsTarget:
-    """Every sensor heads straight for the predicted target at full speed."""
+    """An expert: every sensor heads straight for the predicted target at full speed."""
 
-    def act(self, env):
-        problem = env.planning_problem()
+    def plan(self, problem):
         c = problem.rel_sensors
-        a = -c / np.linalg.norm(c, axis=1, keepdims=True)
-        return dict(zip(env.possible_agents, a, strict=True))
+        return problem.sensors - problem.r[:, None] * c / np.linalg.norm(c, axis=1, keepdims=True)
 
 
 def test_policy_objects_and_mapping_labels():

@@ -1,13 +1,11 @@
-"""Planners acting through the environments reproduce the simulation runner.
+"""Expert policies drive the environments through ``step_positions``, like the runner.
 
-The environment and :func:`activetrack.baselines.simulation.simulate` share the world
-generator ``default_rng(seed)`` and the planner generator ``default_rng([seed, 1])``. The
-true target path depends on the world draws only, so it must agree bit for bit. The
-sensors' positions pass through a displacement action ``a = (p_next - p) / r`` and back,
-``p + r a``, which is exact except where a coordinate shrinks by cancellation (crossing
-zero), where it may differ by one unit in the last place; everything downstream then
-agrees to ~1e-15 (tolerance 1e-9 below, far under any real discrepancy, e.g. a shifted
-random draw, which changes positions by metres).
+The environments and :func:`activetrack.baselines.simulation.simulate` are adapters over
+one loop (:class:`activetrack.world.World`) with the world generator ``default_rng(seed)``
+and the planner generator ``default_rng([seed, 1])``; an expert's positions are executed
+as planned, so an episode through an environment equals the runner's run bit for bit.
+The loop itself is checked against an independent longhand loop in
+``tests/core/test_world.py``.
 """
 
 import importlib
@@ -21,6 +19,7 @@ import pytest
 from activetrack import make_scenario
 from activetrack.baselines.policies import PlannerPolicy
 from activetrack.envs import ENV_ID, env, parallel_env
+from activetrack.sensor_motion import actions_to_reach
 
 simulation = pytest.importorskip("activetrack.baselines.simulation")
 
@@ -53,7 +52,7 @@ def _run_env(sc, policy, seed):
     e.reset(seed=seed)
     sensors, trues, ests, covs, rewards = [e.sensors], [e.x_true], [e.x_hat], [e.P[:2, :2]], []
     while e.agents:
-        _, rew, *_ = e.step(policy.act(e))
+        _, rew, *_ = e.step_positions(policy.plan(e.planning_problem()))
         rewards.append(rew["sensor_0"])
         sensors.append(e.sensors)
         trues.append(e.x_true)
@@ -80,11 +79,10 @@ def test_env_reproduces_the_simulation_runner(planner_name, policy_name, config,
         sensors, trues, ests, covs, rewards = _run_env(sc, policy, seed)
         assert len(rewards) == len(record.trace) == sc.n_steps
         np.testing.assert_array_equal(trues, record.true_states)  # the same world draws
-        np.testing.assert_array_equal(sensors[0], record.sensors[0])
-        np.testing.assert_allclose(sensors, record.sensors, rtol=0, atol=1e-9)
-        np.testing.assert_allclose(ests, record.estimates, rtol=0, atol=1e-9)
-        np.testing.assert_allclose(covs, record.position_covs, rtol=1e-9, atol=0)
-        np.testing.assert_allclose(-rewards, record.trace, rtol=1e-9, atol=0)
+        np.testing.assert_array_equal(sensors, record.sensors)
+        np.testing.assert_array_equal(ests, record.estimates)
+        np.testing.assert_array_equal(covs, record.position_covs)
+        np.testing.assert_array_equal(-rewards, record.trace)
 
 
 def test_policy_owns_a_runner_seeded_generator():
@@ -95,18 +93,18 @@ def test_policy_owns_a_runner_seeded_generator():
     np.testing.assert_array_equal(policy.rng.random(4), np.random.default_rng([7, 1]).random(4))
 
 
-def test_actions_reach_the_planned_positions():
-    # Two identically seeded policies: one reports its plan, the other acts on it.
-    planner = PlannerPolicy(_planner("RandomMotion"), seed=0)
-    actor = PlannerPolicy(_planner("RandomMotion"), seed=0)
+def test_actions_to_reach_give_the_planned_positions_through_the_actions_path():
+    # For users who need actions (e.g. imitation labels): the actions behind an expert's
+    # positions move the sensors there through step(), to rounding.
+    expert = PlannerPolicy(_planner("RandomMotion"), seed=0)
     e = parallel_env(scenario="homogeneous", n_sensors=4)
     e.reset(seed=0)
     while e.agents:
-        problem, planned = planner.plan(e)
-        actions = actor.act(e)
-        assert list(actions) == e.agents
-        assert all(a.dtype == np.float64 and np.hypot(*a) <= 1 + 1e-12 for a in actions.values())
-        e.step(actions)
+        problem = e.planning_problem()
+        planned = expert.plan(problem)
+        a = actions_to_reach(planned, problem.sensors, problem.r)
+        assert np.all(np.hypot(a[:, 0], a[:, 1]) <= 1 + 1e-12)
+        e.step(dict(zip(e.agents, a, strict=True)))
         np.testing.assert_allclose(e.sensors, planned, rtol=0, atol=1e-12)
         assert problem.violation(e.sensors).max() < 1e-9
 
@@ -125,11 +123,12 @@ def test_same_trajectory_in_aec_and_centralized_envs():
             aec.step(None)
             continue
         if agent == "sensor_0":  # plan once per cycle, when the cycle starts
-            actions = policy.act(aec)
-        aec.step(actions[agent])
+            problem = aec.unwrapped.planning_problem()
+            actions = actions_to_reach(policy.plan(problem), problem.sensors, problem.r)
+        aec.step(actions[aec.unwrapped.possible_agents.index(agent)])
         if agent == aec.unwrapped.possible_agents[-1]:
             got.append(aec.unwrapped.sensors)
-    np.testing.assert_array_equal(np.array(got), sensors_par)
+    np.testing.assert_allclose(np.array(got), sensors_par, rtol=0, atol=1e-12)  # via actions
 
     cen = gym.make(ENV_ID, scenario=sc)
     cen.reset(seed=2)
@@ -137,7 +136,9 @@ def test_same_trajectory_in_aec_and_centralized_envs():
     got = [cen.unwrapped.env.sensors]
     done = False
     while not done:
-        *_, term, trunc, _ = cen.step(policy.joint_action(cen))
+        *_, term, trunc, _ = cen.unwrapped.step_positions(
+            policy.plan(cen.unwrapped.planning_problem())
+        )
         got.append(cen.unwrapped.env.sensors)
         done = term or trunc
     np.testing.assert_array_equal(np.array(got), sensors_par)

@@ -43,6 +43,11 @@ class ReferenceLoop:
     def __init__(self, sc, seed):
         self.sc = sc
         self.rng = np.random.default_rng(seed)
+        self.restart()
+
+    def restart(self):
+        """Start the next episode from the same generator (the draws continue)."""
+        sc = self.sc
         m = sc.n_sensors
         u = self.rng.random((m, 2))
         rad = sc.sensor_radius * np.sqrt(u[:, 0])

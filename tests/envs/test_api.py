@@ -18,7 +18,8 @@ from activetrack.envs import ENV_ID, env, parallel_env
 ALLOWED = re.compile(
     r"observation space (maximum|minimum) value is -?infinity"
     r"|(maximum|minimum) observation space value is -?infinity"
-    r"|render_mode='human' needs an interactive matplotlib backend",
+    r"|render_mode='human' needs an interactive matplotlib backend"
+    r"|reset\(\) ignores unknown options \['options'\]",  # PettingZoo's probe
     re.I,
 )
 

@@ -104,9 +104,9 @@ def test_record_video_with_a_policy_and_env(tmp_path):
     env = parallel_env(scenario="paper", n_steps=50, render_mode="rgb_array")
     calls = []
 
-    def policy(e):
-        calls.append(e.k)
-        return {a: np.array([-0.5, 0.5]) for a in e.agents}
+    def policy(observations):
+        calls.append(env.k)
+        return {a: np.array([-0.5, 0.5]) for a in observations}
 
     record_video(tmp_path / "p.gif", policy, env=env, seed=1, max_steps=4)
     assert calls == [0, 1, 2, 3]

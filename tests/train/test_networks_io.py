@@ -11,7 +11,7 @@ from gymnasium import spaces
 
 from activetrack.envs import CentralizedTrackingEnv, parallel_env
 from activetrack.train.networks import NetConfig, build_policy, mean_action, saturate
-from activetrack.train.policy_io import current_observations, load_policy, save_policy
+from activetrack.train.policy_io import load_policy, save_policy
 
 OBS = spaces.Box(-np.inf, np.inf, (23,), np.float32)
 ACT = spaces.Box(-1.0, 1.0, (2,), np.float32)
@@ -79,7 +79,9 @@ def test_act_uses_the_env_observations(tmp_path):
     env = parallel_env("paper")
     obs, _ = env.reset(seed=4)
     for _ in range(3):
-        np.testing.assert_array_equal(current_observations(env), np.stack(list(obs.values())))
+        np.testing.assert_array_equal(
+            np.stack(list(env.observe().values())), np.stack(list(obs.values()))
+        )
         obs, *_ = env.step({a: np.array([0.2, 0.9]) for a in env.agents})
     torch.manual_seed(0)
     net = NetConfig(hidden=(8,))
@@ -87,7 +89,7 @@ def test_act_uses_the_env_observations(tmp_path):
     learned = load_policy(
         save_policy(tmp_path / "p.zip", policy, net, kind="bc", scenario={}, seed=0)
     )
-    actions = learned.act(env)
+    actions = learned.act(obs)
     assert list(actions) == env.agents
     np.testing.assert_array_equal(
         np.stack(list(actions.values())), learned.predict(np.stack(list(obs.values())))
@@ -106,7 +108,7 @@ def test_centralized_view_act_concatenates(tmp_path):
         )
     )
     cobs, _ = cenv.reset(seed=9)
-    penv.reset(seed=9)
+    pobs, _ = penv.reset(seed=9)
     joint = policy.predict(cobs, deterministic=True)[0]
-    per_agent = learned.act(penv)
+    per_agent = learned.act(pobs)
     np.testing.assert_allclose(np.concatenate(list(per_agent.values())), joint, rtol=1e-6)

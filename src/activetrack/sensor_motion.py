@@ -1,0 +1,145 @@
+"""Sensor motion: proposed next positions to executed ones, eq. (13)-(16).
+
+Every sensor ends a step within its reach ``r_i = vmax_i dt`` of where it was (eq. 13/15)
+and outside the ``rho_i`` disk around the *predicted* target ``p_T(k+1|k)`` (eq. 14/16). Two
+ways to propose a move reach the same rule:
+
+- :func:`apply_actions`: an agent's action ``a_i`` is its displacement as a fraction of its
+  reach, ``p_S_i(k+1) = p_S_i(k) + r_i a_i``; vectors longer than 1 are first scaled onto
+  the unit disk (without overflow, however large);
+- :func:`move_to`: a planner's absolute next positions; a displacement longer than the
+  reach is scaled onto the speed circle.
+
+A move that would end inside the ``rho_i`` disk then goes to the nearest feasible point
+(:func:`activetrack.geometry.project_feasible`); a sensor with ``r_i = 0`` stays.
+
+Both tests carry a relative tolerance of 1e-12, so that a planner's exact boundary point
+(on the speed circle or on the ``rho`` circle, up to rounding) passes unchanged.
+:func:`actions_to_reach` is the inverse of :func:`apply_actions`, for users who need the
+actions behind a planner's positions (for example imitation labels).
+
+The functions are pure and broadcast over leading batch axes (sensor axis second to last).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from activetrack.geometry import project_feasible
+from activetrack.linalg2 import as_complex
+from activetrack.validation import FloatArray
+
+#: Relative tolerance of the unit-disk and minimum-distance tests.
+TOL = 1e-12
+_LONG = 1.0 + TOL
+_INSIDE = 1.0 - TOL
+
+
+def _unit_disk(a: FloatArray) -> FloatArray:
+    """Return vectors ``a`` (..., 2) with those longer than ``1 + TOL`` scaled to length 1."""
+    norm = np.abs(as_complex(a))
+    long = norm > _LONG
+    if not np.count_nonzero(long):
+        return a
+    huge = np.isinf(norm)
+    if np.count_nonzero(huge):  # |a| overflowed: divide by the larger component first
+        big = np.maximum(np.abs(a[..., 0]), np.abs(a[..., 1]))
+        a = a / np.where(huge, big, 1.0)[..., None]
+        norm = np.where(huge, np.abs(as_complex(np.ascontiguousarray(a))), norm)
+    return a / np.where(long, norm, 1.0)[..., None]
+
+
+def keep_distance(
+    new: FloatArray, sensors: FloatArray, target_pred: FloatArray, r: FloatArray, rho: FloatArray
+) -> tuple[FloatArray, np.ndarray]:
+    """Return ``(positions, projected)``: moves within reach pushed out of the ``rho`` disks.
+
+    ``new`` (..., M, 2) must lie within reach of ``sensors``; ``projected`` (..., M) marks
+    the moves that ended inside their disk and were moved to the nearest feasible point.
+    """
+    q = new - target_pred[..., None, :]
+    inside = np.abs(as_complex(q)) < np.asarray(rho, dtype=np.float64) * _INSIDE
+    if np.count_nonzero(inside):
+        inside &= np.asarray(r) > 0.0  # a sensor that cannot move (r = 0) stays, even inside
+        c = sensors - target_pred[..., None, :]
+        fixed = project_feasible(q, c, r, rho) + target_pred[..., None, :]
+        new = np.where(inside[..., None], fixed, new)
+    return new, inside
+
+
+def apply_actions(
+    actions: FloatArray,
+    sensors: FloatArray,
+    target_pred: FloatArray,
+    r: FloatArray,
+    rho: FloatArray,
+) -> tuple[FloatArray, np.ndarray]:
+    """Return ``(next_positions, projected)`` for actions in units of the reach.
+
+    Shapes: ``actions`` and ``sensors`` (..., M, 2), ``target_pred`` (..., 2), ``r`` and
+    ``rho`` broadcastable to (..., M). ``projected`` (..., M) marks the moves that were
+    moved out of the ``rho`` disk. Inputs are not validated (finite values assumed).
+    """
+    a = _unit_disk(np.asarray(actions, dtype=np.float64))
+    r = np.asarray(r, dtype=np.float64)
+    return keep_distance(sensors + a * r[..., None], sensors, target_pred, r, rho)
+
+
+def move_to(
+    positions: FloatArray,
+    sensors: FloatArray,
+    target_pred: FloatArray,
+    r: FloatArray,
+    rho: FloatArray,
+) -> tuple[FloatArray, np.ndarray]:
+    """Return ``(next_positions, projected)`` for proposed absolute next positions.
+
+    A displacement longer than ``r_i (1 + TOL)`` is scaled onto the speed circle, then the
+    ``rho`` rule applies; feasible positions (a planner's) come back unchanged. Shapes as
+    in :func:`apply_actions`; inputs are not validated.
+    """
+    p = np.asarray(positions, dtype=np.float64)
+    r = np.asarray(r, dtype=np.float64)
+    d = p - sensors
+    far = np.abs(as_complex(np.ascontiguousarray(d))) > r * _LONG
+    if np.count_nonzero(far):
+        rr = np.broadcast_to(r, far.shape)
+        safe = np.where(rr > 0.0, rr, 1.0)[..., None]
+        # d / r on the unit disk, then back: also keeps sensors with r = 0 where they are.
+        step = _unit_disk(np.where(far[..., None], d / safe, 0.0)) * rr[..., None]
+        p = np.where(far[..., None], sensors + step, p)
+    return keep_distance(p, sensors, target_pred, r, rho)
+
+
+def actions_to_reach(next_positions: FloatArray, sensors: FloatArray, r: FloatArray) -> FloatArray:
+    """Return float64 actions that move ``sensors`` to ``next_positions`` through the env.
+
+    The inverse of :func:`apply_actions` for positions within reach and outside the
+    ``rho`` disks (a planner's output): ``a = (p_next - p) / r``, its norm capped at 1
+    only beyond ``1 + 1e-12``. Floating-point rounding of ``p + r a`` is then corrected
+    so that :func:`apply_actions` gives ``next_positions`` bit for bit whenever a float
+    action can (sensors with ``r = 0`` get a zero action). Batched like
+    :func:`apply_actions`.
+    """
+    next_positions = np.asarray(next_positions, dtype=np.float64)
+    sensors = np.asarray(sensors, dtype=np.float64)
+    r = np.broadcast_to(np.asarray(r, dtype=np.float64), sensors.shape[:-1])[..., None]
+    moving = r > 0.0
+    safe = np.where(moving, r, 1.0)
+    a = np.where(moving, (next_positions - sensors) / safe, 0.0)
+    norm = np.abs(as_complex(a))[..., None]  # the same norm as in apply_actions
+    capped = norm > _LONG
+    if capped.any():
+        a = np.where(capped, a / np.where(capped, norm, 1.0), a)
+    free = moving & ~capped
+    for _ in range(8):
+        err = next_positions - (sensors + a * r)
+        wrong = free & (err != 0.0)
+        if not wrong.any():
+            break
+        # Step by the residual, and by at least one ulp towards it (tiny residuals).
+        stepped = a + err / safe
+        ulp = np.nextafter(a, np.where(err > 0.0, np.inf, -np.inf))
+        towards = np.where(err > 0.0, np.maximum(stepped, ulp), np.minimum(stepped, ulp))
+        a = np.where(wrong, towards, a)
+    return a

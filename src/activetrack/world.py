@@ -1,0 +1,376 @@
+"""The closed tracking loop of Section V, written once: N independent copies in one object.
+
+:class:`World` holds, for every copy, the true target state, the EKF posterior and its
+prediction, the sensors' positions and the episode's counters. One :meth:`World.step`
+follows the paper's timeline:
+
+1. **move**: the sensors go to their next positions within reach and outside the ``rho``
+   disks around the predicted target (eq. 13-16, :mod:`activetrack.sensor_motion`), from a
+   planner's absolute positions (:meth:`World.step`) or from actions in units of the reach
+   (:meth:`World.step_actions`);
+2. **advance**: the true target moves (eq. 2), every sensor measures distance and bearing
+   (eq. 4) and the EKF updates (eq. 11): :func:`activetrack.tracking.advance`;
+3. **score**: the trace of the posterior position covariance (eq. 12, 17); the reward is
+   ``-reward_scale`` times it;
+4. **episode end**: truncation after ``n_steps`` steps, termination when the score
+   exceeds ``max_trace``;
+5. **predict** (eq. 3): ``x_hat(k+1|k), P(k+1|k)``, what the next plan and the next
+   observation are made from (:meth:`World.planning_problem`, :meth:`World.observe`).
+
+Environments, the simulation runner and the expert policies are adapters over this loop;
+none of them repeats a step of it.
+
+Randomness: copy ``i`` draws from its own ``np.random.default_rng(seed_i)``: at reset ``2M``
+uniforms for the sensors' start (uniform by area in the start disk), then ``n`` normals
+for the true target if it starts from ``N(x0_hat, P0)``; at every step ``n + 2M`` standard
+normals (``n`` process noise, then ``2M`` measurement noise, sensor-major). With
+``noise_block = b > 1`` the step normals are drawn ``b`` steps at a time, never past the
+episode's last step, which leaves the stream in the same state at every episode end (a
+copy terminated early on ``max_trace`` has drawn the rest of its block). A world of one
+copy runs the same code on unbatched arrays (no leading axis inside a step), which is
+what makes a single environment fast.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any, NamedTuple
+
+import numpy as np
+
+from activetrack import observation, sensor_motion, tracking
+from activetrack.ekf import position_nees
+from activetrack.motion import predict
+from activetrack.problem import PlanningProblem
+from activetrack.scenarios import Scenario, make_scenario
+from activetrack.validation import FloatArray
+
+#: Steps of noise a copy draws per generator call in a world of several copies.
+DEFAULT_NOISE_BLOCK = 64
+
+_Selection = int | slice | np.ndarray
+
+
+class StepResult(NamedTuple):
+    """What one step returns for the copies it advanced (NumPy scalars for one copy).
+
+    Attributes:
+        reward: ``-reward_scale * tr P(k+1|k+1)_11``.
+        terminated: the trace exceeded ``max_trace``.
+        truncated: the episode reached ``n_steps``.
+    """
+
+    reward: Any
+    terminated: Any
+    truncated: Any
+
+
+def score(P: FloatArray) -> FloatArray:
+    """Return the objective of eq. (12)/(17) at covariances ``P`` (..., n, n): ``tr P_11``."""
+    return P[..., 0, 0] + P[..., 1, 1]
+
+
+class World:
+    """``num_copies`` independent tracking episodes of one scenario, stepped together.
+
+    Args:
+        scenario: a preset name or a :class:`~activetrack.Scenario`; ``**overrides`` are
+            scenario fields (as in :func:`activetrack.make_scenario`).
+        num_copies: N >= 1.
+        noise_block: steps of noise a copy draws per generator call (default 1 for one
+            copy, :data:`DEFAULT_NOISE_BLOCK` otherwise; see the module docstring).
+
+    State (leading axis N, read-only for users): ``x_true`` (N, n), ``x_hat``/``P`` the
+    posterior, ``x_pred``/``P_pred`` the prediction, ``sensors`` (N, M, 2), ``k`` steps
+    taken, ``trace`` the posterior trace, ``projected`` (N, M) this step's moves pushed
+    out of a ``rho`` disk, ``n_projected`` their count in the episode, ``terminated`` and
+    ``truncated``.
+    """
+
+    def __init__(
+        self,
+        scenario: str | Scenario = "paper",
+        num_copies: int = 1,
+        *,
+        noise_block: int | None = None,
+        **overrides: Any,
+    ) -> None:
+        if isinstance(num_copies, bool) or not isinstance(num_copies, (int, np.integer)):
+            raise ValueError(f"num_copies must be an integer >= 1, got {num_copies!r}")
+        if num_copies < 1:
+            raise ValueError(f"num_copies must be an integer >= 1, got {num_copies!r}")
+        if noise_block is None:
+            noise_block = 1 if num_copies == 1 else DEFAULT_NOISE_BLOCK
+        if (
+            isinstance(noise_block, bool)
+            or not isinstance(noise_block, (int, np.integer))
+            or noise_block < 1
+        ):
+            raise ValueError(f"noise_block must be an integer >= 1, got {noise_block!r}")
+        sc = make_scenario(scenario, **overrides)
+        self.scenario = sc
+        self.params = p = tracking.LoopParams.from_scenario(sc)
+        self.num_copies = N = int(num_copies)
+        self.noise_block = int(noise_block)
+        self.n_sensors = m = sc.n_sensors
+        n = p.Phi.shape[0]
+        self._n_noise = p.n_noise
+        self._n_steps = int(sc.n_steps)
+        self._max_trace = np.inf if sc.max_trace is None else float(sc.max_trace)
+        self._scale = float(sc.reward_scale)
+        self._dt = float(sc.dt)
+        self._x0 = np.asarray(sc.x0, dtype=np.float64)
+        self._x0_hat = np.asarray(sc.x0_hat, dtype=np.float64)
+        self._P0 = sc.initial_cov
+        self._chol0 = np.linalg.cholesky(self._P0)
+        self._center = np.asarray(sc.sensor_center, dtype=np.float64)
+        # Observation constants (activetrack.observation).
+        self.length_scale = observation.length_scale(sc)
+        self._constants = observation.sensor_constants(
+            p.sigma_d2, p.sigma_theta2, p.r, p.rho, self.length_scale
+        )
+        self._order = observation.cyclic_order(m)
+
+        self._rngs: list[np.random.Generator | None] = [None] * N
+        self._noise = (
+            np.zeros((N, self.noise_block, self._n_noise)) if self.noise_block > 1 else None
+        )
+        self._noise_left = np.zeros(N, dtype=np.int64)
+        # Copies not yet reset hold a valid placeholder (the prior, sensors one length scale
+        # away), since whole-batch steps compute them too before discarding the result.
+        self.x_true = np.broadcast_to(self._x0_hat, (N, n)).copy()
+        self.x_hat = self.x_true.copy()
+        self.P = np.broadcast_to(self._P0, (N, n, n)).copy()
+        self.x_pred, self.P_pred = predict(self.x_hat, self.P, p.Phi, p.Q)
+        self.sensors = np.broadcast_to(
+            self._x0_hat[:2] + np.array([self.length_scale, 0.0]), (N, m, 2)
+        ).copy()
+        self.k = np.zeros(N, dtype=np.int64)
+        self.trace = np.zeros(N)
+        self.projected = np.zeros((N, m), dtype=bool)
+        self.n_projected = np.zeros((N, m), dtype=np.int64)
+        self.terminated = np.zeros(N, dtype=bool)
+        self.truncated = np.zeros(N, dtype=bool)
+        self._ended = np.ones(N, dtype=bool)  # not started, or its episode is over
+
+    # Random streams ---------------------------------------------------------------------
+    def rng(self, i: int = 0) -> np.random.Generator:
+        """Return copy ``i``'s generator (created from fresh entropy if never seeded)."""
+        g = self._rngs[i]
+        if g is None:
+            g = self._rngs[i] = np.random.default_rng()
+        return g
+
+    def _rows(self, sel: _Selection) -> np.ndarray:
+        """Return the copy indices of a selection."""
+        return np.arange(self.num_copies)[sel] if isinstance(sel, slice) else np.atleast_1d(sel)
+
+    def _draw_noise(self, rows: np.ndarray) -> None:
+        """Refill the noise blocks of copies ``rows``, never past their episode's last step."""
+        b = self.noise_block
+        for i in rows.tolist():
+            steps = int(min(b, max(self._n_steps - self.k[i], 1)))
+            self._noise[i, b - steps :] = self.rng(i).standard_normal((steps, self._n_noise))
+            self._noise_left[i] = steps
+
+    def _step_noise(self, sel: _Selection) -> FloatArray:
+        """Return the ``n + 2M`` standard normals of this step for the selected copies."""
+        if self._noise is None:
+            if isinstance(sel, int):
+                return self.rng(sel).standard_normal(self._n_noise)
+            return np.stack([self.rng(i).standard_normal(self._n_noise) for i in self._rows(sel)])
+        rows = self._rows(sel)
+        empty = rows[self._noise_left[rows] == 0]
+        if empty.size:
+            self._draw_noise(empty)
+        noise = self._noise[rows, self.noise_block - self._noise_left[rows]]
+        self._noise_left[rows] -= 1
+        return noise[0] if isinstance(sel, int) else noise
+
+    # Selections -------------------------------------------------------------------------
+    def _select(self, indices: Any) -> _Selection | None:
+        """Return the selection of ``indices`` (None: all copies); None if it is empty.
+
+        A world of one copy selects with the integer 0, so a step runs on unbatched arrays.
+        """
+        N = self.num_copies
+        if indices is None:
+            return 0 if N == 1 else slice(None)
+        idx = np.asarray(indices)
+        if idx.dtype == np.bool_:
+            if idx.shape != (N,):
+                raise ValueError(f"a copy mask must have shape ({N},), got {idx.shape}")
+            idx = np.flatnonzero(idx)
+        elif idx.ndim != 1 or (idx.size and not np.issubdtype(idx.dtype, np.integer)):
+            raise ValueError(f"copy indices must be a 1-d integer array, got {indices!r}")
+        idx = idx.astype(np.int64)
+        if idx.size and (idx.min() < 0 or idx.max() >= N or np.unique(idx).size != idx.size):
+            raise ValueError(f"copy indices must be distinct and in [0, {N - 1}], got {indices!r}")
+        if idx.size == 0:
+            return None
+        if idx.size == N:
+            return 0 if N == 1 else slice(None)
+        return idx
+
+    # Reset ------------------------------------------------------------------------------
+    def reset(
+        self, indices: Sequence[int] | np.ndarray | None = None, seeds: Sequence[Any] | None = None
+    ) -> None:
+        """Start new episodes for copies ``indices`` (a mask or indices; None: all).
+
+        ``seeds`` gives one seed (an int, anything ``default_rng`` takes, or None) per
+        selected copy; a copy without a seed continues its generator.
+        """
+        sel = self._select(indices)
+        if sel is None:
+            return
+        rows = self._rows(sel)
+        if seeds is not None:
+            seeds = list(seeds)
+            if len(seeds) != rows.size:
+                raise ValueError(f"seeds must hold one seed per reset copy ({rows.size})")
+            for i, s in zip(rows.tolist(), seeds, strict=True):
+                if s is not None:
+                    self._rngs[i] = np.random.default_rng(s)
+        m, n = self.n_sensors, self._x0.shape[0]
+        gaussian = self.scenario.target_init == "gaussian"
+        u = np.empty((rows.size, m, 2))
+        g = np.empty((rows.size, n)) if gaussian else None
+        for j, i in enumerate(rows.tolist()):
+            rng = self.rng(i)
+            u[j] = rng.random((m, 2))
+            if gaussian:
+                g[j] = rng.standard_normal(n)
+        if isinstance(sel, int):  # one copy: unbatched arrays, as in the step
+            u, g = u[0], None if g is None else g[0]
+        radius = self.scenario.sensor_radius * np.sqrt(u[..., 0])  # uniform by area
+        angle = 2.0 * np.pi * u[..., 1]
+        self.sensors[sel] = self._center + radius[..., None] * np.stack(
+            [np.cos(angle), np.sin(angle)], -1
+        )
+        self.x_true[sel] = self._x0_hat + g @ self._chol0.T if gaussian else self._x0
+        self.x_hat[sel] = self._x0_hat
+        self.P[sel] = self._P0
+        self.x_pred[sel], self.P_pred[sel] = predict(
+            self.x_hat[sel], self.P[sel], self.params.Phi, self.params.Q
+        )
+        self.k[sel] = 0
+        self.trace[sel] = score(self._P0)
+        self.projected[sel] = False
+        self.n_projected[sel] = 0
+        self.terminated[sel] = self.truncated[sel] = self._ended[sel] = False
+        self._noise_left[sel] = 0
+        if self._noise is not None:
+            self._draw_noise(rows)
+
+    # Step -------------------------------------------------------------------------------
+    def step(self, positions: FloatArray, live: Any = None) -> StepResult | None:
+        """Advance the copies ``live`` (None: all) with the sensors' proposed next positions.
+
+        ``positions`` (N, M, 2) are absolute; a move beyond reach or into a ``rho`` disk is
+        mended by :func:`activetrack.sensor_motion.move_to` (a planner's feasible positions
+        pass unchanged). Returns the advanced copies' :class:`StepResult` (None if none).
+        """
+        return self._step(sensor_motion.move_to, positions, live)
+
+    def step_actions(self, actions: FloatArray, live: Any = None) -> StepResult | None:
+        """As :meth:`step`, with actions (N, M, 2) in units of the reach (eq. 13).
+
+        :func:`activetrack.sensor_motion.apply_actions` gives the positions.
+        """
+        return self._step(sensor_motion.apply_actions, actions, live)
+
+    def _step(self, move: Any, moves: FloatArray, live: Any) -> StepResult | None:
+        """Move the sensors of the copies ``live`` by ``move`` and advance them (steps 1-5)."""
+        sel = self._select(live)
+        if sel is None:
+            return None
+        if np.any(self._ended[sel]):
+            rows = self._rows(sel)
+            bad = rows[self._ended[rows]].tolist()
+            raise RuntimeError(
+                f"copies {bad[:10]} have no running episode (never reset, or ended): reset them"
+                " before stepping"
+            )
+        # A subset of several copies is computed with all of them and written back alone:
+        # stacked matrix products round a row differently with another number of rows, and
+        # a copy's numbers must not depend on which other copies step with it.
+        calc = slice(None) if isinstance(sel, np.ndarray) else sel
+        pick = sel if isinstance(sel, np.ndarray) else slice(None)
+        p = self.params
+        x_pred = self.x_pred[calc]
+        sensors, projected = move(moves[calc], self.sensors[calc], x_pred[..., :2], p.r, p.rho)
+        noise = self._step_noise(sel)
+        if calc is not sel:
+            full = np.zeros((self.num_copies, self._n_noise))
+            full[sel] = noise
+            noise = full
+        x_true, _, x_post, P_post = tracking.advance(
+            p, self.x_true[calc], x_pred, self.P_pred[calc], sensors, noise
+        )
+        x_next, P_next = predict(x_post, P_post, p.Phi, p.Q)
+        trace = score(P_post)[pick]
+        self.x_true[sel], self.x_hat[sel], self.P[sel] = x_true[pick], x_post[pick], P_post[pick]
+        self.x_pred[sel], self.P_pred[sel] = x_next[pick], P_next[pick]
+        self.sensors[sel] = sensors[pick]
+        self.projected[sel] = projected = projected[pick]
+        self.n_projected[sel] += projected
+        k = self.k[sel] + 1
+        self.k[sel] = k
+        self.trace[sel] = trace
+        terminated = trace > self._max_trace  # never when max_trace is None (inf)
+        truncated = k >= self._n_steps
+        self.terminated[sel], self.truncated[sel] = terminated, truncated
+        self._ended[sel] = terminated | truncated
+        return StepResult(-self._scale * trace, terminated, truncated)
+
+    # What adapters read -----------------------------------------------------------------
+    def planning_problem(self, index: int | None = None) -> PlanningProblem:
+        """Return the planning problem of eq. (15)-(17) from the current prediction.
+
+        ``index`` None: every copy (leading batch axis N); an int: that copy, unbatched.
+        """
+        sel = slice(None) if index is None else index
+        p = self.params
+        return PlanningProblem(
+            prior_cov=self.P_pred[sel, :2, :2],
+            target=self.x_pred[sel, :2],
+            sensors=self.sensors[sel],
+            r=p.r,
+            rho=p.rho,
+            sigma_d2=p.sigma_d2,
+            sigma_theta2=p.sigma_theta2,
+        )
+
+    def observe(self, index: int | None = None) -> np.ndarray:
+        """Return every agent's observation, float32 (N, M, 5 + 6M), or (M, 5 + 6M) for a copy.
+
+        The layout is :mod:`activetrack.observation`'s: the prediction and the team as seen
+        from each agent's seat.
+        """
+        target, sensor = self._features(slice(None) if index is None else index)
+        return observation.observations(target, sensor, self._order)
+
+    def state(self, index: int | None = None) -> np.ndarray:
+        """Return the global state, float32 (N, 6 + 6M) or (6 + 6M,) for one copy."""
+        sel = slice(None) if index is None else index
+        target, sensor = self._features(sel)
+        return observation.global_state(target, sensor, self.k[sel] / self._n_steps)
+
+    def _features(self, sel: _Selection) -> tuple[FloatArray, FloatArray]:
+        x_pred = self.x_pred[sel]
+        L = self.length_scale
+        target = observation.target_features(x_pred, self.P_pred[sel], self._dt, L)
+        sensor = observation.sensor_features(self.sensors[sel], x_pred[..., :2], self._constants, L)
+        return target, sensor
+
+    def position_error(self, index: int | None = None) -> FloatArray:
+        """Return ``||p_T(k) - p_hat_T(k|k)||`` (m) per copy, or of copy ``index``."""
+        sel = slice(None) if index is None else index
+        d = self.x_true[sel, :2] - self.x_hat[sel, :2]
+        return np.hypot(d[..., 0], d[..., 1])
+
+    def position_nees(self, index: int | None = None) -> FloatArray:
+        """Return the position NEES ``e^T P_11^{-1} e`` per copy, or of copy ``index``."""
+        sel = slice(None) if index is None else index
+        return position_nees(self.x_true[sel], self.x_hat[sel], self.P[sel])
