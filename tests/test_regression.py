@@ -111,6 +111,7 @@ def assert_same(expected: Any, actual: Any, rtol: float = 0.0, path: str = "") -
 def test_recording_metadata():
     data = recording()
     assert data["commit"] == RECORDED_AT
+    assert data["library_clean"]
     assert sorted(data["cases"]) == sorted(tool.CASES)
     assert sorted(data["descriptions"]) == sorted(tool.CASES)
 
@@ -127,7 +128,10 @@ def test_case_reproduces_recording(name: str) -> None:
     data = recording()
     rtol = RTOL.get(name, (0.0, ""))[0]
     actual = tool.compute(name)
-    versions = f"(recorded with numpy {data['numpy']}, scipy {data['scipy']}, at {RECORDED_AT})"
+    versions = (
+        f"(recorded at {RECORDED_AT} with numpy {data['numpy']}, scipy {data['scipy']}, "
+        f"BLAS {data['blas']!r}, CPU {data['cpu']!r})"
+    )
     try:
         assert_same(data["cases"][name], actual, rtol, name)
     except AssertionError as exc:

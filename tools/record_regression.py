@@ -902,6 +902,35 @@ def git_commit() -> str:
     ).stdout.strip()
 
 
+def library_clean() -> bool:
+    """Return whether the library's files are as committed (no local changes)."""
+    out = subprocess.run(
+        ["git", "status", "--porcelain", "--", "src", "envs", "baselines", "pyproject.toml"],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout
+    return not out.strip()
+
+
+def cpu_model() -> str:
+    """Return the CPU model name (results of BLAS kernels may depend on it)."""
+    with contextlib.suppress(OSError):
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    return platform.processor()
+
+
+def blas_config() -> str:
+    """Return numpy's BLAS build configuration (e.g. OpenBLAS version and target)."""
+    with contextlib.suppress(Exception):
+        blas = np.show_config(mode="dicts")["Build Dependencies"]["blas"]
+        return str(blas.get("openblas configuration") or blas.get("name"))
+    return "unknown"
+
+
 def compute(name: str) -> Any:
     """Return case ``name`` as it reads back from JSON (tuples become lists)."""
     return json.loads(json.dumps(CASES[name].compute(), allow_nan=False))
@@ -913,11 +942,14 @@ def record(names: list[str] | None = None, verbose: bool = True) -> dict[str, An
 
     data: dict[str, Any] = {
         "commit": git_commit(),
+        "library_clean": library_clean(),
         "command": "python tools/record_regression.py",
         "numpy": np.__version__,
         "scipy": scipy.__version__,
         "python": sys.version.split()[0],
         "machine": platform.machine(),
+        "cpu": cpu_model(),
+        "blas": blas_config(),
         "descriptions": {},
         "cases": {},
     }
