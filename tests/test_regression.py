@@ -2,10 +2,12 @@
 
 The values in ``tests/data/regression_bb51820.json`` were recorded at commit
 bb518205aff6ebdc562250b19fb081941ffb6378 (main before the closed tracking loop moved
-into a batched ``World``) with ``OPENBLAS_NUM_THREADS=1 python
-tools/record_regression.py``. The file also names the numpy and scipy versions it was
-recorded with. Each case below recomputes one group of results with the same functions
-of ``tools/record_regression.py`` (one copy of the computation), through public entry
+into a batched ``World``): HEAD detached at that commit, this branch's
+``tools/record_regression.py`` copied in, ``OPENBLAS_NUM_THREADS=1 .venv/bin/python
+tools/record_regression.py``. The file also names the numpy and scipy versions, the BLAS
+build and the CPU it was recorded with (a failure message repeats them). Each case
+below recomputes one group of results with the same functions of
+``tools/record_regression.py`` (one copy of the computation), through public entry
 points only: the runner and planners of ``activetrack.baselines``, the parallel, AEC,
 Gymnasium and batched environments, the expert policies and the evaluation.
 
@@ -22,7 +24,10 @@ Reading a failure: the process noise is ``noise_factor @ w`` with ``noise_factor
 ``eigh`` of the discrete ``Q`` (``activetrack.motion``), whose eigenvalues come in equal
 x/y pairs; a last-bit change of ``Q`` (or another LAPACK) rotates the eigenvectors within
 each pair and changes a seed's trajectory by O(1) from the first step, not in the last
-bits. Recording twice, and with 1 or 2 BLAS threads, gave byte-identical files.
+bits. The batched environment's copy i is not bit-equal to the single environment seeded
+``s + i`` (the recording's ``equals_single`` data): stacked (N, n) matrix products round
+differently from per-copy vectors, so reproducing both needs each path's operations and
+shapes kept. Recording twice, and with 1 or 2 BLAS threads, gave byte-identical files.
 """
 
 from __future__ import annotations

@@ -23,7 +23,9 @@ than 1 (scaled onto the unit disk).
 
 ``python tools/record_regression.py`` writes ``tests/data/regression_bb51820.json``
 (atomically: a temporary file in the same folder, then ``os.replace``) with the commit
-it ran at, the versions of numpy and scipy, and a description of every case;
+it ran at (``git rev-parse HEAD``) and whether the library's files were as committed,
+the versions of numpy and scipy, the BLAS build and the CPU, a description of every
+case, and ``notes`` (observations about the values that the test does not compare);
 ``tests/test_regression.py`` recomputes every case with these same functions and
 compares.
 """
@@ -51,7 +53,7 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 DEFAULT_OUT = REPO / "tests" / "data" / "regression_bb51820.json"
 
-# Sizes: the whole recording takes about a minute on one core.
+# Sizes chosen to keep the whole recording within a minute on one core.
 PAPER_RUNS = 10
 ENV_ID = "activetrack/ActiveTracking-v0"
 BATCH_N = 5
