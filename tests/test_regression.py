@@ -1,0 +1,172 @@
+"""Regression test: today's seeded results, recomputed and compared with a recording.
+
+The values in ``tests/data/regression_bb51820.json`` were recorded at commit
+bb518205aff6ebdc562250b19fb081941ffb6378 (main before the closed tracking loop moved
+into a batched ``World``): HEAD detached at that commit, this branch's
+``tools/record_regression.py`` copied in, ``OPENBLAS_NUM_THREADS=1 .venv/bin/python
+tools/record_regression.py``. The file also names the numpy and scipy versions, the BLAS
+build and the CPU it was recorded with (a failure message repeats them). Each case
+below recomputes one group of results with the same functions of
+``tools/record_regression.py`` (one copy of the computation), through public entry
+points only: the runner and planners of ``activetrack.baselines``, the parallel, AEC,
+Gymnasium and batched environments, the expert policies and the evaluation.
+
+"Exact" means bit for bit: every float64 equal to the recorded one
+(``np.testing.assert_array_equal``; ``-0.0 == 0.0`` is its only leniency), every
+float32 observation equal to the recorded float32 (stored as the shortest decimal that
+gives it back), every int, bool, string, list length and dict key equal, and SHA-256
+digests of whole observation arrays equal. A case may be given a relative tolerance in
+``RTOL`` below, with the reason beside it; none has one: the refactor must reproduce
+every value exactly. The recording is what the code did, not an independent truth: it
+pins behaviour, it does not prove it right (the other tests do that).
+
+Reading a failure: the process noise is ``noise_factor @ w`` with ``noise_factor`` from
+``eigh`` of the discrete ``Q`` (``activetrack.motion``), whose eigenvalues come in equal
+x/y pairs; a last-bit change of ``Q`` (or another LAPACK) rotates the eigenvectors within
+each pair and changes a seed's trajectory by O(1) from the first step, not in the last
+bits. The batched environment's copy i is not bit-equal to the single environment seeded
+``s + i`` (the recording's ``equals_single`` data): stacked (N, n) matrix products round
+differently from per-copy vectors, so reproducing both needs each path's operations and
+shapes kept. Recording twice, and with 1 or 2 BLAS threads, gave byte-identical files.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import sys
+from functools import cache
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+DATA = REPO / "tests" / "data" / "regression_bb51820.json"
+RECORDED_AT = "bb518205aff6ebdc562250b19fb081941ffb6378"
+
+#: Per-case relative tolerance (0 = exact), each with a one-line reason. None today.
+RTOL: dict[str, tuple[float, str]] = {}
+
+
+def _load_tool() -> Any:
+    spec = importlib.util.spec_from_file_location(
+        "record_regression", REPO / "tools" / "record_regression.py"
+    )
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # dataclasses look their module up there
+    spec.loader.exec_module(module)
+    return module
+
+
+tool = _load_tool()
+
+
+@cache
+def recording() -> dict[str, Any]:
+    return json.loads(DATA.read_text())
+
+
+def _numeric(values: list[Any]) -> np.ndarray | None:
+    """Return ``values`` as a numeric array, or None if they are not a regular numeric list."""
+    try:
+        arr = np.asarray(values)
+    except ValueError:  # ragged
+        return None
+    return arr if arr.dtype.kind in "biuf" and arr.size else None
+
+
+def assert_same(expected: Any, actual: Any, rtol: float = 0.0, path: str = "") -> None:
+    """Assert that ``actual`` equals ``expected`` (JSON values), floats within ``rtol``.
+
+    ``rtol = 0``: bit for bit (``assert_array_equal``); otherwise floats are compared with
+    ``assert_allclose(rtol=rtol, atol=0)`` and everything else exactly.
+    """
+    where = path or "<root>"
+    if isinstance(expected, dict):
+        assert isinstance(actual, dict), f"{where}: expected a dict, got {type(actual).__name__}"
+        assert sorted(actual) == sorted(expected), f"{where}: keys differ"
+        for key in expected:
+            assert_same(expected[key], actual[key], rtol, f"{path}.{key}")
+        return
+    if isinstance(expected, list):
+        assert isinstance(actual, list), f"{where}: expected a list, got {type(actual).__name__}"
+        e, a = _numeric(expected), _numeric(actual)
+        if e is not None and a is not None and e.dtype.kind == a.dtype.kind:
+            assert e.shape == a.shape, f"{where}: shape {a.shape} != recorded {e.shape}"
+            if rtol and e.dtype.kind == "f":
+                np.testing.assert_allclose(a, e, rtol=rtol, atol=0.0, err_msg=where)
+            else:
+                np.testing.assert_array_equal(a, e, err_msg=where)
+            return
+        assert len(actual) == len(expected), f"{where}: length {len(actual)} != {len(expected)}"
+        for k, (x, y) in enumerate(zip(expected, actual, strict=True)):
+            assert_same(x, y, rtol, f"{path}[{k}]")
+        return
+    assert type(actual) is type(expected), (
+        f"{where}: type {type(actual).__name__} != recorded {type(expected).__name__}"
+    )
+    if rtol and isinstance(expected, float):
+        np.testing.assert_allclose(actual, expected, rtol=rtol, atol=0.0, err_msg=where)
+    else:
+        assert actual == expected, f"{where}: {actual!r} != recorded {expected!r}"
+
+
+def test_recording_metadata():
+    data = recording()
+    assert data["commit"] == RECORDED_AT
+    assert data["library_clean"]
+    assert sorted(data["cases"]) == sorted(tool.CASES)
+    assert sorted(data["descriptions"]) == sorted(tool.CASES)
+
+
+def _params() -> list[Any]:
+    return [
+        pytest.param(name, marks=pytest.mark.slow) if case.slow else name
+        for name, case in tool.CASES.items()
+    ]
+
+
+@pytest.mark.parametrize("name", _params())
+def test_case_reproduces_recording(name: str) -> None:
+    data = recording()
+    rtol = RTOL.get(name, (0.0, ""))[0]
+    actual = tool.compute(name)
+    versions = (
+        f"(recorded at {RECORDED_AT} with numpy {data['numpy']}, scipy {data['scipy']}, "
+        f"BLAS {data['blas']!r}, CPU {data['cpu']!r})"
+    )
+    try:
+        assert_same(data["cases"][name], actual, rtol, name)
+    except AssertionError as exc:
+        raise AssertionError(f"{exc}\n{versions}") from None
+
+
+def test_comparison_detects_a_one_ulp_change():
+    """The comparison itself: one ulp in a float64, a float32 or a key is a failure."""
+    base = {"a": [1.0, 2.0, [3.0]], "b": tool.f32(np.float32([0.1, 0.2])), "c": True}
+    assert_same(base, json.loads(json.dumps(base)))
+    moved = json.loads(json.dumps(base))
+    moved["a"][1] = float(np.nextafter(2.0, 3.0))
+    with pytest.raises(AssertionError):
+        assert_same(base, moved)
+    assert_same(base, moved, rtol=1e-15)
+    moved32 = json.loads(json.dumps(base))
+    moved32["b"] = tool.f32(np.nextafter(np.float32([0.1, 0.2]), np.float32(1.0)))
+    with pytest.raises(AssertionError):
+        assert_same(base, moved32)
+    with pytest.raises(AssertionError):
+        assert_same(base, {**base, "c": 1})
+    with pytest.raises(AssertionError):
+        assert_same(base, {k: v for k, v in base.items() if k != "c"})
+
+
+def test_float32_encoding_round_trips():
+    """Every float32 comes back exactly from its stored decimal (random bit patterns)."""
+    rng = np.random.default_rng(0)
+    bits = rng.integers(0, 2**32, 100_000, dtype=np.uint64).astype(np.uint32)
+    x = bits.view(np.float32)
+    x = x[np.isfinite(x)]
+    back = np.asarray(json.loads(json.dumps(tool.f32(x))), dtype=np.float64).astype(np.float32)
+    np.testing.assert_array_equal(back.view(np.uint32), x.view(np.uint32))
