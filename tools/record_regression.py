@@ -585,7 +585,9 @@ def expert_episode(policy_cls: type, seed: int, scenario: str = "paper") -> dict
     sensors = [f64(env.planning_problem().sensors)]
     rewards, traces, errors, projected = [], [], [], []
     while env.agents:
-        obs, rew, _, _, infos = env.step(policy.act(env))
+        # Since the one-world refactor an expert's positions are executed directly (the
+        # recording at bb51820 went through actions_to_reach and back: exact there).
+        obs, rew, _, _, infos = env.step_positions(policy.plan(env.planning_problem()))
         rewards.append(rew[first])
         traces.append(infos[first]["trace"])
         errors.append(infos[first]["position_error"])

@@ -295,13 +295,13 @@ class World:
         # A subset of several copies is computed with all of them and written back alone:
         # stacked matrix products round a row differently with another number of rows, and
         # a copy's numbers must not depend on which other copies step with it.
-        calc = slice(None) if isinstance(sel, np.ndarray) else sel
-        pick = sel if isinstance(sel, np.ndarray) else slice(None)
+        partial = isinstance(sel, np.ndarray)
+        calc = slice(None) if partial else sel
         p = self.params
         x_pred = self.x_pred[calc]
         sensors, projected = move(moves[calc], self.sensors[calc], x_pred[..., :2], p.r, p.rho)
         noise = self._step_noise(sel)
-        if calc is not sel:
+        if partial:
             full = np.zeros((self.num_copies, self._n_noise))
             full[sel] = noise
             noise = full
@@ -309,11 +309,16 @@ class World:
             p, self.x_true[calc], x_pred, self.P_pred[calc], sensors, noise
         )
         x_next, P_next = predict(x_post, P_post, p.Phi, p.Q)
-        trace = score(P_post)[pick]
-        self.x_true[sel], self.x_hat[sel], self.P[sel] = x_true[pick], x_post[pick], P_post[pick]
-        self.x_pred[sel], self.P_pred[sel] = x_next[pick], P_next[pick]
-        self.sensors[sel] = sensors[pick]
-        self.projected[sel] = projected = projected[pick]
+        if partial:
+            x_true, x_post, P_post, x_next, P_next = (
+                a[sel] for a in (x_true, x_post, P_post, x_next, P_next)
+            )
+            sensors, projected = sensors[sel], projected[sel]
+        trace = score(P_post)
+        self.x_true[sel], self.x_hat[sel], self.P[sel] = x_true, x_post, P_post
+        self.x_pred[sel], self.P_pred[sel] = x_next, P_next
+        self.sensors[sel] = sensors
+        self.projected[sel] = projected
         self.n_projected[sel] += projected
         k = self.k[sel] + 1
         self.k[sel] = k
