@@ -189,7 +189,7 @@ class TrackingParallelEnv(ParallelEnv):
         """
         check_no_options(options)
         obs = self.reset_arrays(seed)
-        infos = {a: self._info(i, False) for i, a in enumerate(self.agents)}
+        infos = self._infos(self.agents, False)
         if self.render_mode == "human":
             self.render()
         return dict(zip(self.agents, obs, strict=True)), infos
@@ -251,27 +251,31 @@ class TrackingParallelEnv(ParallelEnv):
     def _dicts(
         self, agents: list[str], obs: np.ndarray, reward: float, terminated: bool, truncated: bool
     ) -> StepReturn:
-        infos = {a: self._info(i, terminated) for i, a in enumerate(agents)}
         out = (
             dict(zip(agents, obs, strict=True)),
             dict.fromkeys(agents, reward),
             dict.fromkeys(agents, terminated),
             dict.fromkeys(agents, truncated),
-            infos,
+            self._infos(agents, terminated),
         )
         if self.render_mode == "human":
             self.render()
         return out
 
-    def _info(self, i: int, exceeded: bool) -> dict[str, Any]:
+    def _infos(self, agents: list[str], exceeded: bool) -> dict[str, dict[str, Any]]:
         w = self.world
+        k, trace, err = int(w.k[0]), float(w.trace[0]), float(w.position_error(0))
+        proj, nproj = w.projected[0].tolist(), w.n_projected[0].tolist()
         return {
-            "step": int(w.k[0]),
-            "trace": float(w.trace[0]),
-            "position_error": float(w.position_error(0)),
-            "projected": bool(w.projected[0, i]),
-            "n_projected": int(w.n_projected[0, i]),
-            "max_trace_exceeded": exceeded,
+            a: {
+                "step": k,
+                "trace": trace,
+                "position_error": err,
+                "projected": proj[i],
+                "n_projected": nproj[i],
+                "max_trace_exceeded": exceeded,
+            }
+            for i, a in enumerate(agents)
         }
 
     def _running_agents(self) -> list[str]:

@@ -177,7 +177,7 @@ class World:
         """Return the ``n + 2M`` standard normals of this step for the selected copies."""
         if self._noise is None:
             if isinstance(sel, int):
-                return self.rng(sel).standard_normal(self._n_noise)
+                return (self._rngs[sel] or self.rng(sel)).standard_normal(self._n_noise)
             return np.stack([self.rng(i).standard_normal(self._n_noise) for i in self._rows(sel)])
         rows = self._rows(sel)
         empty = rows[self._noise_left[rows] == 0]
@@ -282,10 +282,10 @@ class World:
 
     def _step(self, move: Any, moves: FloatArray, live: Any) -> StepResult | None:
         """Move the sensors of the copies ``live`` by ``move`` and advance them (steps 1-5)."""
-        sel = self._select(live)
+        sel = 0 if live is None and self.num_copies == 1 else self._select(live)
         if sel is None:
             return None
-        if np.any(self._ended[sel]):
+        if self._ended[sel] if isinstance(sel, int) else self._ended[sel].any():
             rows = self._rows(sel)
             bad = rows[self._ended[rows]].tolist()
             raise RuntimeError(
@@ -319,7 +319,8 @@ class World:
         self.x_pred[sel], self.P_pred[sel] = x_next, P_next
         self.sensors[sel] = sensors
         self.projected[sel] = projected
-        self.n_projected[sel] += projected
+        if np.count_nonzero(projected):  # rare; the mixed-type add costs microseconds
+            self.n_projected[sel] += projected
         k = self.k[sel] + 1
         self.k[sel] = k
         self.trace[sel] = trace
