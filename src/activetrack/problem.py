@@ -86,11 +86,7 @@ class PlanningProblem:
                 )
             values[name] = arr
             batch_of[name] = arr.shape[:-1]
-        try:
-            batch = np.broadcast_shapes(*batch_of.values())
-        except ValueError:
-            shapes = ", ".join(f"{k} {v}" for k, v in batch_of.items())
-            raise ValueError(f"the batch axes of the fields do not broadcast: {shapes}") from None
+        batch = _broadcast(batch_of)
         if not all(hasattr(self.objective, a) for a in ("name", "of_information")):
             raise ValueError(
                 f"objective must be an objective such as activetrack.objective.TRACE, "
@@ -98,7 +94,11 @@ class PlanningProblem:
             )
         trailing = {"prior_cov": (2, 2), "target": (2,), "sensors": (m, 2)}
         for name, value in values.items():
-            value = np.array(np.broadcast_to(value, batch + trailing.get(name, (m,))))
+            shape = batch + trailing.get(name, (m,))
+            if value.ndim == 0:
+                value = np.full(shape, float(value))
+            else:  # a copy the caller cannot change
+                value = np.array(np.broadcast_to(value, shape) if value.shape != shape else value)
             value.setflags(write=False)
             object.__setattr__(self, name, value)
 
@@ -181,6 +181,18 @@ class PlanningProblem:
         step = np.linalg.norm(p - self.sensors, axis=-1) - self.r
         dist = self.rho - np.linalg.norm(p - self.target[..., None, :], axis=-1)
         return np.maximum(np.maximum(step, dist), 0.0)
+
+
+def _broadcast(batch_of: dict[str, tuple[int, ...]]) -> tuple[int, ...]:
+    """Return the broadcast of the fields' batch shapes, or raise naming them all."""
+    shapes = list(batch_of.values())
+    if all(sh == shapes[0] for sh in shapes):  # the common case, without numpy's helper
+        return shapes[0]
+    try:
+        return np.broadcast_shapes(*shapes)
+    except ValueError:
+        listed = ", ".join(f"{k} {v}" for k, v in batch_of.items())
+        raise ValueError(f"the batch axes of the fields do not broadcast: {listed}") from None
 
 
 @runtime_checkable
