@@ -124,8 +124,8 @@ class GBES:
         points per arc, less the shared end points of adjacent arcs. ``problem`` is single.
 
         Raises:
-            ValueError: ``spacing`` is below the 1e-12 m resolution at which the grid drops
-                repeated points, so the grid size cannot be counted.
+            ValueError: ``spacing`` is below ``_DISTINCT_STEP`` (1e-11 m), near the 1e-12 m
+                at which the grid drops repeated points, so its size cannot be counted.
         """
         free, _ = sensor_modes(problem)
         c = problem.rel_sensors
