@@ -1,19 +1,20 @@
 """The planners of the paper and the closed-loop simulation that compares them (Section V).
 
 - :class:`GSR`: Gauss-Seidel relaxation over the analytic single-sensor optimum
-  (Section IV-B, eq. 38), optionally with restarts that escape its local optima.
+  (Section IV-B, eq. 38), on one problem or a batch (one vectorized sweep over the
+  copies), optionally with restarts that escape its local optima.
 - :class:`GBES`: grid-based exhaustive search over the curves ADB (exact grid optimum).
 - :class:`RandomMotion`: each sensor to a uniformly random point of its curve ADB.
 - :func:`simulate` / :func:`run_monte_carlo`: the closed tracking loop of
   :mod:`activetrack.tracking` with per-step metrics, over seeds.
 
-A planner is anything with ``plan(problem, rng) -> next_positions`` (M, 2), see
-:class:`activetrack.Planner`.
+A planner is anything with ``plan(problem, rng) -> next_positions`` of shape
+``problem.batch_shape + (M, 2)``, see :class:`activetrack.Planner`.
 """
 
 from activetrack.baselines._common import random_problem
 from activetrack.baselines.gbes import GBES, GBESResult
-from activetrack.baselines.gsr import GSR, GSRResult
+from activetrack.baselines.gsr import GSR, GSRBatchResult, GSRResult
 from activetrack.baselines.random_motion import RandomMotion
 from activetrack.baselines.simulation import (
     MonteCarloResult,
@@ -27,6 +28,7 @@ __all__ = [
     "GBES",
     "GBESResult",
     "GSR",
+    "GSRBatchResult",
     "GSRResult",
     "MonteCarloResult",
     "RandomMotion",

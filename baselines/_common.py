@@ -8,7 +8,8 @@ Every planner treats two kinds of sensor as *fixed* (not optimized):
   point farthest from the target (the least violation of eq. 16).
 
 All other sensors are *free*: their next position is searched on the curve ADB of
-Lemma 3 (:func:`activetrack.geometry.facing_boundary`).
+Lemma 3 (:func:`activetrack.geometry.facing_boundary`). The modes are computed here once,
+batched over the copies of a batched problem, for every planner.
 """
 
 from __future__ import annotations
@@ -23,33 +24,46 @@ from activetrack.validation import FloatArray
 def sensor_modes(problem: PlanningProblem) -> tuple[np.ndarray, FloatArray]:
     """Return ``(free, fixed_rel)``: which sensors are optimized, and the others' positions.
 
-    ``fixed_rel`` (M, 2) holds, relative to the predicted target, the next position of every
-    fixed sensor (rows of free sensors hold their current position and are not used).
+    Batched over the problem's batch axes: ``free`` (..., M) bool; ``fixed_rel`` (..., M, 2)
+    holds, relative to the predicted target, the next position of every fixed sensor (rows
+    of free sensors hold their current position ``c_i``).
 
     Raises:
         ValueError: a free sensor with ``rho = 0`` can reach the predicted target (the
             objective has no minimum there), or a fixed sensor sits exactly on it.
     """
-    c = problem.rel_sensors
-    r, rho = problem.r, problem.rho
-    nc = np.hypot(c[:, 0], c[:, 1])
+    return sensor_modes_of(problem.rel_sensors, problem.r, problem.rho)
+
+
+def sensor_modes_of(c: FloatArray, r: FloatArray, rho: FloatArray) -> tuple[np.ndarray, FloatArray]:
+    """Return :func:`sensor_modes` for arrays ``c`` (..., M, 2) and ``r``, ``rho`` (..., M)."""
+    nc = np.hypot(c[..., 0], c[..., 1])
     stay = r <= 0.0
     unreachable = ~stay & (nc + r < rho)
     free = ~stay & ~unreachable
     degenerate = free & (rho <= 0.0) & (nc <= r)
     if np.any(degenerate):
         raise ValueError(
-            f"rho must be > 0 for sensors {np.flatnonzero(degenerate).tolist()}: the predicted "
+            f"rho must be > 0 for sensors {_where(degenerate)}: the predicted "
             "target is within their reach and the information grows without bound near it"
         )
-    fixed_rel = np.where(unreachable[:, None], geometry.unreachable_fallback(c, r), c)
-    on_target = ~free & (np.hypot(fixed_rel[:, 0], fixed_rel[:, 1]) == 0.0)
+    fixed_rel = np.where(unreachable[..., None], geometry.unreachable_fallback(c, r), c)
+    on_target = ~free & (np.hypot(fixed_rel[..., 0], fixed_rel[..., 1]) == 0.0)
     if np.any(on_target):
         raise ValueError(
-            f"sensors {np.flatnonzero(on_target).tolist()} cannot move (r = 0) and sit exactly "
+            f"sensors {_where(on_target)} cannot move (r = 0) and sit exactly "
             "on the predicted target, where the bearing is undefined"
         )
     return free, fixed_rel
+
+
+def _where(mask: np.ndarray, limit: int = 10) -> str:
+    """Return the sensors flagged in ``mask`` (..., M): indices, or (copy..., sensor) tuples."""
+    if mask.ndim == 1:
+        return str(np.flatnonzero(mask).tolist())
+    hits = [tuple(int(k) for k in row) for row in np.argwhere(mask)[:limit]]
+    more = " ..." if np.count_nonzero(mask) > limit else ""
+    return f"(copy, sensor) {hits}{more}"
 
 
 def random_problem(

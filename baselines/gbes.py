@@ -7,18 +7,22 @@ combination of grid points minimizing the objective of eq. (17),
 the grid optimum (up to floating-point ties).
 
 Speed comes from two facts. The information is additive, so every candidate's 2x2 entries
-``(a, b, c)`` are computed once and a configuration costs a few additions and
-``(A + C) / (AC - B^2)``. And the search is a branch and bound with exact bounds: each
-sensor's candidates are grouped into blocks of ``block`` consecutive points, and since
-``phi(Y) = tr(Y^{-1})`` is convex on positive definite matrices, its tangent plane at the
-sum ``Y0`` of the blocks' mean information is below it everywhere; that linear bound
-separates over the sensors, so its minimum over a block combination costs ``M * block``
-operations instead of ``block^M`` (``_BlockSearch._bounds``). A block combination is
-skipped only when its bound exceeds the best configuration found (with a 1e-10 relative
-margin for rounding), so nothing better than the reported optimum is ever skipped. With
-``prune=False`` every combination is evaluated. Both paths work in memory-bounded
-batches. On the ``paper`` preset (about 7e6 combinations per step at pi/200) a step takes
-a few milliseconds and evaluates 0.15% of the combinations on average (1.3% at most).
+``(a, b, c)`` are computed once and a configuration costs a few additions and one call of
+the problem's objective on the summed entries (``objective.of_entries``; for the trace,
+``(A + C) / (AC - B^2)``). And the search is a branch and bound with exact bounds: each
+sensor's candidates are grouped into blocks of ``block`` consecutive points, and since the
+objective ``phi(Y)`` is convex on positive definite matrices, its tangent plane
+(``objective.tangent``) at the sum ``Y0`` of the blocks' mean information is below it
+everywhere; that linear bound separates over the sensors, so its minimum over a block
+combination costs ``M * block`` operations instead of ``block^M``
+(``_BlockSearch._bounds``). A block combination is skipped only when its bound exceeds the
+best configuration found (with a 1e-10 relative margin for rounding), so nothing better
+than the reported optimum is ever skipped. With ``prune=False`` every combination is
+evaluated. Both paths work in memory-bounded batches.
+
+The grid size is counted from the arc lengths before any grid is built
+(:meth:`GBES.n_combinations`), so a grid over ``max_combinations`` is refused without
+allocating it. A batched problem is searched copy by copy.
 """
 
 from __future__ import annotations
@@ -30,13 +34,18 @@ import numpy as np
 
 from activetrack import geometry
 from activetrack.baselines._common import sensor_modes
-from activetrack.objective import sensor_information
+from activetrack.objective import TRACE, TraceObjective, sensor_information
 from activetrack.problem import PlanningProblem
 from activetrack.validation import FloatArray
 
 #: Relative margin of the bound test: a block combination is pruned only if its lower
 #: bound exceeds the incumbent by this factor, which covers the rounding of both.
 _PRUNE_RTOL = 1e-10
+
+#: Arc-length steps above this keep every grid point: the grid drops points closer than
+#: 1e-12 m in both coordinates, and with 2 or more steps per arc (each at most pi radians)
+#: consecutive points differ by at least ``step * 2 / (pi sqrt 2)`` in one coordinate.
+_DISTINCT_STEP = 1e-11
 
 
 @dataclass(frozen=True)
@@ -108,23 +117,78 @@ class GBES:
             out.append(pts[keep])
         return out
 
+    def grid_sizes(self, problem: PlanningProblem) -> list[int]:
+        """Return each sensor's grid size, counted from the arc lengths (no grid is built).
+
+        The same count as ``len`` of :meth:`candidates`: ``ceil(length / spacing) + 1``
+        points per arc, less the shared end points of adjacent arcs. ``problem`` is single.
+
+        Raises:
+            ValueError: ``spacing`` is below ``_DISTINCT_STEP`` (1e-11 m), near the 1e-12 m
+                at which the grid drops repeated points, so its size cannot be counted.
+        """
+        free, _ = sensor_modes(problem)
+        c = problem.rel_sensors
+        sizes = []
+        for i in range(problem.n_sensors):
+            if not free[i]:
+                sizes.append(1)
+                continue
+            arcs = geometry.facing_boundary(c[i], float(problem.r[i]), float(problem.rho[i]))
+            sizes.append(self._count(arcs))
+        return sizes
+
+    def _count(self, arcs: list[geometry.Arc]) -> int:
+        """Return the number of distinct points :meth:`candidates` keeps on ``arcs``."""
+        count = 0
+        prev_end = None
+        for arc in arcs:
+            n = max(1, int(np.ceil(arc.length / self.spacing)))
+            ends = arc.points(np.array([arc.t0, arc.t1]))
+            if n == 1:  # its two points may coincide (a tiny arc, or a full circle)
+                count += 1 + int(_distinct(ends[0], ends[1]))
+            elif arc.length / n > _DISTINCT_STEP:
+                count += n + 1  # consecutive points differ by more than the dedup tolerance
+            else:
+                raise ValueError(
+                    f"spacing must be at least {_DISTINCT_STEP:g} m for a countable grid, "
+                    f"got {self.spacing!r}"
+                )
+            if prev_end is not None and not _distinct(prev_end, ends[0]):
+                count -= 1  # adjacent arcs share their end point (A and B of Fig. 3)
+            prev_end = ends[1]
+        return count
+
     def n_combinations(self, problem: PlanningProblem) -> int:
         """Return the number of grid combinations of ``problem`` (product of grid sizes)."""
-        return math.prod(len(p) for p in self.candidates(problem))
+        return math.prod(self.grid_sizes(problem))
 
     # Planning -----------------------------------------------------------------------------
     def plan(self, problem: PlanningProblem, rng: np.random.Generator | None = None) -> FloatArray:
-        """Return the grid-optimal next absolute positions, shape (M, 2)."""
-        return self.search(problem).positions
+        """Return the grid-optimal next absolute positions, ``batch_shape + (M, 2)``.
+
+        A batch is searched copy by copy (``last_result`` is then the last copy's).
+        """
+        if not problem.batch_shape:
+            return self.search(problem).positions
+        out = np.empty(problem.sensors.shape)
+        for b in np.ndindex(problem.batch_shape):
+            out[b] = self.search(problem[b]).positions
+        return out
 
     def search(self, problem: PlanningProblem) -> GBESResult:
-        """Return the grid optimum of ``problem`` with search statistics.
+        """Return the grid optimum of a single ``problem`` with search statistics.
 
         Raises:
-            ValueError: the grid has more than ``max_combinations`` combinations.
+            ValueError: the grid has more than ``max_combinations`` combinations (counted
+                before the grid is built).
         """
-        cands = self.candidates(problem)
-        sizes = [len(p) for p in cands]
+        if problem.batch_shape:
+            raise ValueError(
+                f"search takes a single problem, got batch_shape {problem.batch_shape}; "
+                "use plan, or index the problem"
+            )
+        sizes = self.grid_sizes(problem)
         total = math.prod(sizes)
         if total > self.max_combinations:
             raise ValueError(
@@ -132,9 +196,10 @@ class GBES:
                 f"at spacing {self.spacing:.4g} m), more than max_combinations="
                 f"{self.max_combinations:.3g}; raise max_combinations or the spacing"
             )
+        cands = self.candidates(problem)
         rel, n_eval = grid_optimum(problem, cands, self.block, self.batch_elements, self.prune)
         positions = rel + problem.target
-        result = GBESResult(positions, float(problem.trace(positions)), total, n_eval)
+        result = GBESResult(positions, float(problem.score(positions)), total, n_eval)
         self.last_result = result
         return result
 
@@ -155,7 +220,9 @@ def grid_optimum(
         _entries(sensor_information(p, problem.sigma_d2[i], problem.sigma_theta2[i]))
         for i, p in enumerate(candidates)
     ]
-    search = _BlockSearch(feats, _entries(problem.prior_info), block, batch_elements)
+    search = _BlockSearch(
+        feats, _entries(problem.prior_info), block, batch_elements, problem.objective
+    )
     idx, n_eval = search.run(prune)
     return np.stack([candidates[i][k] for i, k in enumerate(idx)]), n_eval
 
@@ -165,16 +232,24 @@ def _entries(info: FloatArray) -> FloatArray:
     return np.stack([info[..., 0, 0], info[..., 0, 1], info[..., 1, 1]], -1)
 
 
-def _trace_inv(a: FloatArray, b: FloatArray, c: FloatArray) -> FloatArray:
-    """Return ``tr([[a, b], [b, c]]^{-1}) = (a + c) / (ac - b^2)``."""
-    return (a + c) / (a * c - b * b)
+def _distinct(p: FloatArray, q: FloatArray) -> bool:
+    """Return whether :meth:`GBES.candidates` keeps both of consecutive points ``p``, ``q``."""
+    return bool(np.any(np.abs(q - p) > 1e-12))
 
 
 class _BlockSearch:
     """Exact branch and bound over block combinations (see the module docstring)."""
 
-    def __init__(self, feats: list[FloatArray], prior: FloatArray, block: int, batch: int):
+    def __init__(
+        self,
+        feats: list[FloatArray],
+        prior: FloatArray,
+        block: int,
+        batch: int,
+        objective: TraceObjective = TRACE,
+    ):
         self.prior = prior
+        self.objective = objective
         self.sizes = [len(f) for f in feats]
         self.bsize = [min(block, k) for k in self.sizes]
         self.nblocks = [-(-k // b) for k, b in zip(self.sizes, self.bsize, strict=True)]
@@ -231,21 +306,17 @@ class _BlockSearch:
     def _bounds(self, lo: int) -> tuple[np.ndarray, FloatArray]:
         """Return block combinations ``lo ...`` (flat indices) and their lower bounds.
 
-        ``phi(Y) = tr(Y^{-1})`` is convex on positive definite matrices, so at the sum
-        ``Y0`` of the blocks' mean information, ``phi(Y) >= phi(Y0) + <grad, Y - Y0>`` with
-        ``grad = -Y0^{-2}``. ``Y - Y0`` is a sum of per-sensor deviations from the block
-        means, so the bound's minimum over a block combination is a sum of per-sensor minima
-        over ``block`` points each, instead of ``block^M`` configurations.
+        The objective ``phi(Y)`` (``tr(Y^{-1})``) is convex on positive definite matrices,
+        so at the sum ``Y0`` of the blocks' mean information, ``phi(Y) >= phi(Y0) + <grad,
+        Y - Y0>`` (``objective.tangent``; ``grad = -Y0^{-2}`` for the trace). ``Y - Y0`` is
+        a sum of per-sensor deviations from the block means, so the bound's minimum over a
+        block combination is a sum of per-sensor minima over ``block`` points each,
+        instead of ``block^M`` configurations.
         """
         flat = np.arange(lo, min(lo + self.chunk, self.n_block_combos))
         idx = np.unravel_index(flat, self.nblocks)
         y0 = self.prior + sum(mu[i] for mu, i in zip(self.means, idx, strict=True))
-        a, b, c = y0[:, 0], y0[:, 1], y0[:, 2]
-        det = a * c - b * b
-        lb = (a + c) / det
-        # Y0^{-1} = [[c, -b], [-b, a]] / det; the gradient is minus its square.
-        p, q, s = c / det, -b / det, a / det
-        ga, gb, gc = -(p * p + q * q), -2.0 * q * (p + s), -(s * s + q * q)
+        lb, ga, gb, gc = self.objective.tangent(y0[:, 0], y0[:, 1], y0[:, 2])
         for dev, i in zip(self.devs, idx, strict=True):
             lin = ga[:, None] * dev[0][i] + gb[:, None] * dev[1][i] + gc[:, None] * dev[2][i]
             lb = lb + lin.min(axis=1)
@@ -264,7 +335,7 @@ class _BlockSearch:
             for e in range(3):
                 term = self.blocks[i][e][idx[i]].reshape(shape)
                 tot[e] = term + self.prior[e] if tot[e] is None else tot[e] + term
-        val = _trace_inv(*tot)
+        val = self.objective.of_entries(*tot)
         self.n_eval += val.size
         k = int(np.argmin(val))
         v = float(val.flat[k])

@@ -21,17 +21,21 @@ class RandomMotion:
     """Each sensor to a uniformly random point of its curve ADB (Section V, "RM")."""
 
     def plan(self, problem: PlanningProblem, rng: np.random.Generator) -> FloatArray:
-        """Return random feasible next absolute positions, shape (M, 2).
+        """Return random feasible next absolute positions, ``batch_shape + (M, 2)``.
 
-        Draws exactly one uniform per free sensor, in sensor order, from ``rng``.
+        Draws exactly one uniform per free sensor from ``rng``, in copy order (row-major
+        over the batch axes), then sensor order.
         """
         free, rel = sensor_modes(problem)
         rel = rel.copy()
         c = problem.rel_sensors
-        for i in np.flatnonzero(free):
-            arcs = geometry.facing_boundary(c[i], float(problem.r[i]), float(problem.rho[i]))
-            rel[i] = geometry.sample_uniform(arcs, rng)
-        return rel + problem.target
+        r, rho = problem.r, problem.rho
+        for b in np.ndindex(problem.batch_shape):
+            for i in np.flatnonzero(free[b]):
+                k = b + (i,)
+                arcs = geometry.facing_boundary(c[k], float(r[k]), float(rho[k]))
+                rel[k] = geometry.sample_uniform(arcs, rng)
+        return rel + problem.target[..., None, :]
 
     def __repr__(self) -> str:
         return "RandomMotion()"

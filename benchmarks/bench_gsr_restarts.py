@@ -7,7 +7,8 @@ the GBES grid optimum at pi/200 (exact over the grid) is the reference: a GSR an
 counts as a hit when its trace is at most 1e-6 (relative) above it. GSR being below the
 grid optimum is normal: GSR optimizes on the continuous curves.
 
-Cost is reported as single-sensor solves and as wall time, relative to plain GSR.
+The restart starts are described in :mod:`activetrack.baselines.gsr_restarts`. Cost is
+reported as single-sensor solves and as wall time, relative to plain GSR.
 
     .venv/bin/python benchmarks/bench_gsr_restarts.py [--problems 500] [--seed 0]
 """

@@ -1,5 +1,9 @@
 """Planning time per step of GSR (M = 1..64) and GBES (M = 1..3): the scaling table.
 
+GSR is timed on each problem alone and, in the rows "GSR (batch)", on all the problems of
+a team size stacked into one batched :class:`activetrack.PlanningProblem` (one call; the
+time per plan is the call's time over the number of problems).
+
 Problems are random one-step planning problems (:func:`activetrack.baselines.random_problem`:
 prior eigenvalues log-uniform in [0.05, 20], sensors at 1-4 m from the predicted target,
 r = 1, rho = 2, heterogeneous noise, so the minimum distance is often active), the same
@@ -19,6 +23,7 @@ import time
 import numpy as np
 
 from activetrack.baselines import GBES, GSR, random_problem
+from activetrack.problem import PlanningProblem
 
 
 def cpu_times(planner, problems) -> tuple[np.ndarray, list]:
@@ -67,6 +72,15 @@ def main() -> None:
                 f"{solves / len(res) / m:.2f} solves/sensor, {t.sum() / solves * 1e6:.0f} us/solve"
             )
             print(row(name, m, "-", t, extra))
+        batch = PlanningProblem.stack(probs)
+        gsr = GSR()
+        t0 = time.process_time()
+        res = gsr.plan_with_info(batch)
+        per_plan = (time.process_time() - t0) / len(probs)
+        print(
+            f"| GSR (batch) | {m} | - | - | {per_plan * 1e3:.2f} | {per_plan / m * 1e3:.3f} | "
+            f"{np.mean(res.sweeps):.1f} sweeps, {len(probs)} problems in one call |"
+        )
     for m, spacing in (
         (1, math.pi / 200),
         (2, math.pi / 200),

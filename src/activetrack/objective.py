@@ -8,6 +8,13 @@ Lemma 2 rotates the prior information into its eigenbasis (eq. 18).
 
 Every function is vectorized over a leading batch axis of relative positions
 (shape (..., M, 2)): exhaustive search evaluates millions of candidate configurations.
+
+:class:`TraceObjective` (:data:`TRACE`) is the objective as one piece: the function of the
+total information ``Y`` (eq. 12, 17) that every planner calls to score a candidate
+configuration, through :attr:`activetrack.problem.PlanningProblem.objective`. Another
+objective (a sum over targets, ``log det``) plugs in there as another object with the
+same methods; planners that rely on the form of ``tr(Y^{-1})`` (GSR's exact single-sensor
+step of Section IV-A) check its ``name``.
 """
 
 from __future__ import annotations
@@ -48,6 +55,62 @@ def total_information(
 ) -> FloatArray:
     """Return the posterior position information ``P11^{-1} + sum_i info_i`` (..., 2, 2)."""
     return prior_info + sensor_information(rel, sigma_d2, sigma_theta2).sum(axis=-3)
+
+
+class TraceObjective:
+    """The objective of eq. (17), ``phi(Y) = tr(Y^{-1})``, of the total information ``Y``.
+
+    ``Y = P11^{-1} + sum_i info_i`` is 2x2 symmetric positive definite. Methods take
+    either the matrices (..., 2, 2) or their independent entries ``a = Y11``, ``b = Y12``,
+    ``c = Y22`` (arrays of any broadcastable shapes): exhaustive search adds the entries of
+    per-sensor candidates by broadcasting and never forms matrices. ``phi`` is convex on
+    positive definite matrices, so its tangent plane (:meth:`tangent`) is a lower bound
+    everywhere (GBES's branch and bound relies on that).
+    """
+
+    name = "trace"
+
+    def of_entries(self, a: FloatArray, b: FloatArray, c: FloatArray) -> FloatArray:
+        """Return ``tr([[a, b], [b, c]]^{-1}) = (a + c) / (ac - b^2)``."""
+        return (a + c) / (a * c - b * b)
+
+    def of_information(self, Y: FloatArray) -> FloatArray:
+        """Return ``tr(Y^{-1})`` for total information matrices ``Y`` (..., 2, 2) (eq. 12, 17).
+
+        Reads ``Y[..., 0, 1]`` as the off-diagonal entry (``Y`` is symmetric).
+        """
+        return self.of_entries(Y[..., 0, 0], Y[..., 0, 1], Y[..., 1, 1])
+
+    def of_covariance(self, P11: FloatArray) -> FloatArray:
+        """Return the objective of position covariances ``P11`` (..., 2, 2): their trace."""
+        return P11[..., 0, 0] + P11[..., 1, 1]
+
+    def tangent(
+        self, a: FloatArray, b: FloatArray, c: FloatArray
+    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        """Return ``(phi, ga, gb, gc)`` at ``Y = [[a, b], [b, c]]``: value and entry gradient.
+
+        ``phi(Y + dY) ~ phi + ga da + gb db + gc dc`` for ``dY = [[da, db], [db, dc]]``:
+        the gradient of ``tr(Y^{-1})`` with respect to ``Y`` is ``G = -Y^{-2}``, and
+        ``<G, dY> = G11 da + 2 G12 db + G22 dc``, so ``gb = 2 G12``.
+        """
+        det = a * c - b * b
+        # Y^{-1} = [[c, -b], [-b, a]] / det; the gradient is minus its square.
+        p, q, s = c / det, -b / det, a / det
+        return (a + c) / det, -(p * p + q * q), -2.0 * q * (p + s), -(s * s + q * q)
+
+    def gradient(self, Y: FloatArray) -> FloatArray:
+        """Return ``d tr(Y^{-1}) / dY = -Y^{-2}`` for symmetric ``Y`` (..., 2, 2)."""
+        _, ga, gb, gc = self.tangent(Y[..., 0, 0], Y[..., 0, 1], Y[..., 1, 1])
+        half = 0.5 * gb
+        return np.stack([np.stack([ga, half], -1), np.stack([half, gc], -1)], -2)
+
+    def __repr__(self) -> str:
+        return "TRACE"
+
+
+#: The trace objective of eq. (17), the default of every planning problem.
+TRACE = TraceObjective()
 
 
 def _check(prior_cov: ArrayLike, rel: ArrayLike, sigma_d2: ArrayLike, sigma_theta2: ArrayLike):

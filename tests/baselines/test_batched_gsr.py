@@ -131,3 +131,21 @@ def test_warm_started_roots_on_environment_problems(monkeypatch):
 def test_warm_roots_must_be_a_bool():
     with pytest.raises(ValueError, match="warm_roots"):
         BatchedGSR(warm_roots="yes")
+
+
+def test_batched_gsr_rejects_a_fixed_sensor_on_the_target_and_names_the_copy():
+    # The check the scalar planners always had: r = 0 and exactly on the predicted target.
+    sensors = np.array([[[3.0, 0.0], [0.0, 4.0]], [[1.0, -2.0], [5.0, 5.0]]])
+    target = np.array([[0.0, 0.0], [1.0, -2.0]])  # copy 1, sensor 0 sits on the target
+    r = np.array([[1.0, 1.0], [0.0, 1.0]])
+    args = (np.broadcast_to(np.eye(2), (2, 2, 2)), target, sensors, r, 2.0, 1.0, 0.5)
+    with pytest.raises(ValueError, match="cannot move") as err:
+        BatchedGSR().plan_batch(*args)
+    assert "(1, 0)" in str(err.value)
+
+
+def test_batched_gsr_rejects_rho_zero_with_a_reachable_target():
+    sensors = np.array([[[3.0, 0.0]], [[0.5, 0.0]]])
+    args = (np.broadcast_to(np.eye(2), (2, 2, 2)), np.zeros((2, 2)), sensors, 1.0, 0.0, 1.0, 1.0)
+    with pytest.raises(ValueError, match=r"rho must be > 0.*\(1, 0\)"):
+        BatchedGSR().plan_batch(*args)

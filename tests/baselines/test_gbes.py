@@ -119,3 +119,59 @@ def test_gbes_refuses_too_many_combinations_with_their_number():
         GBES(max_combinations=n - 1).plan(p)
     assert f"{n:.3g}" in str(err.value)
     assert GBES(max_combinations=n).search(p).n_combinations == n
+
+
+def _count_from_arc_lengths(problem, spacing):
+    """Grid size per sensor from the arc lengths alone: ceil(L / spacing) + 1 points per
+    arc, minus one where an arc starts at the point (A or B, Fig. 3) where the previous
+    one ended (the grid lists the arcs in order and drops repeated points)."""
+    sizes = []
+    for i in range(problem.n_sensors):
+        arcs = geometry.facing_boundary(problem.rel_sensors[i], problem.r[i], problem.rho[i])
+        n = sum(max(1, math.ceil(a.length / spacing)) + 1 for a in arcs)
+        for prev, nxt in zip(arcs[:-1], arcs[1:], strict=True):
+            end = np.add(prev.center, prev.radius * np.array([np.cos(prev.t1), np.sin(prev.t1)]))
+            start = np.add(nxt.center, nxt.radius * np.array([np.cos(nxt.t0), np.sin(nxt.t0)]))
+            n -= int(np.hypot(*(end - start)) < 1e-12)
+        sizes.append(n)
+    return sizes
+
+
+def test_gbes_counts_its_grid_from_the_arc_lengths():
+    rng = np.random.default_rng(31)
+    for spacing in (math.pi / 200, 0.05, 0.7):
+        for _ in range(30):
+            p = random_problem(rng, 3, distance=(0.5 + 2.0, 8.0))  # every sensor free
+            gbes = GBES(spacing=spacing)
+            expected = _count_from_arc_lengths(p, spacing)
+            assert gbes.grid_sizes(p) == expected
+            assert [len(c) for c in gbes.candidates(p)] == expected
+            assert gbes.n_combinations(p) == math.prod(expected)
+
+
+def test_gbes_refuses_a_too_fine_grid_before_building_it():
+    # At 1e-9 m the grid would hold ~1e9 points per sensor (GBs): the count must come first.
+    import tracemalloc
+
+    p = random_problem(np.random.default_rng(32), 3, distance=(3.0, 8.0))
+    n = math.prod(_count_from_arc_lengths(p, 1e-9))
+    assert n > 1e24
+    tracemalloc.start()
+    try:
+        with pytest.raises(ValueError, match="max_combinations") as err:
+            GBES(spacing=1e-9).plan(p)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert peak < 1 << 20  # well under a megabyte: nothing of the grid's size was built
+    assert f"{n:.3g}" in str(err.value)
+
+
+def test_gbes_plans_a_batch_copy_by_copy():
+    from activetrack.problem import PlanningProblem
+
+    rng = np.random.default_rng(33)
+    singles = [random_problem(rng, 2) for _ in range(4)]
+    out = GBES(spacing=0.1).plan(PlanningProblem.stack(singles))
+    for b, p in enumerate(singles):
+        np.testing.assert_array_equal(out[b], GBES(spacing=0.1).plan(p))

@@ -11,7 +11,8 @@ from hypothesis import strategies as st
 
 from activetrack import geometry
 from activetrack.baselines import GBES, GSR, random_problem
-from activetrack.baselines.gsr import _Relaxation
+from activetrack.baselines.gsr import Relaxation
+from activetrack.baselines.gsr_restarts import mirror
 from activetrack.problem import PlanningProblem
 
 
@@ -118,12 +119,12 @@ def test_mirror_preserves_the_objective():
     rng = np.random.default_rng(4)
     for _ in range(10):
         p = random_problem(rng, 3, distance=(1.0, 10.0))
-        run = _Relaxation(p, 1e-9, 10)
+        run = Relaxation(p, 1e-9, 10)
         s = p.rel_sensors
         w, v = np.linalg.eigh(p.prior_info)
         axis = v[:, 1]  # the principal axis of the larger eigenvalue
         reflected = 2.0 * (s @ axis)[:, None] * axis - s  # independent construction
-        assert np.allclose(run.mirror(s), reflected)
+        assert np.allclose(mirror(run, s), reflected)
         assert p.trace(reflected + p.target) == pytest.approx(p.trace(p.sensors), rel=1e-12)
 
 
@@ -200,3 +201,57 @@ def test_rho_zero_with_reachable_target_is_rejected():
     p = PlanningProblem(np.eye(2), np.zeros(2), np.array([[0.5, 0.0]]), 1.0, 0.0, 1.0, 1.0)
     with pytest.raises(ValueError, match="rho"):
         GSR().plan(p)
+
+
+def test_gsr_on_a_batch_equals_gsr_copy_by_copy_and_never_worse_than_the_warm_start():
+    # The batched sweep (vectorized solver) against the scalar GSR on each copy, and each
+    # copy's value against the objective of its warm start computed here from the problem.
+    rng = np.random.default_rng(21)
+    singles = [random_problem(rng, 3, distance=(0.5, 6.0)) for _ in range(60)]
+    batch = PlanningProblem.stack(singles)
+    res = GSR().plan_with_info(batch)
+    assert res.positions.shape == (60, 3, 2) and res.value.shape == (60,)
+    np.testing.assert_allclose(res.value, batch.score(res.positions), rtol=1e-12)
+    for b, p in enumerate(singles):
+        ref = GSR().plan_with_info(p)
+        assert res.value[b] == pytest.approx(ref.value, rel=1e-10)
+        np.testing.assert_allclose(res.positions[b], ref.positions, atol=1e-6)
+        ok = _reachable(p)
+        assert np.all(p.violation(res.positions[b])[ok] <= 1e-9)
+        if np.all(np.hypot(*p.rel_sensors[ok].T) >= p.rho[ok]):  # feasible warm start
+            warm = p.sensors.copy()
+            c = p.rel_sensors[~ok]
+            warm[~ok] = p.target + c + p.r[~ok, None] * c / np.hypot(*c.T)[:, None]
+            assert res.value[b] <= p.score(warm) * (1 + 1e-12)
+
+
+def test_gsr_keeps_extra_batch_axes_and_restarts_go_copy_by_copy():
+    rng = np.random.default_rng(22)
+    singles = [random_problem(rng, 2) for _ in range(6)]
+    flat = PlanningProblem.stack(singles)
+    grid = PlanningProblem(
+        *(
+            getattr(flat, k).reshape((2, 3) + getattr(flat, k).shape[1:])
+            for k in ("prior_cov", "target", "sensors", "r", "rho", "sigma_d2", "sigma_theta2")
+        )
+    )
+    assert grid.batch_shape == (2, 3)
+    np.testing.assert_array_equal(GSR().plan(grid).reshape(6, 2, 2), GSR().plan(flat))
+    out = GSR(restarts=True).plan(grid)
+    for b, p in enumerate(singles):
+        np.testing.assert_array_equal(out[b // 3, b % 3], GSR(restarts=True).plan(p))
+
+
+def test_gsr_refuses_an_objective_it_cannot_solve_exactly():
+    class LogDet:
+        name = "logdet"
+
+        def of_information(self, Y):
+            return -np.log(np.linalg.det(Y))
+
+    p = random_problem(np.random.default_rng(0), 2)
+    q = PlanningProblem(
+        p.prior_cov, p.target, p.sensors, p.r, p.rho, p.sigma_d2, p.sigma_theta2, objective=LogDet()
+    )
+    with pytest.raises(ValueError, match="objective"):
+        GSR().plan(q)

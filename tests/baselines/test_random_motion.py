@@ -66,3 +66,15 @@ def test_rm_draws_only_from_the_given_generator():
     a = RandomMotion().plan(p, np.random.default_rng(3))
     b = RandomMotion().plan(p, np.random.default_rng(3))
     assert np.array_equal(a, b)
+
+
+def test_rm_on_a_batch_draws_copy_by_copy_then_sensor_by_sensor():
+    # One uniform per free sensor, copies in order: the same as planning them one by one.
+    rng = np.random.default_rng(4)
+    singles = [_problem(rng.uniform(-6, 6, (3, 2)), r=np.array([1.0, 0.0, 1.0])) for _ in range(5)]
+    batch = PlanningProblem.stack(singles)
+    out = RandomMotion().plan(batch, np.random.default_rng(9))
+    assert out.shape == (5, 3, 2)
+    g = np.random.default_rng(9)
+    for b, p in enumerate(singles):
+        np.testing.assert_array_equal(out[b], RandomMotion().plan(p, g))
