@@ -5,8 +5,10 @@
   copies), optionally with restarts that escape its local optima.
 - :class:`GBES`: grid-based exhaustive search over the curves ADB (exact grid optimum).
 - :class:`RandomMotion`: each sensor to a uniformly random point of its curve ADB.
-- :func:`simulate` / :func:`run_monte_carlo`: the closed tracking loop of
-  :mod:`activetrack.tracking` with per-step metrics, over seeds.
+- :class:`GSRPolicy`, :class:`GBESPolicy`, :class:`RMPolicy`: the planners as expert
+  policies for the environments (planning problems to next positions);
+- :func:`simulate` / :func:`run_monte_carlo`: a planner driving the closed tracking loop
+  (:class:`activetrack.world.World`) with per-step metrics, over seeds.
 
 A planner is anything with ``plan(problem, rng) -> next_positions`` of shape
 ``problem.batch_shape + (M, 2)``, see :class:`activetrack.Planner`.
@@ -15,6 +17,7 @@ A planner is anything with ``plan(problem, rng) -> next_positions`` of shape
 from activetrack.baselines._common import random_problem
 from activetrack.baselines.gbes import GBES, GBESResult
 from activetrack.baselines.gsr import GSR, GSRBatchResult, GSRResult
+from activetrack.baselines.policies import GBESPolicy, GSRPolicy, PlannerPolicy, RMPolicy
 from activetrack.baselines.random_motion import RandomMotion
 from activetrack.baselines.simulation import (
     MonteCarloResult,
@@ -26,11 +29,15 @@ from activetrack.baselines.simulation import (
 
 __all__ = [
     "GBES",
+    "GBESPolicy",
     "GBESResult",
     "GSR",
     "GSRBatchResult",
+    "GSRPolicy",
     "GSRResult",
     "MonteCarloResult",
+    "PlannerPolicy",
+    "RMPolicy",
     "RandomMotion",
     "RunRecord",
     "mean_ci",

@@ -1,4 +1,4 @@
-"""Compatibility front end of GSR for a batch given as arrays, and the batched expert.
+"""Compatibility front end of GSR for a batch given as arrays.
 
 :class:`BatchedGSR` is :class:`activetrack.baselines.GSR` (without restarts) on a batched
 :class:`activetrack.problem.PlanningProblem`: :meth:`BatchedGSR.plan_batch` builds the
@@ -6,7 +6,8 @@ problem from arrays and runs GSR's one vectorized sweep over the copies
 (:func:`activetrack.baselines.gsr.relax_batch`, what ``GSR().plan`` runs on a batched
 problem). New code can call ``GSR().plan`` on a batched problem directly.
 
-:class:`BatchedGSRPolicy` labels a whole batched environment per call with it.
+The batched expert is :class:`activetrack.baselines.GSRPolicy` on the batched
+environment's planning problem: ``env.step_positions(expert.plan(env.planning_problem()))``.
 """
 
 from __future__ import annotations
@@ -77,32 +78,3 @@ def _solve(*args):
     instrumentation that replaces it here, as ``benchmarks/throughput.py`` does, sees
     every solve)."""
     return _solve_batch_unchecked(*args)
-
-
-class BatchedGSRPolicy:
-    """The GSR expert for a :class:`~activetrack.envs.batched.BatchedActiveTracking`.
-
-    :meth:`act` returns the actions (N, M, 2) that move every copy's sensors to GSR's
-    positions exactly (:func:`activetrack.envs.dynamics.actions_to_reach`).
-    """
-
-    def __init__(self, tol: float = 1e-9, max_sweeps: int = 100) -> None:
-        self.planner = BatchedGSR(tol, max_sweeps)
-        self.last_result: BatchedGSRResult | None = None
-
-    def act(self, env) -> FloatArray:
-        """Return every copy's expert actions, shape (N, M, 2)."""
-        from activetrack.envs.dynamics import actions_to_reach
-
-        p = env.params
-        res = self.planner.plan_batch(
-            env.P_pred[:, :2, :2],
-            env.x_pred[:, :2],
-            env.sensors,
-            p.r,
-            p.rho,
-            p.sigma_d2,
-            p.sigma_theta2,
-        )
-        self.last_result = res
-        return actions_to_reach(res.positions, env.sensors, p.r)

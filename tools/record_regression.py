@@ -625,16 +625,18 @@ def case_expert_rm() -> dict[str, Any]:
 
 def case_expert_batched_gsr() -> dict[str, Any]:
     from activetrack import envs
-    from activetrack.baselines.batched_gsr import BatchedGSRPolicy
+    from activetrack.baselines import GSRPolicy
 
     n = 4
     env = envs.BatchedActiveTracking(n, "paper")
     m = env.n_sensors
-    policy = BatchedGSRPolicy()
+    policy = GSRPolicy()
     obs, _ = env.reset(seed=80)
     rows = []
     for _ in range(60):
-        obs, rewards, term, trunc, infos = env.step(policy.act(env))
+        # At bb51820: BatchedGSRPolicy().act(env) actions through env.step (round trip).
+        obs, rewards, term, trunc, infos = env.step_positions(policy.plan(env.planning_problem()))
+        obs = obs.reshape(n, -1)
         rows.append(
             {
                 "obs": batched_obs(obs, m),

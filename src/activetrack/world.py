@@ -41,6 +41,7 @@ import numpy as np
 from activetrack import observation, sensor_motion, tracking
 from activetrack.ekf import position_nees
 from activetrack.motion import predict
+from activetrack.objective import TRACE
 from activetrack.problem import PlanningProblem
 from activetrack.scenarios import Scenario, make_scenario
 from activetrack.validation import FloatArray
@@ -63,11 +64,6 @@ class StepResult(NamedTuple):
     reward: Any
     terminated: Any
     truncated: Any
-
-
-def score(P: FloatArray) -> FloatArray:
-    """Return the objective of eq. (12)/(17) at covariances ``P`` (..., n, n): ``tr P_11``."""
-    return P[..., 0, 0] + P[..., 1, 1]
 
 
 class World:
@@ -118,6 +114,8 @@ class World:
         self._n_steps = int(sc.n_steps)
         self._max_trace = np.inf if sc.max_trace is None else float(sc.max_trace)
         self._scale = float(sc.reward_scale)
+        #: The score of a configuration (eq. 12, 17); the reward is minus it at the posterior.
+        self.objective = TRACE
         self._dt = float(sc.dt)
         self._x0 = np.asarray(sc.x0, dtype=np.float64)
         self._x0_hat = np.asarray(sc.x0_hat, dtype=np.float64)
@@ -255,7 +253,7 @@ class World:
             self.x_hat[sel], self.P[sel], self.params.Phi, self.params.Q
         )
         self.k[sel] = 0
-        self.trace[sel] = score(self._P0)
+        self.trace[sel] = self.objective.of_covariance(self._P0[:2, :2])
         self.projected[sel] = False
         self.n_projected[sel] = 0
         self.terminated[sel] = self.truncated[sel] = self._ended[sel] = False
@@ -314,7 +312,7 @@ class World:
                 a[sel] for a in (x_true, x_post, P_post, x_next, P_next)
             )
             sensors, projected = sensors[sel], projected[sel]
-        trace = score(P_post)
+        trace = self.objective.of_covariance(P_post[..., :2, :2])
         self.x_true[sel], self.x_hat[sel], self.P[sel] = x_true, x_post, P_post
         self.x_pred[sel], self.P_pred[sel] = x_next, P_next
         self.sensors[sel] = sensors
@@ -346,6 +344,7 @@ class World:
             rho=p.rho,
             sigma_d2=p.sigma_d2,
             sigma_theta2=p.sigma_theta2,
+            objective=self.objective,
         )
 
     def observe(self, index: int | None = None) -> np.ndarray:
