@@ -23,6 +23,7 @@ from typing import Any
 from activetrack.cli import COMMANDS, add_output_arguments, field_default, nonneg_int
 from activetrack.files import RunOutputs, prepare_output_dir
 from activetrack.scenarios import PRESETS
+from activetrack.train import imitation as imitation_module
 from activetrack.train.imitation import DAGGER_DEFAULTS, ImitationConfig, train_imitation
 from activetrack.train.networks import ACTIVATIONS, NetConfig
 from activetrack.train.policy_io import VIEWS, load_policy, save_policy
@@ -64,7 +65,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     )
     p.set_defaults(parser=p)
     methods = p.add_subparsers(dest="method", metavar="METHOD", required=True)
-    signature = inspect.signature(train_imitation).parameters
+    signature = inspect.signature(imitation_module.train_imitation).parameters
     common = argparse.ArgumentParser(add_help=False)
     common.add_argument(
         "--scenario",
