@@ -18,7 +18,7 @@ import inspect
 from pathlib import Path
 from typing import Any
 
-from activetrack.baselines import GBES, GSR, RandomMotion, run_monte_carlo
+from activetrack.baselines import GBES, GSR, RandomMotion, evaluation, run_monte_carlo, simulation
 from activetrack.baselines.evaluation import run_evaluation
 from activetrack.cli import (
     COMMANDS,
@@ -52,7 +52,7 @@ def _add_simulate(sub: argparse._SubParsersAction) -> None:
         help=COMMANDS["simulate"][1],
         description=(
             "Run every --planner on --runs seeds (seed, seed+1, ...) of a scenario, print mean "
-            "trace and RMSE with 95%% intervals of the mean, and write OUT/results.json and "
+            "trace and RMSE with 95% intervals of the mean, and write OUT/results.json and "
             "OUT/trajectories.png (the first seed, Fig. 4 style)."
         ),
     )
@@ -69,7 +69,7 @@ def _add_simulate(sub: argparse._SubParsersAction) -> None:
         default=SIMULATE_RUNS,
         help="number of seeds (default %(default)s)",
     )
-    seed = inspect.signature(run_monte_carlo).parameters["seed"].default
+    seed = inspect.signature(simulation.run_monte_carlo).parameters["seed"].default
     p.add_argument("--seed", type=nonneg_int, default=seed, help="first seed (default %(default)s)")
     add_output_arguments(p, Path(SIMULATE_OUT))
     p.add_argument(
@@ -201,14 +201,14 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
 
 
 def _add_evaluate(sub: argparse._SubParsersAction) -> None:
-    defaults = inspect.signature(run_evaluation).parameters
+    defaults = inspect.signature(evaluation.run_evaluation).parameters
     p = sub.add_parser(
         "evaluate",
         help=COMMANDS["evaluate"][1],
         description=(
             "Run every --policy (gsr, gsr-restarts, gbes, rm, or the path of a policy.zip "
             "written by 'activetrack train') in the environment on the same --episodes seeds "
-            "(seed, seed+1, ...). Prints mean trace and RMSE with 95%% intervals, mean return "
+            "(seed, seed+1, ...). Prints mean trace and RMSE with 95% intervals, mean return "
             "and the ratio of mean trace to GSR's (GSR is evaluated as the reference even if "
             "not listed); writes OUT/results.json (a list, one object per policy), "
             "OUT/episodes.json and OUT/mean_trace.png. Every policy file is checked before "
