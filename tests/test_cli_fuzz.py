@@ -225,3 +225,36 @@ def test_train_fuzz(folders):
     ):
         inner()
     assert seen == {"reached", 2}
+
+
+def test_config_fuzz():
+    """Any value of any field: the config is built, or a ValueError/TypeError names the field."""
+    pytest.importorskip("torch")
+    from dataclasses import fields
+
+    from activetrack.train import ImitationConfig, NetConfig, PPOConfig
+
+    values = st.one_of(
+        st.integers(-(2**70), 2**70),
+        st.floats(allow_nan=True, allow_infinity=True),
+        st.booleans(),
+        st.none(),
+        st.text(max_size=5),
+        st.lists(st.integers(-3, 5000), max_size=10),
+        st.sampled_from(["tanh", "shared", "linear", "batched", (16, 16)]),
+    )
+    classes = [ImitationConfig, NetConfig, PPOConfig]
+    strategy = st.sampled_from(classes).flatmap(
+        lambda cls: st.tuples(st.just(cls), st.sampled_from([f.name for f in fields(cls)]), values)
+    )
+
+    @settings(SETTINGS, max_examples=400)
+    @given(strategy)
+    def inner(drawn):
+        cls, name, value = drawn
+        try:
+            cls(**{name: value})
+        except (ValueError, TypeError) as exc:
+            assert name in str(exc), (cls.__name__, name, value, str(exc))
+
+    inner()
