@@ -13,15 +13,17 @@ of its mean trace to GSR's with a paired bootstrap 95% interval. GSR is always e
 
 A policy is anything with ``act(env) -> {agent: action}`` (e.g.
 :class:`~activetrack.baselines.policies.GSRPolicy`), or a name: ``gsr``, ``gsr-restarts``
-(GSR with mirror restarts), ``gbes``, ``rm``,
-or the path of a trained ``policy.zip`` (loaded lazily through
-:func:`activetrack.train.policy_io.load_policy`: baselines never imports ``train`` at
-module level).
+(``GSR(restarts=True)``), ``gbes``, ``rm``, or the path of a trained ``policy.zip``
+(loaded through :func:`activetrack.train.policy_io.load_policy`, imported only then:
+baselines never imports ``train`` at module level). Every policy is loaded and checked
+before the first episode runs.
+
+:func:`write_results` writes a run's files together (:mod:`activetrack.files`); the
+figure is :func:`activetrack.baselines.plotting.plot_evaluation`.
 """
 
 from __future__ import annotations
 
-import json
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -30,6 +32,7 @@ from typing import Any
 import numpy as np
 
 from activetrack.baselines.simulation import mean_ci
+from activetrack.files import RunOutputs, prepare_output_dir
 
 #: Names that resolve to the planners' expert policies.
 EXPERT_NAMES = ("gsr", "gsr-restarts", "gbes", "rm")
@@ -207,11 +210,19 @@ def evaluate(
     seeds = [seed + j for j in range(episodes)]
     env = parallel_env(scenario, **overrides)
     results = []
-    bar = tqdm(total=episodes * len(items), disable=not progress, unit="ep", leave=False)
     try:
-        for index, (label, spec) in enumerate(items):
+        # Every policy loaded and checked before the first episode.
+        resolved = []
+        for label, spec in items:
             policy = resolve_policy(spec)
             check_compatible(policy, env, label)
+            resolved.append(policy)
+    except BaseException:
+        env.close()
+        raise
+    bar = tqdm(total=episodes * len(items), disable=not progress, unit="ep", leave=False)
+    try:
+        for index, ((label, _), policy) in enumerate(zip(items, resolved, strict=True)):
             bar.set_description(label)
             rows = []
             for s in seeds:
@@ -263,66 +274,29 @@ def format_table(rows: Sequence[dict[str, Any]]) -> str:
     return "\n".join(lines)
 
 
-def short_label(label: str) -> str:
-    """Return ``DIR/policy.zip`` for a long policy path (the last folder and the file)."""
-    path = Path(label)
-    if label.endswith(".zip") and path.parent.name:
-        return f"{path.parent.name}/{path.name}"
-    return label
-
-
-def plot_results(results: Sequence[PolicyEvaluation], path: str | Path, title: str = "") -> Path:
-    """Write box plots of the per-episode mean traces and their ratios to GSR; return the path.
-
-    Left: each episode's mean trace; right: each episode's mean trace over GSR's on the same
-    seed (the paired comparison). Both on a log scale, so that random motion (about 4x GSR)
-    and the policies within a few percent of GSR are readable together.
-    """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    from matplotlib.ticker import NullFormatter, ScalarFormatter
-
-    gsr = _gsr_of(results)
-    labels = [short_label(r.policy) for r in results]
-    ticks = range(1, len(results) + 1)
-    fig, (ax, bx) = plt.subplots(1, 2, figsize=(2.5 + 1.5 * len(results), 4.4))
-    ax.boxplot([r.mean_trace for r in results], showmeans=True)
-    ax.axhline(float(np.mean(gsr.mean_trace)), color="tab:green", ls="--", lw=1, label="GSR mean")
-    ax.set_ylabel("episode mean trace of P(k|k)_11 [m^2]")
-    bx.boxplot([r.mean_trace / gsr.mean_trace for r in results], showmeans=True)
-    bx.axhline(1.0, color="tab:green", ls="--", lw=1, label="GSR")
-    bx.set_ylabel("episode mean trace / GSR's (same seed)")
-    for axis in (ax, bx):
-        axis.set_yscale("log")
-        axis.yaxis.set_major_formatter(ScalarFormatter())
-        axis.yaxis.set_minor_formatter(NullFormatter())
-        axis.set_xticks(ticks, labels, rotation=25, ha="right")
-        axis.legend(loc="upper right", fontsize=8)
-    fig.suptitle(title or f"{len(results[0].seeds)} held-out episodes (triangles: means)")
-    fig.tight_layout()
-    path = Path(path)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+#: The files ``write_results`` writes in its output folder.
+OUTPUTS = ("results.json", "episodes.json", "mean_trace.png")
 
 
 def write_results(
     results: Sequence[PolicyEvaluation],
-    out_dir: str | Path,
+    out_dir: str | Path | RunOutputs,
     meta: dict[str, Any] | None = None,
     plot: bool = True,
+    overwrite: bool = False,
 ) -> dict[str, Path]:
     """Write ``results.json`` (a list, one object per policy), ``episodes.json`` and the plot.
 
-    Returns the written paths by name. ``meta`` (scenario, seeds...) goes to
-    ``episodes.json`` along with every episode's metrics.
+    Returns the written paths by name (``results``, ``episodes``, ``plot``). ``meta``
+    (scenario, seeds...) goes to ``episodes.json`` along with every episode's metrics.
+    ``out_dir`` is a folder (checked by :func:`~activetrack.files.prepare_output_dir`:
+    one that holds results needs ``overwrite``) or the :class:`RunOutputs` of one checked
+    earlier. The files are committed together (a failed write leaves the previous ones);
+    a previous ``mean_trace.png`` is removed when ``plot`` is false.
     """
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    paths = {"results": out / "results.json", "episodes": out / "episodes.json"}
-    paths["results"].write_text(json.dumps(summaries(results), indent=2))
+    outputs = out_dir if isinstance(out_dir, RunOutputs) else None
+    if outputs is None:
+        outputs = prepare_output_dir(out_dir, OUTPUTS, overwrite)
     per_episode = {
         "meta": meta or {},
         "policies": {
@@ -335,10 +309,16 @@ def write_results(
             for r in results
         },
     }
-    paths["episodes"].write_text(json.dumps(per_episode, indent=2))
-    if plot:
-        paths["plot"] = plot_results(results, out / "mean_trace.png")
-    return paths
+    with outputs:
+        outputs.write_json("results.json", summaries(results))
+        outputs.write_json("episodes.json", per_episode)
+        if plot:
+            from activetrack.baselines.plotting import plot_evaluation
+
+            plot_evaluation(results, outputs.staged("mean_trace.png"))
+        written = outputs.commit()
+    keys = {"results.json": "results", "episodes.json": "episodes", "mean_trace.png": "plot"}
+    return {keys[name]: p for name, p in written.items()}
 
 
 def run_evaluation(
@@ -349,20 +329,24 @@ def run_evaluation(
     out_dir: str | Path | None = None,
     plot: bool = True,
     progress: bool = True,
+    overwrite: bool = False,
     **overrides: Any,
 ) -> list[dict[str, Any]]:
     """Evaluate, print the table, write ``out_dir`` if given; return the JSON summaries.
 
-    The command ``activetrack evaluate`` is this function.
+    The command ``activetrack evaluate`` is this function. Everything that can be checked
+    before the episodes is: the output folder (one holding results needs ``overwrite``)
+    and every policy (names, policy files, their observation size).
     """
+    outputs = None if out_dir is None else prepare_output_dir(out_dir, OUTPUTS, overwrite)
     results = evaluate(policies, scenario, episodes, seed, progress, **overrides)
     rows = summaries(results)
     print(f"scenario {scenario!r}, {episodes} episodes, seeds {seed}..{seed + episodes - 1}")
     print(format_table(rows))
     if not results[-1].requested:
         print("gsr was not requested: it was evaluated on the same seeds as the ratio's reference")
-    if out_dir is not None:
+    if outputs is not None:
         meta = {"scenario": scenario, "overrides": overrides, "episodes": episodes, "seed": seed}
-        paths = write_results(results, out_dir, meta, plot=plot)
+        paths = write_results(results, outputs, meta, plot=plot)
         print("wrote " + ", ".join(str(p) for p in paths.values()))
     return rows

@@ -1,20 +1,56 @@
-"""Figures of closed-loop runs in the style of the paper's Fig. 4.
+"""The baselines' figures: closed-loop runs (Fig. 4 style) and policy evaluations.
 
-One panel per planner: the sensors' trajectories, the true and the estimated target
-track, and the 3-sigma ellipses of the posterior position covariance every few steps.
+- :func:`plot_trajectories`: one panel per planner with the sensors' trajectories, the
+  true and the estimated target track, and the 3-sigma ellipses of the posterior position
+  covariance every few steps (the paper's Fig. 4);
+- :func:`plot_evaluation`: box plots of per-episode mean traces and their ratios to GSR's
+  (the figure of ``activetrack evaluate``);
+- :func:`save_figure`: every figure is written to a temporary file and renamed into place.
+
 matplotlib is imported inside the functions (Agg backend) so that importing the
 baselines never needs a display or pays matplotlib's import time.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from activetrack.baselines.simulation import RunRecord
+from activetrack.files import atomic_path
 from activetrack.validation import FloatArray
+
+#: Resolution of the saved figures.
+DPI = 110
+
+
+def _pyplot() -> Any:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def save_figure(fig: Any, path: str | Path, dpi: int = DPI) -> Path:
+    """Save ``fig`` to ``path`` (format from the suffix) atomically, close it; return the path.
+
+    The image goes to a temporary file beside ``path`` and is renamed into place, so a
+    failed write leaves the previous image.
+    """
+    path = Path(path)
+    fmt = path.suffix.lstrip(".").lower() or None
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with atomic_path(path) as tmp:
+            fig.savefig(tmp, dpi=dpi, format=fmt)
+    finally:
+        _pyplot().close(fig)
+    return path
 
 
 def ellipse_points(center: FloatArray, cov: FloatArray, n_sigma: float = 3.0, n: int = 64):
@@ -47,11 +83,7 @@ def plot_trajectories(
         raise ValueError("records must hold at least one run")
     if not isinstance(ellipse_every, int) or ellipse_every < 1:
         raise ValueError(f"ellipse_every must be an integer >= 1, got {ellipse_every!r}")
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = _pyplot()
     n = len(records)
     fig, axes = plt.subplots(1, n, figsize=(5.2 * n, 5.0), squeeze=False)
     colors = plt.get_cmap("tab10").colors
@@ -83,8 +115,47 @@ def plot_trajectories(
     if title:
         fig.suptitle(title)
     fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
+
+
+def short_label(label: str) -> str:
+    """Return ``DIR/policy.zip`` for a long policy path (the last folder and the file)."""
+    path = Path(label)
+    if label.endswith(".zip") and path.parent.name:
+        return f"{path.parent.name}/{path.name}"
+    return label
+
+
+def plot_evaluation(results: Sequence[Any], path: str | Path, title: str = "") -> Path:
+    """Write box plots of the per-episode mean traces and their ratios to GSR; return the path.
+
+    ``results`` are :class:`~activetrack.baselines.evaluation.PolicyEvaluation` objects
+    (``policy``, ``seeds``, ``mean_trace``), one of them GSR's on the same seeds. Left:
+    each episode's mean trace; right: each episode's mean trace over GSR's on the same
+    seed (the paired comparison). Both on a log scale, so that random motion (several
+    times GSR's trace) and policies within a few percent of GSR are readable together.
+    """
+    plt = _pyplot()
+    from matplotlib.ticker import NullFormatter, ScalarFormatter
+
+    gsr = next((r for r in results if r.policy.lower() == "gsr"), None)
+    if gsr is None:
+        raise ValueError("the results hold no GSR evaluation (the ratio's reference)")
+    labels = [short_label(r.policy) for r in results]
+    ticks = range(1, len(results) + 1)
+    fig, (ax, bx) = plt.subplots(1, 2, figsize=(2.5 + 1.5 * len(results), 4.4))
+    ax.boxplot([r.mean_trace for r in results], showmeans=True)
+    ax.axhline(float(np.mean(gsr.mean_trace)), color="tab:green", ls="--", lw=1, label="GSR mean")
+    ax.set_ylabel("episode mean trace of P(k|k)_11 [m^2]")
+    bx.boxplot([r.mean_trace / gsr.mean_trace for r in results], showmeans=True)
+    bx.axhline(1.0, color="tab:green", ls="--", lw=1, label="GSR")
+    bx.set_ylabel("episode mean trace / GSR's (same seed)")
+    for axis in (ax, bx):
+        axis.set_yscale("log")
+        axis.yaxis.set_major_formatter(ScalarFormatter())
+        axis.yaxis.set_minor_formatter(NullFormatter())
+        axis.set_xticks(ticks, labels, rotation=25, ha="right")
+        axis.legend(loc="upper right", fontsize=8)
+    fig.suptitle(title or f"{len(results[0].seeds)} held-out episodes (triangles: means)")
+    fig.tight_layout()
+    return save_figure(fig, path)

@@ -1,39 +1,228 @@
-"""``activetrack train bc|dagger|ppo``: the command-line runners (argparse lives in ``cli.py``).
+"""The training command: ``activetrack train bc|dagger|ppo``.
 
-Each writes ``OUT/policy.zip`` (loadable by ``activetrack evaluate --policy``), plus
+Each method writes ``OUT/policy.zip`` (loadable by ``activetrack evaluate --policy``),
 ``OUT/config.json`` and TensorBoard logs in ``OUT/tb``; PPO also writes ``model.zip`` and
-``checkpoints/``. The parser's defaults equal those of
-:class:`~activetrack.train.imitation.ImitationConfig` and :class:`~activetrack.train.ppo.PPOConfig`
-(DAgger has its own rounds and epochs; ``tests/train/test_cli.py`` checks the rest).
+``checkpoints/``. Every option's default is the field default of
+:class:`~activetrack.train.imitation.ImitationConfig` (DAgger:
+:data:`~activetrack.train.imitation.DAGGER_DEFAULTS`),
+:class:`~activetrack.train.ppo.PPOConfig` or :class:`~activetrack.train.networks.NetConfig`:
+the parser's defaults are None and only the options given reach the config, which checks
+every value. Before training: the configs, ``--threads``, the ``--init`` policy file and
+the output folder (one holding results needs ``--overwrite``) are checked; the output
+files are committed together at the end.
 """
 
 from __future__ import annotations
 
 import argparse
-import json
+import inspect
 from dataclasses import fields
 from pathlib import Path
 from typing import Any
 
-from activetrack.train.imitation import ImitationConfig, train_imitation
-from activetrack.train.networks import NetConfig
-from activetrack.train.policy_io import save_policy
-from activetrack.train.ppo import PPOConfig, train_ppo
-from activetrack.train.utils import configure_torch
+from activetrack.cli import COMMANDS, add_output_arguments, field_default, nonneg_int
+from activetrack.files import RunOutputs, prepare_output_dir
+from activetrack.scenarios import PRESETS
+from activetrack.train import imitation as imitation_module
+from activetrack.train.imitation import DAGGER_DEFAULTS, ImitationConfig, train_imitation
+from activetrack.train.networks import ACTIVATIONS, NetConfig
+from activetrack.train.policy_io import VIEWS, load_policy, save_policy
+from activetrack.train.ppo import LR_SCHEDULES, OUTPUTS, PPOConfig, train_ppo
+from activetrack.train.utils import DEFAULT_THREADS, MAX_THREADS, check_int, configure_torch
 
 #: CLI option (argparse dest) -> config field, where the names differ.
 _RENAMES = {"lr": "learning_rate"}
 
 
+#: What ``--action-gain none`` parses to (None means "not given").
+_LINEAR = "none"
+
+
+def _action_gain(text: str) -> float | str:
+    if text.lower() == _LINEAR:
+        return _LINEAR
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a number or 'none', got {text!r}") from None
+
+
+def _help(text: str, cls: type, name: str, default: Any = None) -> str:
+    """Return ``text`` with the default of ``cls.name`` (or ``default``) appended."""
+    value = field_default(cls, name) if default is None else default
+    if isinstance(value, tuple):
+        value = " ".join(map(str, value))
+    return f"{text} (default {value})".lstrip()
+
+
+def add_parsers(sub: argparse._SubParsersAction) -> None:
+    """Add ``train bc|dagger|ppo`` to the ``activetrack`` subparsers ``sub``."""
+    p = sub.add_parser(
+        "train",
+        help=COMMANDS["train"][1],
+        description="Train a policy and write OUT/policy.zip, which 'activetrack evaluate "
+        "--policy OUT/policy.zip' loads. See the README for commands and budgets.",
+    )
+    p.set_defaults(parser=p)
+    methods = p.add_subparsers(dest="method", metavar="METHOD", required=True)
+    signature = inspect.signature(imitation_module.train_imitation).parameters
+    common = argparse.ArgumentParser(add_help=False)
+    common.add_argument(
+        "--scenario",
+        default=signature["scenario"].default,
+        choices=sorted(PRESETS),
+        help="preset (default %(default)s)",
+    )
+    common.add_argument(
+        "--seed",
+        type=nonneg_int,
+        default=signature["seed"].default,
+        help="training seed (default %(default)s)",
+    )
+    add_output_arguments(common, None, required=True)
+    common.add_argument(
+        "--hidden",
+        type=int,
+        nargs="+",
+        default=None,
+        help=_help("MLP hidden sizes", NetConfig, "hidden"),
+    )
+    common.add_argument(
+        "--activation",
+        choices=sorted(ACTIVATIONS),
+        default=None,
+        help=_help("", NetConfig, "activation"),
+    )
+    common.add_argument(
+        "--action-gain",
+        type=_action_gain,
+        default=None,
+        help=_help(
+            "saturation gain of the mean action (per sensor, m / max(|m|, 1/K)); "
+            "'none' for SB3's linear mean",
+            NetConfig,
+            "action_gain",
+        ),
+    )
+    common.add_argument(
+        "--threads",
+        type=int,
+        default=DEFAULT_THREADS,
+        help=f"torch threads, 1 to {MAX_THREADS} (default %(default)s)",
+    )
+    common.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+
+    def imitation(name: str, help_text: str, own: dict[str, Any]) -> None:
+        def default(field_name: str) -> Any:
+            return own.get(field_name, field_default(ImitationConfig, field_name))
+
+        q = methods.add_parser(name, parents=[common], help=help_text, description=help_text)
+        q.add_argument(
+            "--episodes",
+            type=int,
+            default=None,
+            help="expert-labelled episodes in total: the label budget "
+            f"(default {default('episodes')})",
+        )
+        q.add_argument(
+            "--epochs",
+            type=int,
+            default=None,
+            help=f"passes over the data (per DAgger round) (default {default('epochs')})",
+        )
+        q.add_argument(
+            "--batch-size", type=int, default=None, help=f"(default {default('batch_size')})"
+        )
+        q.add_argument("--lr", type=float, default=None, help=f"Adam (default {default('lr')})")
+        q.add_argument(
+            "--weight-decay",
+            type=float,
+            default=None,
+            help=f"Adam (default {default('weight_decay')})",
+        )
+        if name == "dagger":
+            q.add_argument(
+                "--iterations",
+                type=int,
+                default=None,
+                help=f"rounds; the episodes are split over them (default {default('iterations')})",
+            )
+            q.add_argument(
+                "--beta",
+                type=float,
+                default=None,
+                help="round i executes the expert with probability beta**i "
+                f"(default {default('beta')})",
+            )
+        q.set_defaults(func=run_train, parser=q, method_defaults=own)
+
+    imitation("bc", "behaviour cloning of GSR", {"iterations": 1})
+    imitation("dagger", "DAgger with GSR labels", DAGGER_DEFAULTS)
+
+    q = methods.add_parser(
+        "ppo",
+        parents=[common],
+        help="PPO (stable-baselines3), from scratch or from --init PATH/policy.zip",
+        description="PPO with parameter sharing over the PettingZoo env (default) or on the "
+        "centralized Gymnasium view; TensorBoard logs in OUT/tb, checkpoints in "
+        "OUT/checkpoints.",
+    )
+
+    def ppo(option: str, text: str = "", type_: Any = int, **kw: Any) -> None:
+        name = _RENAMES.get(option[2:].replace("-", "_"), option[2:].replace("-", "_"))
+        q.add_argument(option, type=type_, default=None, help=_help(text, PPOConfig, name), **kw)
+
+    ppo("--total-timesteps")
+    q.add_argument("--init", type=Path, default=None, help="warm start from a policy.zip")
+    ppo("--critic-warmup", "timesteps of critic-only training after --init")
+    q.add_argument(
+        "--log-std-init",
+        type=float,
+        default=None,
+        help="initial log std (default: the network's, "
+        f"{field_default(NetConfig, 'log_std_init')}; of --init: unchanged)",
+    )
+    q.add_argument("--view", choices=VIEWS, default=None, help=_help("", PPOConfig, "view"))
+    ppo("--n-copies", "environment copies")
+    ppo("--n-steps", "rollout length per slot")
+    ppo("--batch-size")
+    ppo("--n-epochs")
+    ppo("--lr", "learning rate", float)
+    q.add_argument(
+        "--lr-schedule",
+        choices=LR_SCHEDULES,
+        default=None,
+        help=_help("linear: decay to 0 over the run", PPOConfig, "lr_schedule"),
+    )
+    ppo("--gamma", "discount, in (0, 1]", float)
+    ppo("--gae-lambda", "in [0, 1]", float)
+    ppo("--clip-range", "> 0", float)
+    ppo("--ent-coef", ">= 0", float)
+    q.add_argument(
+        "--target-kl", type=float, default=None, help="> 0 (default: none, no early stop)"
+    )
+    q.add_argument(
+        "--no-normalize-reward",
+        action="store_true",
+        help="train on the raw reward instead of VecNormalize's scaled one",
+    )
+    ppo("--checkpoint-every", "timesteps (0: none)")
+    ppo("--eval-every", "validate the deterministic policy every N timesteps (0: never)")
+    ppo("--eval-episodes", "validation episodes")
+    q.add_argument(
+        "--keep-best", action="store_true", help="save the best validated policy, not the last"
+    )
+    q.set_defaults(func=run_train, parser=q)
+
+
 def _net_config(args: argparse.Namespace) -> NetConfig:
     kw: dict[str, Any] = {}
-    if getattr(args, "hidden", None):
+    if args.hidden is not None:
         kw["hidden"] = tuple(args.hidden)
-    if getattr(args, "activation", None):
+    if args.activation is not None:
         kw["activation"] = args.activation
-    if getattr(args, "action_gain", None) is not None:
-        gain = args.action_gain
-        kw["action_gain"] = None if str(gain).lower() == "none" else float(gain)
+    if args.action_gain is not None:
+        kw["action_gain"] = None if args.action_gain == _LINEAR else args.action_gain
     if getattr(args, "log_std_init", None) is not None:
         kw["log_std_init"] = args.log_std_init
     return NetConfig(**kw)
@@ -41,62 +230,23 @@ def _net_config(args: argparse.Namespace) -> NetConfig:
 
 def _given(args: argparse.Namespace, cls: type, renames: dict[str, str]) -> dict[str, Any]:
     """Return the config fields of ``cls`` that were given on the command line."""
-    names = {f.name for f in fields(cls)}
+    names = {f.name for f in fields(cls)} - {"net"}
     out = {}
     for key, value in vars(args).items():
         field_name = renames.get(key, key)
-        if field_name in names and value is not None and field_name != "net":
+        if field_name in names and value is not None:
             out[field_name] = value
     return out
 
 
-def run_train(args: argparse.Namespace) -> int:
-    """Run ``activetrack train <method>`` from parsed arguments; return the exit code."""
-    configure_torch(args.threads)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+def configs(args: argparse.Namespace) -> tuple[Any, NetConfig]:
+    """Return the method's config and the network config of parsed arguments (checked)."""
     net = _net_config(args)
-    progress = not args.no_progress
     if args.method in ("bc", "dagger"):
-        given = _given(args, ImitationConfig, {})
+        given = {**args.method_defaults, **_given(args, ImitationConfig, {})}
         if args.method == "bc":
             given["iterations"] = 1
-        cfg = ImitationConfig(**given, net=net)
-        result = train_imitation(
-            args.scenario,
-            seed=args.seed,
-            config=cfg,
-            tensorboard_dir=str(out / "tb"),
-            progress=progress,
-            threads=args.threads,
-        )
-        from activetrack.scenarios import make_scenario
-
-        train_config = {
-            "algo": args.method,
-            **cfg.to_dict(),
-            "labels": len(result.data),
-            "final_mse": result.losses,
-            "rollout_mean_trace": result.rollout_traces,
-            "seconds": result.seconds,
-        }
-        path = save_policy(
-            out / "policy.zip",
-            result.policy,
-            net,
-            kind=args.method,
-            scenario=make_scenario(args.scenario).to_dict(),
-            seed=args.seed,
-            train_config=train_config,
-        )
-        (out / "config.json").write_text(
-            json.dumps({"seed": args.seed, "scenario": args.scenario, **train_config}, indent=2)
-        )
-        print(
-            f"{args.method}: {len(result.data)} expert labels, final MSE {result.losses[-1]:.4f}, "
-            f"{result.seconds:.1f} s -> {path}"
-        )
-        return 0
+        return ImitationConfig(**given, net=net), net
     if args.method == "ppo":
         given = _given(args, PPOConfig, _RENAMES)
         given.pop("log_std_init", None)  # part of the network config here
@@ -104,22 +254,86 @@ def run_train(args: argparse.Namespace) -> int:
             given["normalize_reward"] = False
         if args.keep_best:
             given["keep_best"] = True
-        cfg = PPOConfig(**given, net=net, log_std_init=args.log_std_init)
-        result = train_ppo(
-            args.scenario,
-            seed=args.seed,
-            config=cfg,
-            out_dir=out,
-            init=args.init,
-            progress=progress,
-            threads=args.threads,
-        )
-        best = ""
-        if result.validation:
-            best = f", validation mean trace {min(t for _, t in result.validation):.4f} (best)"
-        print(
-            f"ppo: {cfg.total_timesteps} timesteps, {result.seconds:.1f} s{best} -> "
-            f"{result.policy_path}"
-        )
-        return 0
+        return PPOConfig(**given, net=net, log_std_init=args.log_std_init), net
     raise ValueError(f"unknown method {args.method!r}")
+
+
+def run_train(args: argparse.Namespace) -> int:
+    """Run ``activetrack train <method>`` from parsed arguments; return the exit code.
+
+    Checks everything first (configs, threads, ``--init``, the output folder), then trains.
+    """
+    cfg, net = configs(args)
+    threads = check_int("threads", args.threads, 1, MAX_THREADS)
+    init = getattr(args, "init", None)
+    if init is not None:
+        load_policy(init)  # a bad file fails now, with its path and problem
+    outputs = prepare_output_dir(args.out, OUTPUTS, args.overwrite)
+    configure_torch(threads)
+    progress = not args.no_progress
+    if args.method in ("bc", "dagger"):
+        return _run_imitation(args, cfg, net, outputs, threads, progress)
+    result = train_ppo(
+        args.scenario,
+        seed=args.seed,
+        config=cfg,
+        out_dir=outputs,
+        init=init,
+        progress=progress,
+        threads=threads,
+    )
+    best = ""
+    if result.validation:
+        best = f", validation mean trace {min(t for _, t in result.validation):.4f} (best)"
+    print(
+        f"ppo: {cfg.total_timesteps} timesteps, {result.seconds:.1f} s{best} -> "
+        f"{result.policy_path}"
+    )
+    return 0
+
+
+def _run_imitation(
+    args: argparse.Namespace,
+    cfg: ImitationConfig,
+    net: NetConfig,
+    outputs: RunOutputs,
+    threads: int,
+    progress: bool,
+) -> int:
+    from activetrack.scenarios import make_scenario
+
+    result = train_imitation(
+        args.scenario,
+        seed=args.seed,
+        config=cfg,
+        tensorboard_dir=str(outputs.path("tb/")),
+        progress=progress,
+        threads=threads,
+    )
+    train_config = {
+        "algo": args.method,
+        **cfg.to_dict(),
+        "labels": len(result.data),
+        "final_mse": result.losses,
+        "rollout_mean_trace": result.rollout_traces,
+        "seconds": result.seconds,
+    }
+    with outputs:
+        save_policy(
+            outputs.staged("policy.zip"),
+            result.policy,
+            net,
+            kind=args.method,
+            scenario=make_scenario(args.scenario).to_dict(),
+            seed=args.seed,
+            train_config=train_config,
+        )
+        outputs.write_json(
+            "config.json", {"seed": args.seed, "scenario": args.scenario, **train_config}
+        )
+        path = outputs.commit()["policy.zip"]
+    print(
+        f"{args.method}: {len(result.data)} expert labels, final MSE {result.losses[-1]:.4f}, "
+        f"{result.seconds:.1f} s -> {path}"
+    )
+    return 0

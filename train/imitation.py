@@ -33,10 +33,18 @@ from stable_baselines3.common.policies import ActorCriticPolicy
 
 from activetrack.sensor_motion import actions_to_reach
 from activetrack.train.networks import DEFAULT_NET, NetConfig, build_policy, mean_action
-from activetrack.train.utils import DEFAULT_THREADS, configure_torch, seed_everything
+from activetrack.train.utils import (
+    DEFAULT_THREADS,
+    check_float,
+    check_int,
+    configure_torch,
+    seed_everything,
+)
 
 #: Training episodes use seeds at or above this, disjoint from held-out evaluation seeds.
 TRAIN_SEED_LOW = 1_000_000
+#: Bounds of the label budget (episodes) and of the passes over the data.
+MAX_EPISODES, MAX_EPOCHS = 1_000_000, 1_000_000
 
 
 @dataclass
@@ -65,6 +73,10 @@ class Dataset:
 class ImitationConfig:
     """Budget and optimizer of BC/DAgger.
 
+    Every field is checked and converted on construction (ValueError naming it): counts
+    are integers >= 1 with ``iterations <= episodes``, ``beta`` in [0, 1], ``lr`` in
+    (0, 1], ``weight_decay`` in [0, 1].
+
     Attributes:
         episodes: expert-labelled episodes in total (the label budget is
             ``episodes * n_steps * M`` samples), shared by all DAgger rounds.
@@ -85,11 +97,29 @@ class ImitationConfig:
     weight_decay: float = 0.0
     net: NetConfig = field(default_factory=lambda: DEFAULT_NET)
 
+    def __post_init__(self) -> None:
+        # Every field checked and converted here, once: ValueError naming the field.
+        self.episodes = check_int("episodes", self.episodes, 1, MAX_EPISODES)
+        self.epochs = check_int("epochs", self.epochs, 1, MAX_EPOCHS)
+        self.iterations = check_int("iterations", self.iterations, 1, self.episodes)
+        self.beta = check_float("beta", self.beta, 0, 1)
+        self.batch_size = check_int("batch_size", self.batch_size, 1, 10**7)
+        self.lr = check_float("lr", self.lr, 0, 1, low_open=True)
+        self.weight_decay = check_float("weight_decay", self.weight_decay, 0, 1)
+        if isinstance(self.net, dict):
+            self.net = NetConfig.from_dict(self.net)
+        if not isinstance(self.net, NetConfig):
+            raise ValueError(f"net must be a NetConfig, got {self.net!r}")
+
     def to_dict(self) -> dict[str, Any]:
         """Return JSON-friendly values."""
         d = asdict(self)
         d["net"] = self.net.to_dict()
         return d
+
+
+#: DAgger's own defaults (``activetrack train dagger``); the other fields as for BC.
+DAGGER_DEFAULTS: dict[str, Any] = {"epochs": 40, "iterations": 5}
 
 
 def train_seeds(seed: int, n: int) -> list[int]:
@@ -231,8 +261,8 @@ def train_imitation(
     from activetrack.envs import parallel_env
 
     cfg = config or ImitationConfig()
-    if cfg.iterations < 1 or cfg.episodes < cfg.iterations:
-        raise ValueError("need iterations >= 1 and episodes >= iterations")
+    if not isinstance(cfg, ImitationConfig):
+        raise TypeError(f"config must be an ImitationConfig, got {type(cfg).__name__}")
     configure_torch(threads)
     t0 = time.perf_counter()
     rng = seed_everything(seed)

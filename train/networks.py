@@ -3,12 +3,11 @@
 Imitation trains this very class, so a behaviour-cloned network drops into
 ``PPO(TrackingPolicy, ...).policy`` by ``load_state_dict`` and PPO fine-tunes it.
 
-The action head. GSR moves a sensor at full speed almost always (99% of its actions on
-``paper`` have norm 1: the sensors are no faster than the target and fall behind). A
-linear Gaussian mean fitted by least squares shrinks wherever the expert's direction is
-ambiguous (two nearly equally good directions average to a short vector), so the cloned
-sensors slow down and lose ground for good: on ``paper`` that alone cost BC about 7% of
-mean trace. :class:`TrackingPolicy` therefore saturates the mean radially, per sensor:
+The action head. GSR moves a sensor at full speed almost always (the sensors are no faster
+than the target and fall behind). A linear Gaussian mean fitted by least squares shrinks
+wherever the expert's direction is ambiguous (two nearly equally good directions average
+to a short vector), so the cloned sensors slow down and lose ground for good (the README
+gives the cost). :class:`TrackingPolicy` therefore saturates the mean radially, per sensor:
 ``s(m) = m / max(|m|, 1/K)`` is the unit vector of ``m`` outside the small ball
 ``|m| < 1/K`` and ``K m`` inside it (so a sensor can still slow down or stop). The
 Gaussian, PPO's sampling and the deterministic action all use ``s(m)``, which lies in the
@@ -18,7 +17,7 @@ SB3's plain linear mean.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, fields
 from typing import Any
 
 import gymnasium as gym
@@ -26,12 +25,22 @@ import torch
 from stable_baselines3.common.policies import ActorCriticPolicy
 from torch import nn
 
+from activetrack.train.utils import check_bool, check_choice, check_float, check_int
+
 ACTIVATIONS: dict[str, type[nn.Module]] = {"tanh": nn.Tanh, "relu": nn.ReLU, "elu": nn.ELU}
+#: Largest hidden layer and most hidden layers accepted (files and command line alike).
+MAX_UNITS, MAX_LAYERS = 4096, 8
+#: Accepted range of the initial log standard deviation.
+LOG_STD_RANGE = (-20.0, 5.0)
 
 
 @dataclass(frozen=True)
 class NetConfig:
     """Architecture of the actor-critic MLP.
+
+    Every field is checked on construction (ValueError naming it): at most
+    :data:`MAX_LAYERS` hidden layers of 1 to :data:`MAX_UNITS` units, a finite
+    ``log_std_init`` in :data:`LOG_STD_RANGE`, ``action_gain`` > 0 or None.
 
     Attributes:
         hidden: hidden layer sizes, the same for the actor and the critic (separate nets).
@@ -51,9 +60,21 @@ class NetConfig:
     action_gain: float | None = 100.0
 
     def __post_init__(self) -> None:
-        if self.activation not in ACTIVATIONS:
-            raise ValueError(f"activation must be one of {sorted(ACTIVATIONS)}")
-        object.__setattr__(self, "hidden", tuple(int(h) for h in self.hidden))
+        hidden = self.hidden
+        if isinstance(hidden, (str, bytes)) or not hasattr(hidden, "__iter__"):
+            raise ValueError(f"hidden must be a sequence of layer sizes, got {hidden!r}")
+        hidden = tuple(hidden)
+        if len(hidden) > MAX_LAYERS:
+            raise ValueError(f"hidden must have at most {MAX_LAYERS} layers, got {len(hidden)}")
+        hidden = tuple(check_int("hidden", h, 1, MAX_UNITS) for h in hidden)
+        set_ = object.__setattr__  # frozen: store the converted values
+        set_(self, "hidden", hidden)
+        set_(self, "activation", check_choice("activation", self.activation, sorted(ACTIVATIONS)))
+        set_(self, "log_std_init", check_float("log_std_init", self.log_std_init, *LOG_STD_RANGE))
+        set_(self, "ortho_init", check_bool("ortho_init", self.ortho_init))
+        if self.action_gain is not None:
+            gain = check_float("action_gain", self.action_gain, 0, low_open=True)
+            set_(self, "action_gain", gain)
 
     def policy_kwargs(self) -> dict[str, Any]:
         """Return the ``policy_kwargs`` of ``PPO("MlpPolicy", ...)`` for this architecture."""
@@ -73,8 +94,34 @@ class NetConfig:
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> NetConfig:
-        """Return the configuration saved by :meth:`to_dict`."""
-        return cls(**{**d, "hidden": tuple(d["hidden"])})
+        """Return the configuration saved by :meth:`to_dict` (ValueError if it is malformed)."""
+        if not isinstance(d, dict):
+            raise ValueError(f"a network configuration must be a JSON object, got {d!r}")
+        unknown = sorted(set(d) - {f.name for f in fields(cls)})
+        if unknown:
+            raise ValueError(f"unknown network configuration fields {unknown}")
+        return cls(**d)
+
+    def expected_state_shapes(self, obs_dim: int, act_dim: int) -> dict[str, tuple[int, ...]]:
+        """Return the shape of every entry of :func:`build_policy`'s state dict, by key.
+
+        Computed without building the network (SB3's MLP: ``Linear`` layers at even
+        indices of ``policy_net``/``value_net``, activations between them), so a policy
+        file can be checked before anything is allocated.
+        """
+        shapes: dict[str, tuple[int, ...]] = {"log_std": (act_dim,)}
+        for branch in ("policy_net", "value_net"):
+            last = obs_dim
+            for i, h in enumerate(self.hidden):
+                shapes[f"mlp_extractor.{branch}.{2 * i}.weight"] = (h, last)
+                shapes[f"mlp_extractor.{branch}.{2 * i}.bias"] = (h,)
+                last = h
+        last = self.hidden[-1] if self.hidden else obs_dim
+        shapes["action_net.weight"] = (act_dim, last)
+        shapes["action_net.bias"] = (act_dim,)
+        shapes["value_net.weight"] = (1, last)
+        shapes["value_net.bias"] = (1,)
+        return shapes
 
 
 DEFAULT_NET = NetConfig()
@@ -152,6 +199,8 @@ def actor_parameters(policy: ActorCriticPolicy) -> list[nn.Parameter]:
 __all__ = [
     "ACTIVATIONS",
     "DEFAULT_NET",
+    "MAX_LAYERS",
+    "MAX_UNITS",
     "NetConfig",
     "TrackingPolicy",
     "actor_parameters",

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import io
 import json
+import math
 import zipfile
 from pathlib import Path
 from typing import Any
@@ -26,10 +27,16 @@ import numpy as np
 import torch
 from stable_baselines3.common.policies import ActorCriticPolicy
 
+from activetrack.files import atomic_path
 from activetrack.train.networks import NetConfig, build_policy
 
 FORMAT = "activetrack-policy/1"
 VIEWS = ("shared", "centralized")
+#: Limits checked before reading a policy file: meta.json's size, the observation and
+#: action sizes, and the network's parameter count.
+MAX_META_BYTES = 16_000_000
+MAX_SPACE_SIZE = 65_536
+MAX_PARAMETERS = 50_000_000
 
 
 def _box_to_dict(space: gym.spaces.Box) -> dict[str, Any]:
@@ -39,14 +46,6 @@ def _box_to_dict(space: gym.spaces.Box) -> dict[str, Any]:
         "shape": list(space.shape),
         "dtype": str(space.dtype),
     }
-
-
-def _box_from_dict(d: dict[str, Any]) -> gym.spaces.Box:
-    def arr(v: list) -> np.ndarray:
-        # JSON has no inf: Python's json writes/reads Infinity, keep it that way.
-        return np.asarray(v, dtype=d["dtype"]).reshape(d["shape"])
-
-    return gym.spaces.Box(arr(d["low"]), arr(d["high"]), dtype=np.dtype(d["dtype"]))
 
 
 def save_policy(
@@ -60,7 +59,11 @@ def save_policy(
     view: str = "shared",
     train_config: dict[str, Any] | None = None,
 ) -> Path:
-    """Write ``policy`` and its metadata to the single file ``path``; return the path."""
+    """Write ``policy`` and its metadata to the single file ``path``; return the path.
+
+    The file is written to a temporary file beside ``path`` and renamed into place, so a
+    failed write leaves the previous file.
+    """
     if view not in VIEWS:
         raise ValueError(f"view must be one of {VIEWS}, got {view!r}")
     path = Path(path)
@@ -79,7 +82,7 @@ def save_policy(
     }
     buf = io.BytesIO()
     torch.save({k: v.detach().cpu() for k, v in policy.state_dict().items()}, buf)
-    with zipfile.ZipFile(path, "w", compression=zipfile.ZIP_DEFLATED) as zf:
+    with atomic_path(path) as tmp, zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as zf:
         zf.writestr("meta.json", json.dumps(meta, indent=2, default=str))
         zf.writestr("policy.pth", buf.getvalue())
     return path
@@ -124,19 +127,153 @@ class LearnedPolicy:
 
 
 def load_policy(path: str | Path) -> LearnedPolicy:
-    """Return the :class:`LearnedPolicy` saved at ``path`` by :func:`save_policy`."""
+    """Return the :class:`LearnedPolicy` saved at ``path`` by :func:`save_policy`.
+
+    Raises ``ValueError("<path>: <problem>")`` for any file that is not one: unreadable,
+    not a zip, a member missing or too large, ``meta.json`` malformed (types, spaces,
+    network sizes), ``policy.pth`` not a state dict of exactly the network ``meta.json``
+    describes, or non-finite weights. Sizes are checked before anything is allocated.
+    """
     path = Path(path)
-    with zipfile.ZipFile(path) as zf:
-        meta = json.loads(zf.read("meta.json"))
-        if meta.get("format") != FORMAT:
-            raise ValueError(
-                f"{path}: not an activetrack policy file (format {meta.get('format')!r})"
+    try:
+        return _load_policy(path)
+    except _PolicyFileError as exc:
+        raise ValueError(f"{path}: {exc}") from exc.__cause__
+
+
+class _PolicyFileError(Exception):
+    """A problem with a policy file (turned into ``ValueError("<path>: <problem>")``)."""
+
+
+def _member(zf: zipfile.ZipFile, name: str, max_bytes: int) -> bytes:
+    """Return the member ``name`` of ``zf`` after checking its declared size."""
+    try:
+        info = zf.getinfo(name)
+    except KeyError:
+        raise _PolicyFileError(f"missing member {name!r} (has {zf.namelist()[:10]})") from None
+    if info.file_size > max_bytes:
+        raise _PolicyFileError(
+            f"member {name!r} is {info.file_size} bytes, more than the {max_bytes} expected"
+        )
+    try:
+        return zf.read(info)
+    except (zipfile.BadZipFile, zipfile.LargeZipFile, OSError, EOFError, ValueError) as exc:
+        raise _PolicyFileError(f"member {name!r} is corrupt ({exc})") from exc
+    except (RuntimeError, NotImplementedError) as exc:  # encrypted, unknown compression
+        raise _PolicyFileError(f"member {name!r} cannot be read ({exc})") from exc
+
+
+def _load_policy(path: Path) -> LearnedPolicy:
+    if not path.is_file():
+        raise _PolicyFileError("no such file")
+    try:
+        zf = zipfile.ZipFile(path)
+    except (zipfile.BadZipFile, zipfile.LargeZipFile, OSError, EOFError, ValueError) as exc:
+        raise _PolicyFileError(f"not a policy.zip (not a readable zip file: {exc})") from exc
+    with zf:
+        try:
+            meta = json.loads(_member(zf, "meta.json", MAX_META_BYTES))
+        except (UnicodeDecodeError, json.JSONDecodeError, RecursionError) as exc:
+            raise _PolicyFileError(f"meta.json is not valid JSON ({exc})") from exc
+        obs_space, act_space, net = _check_meta(meta)
+        shapes = net.expected_state_shapes(obs_space.shape[0], act_space.shape[0])
+        numel = sum(math.prod(s) for s in shapes.values())
+        if numel > MAX_PARAMETERS:
+            raise _PolicyFileError(
+                f"the network has {numel} parameters, more than {MAX_PARAMETERS}"
             )
-        state = torch.load(io.BytesIO(zf.read("policy.pth")), map_location="cpu", weights_only=True)
-    policy = build_policy(
-        _box_from_dict(meta["observation_space"]),
-        _box_from_dict(meta["action_space"]),
-        NetConfig.from_dict(meta["net"]),
-    )
+        # float32 weights plus the pickle and zip structure of torch.save.
+        raw = _member(zf, "policy.pth", 8 * numel + 1_000_000)
+    try:
+        state = torch.load(io.BytesIO(raw), map_location="cpu", weights_only=True)
+    except Exception as exc:  # torch raises many types for a corrupt file
+        raise _PolicyFileError(f"policy.pth is not a torch state dict ({exc})") from exc
+    _check_state(state, shapes)
+    policy = build_policy(obs_space, act_space, net)
     policy.load_state_dict(state)
     return LearnedPolicy(policy, meta, name=path.name)
+
+
+def _check_meta(meta: Any) -> tuple[gym.spaces.Box, gym.spaces.Box, NetConfig]:
+    """Return the spaces and network of a policy file's metadata after checking them."""
+    if not isinstance(meta, dict):
+        raise _PolicyFileError(f"meta.json must hold a JSON object, got {type(meta).__name__}")
+    if meta.get("format") != FORMAT:
+        raise _PolicyFileError(f"not an activetrack policy file (format {meta.get('format')!r})")
+    for key in ("net", "observation_space", "action_space"):
+        if key not in meta:
+            raise _PolicyFileError(f"meta.json has no {key!r}")
+    if meta.get("view", "shared") not in VIEWS:
+        raise _PolicyFileError(f"meta.json: view must be one of {VIEWS}, got {meta['view']!r}")
+    if not isinstance(meta.get("scenario", {}), dict):
+        raise _PolicyFileError("meta.json: scenario must be a JSON object")
+    obs_space = _space_from_meta(meta["observation_space"], "observation_space")
+    act_space = _space_from_meta(meta["action_space"], "action_space")
+    try:
+        net = NetConfig.from_dict(meta["net"])
+    except (TypeError, ValueError) as exc:
+        raise _PolicyFileError(f"meta.json: net: {exc}") from exc
+    if net.action_gain is not None and act_space.shape[0] % 2:
+        raise _PolicyFileError("meta.json: a saturated mean needs an even action size")
+    return obs_space, act_space, net
+
+
+def _space_from_meta(d: Any, key: str) -> gym.spaces.Box:
+    """Return the flat float Box saved by :func:`_box_to_dict` under ``key``, checked."""
+    where = f"meta.json: {key}"
+    if not isinstance(d, dict) or not {"low", "high", "shape", "dtype"} <= d.keys():
+        raise _PolicyFileError(f"{where} must be an object with low, high, shape and dtype")
+    shape = d["shape"]
+    if (
+        not isinstance(shape, list)
+        or len(shape) != 1
+        or not isinstance(shape[0], int)
+        or isinstance(shape[0], bool)
+        or not 1 <= shape[0] <= MAX_SPACE_SIZE
+    ):
+        raise _PolicyFileError(
+            f"{where}: shape must be [n] with 1 <= n <= {MAX_SPACE_SIZE}, got {shape!r}"
+        )
+    if d["dtype"] not in ("float32", "float64"):
+        raise _PolicyFileError(f"{where}: dtype must be float32 or float64, got {d['dtype']!r}")
+    bounds = []
+    for name in ("low", "high"):
+        v = d[name]
+        if (
+            not isinstance(v, list)
+            or len(v) != shape[0]
+            or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v)
+            or any(math.isnan(x) for x in v)
+        ):
+            raise _PolicyFileError(f"{where}: {name} must be a list of {shape[0]} numbers")
+        try:
+            bounds.append(np.asarray(v, dtype=d["dtype"]))
+        except (OverflowError, ValueError) as exc:
+            raise _PolicyFileError(f"{where}: {name} is out of range ({exc})") from exc
+    if np.any(bounds[0] > bounds[1]):
+        raise _PolicyFileError(f"{where}: low must not exceed high")
+    return gym.spaces.Box(bounds[0], bounds[1], dtype=np.dtype(d["dtype"]))
+
+
+def _check_state(state: Any, shapes: dict[str, tuple[int, ...]]) -> None:
+    """Check that ``state`` holds exactly the finite float tensors of the given shapes."""
+    if not isinstance(state, dict):
+        raise _PolicyFileError(f"policy.pth must hold a state dict, got {type(state).__name__}")
+    missing = sorted(set(shapes) - set(state))
+    extra = sorted(set(state) - set(shapes), key=str)
+    if missing or extra:
+        raise _PolicyFileError(
+            "policy.pth does not match the network of meta.json "
+            f"(missing {missing[:5]}, unexpected {extra[:5]})"
+        )
+    for key, want in shapes.items():
+        t = state[key]
+        if not isinstance(t, torch.Tensor) or not t.is_floating_point():
+            raise _PolicyFileError(f"policy.pth: {key} is not a float tensor")
+        if tuple(t.shape) != want:
+            raise _PolicyFileError(
+                f"policy.pth: {key} has shape {tuple(t.shape)}, the network of meta.json "
+                f"needs {want}"
+            )
+        if not bool(torch.isfinite(t).all()):
+            raise _PolicyFileError(f"policy.pth: {key} holds NaN or infinite weights")

@@ -23,13 +23,13 @@ timesteps train the critic only (the actor's parameters and ``log_std`` are froz
 then PPO trains everything, by default with a smaller learning rate.
 
 Outputs in ``out_dir``: ``policy.zip`` (the single-file policy that ``evaluate`` loads),
-``model.zip`` (the SB3 model, to resume), ``checkpoints/`` (CheckpointCallback), ``tb/``
+``model.zip`` (the SB3 model, to resume), ``checkpoints/`` (every ``checkpoint_every``
+timesteps), ``tb/``
 (TensorBoard), ``config.json`` (everything needed to rerun, seed included).
 """
 
 from __future__ import annotations
 
-import json
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -41,25 +41,44 @@ from stable_baselines3 import PPO
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList, CheckpointCallback
 from stable_baselines3.common.vec_env import VecEnv, VecMonitor, VecNormalize
 
-from activetrack.train.networks import DEFAULT_NET, NetConfig, TrackingPolicy
-from activetrack.train.policy_io import load_policy, save_policy
+from activetrack.files import RunOutputs, atomic_path, prepare_output_dir
+from activetrack.train.networks import DEFAULT_NET, LOG_STD_RANGE, NetConfig, TrackingPolicy
+from activetrack.train.policy_io import VIEWS, load_policy, save_policy
 from activetrack.train.sb3_vecenv import make_shared_vec_env
-from activetrack.train.utils import DEFAULT_THREADS, configure_torch, seed_everything
+from activetrack.train.utils import (
+    DEFAULT_THREADS,
+    check_bool,
+    check_choice,
+    check_float,
+    check_int,
+    configure_torch,
+    seed_everything,
+)
 
 #: Validation episodes for model selection use seeds from here (disjoint from evaluation).
 VALIDATION_SEED = 500_000
+LR_SCHEDULES = ("constant", "linear")
+BACKENDS = ("batched", "parallel")
+#: Bounds of the counts: timesteps, environment copies, rollout slots per copy and in all.
+MAX_TIMESTEPS, MAX_COPIES, MAX_ROLLOUT = 10**10, 1024, 1_000_000
+#: What a PPO run writes in its output folder (folders end in "/").
+OUTPUTS = ("policy.zip", "model.zip", "config.json", "checkpoints/", "tb/")
 
 
 @dataclass
 class PPOConfig:
     """Hyper-parameters of a PPO run (SB3 names; ``n_steps`` is per slot).
 
+    Every field is checked and converted on construction (ValueError naming it):
+    counts are integers in range, ``gamma`` in (0, 1], ``gae_lambda`` in [0, 1],
+    ``learning_rate``, ``clip_range``, ``max_grad_norm`` and ``target_kl`` (or None) > 0,
+    coefficients >= 0, everything finite.
+
     Attributes:
         total_timesteps: agent-steps to train for (a slot step counts once; one env step
             of the shared view is M timesteps).
         n_copies: environment copies (the shared view has ``n_copies * M`` slots).
-        lr_schedule: ``"constant"`` or ``"linear"`` (decays to 0 over the PPO phase; late
-            updates at a constant 3e-4 destabilized PPO from scratch on ``paper``).
+        lr_schedule: ``"constant"`` or ``"linear"`` (decays to 0 over the PPO phase).
         critic_warmup: timesteps of critic-only training before PPO (warm start only).
         log_std_init: if set, overrides the initial log std (also of a warm start).
         eval_every, eval_episodes: every ``eval_every`` timesteps, evaluate the
@@ -95,6 +114,45 @@ class PPOConfig:
     backend: str = "batched"
     net: NetConfig = field(default_factory=lambda: DEFAULT_NET)
 
+    def __post_init__(self) -> None:
+        # Every field checked and converted here, once: ValueError naming the field.
+        c = self
+        c.total_timesteps = check_int("total_timesteps", c.total_timesteps, 1, MAX_TIMESTEPS)
+        c.n_copies = check_int("n_copies", c.n_copies, 1, MAX_COPIES)
+        # SB3 normalizes advantages over a batch, which needs at least two samples.
+        c.n_steps = check_int("n_steps", c.n_steps, 2, MAX_ROLLOUT)
+        c.batch_size = check_int("batch_size", c.batch_size, 2, MAX_ROLLOUT)
+        if c.n_steps * c.n_copies > MAX_ROLLOUT:
+            raise ValueError(
+                f"n_steps * n_copies (the rollout) must be at most {MAX_ROLLOUT}, got "
+                f"{c.n_steps} * {c.n_copies}"
+            )
+        c.n_epochs = check_int("n_epochs", c.n_epochs, 1, 10_000)
+        c.learning_rate = check_float("learning_rate", c.learning_rate, 0, 1, low_open=True)
+        c.lr_schedule = check_choice("lr_schedule", c.lr_schedule, LR_SCHEDULES)
+        c.gamma = check_float("gamma", c.gamma, 0, 1, low_open=True)
+        c.gae_lambda = check_float("gae_lambda", c.gae_lambda, 0, 1)
+        c.clip_range = check_float("clip_range", c.clip_range, 0, low_open=True)
+        c.ent_coef = check_float("ent_coef", c.ent_coef, 0)
+        c.vf_coef = check_float("vf_coef", c.vf_coef, 0)
+        c.max_grad_norm = check_float("max_grad_norm", c.max_grad_norm, 0, low_open=True)
+        if c.target_kl is not None:
+            c.target_kl = check_float("target_kl", c.target_kl, 0, low_open=True)
+        c.normalize_reward = check_bool("normalize_reward", c.normalize_reward)
+        c.critic_warmup = check_int("critic_warmup", c.critic_warmup, 0, MAX_TIMESTEPS)
+        if c.log_std_init is not None:
+            c.log_std_init = check_float("log_std_init", c.log_std_init, *LOG_STD_RANGE)
+        c.checkpoint_every = check_int("checkpoint_every", c.checkpoint_every, 0, MAX_TIMESTEPS)
+        c.eval_every = check_int("eval_every", c.eval_every, 0, MAX_TIMESTEPS)
+        c.eval_episodes = check_int("eval_episodes", c.eval_episodes, 1, 100_000)
+        c.keep_best = check_bool("keep_best", c.keep_best)
+        c.view = check_choice("view", c.view, VIEWS)
+        c.backend = check_choice("backend", c.backend, BACKENDS)
+        if isinstance(c.net, dict):
+            c.net = NetConfig.from_dict(c.net)
+        if not isinstance(c.net, NetConfig):
+            raise ValueError(f"net must be a NetConfig, got {c.net!r}")
+
     def to_dict(self) -> dict[str, Any]:
         """Return JSON-friendly values."""
         d = asdict(self)
@@ -127,6 +185,16 @@ class TqdmCallback(BaseCallback):
 
     def _on_training_end(self) -> None:
         self.bar.close()
+
+
+class AtomicCheckpointCallback(CheckpointCallback):
+    """SB3's ``CheckpointCallback`` (model only) writing each checkpoint atomically."""
+
+    def _on_step(self) -> bool:
+        if self.n_calls % self.save_freq == 0:
+            with atomic_path(self._checkpoint_path(extension="zip")) as tmp:
+                self.model.save(tmp)
+        return True
 
 
 class ValidationCallback(BaseCallback):
@@ -217,8 +285,6 @@ def build_ppo(
     kwargs = config.net.policy_kwargs()
     if config.log_std_init is not None:
         kwargs["log_std_init"] = config.log_std_init
-    if config.lr_schedule not in ("constant", "linear"):
-        raise ValueError(f"lr_schedule must be 'constant' or 'linear', got {config.lr_schedule!r}")
     lr = config.learning_rate
     # SB3 calls a schedule with the fraction of the current learn() call still to go.
     schedule = lr if config.lr_schedule == "constant" else (lambda remaining: remaining * lr)
@@ -295,19 +361,30 @@ def train_ppo(
     init: str | Path | None = None,
     progress: bool = False,
     threads: int = DEFAULT_THREADS,
+    overwrite: bool = False,
     **overrides: Any,
 ) -> PPOResult:
     """Train PPO (from scratch, or from the policy file ``init``); return the result.
 
-    With ``out_dir`` it writes ``policy.zip``, ``model.zip``, ``config.json``,
-    ``checkpoints/`` and ``tb/`` there. Deterministic for a given seed (with ``threads=1``,
-    the default).
+    With ``out_dir`` (a folder, or the :class:`~activetrack.files.RunOutputs` of one
+    prepared with :data:`OUTPUTS`) it writes ``policy.zip``, ``model.zip``,
+    ``config.json``, ``checkpoints/`` and ``tb/`` there. The folder is checked before
+    training (a folder holding results needs ``overwrite``); the three files are committed
+    together at the end, so a failed run leaves the previous ones. Deterministic for a
+    given seed (with ``threads=1``, the default).
     """
     cfg = config or PPOConfig()
+    if not isinstance(cfg, PPOConfig):
+        raise TypeError(f"config must be a PPOConfig, got {type(cfg).__name__}")
+    outputs = None
+    if isinstance(out_dir, RunOutputs):
+        outputs = out_dir
+    elif out_dir is not None:
+        outputs = prepare_output_dir(out_dir, OUTPUTS, overwrite)
     configure_torch(threads)
     seed_everything(seed)
     t0 = time.perf_counter()
-    out = Path(out_dir) if out_dir is not None else None
+    out = outputs.folder if outputs is not None else None
     venv = make_training_env(
         scenario,
         cfg.n_copies,
@@ -324,7 +401,7 @@ def train_ppo(
         callbacks.append(TqdmCallback(cfg.total_timesteps))
     if out is not None and cfg.checkpoint_every > 0:
         callbacks.append(
-            CheckpointCallback(
+            AtomicCheckpointCallback(
                 save_freq=max(1, cfg.checkpoint_every // venv.num_envs),
                 save_path=str(out / "checkpoints"),
                 name_prefix="ppo",
@@ -358,8 +435,7 @@ def train_ppo(
     if validation is not None and cfg.keep_best and validation.best_state is not None:
         model.policy.load_state_dict(validation.best_state)
     policy_path = None
-    if out is not None:
-        out.mkdir(parents=True, exist_ok=True)
+    if outputs is not None:
         train_config = {
             "algo": "ppo",
             "init": str(init) if init is not None else None,
@@ -373,20 +449,21 @@ def train_ppo(
         }
         kind = "ppo" if init is None else "ppo_warm"
         sc = _scenario_dict(scenario, overrides)
-        policy_path = save_policy(
-            out / "policy.zip",
-            model.policy,
-            cfg.net,
-            kind=kind,
-            scenario=sc,
-            seed=seed,
-            view=cfg.view,
-            train_config=train_config,
-        )
-        model.save(out / "model.zip")
-        (out / "config.json").write_text(
-            json.dumps({"seed": seed, "scenario": sc, **train_config}, indent=2, default=str)
-        )
+        with outputs:
+            save_policy(
+                outputs.staged("policy.zip"),
+                model.policy,
+                cfg.net,
+                kind=kind,
+                scenario=sc,
+                seed=seed,
+                view=cfg.view,
+                train_config=train_config,
+            )
+            model.save(outputs.staged("model.zip"))
+            config = {"seed": seed, "scenario": sc, **train_config}
+            outputs.write_json("config.json", config, default=str)
+            policy_path = outputs.commit()["policy.zip"]
     venv.close()
     hist = validation.history if validation is not None else []
     return PPOResult(model, policy_path, time.perf_counter() - t0, hist)

@@ -1,8 +1,10 @@
-"""The ``activetrack simulate`` command: table, results.json, trajectories.png, bad input."""
+"""The ``activetrack simulate`` command and the front door: outputs, defaults, bad input."""
 
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -82,3 +84,102 @@ def test_library_value_errors_become_exit_code_2(tmp_path, capsys):
 def test_no_command_prints_help(capsys):
     assert main([]) == 2
     assert "simulate" in capsys.readouterr().out
+
+
+TINY = ["simulate", "--planner", "rm", "--runs", "1", "--steps", "2", "--no-progress"]
+
+
+def test_bad_out_fails_before_computing(tmp_path, capsys, monkeypatch):
+    """An unusable --out is an argparse-style error before any run: no table, no results."""
+    import activetrack.baselines.cli as bcli
+
+    def never(*args, **kwargs):
+        raise AssertionError("computed before checking --out")
+
+    monkeypatch.setattr(bcli, "run_monte_carlo", never)
+    (tmp_path / "file").write_text("")
+    for out, message in [
+        ("/proc/x", "/proc/x: cannot write to this folder"),
+        (str(tmp_path / "file"), f"{tmp_path / 'file'}: exists and is not a folder"),
+    ]:
+        assert main([*TINY, "--out", out]) == 2
+        captured = capsys.readouterr()
+        assert captured.out == ""  # no table
+        assert captured.err.startswith("usage: activetrack simulate")
+        assert f"activetrack simulate: error: {message}" in captured.err
+
+
+def test_out_with_results_needs_overwrite(tmp_path, capsys):
+    out = tmp_path / "res"
+    assert main([*TINY, "--seed", "1", "--out", str(out)]) == 0
+    (out / "notes.txt").write_text("mine")
+    first = (out / "results.json").read_bytes()
+    assert (out / "trajectories.png").is_file()
+    capsys.readouterr()
+    assert main([*TINY, "--seed", "2", "--out", str(out), "--no-plot"]) == 2
+    err = capsys.readouterr().err
+    assert "already holds results (results.json, trajectories.png)" in err
+    assert "--overwrite" in err
+    assert (out / "results.json").read_bytes() == first
+    # With --overwrite and --no-plot: new results, the old figure removed, other files kept.
+    assert main([*TINY, "--seed", "2", "--out", str(out), "--no-plot", "--overwrite"]) == 0
+    assert json.loads((out / "results.json").read_text())["rm"]["seed"] == 2
+    assert not (out / "trajectories.png").exists()
+    assert (out / "notes.txt").read_text() == "mine"
+    assert sorted(p.name for p in out.iterdir()) == ["notes.txt", "results.json"]
+
+
+def test_planner_defaults_come_from_the_dataclasses():
+    """Options not given are None and the planners keep their dataclass defaults."""
+    from activetrack.baselines import GBES
+    from activetrack.baselines.cli import make_planner
+    from activetrack.cli import build_parser
+
+    args = build_parser(["simulate"]).parse_args(["simulate"])
+    assert args.gsr_tol is None and args.gsr_max_sweeps is None and args.gbes_spacing is None
+    gsr, cfg = make_planner("gsr", args)
+    assert cfg == {
+        "type": "GSR",
+        "tol": GSR().tol,
+        "max_sweeps": GSR().max_sweeps,
+        "restarts": False,
+    }
+    assert cfg["tol"] == 1e-9 and cfg["max_sweeps"] == 100  # the documented defaults
+    gbes, cfg = make_planner("gbes", args)
+    assert cfg == {"type": "GBES", "spacing": GBES().spacing} and gbes.spacing == np.pi / 200
+    args = build_parser(["simulate"]).parse_args(["simulate", "--gsr-tol", "1e-6"])
+    assert make_planner("gsr-restarts", args)[1]["tol"] == 1e-6
+
+
+def test_help_imports_no_layer_and_no_torch():
+    """``activetrack --help`` lists every command without importing the layers."""
+    code = (
+        "import sys\n"
+        "from activetrack.cli import main\n"
+        "try:\n    main(['--help'])\nexcept SystemExit:\n    pass\n"
+        "bad = [m for m in ('torch', 'activetrack.baselines', 'activetrack.train', "
+        "'stable_baselines3', 'matplotlib') if m in sys.modules]\n"
+        "print(bad, file=sys.stderr); sys.exit(1 if bad else 0)\n"
+    )
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+    for command in ("simulate", "evaluate", "train"):
+        assert command in proc.stdout
+    # simulate's own help loads the baselines only.
+    code = code.replace("['--help']", "['simulate', '--help']").replace(
+        "'activetrack.baselines', ", ""
+    )
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+    assert "--overwrite" in proc.stdout and "(default 1e-09)" in proc.stdout
+
+
+def test_summaries_are_the_layers_help():
+    """The front door's one-line summaries are what the layers' subparsers show."""
+    import argparse
+
+    from activetrack.cli import COMMANDS, build_parser
+
+    sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
+    helps = {c.dest: c.help for c in sub._choices_actions}
+    assert helps == {name: summary for name, (_, summary) in COMMANDS.items()}

@@ -135,3 +135,38 @@ def test_write_results_without_plot(rm_and_gsr, tmp_path):
     paths = write_results(rm_and_gsr, tmp_path, plot=False)
     assert set(paths) == {"results", "episodes"}
     assert not (tmp_path / "mean_trace.png").exists()
+
+
+def test_every_policy_is_checked_before_the_first_episode(tmp_path, monkeypatch):
+    pytest.importorskip("torch")
+    import activetrack.baselines.evaluation as ev
+
+    def never(*args, **kwargs):
+        raise AssertionError("an episode ran before every policy was checked")
+
+    monkeypatch.setattr(ev, "run_episode", never)
+    bad = tmp_path / "policy.zip"
+    bad.write_bytes(b"PK\x03\x04 truncated")
+    with pytest.raises(ValueError, match=f"{bad}: not a policy.zip"):
+        evaluate(["gsr", "rm", str(bad)], "paper", 1000, SEED, progress=False)
+    with pytest.raises(ValueError, match="unknown policy 'nope'"):
+        evaluate(["gsr", "nope"], "paper", 1000, SEED, progress=False)
+
+
+def test_results_in_the_folder_need_overwrite(rm_and_gsr, tmp_path, monkeypatch):
+    write_results(rm_and_gsr, tmp_path)
+    before = (tmp_path / "results.json").read_bytes()
+    with pytest.raises(ValueError, match="already holds results.*--overwrite"):
+        write_results(rm_and_gsr, tmp_path, plot=False)
+    import activetrack.baselines.evaluation as ev
+
+    def never(*args, **kwargs):
+        raise AssertionError("evaluated before checking the output folder")
+
+    monkeypatch.setattr(ev, "evaluate", never)
+    with pytest.raises(ValueError, match="already holds results"):
+        run_evaluation(["rm"], "paper", 2, SEED, out_dir=tmp_path, progress=False)
+    assert (tmp_path / "results.json").read_bytes() == before
+    paths = write_results(rm_and_gsr, tmp_path, plot=False, overwrite=True)
+    assert set(paths) == {"results", "episodes"}
+    assert not (tmp_path / "mean_trace.png").exists()  # the old figure does not stay

@@ -9,7 +9,9 @@ from dataclasses import fields
 import pytest
 
 from activetrack.cli import main
-from activetrack.train.imitation import ImitationConfig
+from activetrack.train.cli import configs
+from activetrack.train.imitation import DAGGER_DEFAULTS, ImitationConfig
+from activetrack.train.networks import NetConfig
 from activetrack.train.policy_io import load_policy
 from activetrack.train.ppo import PPOConfig
 
@@ -139,35 +141,140 @@ def test_evaluate_rejects_a_policy_of_another_team_size(trained, capsys):
     assert "trained on observations of size 23, this scenario has 29" in capsys.readouterr().err
 
 
-def _subparser(parser: argparse.ArgumentParser, *names: str) -> argparse.ArgumentParser:
-    for name in names:
-        action = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
-        parser = action.choices[name]
-    return parser
+def _parse(*argv: str) -> argparse.Namespace:
+    from activetrack.cli import build_parser
+
+    return build_parser(["train"]).parse_args(["train", *argv])
 
 
 @pytest.mark.parametrize(
-    "method,cls", [("bc", ImitationConfig), ("dagger", ImitationConfig), ("ppo", PPOConfig)]
+    "method,expected",
+    [
+        ("bc", ImitationConfig()),
+        ("dagger", ImitationConfig(**DAGGER_DEFAULTS)),
+        ("ppo", PPOConfig()),
+    ],
 )
-def test_cli_defaults_are_the_config_defaults(method, cls):
-    """The defaults shown by --help are those the library uses."""
-    from activetrack.cli import build_parser
+def test_cli_defaults_are_the_config_defaults(method, expected):
+    """Options not given are None on the command line: the configs keep their own defaults."""
+    args = _parse(method, "--out", "x")
+    for f in fields(type(expected)):
+        dest = {"learning_rate": "lr"}.get(f.name, f.name)
+        if hasattr(args, dest) and f.name not in ("normalize_reward", "keep_best"):
+            assert getattr(args, dest) is None, f.name  # no second literal in argparse
+    cfg, net = configs(args)
+    assert cfg == expected and net == NetConfig()
+    assert DAGGER_DEFAULTS["iterations"] > 1
 
-    sub = _subparser(build_parser(), "train", method)
-    defaults = {f.name: f.default for f in fields(cls) if f.name != "net"}
-    checked = 0
-    for action in sub._actions:
-        name = (
-            {"lr": "learning_rate"}.get(action.dest, action.dest)
-            if cls is PPOConfig
-            else action.dest
+
+def test_given_options_reach_the_configs():
+    cfg, net = configs(
+        _parse(
+            "ppo",
+            "--out",
+            "x",
+            "--lr",
+            "1e-4",
+            "--gamma",
+            "0.9",
+            "--target-kl",
+            "0.02",
+            "--hidden",
+            "8",
+            "4",
+            "--action-gain",
+            "none",
+            "--log-std-init",
+            "-2",
+            "--no-normalize-reward",
+            "--keep-best",
         )
-        if name in defaults and action.default is not None:
-            if method == "dagger" and name in ("iterations", "epochs"):
-                continue  # DAgger's own defaults, asserted below
-            assert action.default == defaults[name], name
-            checked += 1
-    assert checked >= 3
-    if method == "dagger":
-        args = sub.parse_args(["--out", "x"])
-        assert args.iterations > 1
+    )
+    assert cfg.learning_rate == 1e-4 and cfg.gamma == 0.9 and cfg.target_kl == 0.02
+    assert cfg.normalize_reward is False and cfg.keep_best is True
+    assert net == NetConfig(hidden=(8, 4), action_gain=None, log_std_init=-2.0)
+    assert cfg.net == net and cfg.log_std_init == -2.0
+    cfg, _ = configs(_parse("bc", "--out", "x", "--epochs", "3"))
+    assert cfg.epochs == 3 and cfg.iterations == 1
+
+
+@pytest.mark.parametrize(
+    "argv,message",
+    [
+        (["ppo", "--gamma", "5"], "gamma must be a number in (0, 1]"),
+        (["ppo", "--gamma", "nan"], "gamma"),
+        (["ppo", "--clip-range", "-1"], "clip_range must be a number finite and > 0"),
+        (["ppo", "--target-kl", "-1"], "target_kl"),
+        (["ppo", "--lr", "inf"], "learning_rate"),
+        (["ppo", "--n-steps", "1"], "n_steps must be an integer in [2,"),
+        (["ppo", "--total-timesteps", "0"], "total_timesteps"),
+        (["ppo", "--action-gain", "-5"], "action_gain"),
+        (["bc", "--action-gain", "0"], "action_gain"),
+        (["bc", "--hidden", "20000"], "hidden must be an integer in [1, 4096]"),
+        (["bc", "--hidden", "0"], "hidden"),
+        (["bc", "--episodes", "0"], "episodes"),
+        (["bc", "--lr", "nan"], "lr"),
+        (
+            ["dagger", "--episodes", "2", "--iterations", "3"],
+            "iterations must be an integer in [1, 2]",
+        ),
+        (["dagger", "--beta", "2"], "beta"),
+        (["bc", "--threads", "0"], "threads"),
+    ],
+)
+def test_bad_options_are_argparse_errors_before_training(argv, message, tmp_path, capsys):
+    out = tmp_path / "out"
+    assert main(["train", *argv, "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"usage: activetrack train {argv[0]}")
+    assert f"activetrack train {argv[0]}: error: " in err and message in err
+    assert not out.exists()  # nothing created: checked before the output folder
+
+
+def test_bad_init_file_fails_before_training(tmp_path, capsys):
+    bad = tmp_path / "policy.zip"
+    bad.write_bytes(b"random bytes")
+    out = tmp_path / "out"
+    assert main(["train", "ppo", "--init", str(bad), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert f"activetrack train ppo: error: {bad}: not a policy.zip" in err
+    assert "Traceback" not in err and not out.exists()
+
+
+def test_evaluate_reports_a_bad_policy_file_before_any_episode(tmp_path, capsys):
+    bad = tmp_path / "bad.zip"
+    bad.write_bytes(b"PK\x03\x04" + bytes(100))
+    code = main(
+        [
+            "evaluate",
+            "--policy",
+            "gsr",
+            "--policy",
+            str(bad),
+            "--episodes",
+            "100000",
+            "--no-progress",
+        ]
+    )
+    assert code == 2
+    captured = capsys.readouterr()
+    assert captured.out == ""
+    assert f"activetrack evaluate: error: {bad}: not a policy.zip" in captured.err
+
+
+def test_train_refuses_results_unless_overwrite(trained, tmp_path, capsys):
+    before = (trained / "bc" / "policy.zip").read_bytes()
+    argv = ["train", "bc", "--episodes", "1", "--epochs", "1", "--hidden", "8", "--no-progress"]
+    assert main([*argv, "--out", str(trained / "bc")]) == 2
+    assert "already holds results (policy.zip, config.json, tb/)" in capsys.readouterr().err
+    assert (trained / "bc" / "policy.zip").read_bytes() == before
+    # --overwrite replaces what train owns, even a PPO run's leftovers, and nothing else.
+    out = tmp_path / "run"
+    out.mkdir()
+    for name in ("model.zip", "policy.zip", "notes.txt"):
+        (out / name).write_text("old")
+    (out / "checkpoints").mkdir()
+    (out / "checkpoints" / "ppo_100_steps.zip").write_text("old")
+    assert main([*argv, "--out", str(out), "--overwrite"]) == 0
+    assert sorted(p.name for p in out.iterdir()) == ["config.json", "notes.txt", "policy.zip", "tb"]
+    assert load_policy(out / "policy.zip").meta["net"]["hidden"] == [8]

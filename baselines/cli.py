@@ -1,0 +1,260 @@
+"""The baselines' commands: ``activetrack simulate`` and ``activetrack evaluate``.
+
+- ``simulate``: the closed-loop comparison of planners of Section V (Monte Carlo over
+  seeds), a results table, ``OUT/results.json`` and a Fig. 4 style ``OUT/trajectories.png``;
+- ``evaluate``: policies (planners or trained ``policy.zip`` files) in the environment on
+  held-out seeds (:mod:`activetrack.baselines.evaluation`).
+
+The planners' options take their defaults from the planner dataclasses (:class:`GSR`,
+:class:`GBES`) and ``evaluate``'s from :func:`run_evaluation`. Everything is checked
+before computing: the planners' settings, the policies and the output folder (one that
+holds results needs ``--overwrite``); the outputs are committed together.
+"""
+
+from __future__ import annotations
+
+import argparse
+import inspect
+from pathlib import Path
+from typing import Any
+
+from activetrack.baselines import GBES, GSR, RandomMotion, evaluation, run_monte_carlo, simulation
+from activetrack.baselines.evaluation import run_evaluation
+from activetrack.cli import (
+    COMMANDS,
+    add_output_arguments,
+    field_default,
+    nonneg_int,
+    positive_float,
+    positive_int,
+)
+from activetrack.files import prepare_output_dir
+from activetrack.scenarios import PRESETS, make_scenario
+
+#: Planner names accepted by ``simulate --planner``, and those run when none is given.
+PLANNERS = ("gsr", "gsr-restarts", "gbes", "rm")
+DEFAULT_PLANNERS = ("gsr", "gbes", "rm")
+#: The files ``simulate`` writes in its output folder.
+SIMULATE_OUTPUTS = ("results.json", "trajectories.png")
+#: ``simulate``'s own defaults (no library function has them).
+SIMULATE_RUNS, SIMULATE_OUT = 20, "results/simulate"
+
+
+def add_parsers(sub: argparse._SubParsersAction) -> None:
+    """Add ``simulate`` and ``evaluate`` to the ``activetrack`` subparsers ``sub``."""
+    _add_simulate(sub)
+    _add_evaluate(sub)
+
+
+def _add_simulate(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "simulate",
+        help=COMMANDS["simulate"][1],
+        description=(
+            "Run every --planner on --runs seeds (seed, seed+1, ...) of a scenario, print mean "
+            "trace and RMSE with 95% intervals of the mean, and write OUT/results.json and "
+            "OUT/trajectories.png (the first seed, Fig. 4 style)."
+        ),
+    )
+    p.add_argument("--scenario", default="paper", choices=sorted(PRESETS), help="preset")
+    p.add_argument(
+        "--planner",
+        action="append",
+        choices=PLANNERS,
+        help=f"planner to run (repeatable; default: {', '.join(DEFAULT_PLANNERS)})",
+    )
+    p.add_argument(
+        "--runs",
+        type=positive_int,
+        default=SIMULATE_RUNS,
+        help="number of seeds (default %(default)s)",
+    )
+    seed = inspect.signature(simulation.run_monte_carlo).parameters["seed"].default
+    p.add_argument("--seed", type=nonneg_int, default=seed, help="first seed (default %(default)s)")
+    add_output_arguments(p, Path(SIMULATE_OUT))
+    p.add_argument(
+        "--steps", type=positive_int, default=None, help="override the scenario's n_steps"
+    )
+    p.add_argument(
+        "--gbes-spacing",
+        type=positive_float,
+        default=None,
+        help="GBES grid spacing on the curves ADB in metres "
+        f"(default {field_default(GBES, 'spacing'):.6g}, pi/200, the paper's)",
+    )
+    p.add_argument(
+        "--gsr-tol",
+        type=float,
+        default=None,
+        help=f"GSR relative tolerance (default {field_default(GSR, 'tol'):g})",
+    )
+    p.add_argument(
+        "--gsr-max-sweeps",
+        type=positive_int,
+        default=None,
+        help=f"GSR sweep cap (default {field_default(GSR, 'max_sweeps')})",
+    )
+    p.add_argument("--no-plot", action="store_true", help="do not write trajectories.png")
+    p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    p.set_defaults(func=_cmd_simulate, parser=p)
+
+
+def _given(**kwargs: Any) -> dict[str, Any]:
+    """Return the keyword arguments that were given (not None): the rest keep their defaults."""
+    return {k: v for k, v in kwargs.items() if v is not None}
+
+
+def make_planner(name: str, args: argparse.Namespace) -> tuple[Any, dict[str, Any]]:
+    """Return the planner called ``name`` and its configuration (JSON-friendly).
+
+    Options not given keep the planner dataclass's defaults; a bad value raises the
+    planner's ``ValueError``.
+    """
+    if name in ("gsr", "gsr-restarts"):
+        gsr = GSR(
+            **_given(tol=args.gsr_tol, max_sweeps=args.gsr_max_sweeps),
+            restarts=name == "gsr-restarts",
+        )
+        cfg = {"tol": gsr.tol, "max_sweeps": gsr.max_sweeps, "restarts": gsr.restarts}
+        return gsr, {"type": "GSR", **cfg}
+    if name == "gbes":
+        gbes = GBES(**_given(spacing=args.gbes_spacing))
+        return gbes, {"type": "GBES", "spacing": gbes.spacing}
+    if name == "rm":
+        return RandomMotion(), {"type": "RandomMotion"}
+    raise ValueError(f"unknown planner {name!r}: use one of {list(PLANNERS)}")
+
+
+def format_table(summaries: dict[str, dict[str, Any]]) -> str:
+    """Return the results as an aligned text table (means with 95% intervals)."""
+    head = ("planner", "mean trace (m^2) [95% CI]", "RMSE (m) [95% CI]", "NEES", "plan ms (median)")
+    rows = [head]
+    for name, s in summaries.items():
+        lo, hi = s["mean_trace_ci95"]
+        rlo, rhi = s["rmse_ci95"]
+        rows.append(
+            (
+                name,
+                f"{s['mean_trace']:.4f} [{lo:.4f}, {hi:.4f}]",
+                f"{s['rmse']:.4f} [{rlo:.4f}, {rhi:.4f}]",
+                f"{s['nees']:.2f}",
+                f"{s['plan_time_ms_median']:.2f}",
+            )
+        )
+    widths = [max(len(r[k]) for r in rows) for k in range(len(head))]
+    lines = ["  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)) for r in rows]
+    lines.insert(1, "  ".join("-" * w for w in widths))
+    return "\n".join(lines)
+
+
+def json_default(obj: Any) -> Any:
+    """Return a JSON-friendly version of numpy scalars and arrays."""
+    import numpy as np
+
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    raise TypeError(f"not JSON serializable: {type(obj).__name__}")
+
+
+def _cmd_simulate(args: argparse.Namespace) -> int:
+    # Everything checked before computing: scenario, planners, output folder.
+    overrides = {} if args.steps is None else {"n_steps": args.steps}
+    scenario = make_scenario(args.scenario, **overrides)
+    names = list(dict.fromkeys(args.planner or DEFAULT_PLANNERS))
+    planners, configs = {}, {}
+    for name in names:
+        planners[name], configs[name] = make_planner(name, args)
+    outputs = prepare_output_dir(args.out, SIMULATE_OUTPUTS, args.overwrite)
+
+    results = run_monte_carlo(
+        scenario, planners, args.runs, args.seed, progress=not args.no_progress
+    )
+    summaries = {}
+    for name, res in results.items():
+        s = res.summary()
+        s["seed"] = args.seed
+        s["config"] = {"planner": configs[name], "scenario": scenario.to_dict()}
+        summaries[name] = s
+    last = args.seed + args.runs - 1
+    print(
+        f"scenario {scenario.name!r}, {args.runs} runs (seeds {args.seed}..{last}), "
+        f"{scenario.n_steps} steps"
+    )
+    print(format_table(summaries))
+    with outputs:
+        outputs.write_json("results.json", summaries, default=json_default)
+        if not args.no_plot:
+            from activetrack.baselines.plotting import plot_trajectories
+
+            first = {name: res.records[0] for name, res in results.items()}
+            plot_trajectories(
+                first,
+                outputs.staged("trajectories.png"),
+                title=f"scenario {scenario.name!r}, seed {args.seed}",
+            )
+        written = outputs.commit()
+    for path in written.values():
+        print(f"wrote {path}")
+    return 0
+
+
+def _add_evaluate(sub: argparse._SubParsersAction) -> None:
+    defaults = inspect.signature(evaluation.run_evaluation).parameters
+    p = sub.add_parser(
+        "evaluate",
+        help=COMMANDS["evaluate"][1],
+        description=(
+            "Run every --policy (gsr, gsr-restarts, gbes, rm, or the path of a policy.zip "
+            "written by 'activetrack train') in the environment on the same --episodes seeds "
+            "(seed, seed+1, ...). Prints mean trace and RMSE with 95% intervals, mean return "
+            "and the ratio of mean trace to GSR's (GSR is evaluated as the reference even if "
+            "not listed); writes OUT/results.json (a list, one object per policy), "
+            "OUT/episodes.json and OUT/mean_trace.png. Every policy file is checked before "
+            "the first episode."
+        ),
+    )
+    p.add_argument(
+        "--scenario",
+        default=defaults["scenario"].default,
+        choices=sorted(PRESETS),
+        help="preset (default %(default)s)",
+    )
+    p.add_argument(
+        "--policy",
+        action="append",
+        required=True,
+        metavar="NAME|PATH",
+        help="gsr, gsr-restarts, gbes, rm or PATH/policy.zip (repeatable)",
+    )
+    p.add_argument(
+        "--episodes",
+        type=positive_int,
+        default=defaults["episodes"].default,
+        help="number of seeds (default %(default)s)",
+    )
+    p.add_argument(
+        "--seed",
+        type=nonneg_int,
+        default=defaults["seed"].default,
+        help="first held-out seed (default %(default)s)",
+    )
+    add_output_arguments(p, None)
+    p.add_argument("--no-plot", action="store_true", help="do not write mean_trace.png")
+    p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    p.set_defaults(func=_cmd_evaluate, parser=p)
+
+
+def _cmd_evaluate(args: argparse.Namespace) -> int:
+    run_evaluation(
+        args.policy,
+        args.scenario,
+        args.episodes,
+        args.seed,
+        out_dir=args.out,
+        plot=not args.no_plot,
+        progress=not args.no_progress,
+        overwrite=args.overwrite,
+    )
+    return 0
