@@ -19,7 +19,7 @@ install: $(STAMP)
 
 demo: $(STAMP)
 	$(VENV)/bin/activetrack simulate --scenario paper --planner gsr --planner gbes --planner rm \
-		--runs $(DEMO_RUNS) --seed 0 --out results/demo
+		--runs $(DEMO_RUNS) --seed 0 --out results/demo --overwrite
 
 test: $(STAMP)
 	$(PY) -m pytest -q -p no:cacheprovider

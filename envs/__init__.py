@@ -4,12 +4,14 @@
   sensor (:mod:`activetrack.envs.tracking_env`);
 - :class:`CentralizedTrackingEnv`: the Gymnasium single-agent view, registered as
   ``activetrack/ActiveTracking-v0`` when this package is imported;
-- :func:`apply_actions`, :func:`actions_to_reach` and :mod:`activetrack.envs.features`:
-  the pure batched kernels the environments are assembled from;
 - :class:`BatchedActiveTracking`: N copies over a leading axis, a Gymnasium ``VectorEnv``;
+- :func:`policy_step`: step an env by an expert (positions) or a learned policy (actions);
 - :func:`record_video`: an episode as a GIF/MP4.
 
-Configuration is the core :class:`activetrack.Scenario`: ``scenario="paper"`` or
+All of them adapt the core's closed loop, :class:`activetrack.world.World`; the sensor
+motion (:func:`apply_actions`, :func:`actions_to_reach`) and the observation encoding
+(:mod:`activetrack.observation`) live in the core too. Configuration is the core
+:class:`activetrack.Scenario`: ``scenario="paper"`` or
 ``"homogeneous"`` plus any field override, e.g.
 ``parallel_env(scenario="homogeneous", n_sensors=8, rho=1.5)``.
 

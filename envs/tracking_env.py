@@ -8,7 +8,7 @@ timeline:
    exactly what a planner plans from (so :meth:`reset` ends with a prediction);
 2. the actions move the sensors within their reach ``r_i = vmax_i dt`` and outside the
    ``rho_i`` disk around the *predicted* target (eq. 13-16,
-   :func:`~activetrack.envs.dynamics.apply_actions`);
+   :func:`~activetrack.sensor_motion.apply_actions`);
 3. the true target moves (eq. 2), every sensor measures (eq. 4), the EKF updates
    (eq. 11), with the step's ``n + 2M`` standard normals drawn from the episode
    generator, in the same order as the simulation runner;

@@ -167,7 +167,7 @@ class BatchedCopies:
 
     def __init__(self, n_copies: int, scenario: Any = "paper", **overrides: Any) -> None:
         from activetrack.envs import BatchedActiveTracking
-        from activetrack.envs.features import observation_bounds
+        from activetrack.observation import observation_bounds
 
         self.env = BatchedActiveTracking(n_copies, scenario, autoreset_mode="Disabled", **overrides)
         m = self.env.n_sensors

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from activetrack.envs.dynamics import actions_to_reach, apply_actions
+from activetrack.sensor_motion import actions_to_reach, apply_actions, move_to
 
 
 def _brute_nearest_feasible(q, c, r, rho, n=400):
@@ -136,3 +136,37 @@ def test_actions_to_reach_caps_and_handles_zero_reach():
     goal = np.array([[3.0, 4.0], [7.0, 5.0]])
     a = actions_to_reach(goal, sensors, np.array([1.0, 0.0]))
     np.testing.assert_allclose(a, [[0.6, 0.8], [0.0, 0.0]], atol=1e-15)
+
+
+def test_huge_finite_actions_keep_their_direction():
+    # |a| overflows to inf for a = [1.7e308, 1.7e308]; the move must still be a full step
+    # along the diagonal (independent: the unit vector (1, 1) / sqrt 2).
+    sensors = np.array([[10.0, 0.0], [0.0, 10.0]])
+    a = np.array([[1.7e308, 1.7e308], [-1e300, 0.0]])
+    new, _ = apply_actions(a, sensors, np.zeros(2), np.array([1.0, 2.0]), np.zeros(2))
+    np.testing.assert_allclose(new[0], [10.0 + 2**-0.5, 2**-0.5], rtol=0, atol=1e-14)
+    np.testing.assert_allclose(new[1], [-2.0, 10.0], rtol=0, atol=1e-14)
+
+
+def test_move_to_caps_the_step_and_keeps_feasible_positions():
+    rng = np.random.default_rng(5)
+    sensors = rng.uniform(-10, 10, (200, 2))
+    target = np.array([0.5, -0.5])
+    r, rho = np.full(200, 1.5), np.full(200, 1.0)
+    proposals = sensors + rng.uniform(-4, 4, (200, 2))
+    new, projected = move_to(proposals, sensors, target, r, rho)
+    step = np.hypot(*(new - sensors).T)
+    assert np.all(step <= r * (1 + 1e-12))
+    dist = np.hypot(*(new - target).T)
+    reachable = np.hypot(*(sensors - target).T) + r >= rho
+    assert np.all(dist[reachable] >= rho[reachable] * (1 - 1e-12))
+    # Within reach and outside rho: unchanged, bit for bit.
+    ok = (np.hypot(*(proposals - sensors).T) <= r) & (np.hypot(*(proposals - target).T) > rho)
+    np.testing.assert_array_equal(new[ok], proposals[ok])
+    # Beyond reach, outside rho after capping: on the speed circle along the proposal.
+    far = ~ok & ~projected
+    direction = (proposals - sensors)[far] / np.hypot(*(proposals - sensors)[far].T)[:, None]
+    np.testing.assert_allclose(new[far], sensors[far] + r[far, None] * direction, atol=1e-12)
+    # A sensor with r = 0 stays where it is.
+    stay, _ = move_to(proposals[:3], sensors[:3], target, np.zeros(3), np.zeros(3))
+    np.testing.assert_array_equal(stay, sensors[:3])

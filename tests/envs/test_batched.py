@@ -1,4 +1,4 @@
-"""The batched environment against N single environments, and Gymnasium's autoreset modes."""
+"""The batched environment against the longhand loop per copy, and Gymnasium's autoreset modes."""
 
 import numpy as np
 import pytest
@@ -6,54 +6,41 @@ from gymnasium.vector import AutoresetMode
 
 from activetrack.envs.batched import BatchedActiveTracking
 from activetrack.envs.centralized import CentralizedTrackingEnv
+from tests.envs.reference import ReferenceLoop
 
 TOL = dict(rtol=1e-12, atol=1e-12)
-
-
-def run_singles(singles, actions):
-    """Step single envs with NEXT_STEP autoreset semantics; return obs, rewards, flags."""
-    obs, rew, term, trunc = [], [], [], []
-    for i, e in enumerate(singles):
-        if e.done:
-            o, _ = e.reset()
-            r, te, tr = 0.0, False, False
-        else:
-            o, r, te, tr, _ = e.step(actions[i])
-        e.done = te or tr
-        obs.append(o)
-        rew.append(r)
-        term.append(te)
-        trunc.append(tr)
-    return np.stack(obs), np.array(rew), np.array(term), np.array(trunc)
 
 
 @pytest.mark.parametrize(
     "scenario, overrides",
     [("paper", {"n_steps": 7}), ("homogeneous", {"n_steps": 5, "n_sensors": 2})],
 )
-def test_batched_reproduces_single_envs_across_autoresets(scenario, overrides):
-    N, seed = 5, 42
+def test_next_step_autoreset_follows_the_longhand_loop_per_copy(scenario, overrides):
+    # Each copy against the independent longhand loop seeded seed + i: rewards, and the
+    # NEXT_STEP protocol (the step after an episode ends returns reward 0 and the first
+    # observation of the next episode, whose draws continue the copy's generator).
+    N, seed = 4, 42
+    overrides = {**overrides, "target_init": "fixed"}
     batched = BatchedActiveTracking(N, scenario=scenario, noise_block=3, **overrides)
-    singles = [CentralizedTrackingEnv(scenario, **overrides) for _ in range(N)]
-    obs_b, _ = batched.reset(seed=seed)
-    obs_s = np.stack([e.reset(seed=seed + i)[0] for i, e in enumerate(singles)])
-    for e in singles:
-        e.done = False
-    np.testing.assert_allclose(obs_b, obs_s, **TOL)
+    sc = batched.scenario
+    refs = [ReferenceLoop(sc, seed + i) for i in range(N)]
+    batched.reset(seed=seed)
     rng = np.random.default_rng(0)
     m = batched.n_sensors
+    done = np.zeros(N, dtype=bool)
     for _ in range(23):  # crosses several episode ends
-        a = rng.uniform(-1.3, 1.3, (N, 2 * m))  # some beyond the unit disk
-        obs_b, rew_b, term_b, trunc_b, _ = batched.step(a)
-        obs_s, rew_s, term_s, trunc_s = run_singles(singles, a)
-        np.testing.assert_allclose(obs_b, obs_s, **TOL)
-        np.testing.assert_allclose(rew_b, rew_s, **TOL)
-        np.testing.assert_array_equal(term_b, term_s)
-        np.testing.assert_array_equal(trunc_b, trunc_s)
-        for i, e in enumerate(singles):
-            np.testing.assert_allclose(batched.x_true[i], e.env.x_true, **TOL)
-            np.testing.assert_allclose(batched.P_pred[i], e.env.P_pred, **TOL)
-            np.testing.assert_allclose(batched.sensors[i], e.env.sensors, **TOL)
+        a = rng.uniform(-0.5, 0.5, (N, m, 2))
+        _, rew, term, trunc, _ = batched.step(a.reshape(N, -1))
+        for i, ref in enumerate(refs):
+            if done[i]:
+                ref.restart()
+                assert rew[i] == 0.0 and not trunc[i]
+            else:
+                assert rew[i] == pytest.approx(ref.step(a[i]), rel=1e-9)
+            np.testing.assert_allclose(batched.sensors[i], ref.sensors, rtol=0, atol=1e-12)
+            np.testing.assert_allclose(batched.P_pred[i], ref.P_pred, rtol=1e-8, atol=1e-12)
+        assert not term.any()
+        done = trunc.copy()
 
 
 def test_same_step_autoreset_reports_final_observation():
