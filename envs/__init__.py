@@ -6,7 +6,8 @@
   ``activetrack/ActiveTracking-v0`` when this package is imported;
 - :func:`apply_actions`, :func:`actions_to_reach` and :mod:`activetrack.envs.features`:
   the pure batched kernels the environments are assembled from;
-- :class:`BatchedActiveTracking`: N copies over a leading axis, a Gymnasium ``VectorEnv``;
+- :class:`BatchedActiveTracking`: N copies over a leading axis, a Gymnasium ``VectorEnv``
+  (the id's ``vector_entry_point``: ``gymnasium.make_vec(ENV_ID, num_envs=N)``);
 - :func:`record_video`: an episode as a GIF/MP4.
 
 Configuration is the core :class:`activetrack.Scenario`: ``scenario="paper"`` or
@@ -14,7 +15,9 @@ Configuration is the core :class:`activetrack.Scenario`: ``scenario="paper"`` or
 ``parallel_env(scenario="homogeneous", n_sensors=8, rho=1.5)``.
 
 Importing the package only registers the ids (entry-point strings); the environment
-modules load on first use of a name below (PEP 562), so registering is cheap.
+modules load on first use of a name below (PEP 562), so registering is cheap. From a
+fresh interpreter, ``gymnasium.make("activetrack.envs:activetrack/ActiveTracking-v0")``
+imports this package first (Gymnasium has no plugin auto-loading).
 """
 
 from __future__ import annotations
