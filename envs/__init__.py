@@ -4,7 +4,8 @@
   sensor (:mod:`activetrack.envs.tracking_env`);
 - :class:`CentralizedTrackingEnv`: the Gymnasium single-agent view, registered as
   ``activetrack/ActiveTracking-v0`` when this package is imported;
-- :class:`BatchedActiveTracking`: N copies over a leading axis, a Gymnasium ``VectorEnv``;
+- :class:`BatchedActiveTracking`: N copies over a leading axis, a Gymnasium ``VectorEnv``
+  (the id's ``vector_entry_point``: ``gymnasium.make_vec(ENV_ID, num_envs=N)``);
 - :func:`policy_step`: step an env by an expert (positions) or a learned policy (actions);
 - :func:`record_video`: an episode as a GIF/MP4.
 
@@ -16,7 +17,9 @@ motion (:func:`apply_actions`, :func:`actions_to_reach`) and the observation enc
 ``parallel_env(scenario="homogeneous", n_sensors=8, rho=1.5)``.
 
 Importing the package only registers the ids (entry-point strings); the environment
-modules load on first use of a name below (PEP 562), so registering is cheap.
+modules load on first use of a name below (PEP 562), so registering is cheap. From a
+fresh interpreter, ``gymnasium.make("activetrack.envs:activetrack/ActiveTracking-v0")``
+imports this package first (Gymnasium has no plugin auto-loading).
 """
 
 from __future__ import annotations

@@ -1,35 +1,46 @@
 """Registration of the tracking environments with Gymnasium and PettingZoo.
 
 Registration stores only entry-point strings, so it imports no environment code; the
-environment modules are imported by ``make``. :func:`register_envs` is idempotent.
+environment modules are imported by ``make``. :func:`register_envs` is idempotent and
+runs when :mod:`activetrack.envs` is imported (the core package ``activetrack`` registers
+nothing, so it imports neither Gymnasium nor PettingZoo).
+
+Gymnasium (>= 1.0) has no plugin entry points: an id is known once the module that
+registers it is imported. From a fresh interpreter, name the module in the id, and
+``gymnasium.make`` / ``gymnasium.make_vec`` import it first::
+
+    gymnasium.make("activetrack.envs:activetrack/ActiveTracking-v0")
 """
 
 from __future__ import annotations
 
 ENV_ID = "activetrack/ActiveTracking-v0"
 GYM_ENTRY_POINT = "activetrack.envs.centralized:CentralizedTrackingEnv"
+VECTOR_ENTRY_POINT = "activetrack.envs.batched:BatchedActiveTracking"
 PARALLEL_ENTRY_POINT = "activetrack.envs.tracking_env:parallel_env"
 AEC_ENTRY_POINT = "activetrack.envs.tracking_env:env"
 
 
 def register_envs() -> None:
-    """Register ``activetrack/ActiveTracking-v0`` with Gymnasium (centralized view) and,
-    where PettingZoo has a registry (>= 1.27), as its parallel and AEC environments.
+    """Register ``activetrack/ActiveTracking-v0`` with Gymnasium and PettingZoo.
+
+    Gymnasium: the centralized single-agent view for ``gymnasium.make`` and
+    :class:`~activetrack.envs.batched.BatchedActiveTracking` as the ``vector_entry_point``,
+    so ``gymnasium.make_vec(ENV_ID, num_envs=N)`` steps N copies in one batched call.
+    PettingZoo (>= 1.27, the first with a registry): the parallel and AEC games, for
+    ``pettingzoo.make("parallel" | "aec", ENV_ID)``.
 
     No ``max_episode_steps``: the environment truncates after ``scenario.n_steps``
     itself, so ``gymnasium.make`` adds no second ``TimeLimit``.
     """
     import gymnasium
+    import pettingzoo
 
     if ENV_ID not in gymnasium.registry:
-        gymnasium.register(id=ENV_ID, entry_point=GYM_ENTRY_POINT)
-    try:
-        import pettingzoo
-
-        register = pettingzoo.register
-    except (ImportError, AttributeError):  # PettingZoo without a registry
-        return
+        gymnasium.register(
+            id=ENV_ID, entry_point=GYM_ENTRY_POINT, vector_entry_point=VECTOR_ENTRY_POINT
+        )
     if ENV_ID not in pettingzoo.parallel_registry:
-        register("parallel", ENV_ID, entry_point=PARALLEL_ENTRY_POINT)
+        pettingzoo.register("parallel", ENV_ID, entry_point=PARALLEL_ENTRY_POINT)
     if ENV_ID not in pettingzoo.aec_registry:
-        register("aec", ENV_ID, entry_point=AEC_ENTRY_POINT)
+        pettingzoo.register("aec", ENV_ID, entry_point=AEC_ENTRY_POINT)

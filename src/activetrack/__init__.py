@@ -5,7 +5,12 @@ The core (this package) holds the paper's mathematics and no RL: target motion m
 covariance objective (eq. 12, 17-19), the analytic single-sensor optimum (Section IV-A),
 the planning problem and scenario presets. The layers ``activetrack.envs``,
 ``activetrack.baselines`` and ``activetrack.train`` build on it, in that order.
+
+Importing this package imports none of those layers, nor Gymnasium or PettingZoo: the
+environment ids are registered by ``import activetrack.envs``.
 """
+
+import importlib.metadata as _metadata
 
 from activetrack.ekf import ExtendedKalmanFilter
 from activetrack.motion import (
@@ -29,7 +34,10 @@ from activetrack.solver import (
     solve_single_sensor_batch,
 )
 
-__version__ = "0.1.0"
+try:
+    __version__: str = _metadata.version("activetrack")
+except _metadata.PackageNotFoundError:  # running from a source tree that was never installed
+    __version__ = "0+unknown"
 
 __all__ = [
     "PRESETS",
@@ -51,18 +59,3 @@ __all__ = [
     "solve_single_sensor",
     "solve_single_sensor_batch",
 ]
-
-
-def _register_envs() -> None:
-    """Register ``activetrack/ActiveTracking-v0`` with Gymnasium (and PettingZoo's registry).
-
-    Only entry-point strings are registered: no environment code is imported here.
-    """
-    try:
-        from activetrack.envs.registration import register_envs
-    except ImportError:  # the envs layer or its dependencies are not installed
-        return
-    register_envs()
-
-
-_register_envs()

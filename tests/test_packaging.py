@@ -1,0 +1,161 @@
+"""The distribution: version, license and citation metadata agree, and the built wheel
+installs and runs in a fresh virtual environment (not an editable install) with its type
+hints visible to a type checker (PEP 561).
+"""
+
+from __future__ import annotations
+
+import importlib.metadata
+import shutil
+import subprocess
+import sys
+import zipfile
+from pathlib import Path
+
+import pytest
+
+import activetrack
+
+tomllib = pytest.importorskip("tomllib")  # Python >= 3.11
+yaml = pytest.importorskip("yaml")
+
+ROOT = Path(__file__).resolve().parents[1]
+PROJECT = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+SUBPACKAGES = ["envs", "baselines", "train"]
+
+
+def test_version_comes_from_the_distribution_metadata():
+    assert activetrack.__version__ == PROJECT["version"]
+    assert activetrack.__version__ == importlib.metadata.version("activetrack")
+
+
+def test_license_file_matches_the_declared_license():
+    assert PROJECT["license"] == "MIT" and PROJECT["license-files"] == ["LICENSE"]
+    text = (ROOT / "LICENSE").read_text()
+    assert text.startswith("MIT License") and "WITHOUT WARRANTY OF ANY KIND" in text
+
+
+def test_citation_cff_cites_this_version_and_the_paper():
+    cff = yaml.safe_load((ROOT / "CITATION.cff").read_text())
+    # The keys CFF 1.2.0 requires, and the ones GitHub shows.
+    assert cff["cff-version"] == "1.2.0"
+    assert cff["type"] == "software" and cff["message"] and cff["title"] and cff["authors"]
+    assert str(cff["version"]) == PROJECT["version"]
+    assert cff["license"] == PROJECT["license"]
+    papers = [r for r in cff["references"] if r["type"] == "conference-paper"]
+    assert len(papers) == 1
+    paper = papers[0]
+    assert [a["family-names"] for a in paper["authors"]] == ["Zhou", "Roumeliotis"]
+    assert paper["year"] == 2009 and "bearing" in paper["title"]
+
+
+def test_py_typed_marker_is_in_the_top_package():
+    marker = Path(activetrack.__file__).with_name("py.typed")
+    assert marker.is_file()
+
+
+def _copy_source(dest: Path) -> Path:
+    """Copy the project without its virtual environment, caches and build outputs."""
+    ignore = shutil.ignore_patterns(
+        ".git", ".venv", "results", "build", "dist", "*.egg-info", "__pycache__", ".*_cache",
+        ".benchmarks", "*.pyc",
+    )  # fmt: skip
+    return Path(shutil.copytree(ROOT, dest, ignore=ignore))
+
+
+def _run(args: list, cwd: Path, timeout: float = 900) -> str:
+    out = subprocess.run(args, cwd=cwd, capture_output=True, text=True, timeout=timeout)
+    assert out.returncode == 0, f"{args} failed:\n{out.stdout[-3000:]}\n{out.stderr[-3000:]}"
+    return out.stdout
+
+
+SMOKE = """
+import importlib.metadata, sys, sysconfig
+import activetrack
+
+assert "gymnasium" not in sys.modules and "pettingzoo" not in sys.modules
+assert activetrack.__file__.startswith(sysconfig.get_paths()["purelib"]), activetrack.__file__
+assert activetrack.__version__ == importlib.metadata.version("activetrack") == {version!r}
+
+import activetrack.baselines
+import activetrack.envs
+import gymnasium as gym
+
+env = activetrack.envs.parallel_env(scenario="homogeneous", n_sensors=2, n_steps=3)
+obs, infos = env.reset(seed=0)
+for k in range(3):
+    assert env.agents == ["sensor_0", "sensor_1"], (k, env.agents)
+    actions = {{a: env.action_space(a).sample() for a in env.agents}}
+    obs, rewards, terminations, truncations, infos = env.step(actions)
+assert all(truncations.values()) and not env.agents  # the episode ends after n_steps
+single = gym.make("activetrack.envs:activetrack/ActiveTracking-v0", n_steps=2)
+print("ok", single.reset(seed=0)[0].shape)
+"""
+
+# One wrong use per sub-package: a checker that reads the hints reports each line.
+USER_CODE = """
+import numpy as np
+
+from activetrack import make_scenario
+from activetrack.baselines import mean_ci
+from activetrack.envs import ENV_ID
+from activetrack.train import seed_everything
+
+a: int = make_scenario("paper")
+b: int = ENV_ID
+c: str = mean_ci(np.ones(3))
+d: str = seed_everything(0)
+"""
+
+
+@pytest.mark.slow
+def test_built_wheel_installs_and_runs_in_a_fresh_venv(tmp_path):
+    src = _copy_source(tmp_path / "src")
+    dist = tmp_path / "dist"
+    # sdist first, then the wheel built from the sdist: both must carry everything.
+    _run([sys.executable, "-m", "build", "--outdir", str(dist), str(src)], cwd=tmp_path)
+    (wheel,) = dist.glob("activetrack-*.whl")
+    (sdist,) = dist.glob("activetrack-*.tar.gz")
+    version = PROJECT["version"]
+
+    names = set(zipfile.ZipFile(wheel).namelist())
+    info = f"activetrack-{version}.dist-info"
+    assert "activetrack/py.typed" in names
+    # The mapped sub-packages land under activetrack/, so the one marker covers them.
+    assert {f"activetrack/{p}/__init__.py" for p in SUBPACKAGES} <= names
+    assert f"{info}/licenses/LICENSE" in names
+    metadata = zipfile.ZipFile(wheel).read(f"{info}/METADATA").decode()
+    assert f"\nVersion: {version}\n" in metadata and "\nLicense-Expression: MIT\n" in metadata
+    sdist_names = set(subprocess.run(
+        ["tar", "-tzf", str(sdist)], capture_output=True, text=True, check=True
+    ).stdout.split())  # fmt: skip
+    top = f"activetrack-{version}"
+    assert {f"{top}/LICENSE", f"{top}/src/activetrack/py.typed"} <= sdist_names
+
+    venv = tmp_path / "venv"
+    _run([sys.executable, "-m", "venv", str(venv)], cwd=tmp_path)
+    py = venv / "bin" / "python"
+    _run([str(py), "-m", "pip", "install", "--quiet", str(wheel)], cwd=tmp_path)
+    work = tmp_path / "elsewhere"  # run away from the source tree
+    work.mkdir()
+    out = _run([str(py), "-c", SMOKE.format(version=version)], cwd=work)
+    assert out.split() == ["ok", "(69,)"]  # paper preset: M = 3 sensors, M (5 + 6M) = 69
+    assert _run([str(venv / "bin" / "activetrack"), "--version"], cwd=work).split() == [
+        "activetrack",
+        version,
+    ]
+    assert "usage: activetrack" in _run([str(venv / "bin" / "activetrack"), "--help"], cwd=work)
+
+    # PEP 561: mypy (from this environment) type-checks user code against the installed
+    # wheel; without the marker it would treat activetrack as untyped and report nothing.
+    user = work / "user.py"
+    user.write_text(USER_CODE.lstrip("\n"))
+    args = [sys.executable, "-m", "mypy", "--python-executable", str(py), "--config-file", "",
+            "--no-incremental", "--follow-imports", "silent", "--ignore-missing-imports",
+            "--no-error-summary", str(user)]  # fmt: skip
+    out = subprocess.run(args, cwd=work, capture_output=True, text=True, timeout=900)
+    errors = [line for line in out.stdout.splitlines() if ": error:" in line]
+    lines = USER_CODE.lstrip("\n").splitlines()
+    expected = [i + 1 for i, line in enumerate(lines) if line[:2] in ("a:", "b:", "c:", "d:")]
+    assert [int(e.split(":")[1]) for e in errors] == expected, out.stdout + out.stderr
+    assert all("Incompatible types in assignment" in e for e in errors), out.stdout
