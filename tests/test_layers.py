@@ -52,6 +52,5 @@ def test_envs_import_registers_with_gymnasium_and_pettingzoo(tmp_path):
     assert {"gymnasium", "pettingzoo"} <= loaded_after_import("activetrack.envs", tmp_path)
 
 
-@pytest.mark.xfail(reason="needs scipy.stats imported lazily in activetrack.baselines", strict=True)
 def test_baselines_import_leaves_scipy_stats_unloaded(tmp_path):
     assert "scipy.stats" not in loaded_after_import("activetrack.baselines", tmp_path)
