@@ -33,12 +33,20 @@ if TYPE_CHECKING:
     from .batched import BatchedActiveTracking
     from .centralized import CentralizedTrackingEnv
     from .dynamics import actions_to_reach, apply_actions
-    from .tracking_env import TrackingParallelEnv, env, parallel_env, policy_step, raw_env
+    from .tracking_env import (
+        TrackingAECEnv,
+        TrackingParallelEnv,
+        env,
+        parallel_env,
+        policy_step,
+        raw_env,
+    )
     from .video import record_video
 
 _LAZY = {
     "BatchedActiveTracking": ".batched",
     "CentralizedTrackingEnv": ".centralized",
+    "TrackingAECEnv": ".tracking_env",
     "TrackingParallelEnv": ".tracking_env",
     "actions_to_reach": ".dynamics",
     "apply_actions": ".dynamics",
@@ -53,6 +61,7 @@ __all__ = [
     "BatchedActiveTracking",
     "ENV_ID",
     "CentralizedTrackingEnv",
+    "TrackingAECEnv",
     "TrackingParallelEnv",
     "actions_to_reach",
     "apply_actions",

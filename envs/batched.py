@@ -41,7 +41,7 @@ from activetrack.scenarios import Scenario, make_scenario
 from activetrack.validation import FloatArray
 from activetrack.world import World
 
-from .tracking_env import check_no_options
+from .tracking_env import check_no_options, real_array
 
 StepReturn = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]
 
@@ -169,16 +169,13 @@ class BatchedActiveTracking(VectorEnv):
         if not self._started:
             raise RuntimeError("call reset() before step()")
         N, m = self.num_envs, self.n_sensors
-        a = np.asarray(value)
+        a = real_array(name, value)
         if a.shape == (N, 2 * m):
             a = a.reshape(N, m, 2)
         if a.shape != (N, m, 2):
             raise ValueError(
                 f"{name} must have shape ({N}, {m}, 2) or ({N}, {2 * m}), got {a.shape}"
             )
-        if a.dtype.kind not in "iuf":
-            raise ValueError(f"{name} must be real numbers, got dtype {a.dtype}")
-        a = a.astype(np.float64, copy=False)
         if not np.isfinite(a).all():
             bad = np.argwhere(~np.isfinite(a).all(-1))
             raise ValueError(

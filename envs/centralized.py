@@ -31,7 +31,13 @@ from activetrack.problem import PlanningProblem
 from activetrack.scenarios import Scenario
 from activetrack.validation import FloatArray
 
-from .tracking_env import RENDER_MODES, TrackingParallelEnv, check_no_options, positions_array
+from .tracking_env import (
+    RENDER_MODES,
+    TrackingParallelEnv,
+    check_no_options,
+    positions_array,
+    real_array,
+)
 
 
 class CentralizedTrackingEnv(gym.Env):
@@ -81,20 +87,16 @@ class CentralizedTrackingEnv(gym.Env):
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         """Move the team by the joint action ``(2M,)``, advance one step, and observe."""
         self.env._running_agents()
-        a = np.asarray(action)
-        if (
-            a.shape != (2 * self.n_sensors,)
-            or a.dtype.kind not in "iuf"
-            or np.count_nonzero(np.isfinite(a)) != a.size
-        ):
-            raise ValueError(self._bad_action(action))
-        a = a.astype(np.float64, copy=False).reshape(self.n_sensors, 2)
+        a = real_array("action", action)
+        if a.shape != (2 * self.n_sensors,) or np.count_nonzero(np.isfinite(a)) != a.size:
+            raise ValueError(self._bad_action(a))
+        a = a.reshape(self.n_sensors, 2)
         return self._out(*self.env.step_arrays(a))
 
     def step_positions(self, positions: FloatArray) -> tuple[np.ndarray, float, bool, bool, dict]:
         """Move the sensors to absolute next positions (M, 2) or (2M,) (an expert's plan)."""
         agents = self.env._running_agents()
-        p = np.asarray(positions)
+        p = real_array("positions", positions)
         p = positions_array(p.reshape(-1, 2) if p.shape == (2 * self.n_sensors,) else p, agents)
         return self._out(*self.env._advance(self.env.world.step, p))
 
@@ -118,15 +120,9 @@ class CentralizedTrackingEnv(gym.Env):
             "max_trace_exceeded": exceeded,
         }
 
-    def _bad_action(self, action: Any) -> str:
-        try:
-            a = np.asarray(action)
-        except (TypeError, ValueError):
-            return f"action must be {2 * self.n_sensors} real numbers, got {action!r}"
+    def _bad_action(self, a: np.ndarray) -> str:
         if a.shape != (2 * self.n_sensors,):
             return f"action must have shape ({2 * self.n_sensors},), got {a.shape}"
-        if a.dtype.kind not in "iuf":
-            return f"action must be real numbers, got dtype {a.dtype}"
         bad = np.flatnonzero(~np.isfinite(a.reshape(self.n_sensors, 2)).all(-1))
         names = [self.env.possible_agents[i] for i in bad]
         return f"action of agent(s) {names} must be finite (no NaN or inf), got {a.tolist()}"

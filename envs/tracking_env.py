@@ -53,7 +53,8 @@ import gymnasium
 import numpy as np
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
-from pettingzoo.utils.conversions import parallel_to_aec
+from pettingzoo.utils.conversions import parallel_to_aec_wrapper
+from pettingzoo.utils.wrappers import OrderEnforcingWrapper
 
 from activetrack import observation
 from activetrack.problem import PlanningProblem
@@ -99,7 +100,7 @@ class TrackingParallelEnv(ParallelEnv):
     """
 
     metadata: dict[str, Any] = {
-        "name": "activetrack_v0",
+        "name": "activetrack/ActiveTracking-v0",  # the registered id
         "render_modes": list(RENDER_MODES),
         "render_fps": 10,
         "is_parallelizable": True,
@@ -375,15 +376,40 @@ def positions_array(positions: dict[str, Any] | FloatArray, agents: list[str]) -
     """Return next positions as a finite float64 (M, 2) array, or raise ValueError."""
     if isinstance(positions, dict):
         return actions_array(positions, agents, "position")
-    p = np.asarray(positions)
-    if p.dtype.kind not in "iuf":
-        raise ValueError(f"positions must be real numbers, got {positions!r}")
-    p = p.astype(np.float64, copy=False)
+    p = real_array("positions", positions)
     if p.shape != (len(agents), 2):
         raise ValueError(f"positions must have shape ({len(agents)}, 2), got {p.shape}")
     if not np.isfinite(p).all():
         raise ValueError(f"positions must be finite (no NaN or inf), got {p.tolist()}")
     return p
+
+
+def real_array(name: str, value: Any) -> FloatArray:
+    """Return ``value`` as a float64 array of real numbers, or raise ValueError naming ``name``.
+
+    Rejects what ``np.asarray`` cannot shape (ragged sequences), and bool, complex, object
+    and string data, which would otherwise be cast silently (a complex action would lose
+    its imaginary part).
+    """
+    try:
+        a = np.asarray(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be an array of real numbers, got {value!r}") from None
+    if a.dtype.kind not in "iuf":
+        raise ValueError(f"{name} must be real numbers, got {value!r}")
+    return a.astype(np.float64, copy=False)
+
+
+def agent_action(agent: str, value: Any, what: str = "action") -> FloatArray:
+    """Return one agent's action (or position) as a finite float64 (2,), or raise ValueError."""
+    a = real_array(f"{what} of agent {agent!r}", value)
+    if a.shape != (2,):
+        raise ValueError(f"{what} of agent {agent!r} must have shape (2,), got {a.shape}")
+    if not np.all(np.isfinite(a)):
+        raise ValueError(
+            f"{what} of agent {agent!r} must be finite (no NaN or inf), got {a.tolist()}"
+        )
+    return a.astype(np.float64, copy=False)
 
 
 def _bad_action_message(actions: Any, agents: list[str], what: str = "action") -> str:
@@ -393,24 +419,12 @@ def _bad_action_message(actions: Any, agents: list[str], what: str = "action") -
     for ag in agents:
         if ag not in actions:
             return f"missing {what} for agent {ag!r} (live agents: {agents})"
-        a = np.asarray(actions[ag]) if _array_like(actions[ag]) else None
-        if a is None or a.dtype.kind not in "iuf":
-            return f"{what} of agent {ag!r} must be 2 real numbers, got {actions[ag]!r}"
-        if a.shape != (2,):
-            return f"{what} of agent {ag!r} must have shape (2,), got {a.shape}"
-        if not np.all(np.isfinite(a)):
-            return f"{what} of agent {ag!r} must be finite (no NaN or inf), got {a.tolist()}"
+        try:
+            agent_action(ag, actions[ag], what)
+        except ValueError as exc:
+            return str(exc)
     extra = sorted(set(map(str, actions)) - set(agents))
     return f"{what}s given for agents that are not live: {extra}" if extra else f"invalid {what}s"
-
-
-def _array_like(value: Any) -> bool:
-    """Return whether ``np.asarray(value)`` works (ragged sequences raise)."""
-    try:
-        np.asarray(value)
-    except (ValueError, TypeError):
-        return False
-    return True
 
 
 def policy_step(env: Any, policy: Any, observations: dict[str, np.ndarray]) -> StepReturn:
@@ -439,9 +453,41 @@ def parallel_env(
     return TrackingParallelEnv(scenario, render_mode, **overrides)
 
 
+class TrackingAECEnv(parallel_to_aec_wrapper):
+    """The tracking game as a PettingZoo ``AECEnv``: agents act one after another.
+
+    PettingZoo's conversion of :class:`TrackingParallelEnv` (the world steps once the last
+    agent of a cycle has acted), with each agent's action checked when it is given: a bad
+    action raises a ``ValueError`` naming the agent and is not stored, so the agent can
+    act again and the environment stays usable.
+    """
+
+    def __init__(
+        self, scenario: str | Scenario = "paper", render_mode: str | None = None, **overrides: Any
+    ) -> None:
+        super().__init__(TrackingParallelEnv(scenario, render_mode, **overrides))
+
+    def step(self, action: Any) -> None:
+        """Record the selected agent's action; the last agent's action advances the world."""
+        agent = self.agent_selection
+        if not (self.terminations[agent] or self.truncations[agent]):
+            action = agent_action(agent, action)
+        super().step(action)
+
+    def __getattr__(self, name: str) -> Any:
+        # The parallel env's extras (planning_problem, step_positions, world, ...).
+        if name.startswith("_"):
+            raise AttributeError(name)
+        return getattr(self.env, name)
+
+
+def raw_env(
+    scenario: str | Scenario = "paper", render_mode: str | None = None, **overrides: Any
+) -> TrackingAECEnv:
+    """Return the unwrapped AEC env (PettingZoo's convention: ``env()`` wraps ``raw_env()``)."""
+    return TrackingAECEnv(scenario, render_mode, **overrides)
+
+
 def env(scenario: str | Scenario = "paper", render_mode: str | None = None, **overrides: Any):
-    """Return the AEC version (PettingZoo's ``parallel_to_aec``, order-enforced)."""
-    return parallel_to_aec(TrackingParallelEnv(scenario, render_mode, **overrides))
-
-
-raw_env = TrackingParallelEnv
+    """Return the AEC game, order-enforced (PettingZoo's ``OrderEnforcingWrapper``)."""
+    return OrderEnforcingWrapper(raw_env(scenario, render_mode, **overrides))
