@@ -19,8 +19,8 @@ Autoreset follows Gymnasium's modes (https://farama.org/Vector-Autoreset-Mode):
 observation with reward 0), ``SAME_STEP`` (the copy is reset within the step; the last
 observation is in ``infos["final_obs"]``) and ``DISABLED`` (``reset(options={"reset_mask":
 mask})`` resets chosen copies; stepping a copy whose episode has ended raises). Libraries
-that do not follow NEXT_STEP's extra reset step, such as TorchRL's ``GymWrapper``, need
-``autoreset_mode="SameStep"`` or ``"Disabled"``. :meth:`step_agents` gives the per-agent
+that reset ended copies themselves, such as TorchRL's ``GymWrapper``, need
+``autoreset_mode="Disabled"`` (tested). :meth:`step_agents` gives the per-agent
 observations for parameter-sharing learners (slots = copies x agents);
 :meth:`step_positions` steps with absolute next positions (N, M, 2), an expert's plan
 for every copy (:meth:`planning_problem`).

@@ -73,6 +73,34 @@ def test_torchrl_gymenv_rollout_matches_the_environment():
     assert not td["next", "terminated"].any()
 
 
+def test_torchrl_gymwrapper_over_the_batched_env_with_autoreset_disabled():
+    # TorchRL's GymWrapper resets a VectorEnv's ended copies itself (reset_mask): the
+    # batched env must run with autoreset_mode="Disabled", as its docstring says. (With
+    # "SameStep" TorchRL's own extra reset() after reset(seed=...) loses the seeding.)
+    GymWrapper = pytest.importorskip("torchrl.envs").GymWrapper
+    n, steps = 3, 2 * CONFIG["n_steps"] + 2  # crosses two episode ends
+    env = GymWrapper(BatchedActiveTracking(n, autoreset_mode="Disabled", **CONFIG))
+    assert env.batch_size == (n,)
+    m = CONFIG["n_sensors"]
+    actions = fixed_actions(steps, n * 2 * m).reshape(steps, n, 2 * m)
+    td0 = env.reset(seed=7)
+    td = env.rollout(
+        steps, policy=replaying(actions, "action"), auto_reset=False, tensordict=td0,
+        break_when_any_done=False,
+    )  # fmt: skip
+
+    ref = BatchedActiveTracking(n, autoreset_mode="SameStep", **CONFIG)
+    obs, _ = ref.reset(seed=7)
+    out = [ref.step(a) for a in actions]
+    assert td.batch_size == (n, steps)
+    np.testing.assert_allclose(td["observation"][:, 0].numpy(), obs, **F32)
+    rewards = np.stack([o[1] for o in out], axis=1)
+    np.testing.assert_allclose(td["next", "reward"].squeeze(-1).numpy(), rewards, **F32)
+    truncated = np.stack([o[3] for o in out], axis=1)
+    assert td["next", "truncated"].squeeze(-1).numpy().tolist() == truncated.tolist()
+    assert truncated.sum() == 2 * n
+
+
 def test_torchrl_pettingzoo_wrapper_rollout_matches_the_environment():
     PettingZooWrapper = pytest.importorskip("torchrl.envs.libs.pettingzoo").PettingZooWrapper
     with warnings.catch_warnings():
