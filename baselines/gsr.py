@@ -94,9 +94,16 @@ class GSRBatchResult:
 
 
 def check_parameters(tol: object, max_sweeps: object) -> None:
-    """Raise ValueError unless ``tol`` is a finite number >= 0 and ``max_sweeps`` an int >= 1."""
-    if not (isinstance(tol, (int, float)) and math.isfinite(tol)) or tol < 0:
-        raise ValueError(f"tol must be a finite number >= 0, got {tol!r}")
+    """Raise ValueError unless ``tol`` is in [0, 1) and ``max_sweeps`` an int >= 1.
+
+    ``tol`` is a relative improvement: 1 or more would stop before any sweep counts.
+    """
+    if (
+        isinstance(tol, bool)
+        or not (isinstance(tol, (int, float, np.floating)) and math.isfinite(tol))
+        or not 0 <= tol < 1
+    ):
+        raise ValueError(f"tol must be a number in [0, 1), got {tol!r}")
     if not isinstance(max_sweeps, (int, np.integer)) or max_sweeps < 1:
         raise ValueError(f"max_sweeps must be an integer >= 1, got {max_sweeps!r}")
 
@@ -106,7 +113,8 @@ class GSR:
     """Gauss-Seidel relaxation planner (Section IV-B), for one problem or a batch.
 
     Attributes:
-        tol: stop when a sweep lowers the objective by at most ``tol`` times its value (>= 0).
+        tol: stop when a sweep lowers the objective by at most ``tol`` times its value, in
+            [0, 1).
         max_sweeps: at most this many sweeps per start (>= 1).
         restarts: also run from the ``starts`` and keep the best
             (:mod:`activetrack.baselines.gsr_restarts`; a batch is planned copy by copy).

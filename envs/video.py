@@ -13,6 +13,7 @@ GIF needs only Pillow; MP4 needs an imageio video backend (``pip install imageio
 from __future__ import annotations
 
 import importlib.util
+import os
 import pathlib
 from collections.abc import Callable
 from typing import Any
@@ -53,6 +54,7 @@ def record_video(
         The path written.
     """
     path = pathlib.Path(path)
+    _check_output(path)
     if env is None:
         env = TrackingParallelEnv(render_mode="rgb_array", **config)
     elif config:
@@ -85,18 +87,32 @@ def _random_policy(env: TrackingParallelEnv, seed: int | None) -> Policy:
     return act
 
 
-def _write(path: pathlib.Path, frames: list[np.ndarray], fps: float) -> None:
-    import imageio.v3 as iio
-
-    path.parent.mkdir(parents=True, exist_ok=True)
-    stack = np.stack(frames)
-    if path.suffix.lower() == ".gif":
-        # Pillow's GIF writer takes the frame duration in milliseconds; loop forever.
-        iio.imwrite(path, stack, duration=1000.0 / fps, loop=0)
-        return
-    if not any(importlib.util.find_spec(m) for m in ("imageio_ffmpeg", "av")):
+def _check_output(path: pathlib.Path) -> None:
+    """Raise before any episode runs if ``path`` cannot be written in its format."""
+    if path.suffix.lower() != ".gif" and not any(
+        importlib.util.find_spec(m) for m in ("imageio_ffmpeg", "av")
+    ):
         raise RuntimeError(
             f"cannot write a {path.suffix!r} video without a video backend: "
             "pip install 'imageio[ffmpeg]' (or 'imageio[pyav]'), or write a '.gif' instead"
         )
-    iio.imwrite(path, stack, fps=fps)
+    if path.is_dir():
+        raise ValueError(f"{path} is a folder; give a file name such as episode.gif")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    if not os.access(path.parent, os.W_OK):
+        raise ValueError(f"cannot write to {path.parent}")
+
+
+def _write(path: pathlib.Path, frames: list[np.ndarray], fps: float) -> None:
+    """Write the frames to ``path`` atomically (a temporary file renamed into place)."""
+    import imageio.v3 as iio
+
+    from activetrack.files import atomic_path
+
+    stack = np.stack(frames)
+    with atomic_path(path) as tmp:
+        if path.suffix.lower() == ".gif":
+            # Pillow's GIF writer takes the frame duration in milliseconds; loop forever.
+            iio.imwrite(tmp, stack, duration=1000.0 / fps, loop=0)
+        else:
+            iio.imwrite(tmp, stack, fps=fps)

@@ -3,8 +3,9 @@
 The expert is :class:`activetrack.baselines.policies.GSRPolicy`: at every step it solves
 the planning problem of the environment (``env.planning_problem()``) and returns the
 sensors' next positions; the label of each agent is the action that reaches its position
-(:func:`activetrack.sensor_motion.actions_to_reach`). With parameter sharing every (agent, step) pair is one
-sample ``(observation, expert action)``; the *label budget* counts them.
+(:func:`activetrack.sensor_motion.actions_to_reach`). With parameter sharing every
+(agent, step) pair is one sample ``(observation, expert action)``; the *label budget*
+counts them.
 
 - **BC** rolls out the expert for ``episodes`` episodes and regresses the network's mean
   action on the expert's (mean squared error), for ``epochs`` passes.
