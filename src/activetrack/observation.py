@@ -126,7 +126,14 @@ def global_state(target: FloatArray, sensor: FloatArray, elapsed: FloatArray | f
 
 
 def observation_bounds(n_sensors: int) -> tuple[np.ndarray, np.ndarray]:
-    """Return float32 ``(low, high)`` of one agent's observation (inf where unbounded)."""
+    """Return float32 ``(low, high)`` of one agent's observation (inf where unbounded).
+
+    Only the correlation (in [-1, 1]) and the reach and minimum distance (>= 0) have finite
+    bounds. The others have none by nature: a target that outruns the team takes the
+    relative positions anywhere, and a lost target's log standard deviations grow without
+    limit; a finite box would be a promise the dynamics do not keep (Gymnasium's checker
+    notes the infinite bounds as advisory warnings).
+    """
     low = np.full(obs_dim(n_sensors), -np.inf, dtype=np.float32)
     high = np.full(obs_dim(n_sensors), np.inf, dtype=np.float32)
     low[2], high[2] = -1.0, 1.0  # correlation coefficient
