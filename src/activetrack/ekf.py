@@ -38,6 +38,17 @@ def _numbers(a: np.ndarray) -> np.ndarray | float | complex:
     return a.item() if a.ndim == 0 else a
 
 
+#: Floor of the conditional variance ``p11 - p01^2 / p00`` of a prior's position block,
+#: relative to ``p11``: the rounding level of the stored entries, so the 2x2 Cholesky factor
+#: of a prior that is positive definite in floating point is never singular.
+_FLOOR = 1e-15
+
+
+def _at_least(a, floor):
+    """Return ``max(a, floor)`` elementwise, for Python numbers and arrays alike."""
+    return np.maximum(a, floor) if isinstance(a, np.ndarray) else max(a, floor)
+
+
 def update(
     x: FloatArray,
     P: FloatArray,
@@ -52,20 +63,28 @@ def update(
 
     Shapes: ``x`` (..., n), ``P`` (..., n, n), ``z`` and ``sensor_pos`` (..., M, 2),
     variances and ``orientation`` broadcastable to (..., M), ``mask`` (..., M) bool or None.
-    Written with elementwise 2x2 algebra (the sensor offsets as complex numbers, so one
-    filter costs few NumPy calls) because the batched environment runs it on thousands of
-    filters per call and the single environment once per step.
+    A sensor at zero distance from the estimate contributes no information (see the module
+    docstring). Written with elementwise 2x2 algebra (the sensor offsets as complex numbers,
+    so one filter costs few NumPy calls) because the batched environment runs it on
+    thousands of filters per call and the single environment once per step.
     """
     # Offsets d = p_T_hat - p_S = -p of eq. (10) as complex numbers dx + i dy, (..., M).
     d = as_complex(x[..., :2])[..., None] - as_complex(sensor_pos)
     dist = np.abs(d)
-    n2 = dist * dist
-    nu_t = measurement.wrap_angle(z[..., 1] - np.arctan2(d.imag, d.real) + orientation)
     wd = 1.0 / sigma_d2
     wt = 1.0 / sigma_theta2
     if mask is not None:
         wd = wd * mask
         wt = wt * mask
+    if not dist.all():
+        # Zero distance: no information from that sensor this step. Any positive distance
+        # keeps the arithmetic finite; its terms vanish with the weights (and d = 0).
+        seen = dist > 0.0
+        dist = np.where(seen, dist, 1.0)
+        wd = wd * seen
+        wt = wt * seen
+    n2 = dist * dist
+    nu_t = measurement.wrap_angle(z[..., 1] - np.arctan2(d.imag, d.real) + orientation)
     # Y = sum_i H_i^T R_i^{-1} H_i (eq. 12) with h_d = -p/|p|, h_theta = J p/|p|^2 (eq. 9):
     # since p p^T + (J p)(J p)^T = |p|^2 I, Y = sum_i g_i d d^T + (sum_i h_i) I with
     # h = w_theta / |p|^2 and g = (w_d - h) / |p|^2; and d d^T = (|d|^2 I + [[Re d^2,
@@ -93,38 +112,45 @@ def update(
     yyy = half - 0.5 * gsum.real
     yxy = 0.5 * gsum.imag
     bx, by = bsum.real, bsum.imag
-    # N = (I + P11 Y)^{-1}, in closed form.
+    # Square-root form. P11 = L L^T (Cholesky, L lower); K = L^T Y L; I + K = M M^T.
+    # Then (Woodbury) P11+ = L (I + K)^{-1} L^T and the posterior is
+    #   P+ = Z Z^T + blockdiag(0, S22),  Z = Pc L^{-T} M^{-T},  S22 = P22 - F F^T,
+    # with Pc = P[:, :2] and F = P21 L^{-T} (so S22 is the prior's Schur complement, the
+    # covariance of the unobserved states given the position, which the measurement
+    # leaves unchanged). Both terms are positive semidefinite: a sum, never a difference.
     p00, p01, p11 = _numbers(P[..., 0, 0]), _numbers(P[..., 0, 1]), _numbers(P[..., 1, 1])
-    m00 = 1.0 + p00 * yxx + p01 * yxy
-    m01 = p00 * yxy + p01 * yyy
-    m10 = p01 * yxx + p11 * yxy
-    m11 = 1.0 + p01 * yxy + p11 * yyy
-    det = m00 * m11 - m01 * m10
-    n00, n01, n10, n11 = m11 / det, -m01 / det, -m10 / det, m00 / det
-    # K nu = P[:, :2] N^T b.
-    vx = n00 * bx + n10 * by
-    vy = n01 * bx + n11 * by
-    # Joseph form expanded: P+ = P - Pc D Pc^T with D = A + A^T - A P11 A^T - B,
-    # A = K H restricted to the position block = N^T Y, B = K R K^T core = N^T Y N.
-    a00, a01 = n00 * yxx + n10 * yxy, n00 * yxy + n10 * yyy
-    a10, a11 = n01 * yxx + n11 * yxy, n01 * yxy + n11 * yyy
-    b00, b01, b11 = a00 * n00 + a01 * n10, a00 * n01 + a01 * n11, a10 * n01 + a11 * n11
-    # A P11 A^T
-    t00, t01 = a00 * p00 + a01 * p01, a00 * p01 + a01 * p11
-    t10, t11 = a10 * p00 + a11 * p01, a10 * p01 + a11 * p11
-    q00 = t00 * a00 + t01 * a01
-    q01 = t00 * a10 + t01 * a11
-    q11 = t10 * a10 + t11 * a11
-    # One product Pc [N^T b | D] (..., n, 3) gives the state correction and Pc D.
-    V = np.empty(np.shape(vx) + (2, 3))
-    V[..., 0, 0], V[..., 1, 0] = vx, vy
-    V[..., 0, 1] = 2.0 * a00 - q00 - b00
-    V[..., 0, 2] = V[..., 1, 1] = a01 + a10 - q01 - b01
-    V[..., 1, 2] = 2.0 * a11 - q11 - b11
-    Pc = P[..., :, :2]
-    W = Pc @ V
-    x_post = x + W[..., 0]
-    P_post = P - W[..., 1:] @ P[..., :2, :]  # Pc^T: P is symmetric; rows multiply faster
+    l00 = p00**0.5
+    l10 = p01 / l00
+    l11 = _at_least(p11 - l10 * l10, _FLOOR * p11) ** 0.5
+    yl00, yl10 = yxx * l00 + yxy * l10, yxy * l00 + yyy * l10  # Y L, first column
+    k00 = _at_least(l00 * yl00 + l10 * yl10, 0.0)
+    k01 = l11 * (yxy * l00 + yyy * l10)
+    m00 = (1.0 + k00) ** 0.5
+    m10 = k01 / m00
+    m11 = (1.0 + _at_least(l11 * l11 * yyy - m10 * m10, 0.0)) ** 0.5
+    # T = L^{-T} and U = M^{-T} (upper triangular); TU = T U.
+    t00, t01, t11 = 1.0 / l00, -l10 / (l00 * l11), 1.0 / l11
+    u00, u01, u11 = 1.0 / m00, -m10 / (m00 * m11), 1.0 / m11
+    # State correction K nu = Pc L^{-T} (I + K)^{-1} L^T b, (I + K)^{-1} = U U^T.
+    c0, c1 = l00 * bx + l10 * by, l11 * by
+    w0, w1 = u00 * c0, u01 * c0 + u11 * c1
+    v0, v1 = u00 * w0 + u01 * w1, u11 * w1
+    # One product Pc [T U | T v | T] (..., n, 5) gives Z, the state correction and F.
+    V = np.empty(np.shape(t00) + (2, 5))
+    V[..., 0, 0], V[..., 0, 1], V[..., 1, 0], V[..., 1, 1] = (
+        t00 * u00,
+        t00 * u01 + t01 * u11,
+        0.0,
+        t11 * u11,
+    )
+    V[..., 0, 2], V[..., 1, 2] = t00 * v0 + t01 * v1, t11 * v1
+    V[..., 0, 3], V[..., 0, 4], V[..., 1, 3], V[..., 1, 4] = t00, t01, 0.0, t11
+    W = P[..., :, :2] @ V
+    x_post = x + W[..., 2]
+    Z = W[..., :2]
+    F = W[..., 2:, 3:]
+    P_post = Z @ Z.mT
+    P_post[..., 2:, 2:] += P[..., 2:, 2:] - F @ F.mT
     return x_post, symmetrize(P_post)
 
 
