@@ -19,11 +19,13 @@ is a small validated stateful wrapper around them.
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 from numpy.typing import ArrayLike
 
 from activetrack import measurement
-from activetrack.linalg2 import as_complex, inv2, symmetrize
+from activetrack.linalg2 import as_complex, inv2
 from activetrack.motion import LinearMotionModel
 from activetrack.motion import predict as predict  # re-exported: eq. (3)
 from activetrack.validation import FloatArray, as_finite, per_sensor, spd
@@ -44,9 +46,11 @@ def _numbers(a: np.ndarray) -> np.ndarray | float | complex:
 _FLOOR = 1e-15
 
 
-def _at_least(a, floor):
-    """Return ``max(a, floor)`` elementwise, for Python numbers and arrays alike."""
-    return np.maximum(a, floor) if isinstance(a, np.ndarray) else max(a, floor)
+@functools.cache
+def _triangles(n: int) -> tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]:
+    """Return the indices of the strict upper triangle of an n x n matrix and its mirror."""
+    i, j = np.triu_indices(n, 1)
+    return (i, j), (j, i)
 
 
 def update(
@@ -76,7 +80,7 @@ def update(
     if mask is not None:
         wd = wd * mask
         wt = wt * mask
-    if not dist.all():
+    if np.count_nonzero(dist) != dist.size:  # cheaper than dist.all() for few sensors
         # Zero distance: no information from that sensor this step. Any positive distance
         # keeps the arithmetic finite; its terms vanish with the weights (and d = 0).
         seen = dist > 0.0
@@ -118,40 +122,69 @@ def update(
     # with Pc = P[:, :2] and F = P21 L^{-T} (so S22 is the prior's Schur complement, the
     # covariance of the unobserved states given the position, which the measurement
     # leaves unchanged). Both terms are positive semidefinite: a sum, never a difference.
-    p00, p01, p11 = _numbers(P[..., 0, 0]), _numbers(P[..., 0, 1]), _numbers(P[..., 1, 1])
-    l00 = p00**0.5
+    # The clamps below change nothing in exact arithmetic (each clamped quantity is a
+    # Schur complement or a quadratic form of a PSD matrix); they keep L and M nonsingular.
+    single = P.ndim == 2
+    if single:  # Python floats: plain indexing and comparisons are several times cheaper
+        p00, p01, p11 = P[0, 0].item(), P[0, 1].item(), P[1, 1].item()
+        s = p11 - p01 * p01 / p00
+        s = s if s > _FLOOR * p11 else _FLOOR * p11
+    else:
+        p00, p01, p11 = P[..., 0, 0], P[..., 0, 1], P[..., 1, 1]
+        s = np.maximum(p11 - p01 * p01 / p00, _FLOOR * p11)
+    l00, l11 = p00**0.5, s**0.5
     l10 = p01 / l00
-    l11 = _at_least(p11 - l10 * l10, _FLOOR * p11) ** 0.5
     yl00, yl10 = yxx * l00 + yxy * l10, yxy * l00 + yyy * l10  # Y L, first column
-    k00 = _at_least(l00 * yl00 + l10 * yl10, 0.0)
-    k01 = l11 * (yxy * l00 + yyy * l10)
-    m00 = (1.0 + k00) ** 0.5
-    m10 = k01 / m00
-    m11 = (1.0 + _at_least(l11 * l11 * yyy - m10 * m10, 0.0)) ** 0.5
-    # T = L^{-T} and U = M^{-T} (upper triangular); TU = T U.
-    t00, t01, t11 = 1.0 / l00, -l10 / (l00 * l11), 1.0 / l11
-    u00, u01, u11 = 1.0 / m00, -m10 / (m00 * m11), 1.0 / m11
-    # State correction K nu = Pc L^{-T} (I + K)^{-1} L^T b, (I + K)^{-1} = U U^T.
+    k00 = l00 * yl00 + l10 * yl10
+    m10 = l11 * yl10
+    if single:
+        m00 = (1.0 + k00) ** 0.5 if k00 > 0.0 else 1.0
+        m10 /= m00
+        e = l11 * l11 * yyy - m10 * m10
+        m11 = (1.0 + e) ** 0.5 if e > 0.0 else 1.0
+    else:
+        m00 = np.sqrt(1.0 + np.maximum(k00, 0.0))
+        m10 /= m00
+        m11 = np.sqrt(1.0 + np.maximum(l11 * l11 * yyy - m10 * m10, 0.0))
+    # T = L^{-T} and U = M^{-T}, both upper triangular.
+    t00, t11 = 1.0 / l00, 1.0 / l11
+    t01 = -l10 * t00 * t11
+    u00, u11 = 1.0 / m00, 1.0 / m11
+    u01 = -m10 * u00 * u11
+    # State correction K nu = Pc T (I + K)^{-1} L^T b with (I + K)^{-1} = U U^T.
     c0, c1 = l00 * bx + l10 * by, l11 * by
     w0, w1 = u00 * c0, u01 * c0 + u11 * c1
     v0, v1 = u00 * w0 + u01 * w1, u11 * w1
-    # One product Pc [T U | T v | T] (..., n, 5) gives Z, the state correction and F.
-    V = np.empty(np.shape(t00) + (2, 5))
-    V[..., 0, 0], V[..., 0, 1], V[..., 1, 0], V[..., 1, 1] = (
-        t00 * u00,
-        t00 * u01 + t01 * u11,
-        0.0,
-        t11 * u11,
-    )
-    V[..., 0, 2], V[..., 1, 2] = t00 * v0 + t01 * v1, t11 * v1
-    V[..., 0, 3], V[..., 0, 4], V[..., 1, 3], V[..., 1, 4] = t00, t01, 0.0, t11
-    W = P[..., :, :2] @ V
-    x_post = x + W[..., 2]
-    Z = W[..., :2]
-    F = W[..., 2:, 3:]
-    P_post = Z @ Z.mT
-    P_post[..., 2:, 2:] += P[..., 2:, 2:] - F @ F.mT
-    return x_post, symmetrize(P_post)
+    # Z^T = (T U)^T P[:2, :], the correction g^T P[:2, :] with g = T v, and F = P21 T
+    # (rows of P: P is symmetric and its rows are contiguous).
+    z00, z10, z11 = t00 * u00, t00 * u01 + t01 * u11, t11 * u11
+    g0, g1 = t00 * v0 + t01 * v1, t11 * v1
+    if single:
+        # One product of the stacked rows [Z^T; g^T; F^T] with P[:2, :]: fewest NumPy calls.
+        V = np.array([z00, 0.0, z10, z11, g0, g1, t00, 0.0, t01, t11]).reshape(5, 2)
+        W = V @ P[:2, :]
+        Zt, Ft = W[:2], W[3:, 2:]
+        P_post = Zt.T @ Zt  # A^T A of one operand: BLAS syrk, exactly symmetric
+        P_post[2:, 2:] += P[2:, 2:] - Ft.T @ Ft
+        return x + W[2], P_post
+    # A batch: elementwise rows (a stacked matmul costs one BLAS call per filter).
+    r0, r1 = P[..., 0, :], P[..., 1, :]
+    Zt = np.empty(P.shape[:-2] + (2, P.shape[-1]))
+    np.multiply(z00[..., None], r0, out=Zt[..., 0, :])
+    np.multiply(z10[..., None], r0, out=Zt[..., 1, :])
+    Zt[..., 1, :] += z11[..., None] * r1
+    f0 = t00[..., None] * r0[..., 2:]
+    f1 = t01[..., None] * r0[..., 2:] + t11[..., None] * r1[..., 2:]
+    # Outer products term by term: exactly symmetric (products commute).
+    FFt = f0[..., :, None] * f0[..., None, :]
+    FFt += f1[..., :, None] * f1[..., None, :]
+    # gemm on a copy (per-filter syrk is slower on tiny matrices), then the upper triangle
+    # mirrors the lower one: exactly symmetric.
+    P_post = Zt.mT @ Zt.copy()
+    upper, lower = _triangles(P.shape[-1])
+    P_post[..., upper[0], upper[1]] = P_post[..., lower[0], lower[1]]
+    P_post[..., 2:, 2:] += P[..., 2:, 2:] - FFt
+    return x + g0[..., None] * r0 + g1[..., None] * r1, P_post
 
 
 def position_nees(x_true: FloatArray, x_est: FloatArray, P: FloatArray) -> FloatArray:
