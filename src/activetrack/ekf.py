@@ -2,19 +2,35 @@
 
 The measurement Jacobian has the block structure ``H = [H_e, 0]`` of eq. (6): only the
 target position is observed. The update of eq. (11) is therefore computed with 2x2
-algebra only, exactly (no 2M x 2M innovation matrix), and in Joseph form so that the
-covariance stays symmetric positive definite:
+algebra only, exactly (no 2M x 2M innovation matrix), in square-root form so that the
+covariance stays symmetric positive definite by construction:
 
-- ``Y = H_e^T R^{-1} H_e = sum_i h_i R_i^{-1} h_i^T`` (the measurement information, eq. 12),
-- ``N = (I + P11 Y)^{-1}``; then by the Woodbury identity
-  ``K nu = P[:, :2] N^T H_e^T R^{-1} nu``, ``K H = P[:, :2] N^T Y E`` and
-  ``K R K^T = P[:, :2] N^T Y N P[:, :2]^T``,
-- ``P+ = (I - K H) P (I - K H)^T + K R K^T`` (Joseph form of eq. 11).
+- ``Y = H_e^T R^{-1} H_e = sum_i h_i R_i^{-1} h_i^T`` (the measurement information, eq. 12)
+  and ``b = H_e^T R^{-1} nu``;
+- ``P11 = L L^T`` (2x2 Cholesky), ``K = L^T Y L``, ``I + K = M M^T``; by the Woodbury
+  identity the Kalman gain of eq. (11) gives ``P11+ = L (I + K)^{-1} L^T`` and
+  ``x+ = x + P[:, :2] L^{-T} (I + K)^{-1} L^T b``;
+- ``P+ = Z Z^T + blockdiag(0, S22)`` with ``Z = P[:, :2] L^{-T} M^{-T}`` and
+  ``S22 = P22 - F F^T``, ``F = P21 L^{-T}``: the prior's Schur complement (the covariance
+  of velocity etc. given the position, which a position measurement leaves unchanged).
 
-Sensors left out of an update (``mask`` False) contribute no information. Bearing
-innovations are wrapped to ``[-pi, pi)``. The pure functions broadcast over leading batch
-axes and are shared by the single and the batched environment; :class:`ExtendedKalmanFilter`
-is a small validated stateful wrapper around them.
+This equals the textbook ``P - K S K^T`` and the Joseph form ``(I - K H) P (I - K H)^T +
+K R K^T`` in exact arithmetic, but is computed as a sum of two positive semidefinite terms
+(a Gram matrix with the nonsingular top block ``L M^{-T}``, and the prior's Schur
+complement), never as a difference: the expanded Joseph form subtracts and lost
+definiteness for large process noise. Every clamp in the code only rounds a quantity that
+is nonnegative in exact arithmetic up to zero (or, for ``P11``'s conditional variance, up
+to its rounding level), so ``L`` and ``M`` are nonsingular and the result is exactly
+symmetric.
+
+Zero-distance rule: a sensor at (numerically) zero distance from the estimated target,
+``|p_T_hat - p_S|^2 < ZERO_DISTANCE2``, contributes no information that step, exactly as
+if it had been left out: its bearing is undefined there and its bearing information
+``1 / (d^2 sigma_theta^2)`` unbounded. Sensors left out of an update (``mask`` False)
+contribute no information either. Bearing innovations are wrapped to ``[-pi, pi)``. The
+pure functions broadcast over leading batch axes and are shared by the single and the
+batched environment; :class:`ExtendedKalmanFilter` is a small validated stateful wrapper
+around them.
 """
 
 from __future__ import annotations
@@ -26,6 +42,7 @@ from numpy.typing import ArrayLike
 
 from activetrack import measurement
 from activetrack.linalg2 import as_complex, inv2
+from activetrack.measurement import ZERO_DISTANCE2
 from activetrack.motion import LinearMotionModel
 from activetrack.motion import predict as predict  # re-exported: eq. (3)
 from activetrack.validation import FloatArray, as_finite, per_sensor, spd
@@ -80,14 +97,15 @@ def update(
     if mask is not None:
         wd = wd * mask
         wt = wt * mask
-    if np.count_nonzero(dist) != dist.size:  # cheaper than dist.all() for few sensors
-        # Zero distance: no information from that sensor this step. Any positive distance
-        # keeps the arithmetic finite; its terms vanish with the weights (and d = 0).
-        seen = dist > 0.0
-        dist = np.where(seen, dist, 1.0)
-        wd = wd * seen
-        wt = wt * seen
     n2 = dist * dist
+    if np.count_nonzero(n2 < ZERO_DISTANCE2):
+        # A sensor at zero distance gives no information this step (module docstring).
+        # Its weights vanish; any positive distance keeps the arithmetic finite (d ~ 0).
+        far = n2 >= ZERO_DISTANCE2
+        dist = np.where(far, dist, 1.0)
+        n2 = np.where(far, n2, 1.0)
+        wd = wd * far
+        wt = wt * far
     nu_t = measurement.wrap_angle(z[..., 1] - np.arctan2(d.imag, d.real) + orientation)
     # Y = sum_i H_i^T R_i^{-1} H_i (eq. 12) with h_d = -p/|p|, h_theta = J p/|p|^2 (eq. 9):
     # since p p^T + (J p)(J p)^T = |p|^2 I, Y = sum_i g_i d d^T + (sum_i h_i) I with
@@ -233,7 +251,8 @@ class ExtendedKalmanFilter:
     ) -> None:
         """Update with measurements ``z`` (M, 2) from sensors at ``sensor_pos`` (M, 2), eq. (11).
 
-        ``sensors`` optionally selects a subset: a boolean mask of shape (M,) or indices.
+        ``sensors`` optionally selects a subset: a boolean mask of shape (M,) or indices. A
+        sensor at zero distance from the estimate contributes nothing (module docstring).
         """
         sensor_pos = as_finite("sensor_pos", sensor_pos)
         if sensor_pos.ndim != 2 or sensor_pos.shape[1] != 2:
@@ -255,9 +274,4 @@ class ExtendedKalmanFilter:
                 if np.any((sel < 0) | (sel >= m)):
                     raise ValueError(f"sensors indices must lie in [0, {m - 1}], got {sel}")
                 mask[sel] = True
-        dist = np.hypot(*(sensor_pos - self.x[:2]).T)
-        if np.any(dist[mask] == 0.0):
-            raise ValueError(
-                "sensor_pos must differ from the estimated target position (zero distance)"
-            )
         self.x, self.P = update(self.x, self.P, z, sensor_pos, sd2, st2, phi, mask)
