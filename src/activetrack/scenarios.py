@@ -67,11 +67,13 @@ def _real(name: str, value: object, lo: float, hi: float, *, zero: bool = False)
     return float(arr)
 
 
-def _vector(name: str, value: object, n: int, lo: float, hi: float, *, zero: bool) -> tuple:
+def _vector(
+    name: str, value: object, n: int, lo: float, hi: float, *, zero: bool, why: str = ""
+) -> tuple:
     """Return a length-``n`` real vector in range as a tuple of floats."""
     arr = real_array(name, value)
     if arr.shape != (n,):
-        raise ValueError(f"{name} must have shape ({n},), got {arr.shape}")
+        raise ValueError(f"{name} must have shape ({n},){why}, got {arr.shape}")
     _in_range(name, arr, lo, hi, zero=zero)
     return tuple(float(v) for v in arr)
 
@@ -196,8 +198,10 @@ class Scenario:
                 f"got vmax={self.vmax!r}, dt={self.dt!r}"
             )
         n = self.model.dim
+        why = f" (the state of motion={getattr(self.motion, 'name', self.motion)!r})"
         for key in ("x0", "x0_hat"):
-            put(key, _vector(key, getattr(self, key), n, -STATE_MAX, STATE_MAX, zero=True))
+            value = getattr(self, key)
+            put(key, _vector(key, value, n, -STATE_MAX, STATE_MAX, zero=True, why=why))
         put("P0", self._converted_p0(n))
         self._check_information_ratio()
 
@@ -205,7 +209,10 @@ class Scenario:
         """Return P0 converted (a tuple, or a tuple of tuples), checked SPD and in range."""
         P0 = real_array("P0", self.P0)
         if P0.shape not in ((n,), (n, n)):
-            raise ValueError(f"P0 must have shape ({n},) or ({n}, {n}), got {P0.shape}")
+            raise ValueError(
+                f"P0 must have shape ({n},) or ({n}, {n}) (the state of "
+                f"motion={getattr(self.motion, 'name', self.motion)!r}), got {P0.shape}"
+            )
         _in_range("P0 diagonal", np.diag(P0) if P0.ndim == 2 else P0, *P0_RANGE, zero=False)
         if P0.ndim == 1:
             return tuple(float(v) for v in P0)
