@@ -47,16 +47,6 @@ from activetrack.motion import LinearMotionModel
 from activetrack.motion import predict as predict  # re-exported: eq. (3)
 from activetrack.validation import FloatArray, as_finite, per_sensor, spd
 
-
-def _numbers(a: np.ndarray) -> np.ndarray | float | complex:
-    """Return ``a`` as a Python number if it is 0-d (one filter), else unchanged.
-
-    The 2x2 algebra below then runs on Python numbers for a single filter, several times
-    cheaper than on 0-d arrays or NumPy scalars, and on whole arrays for a batch.
-    """
-    return a.item() if a.ndim == 0 else a
-
-
 #: Floor of the conditional variance ``p11 - p01^2 / p00`` of a prior's position block,
 #: relative to ``p11``: the rounding level of the stored entries, so the 2x2 Cholesky factor
 #: of a prior that is positive definite in floating point is never singular.
@@ -127,7 +117,11 @@ def update(
     # einsum: NumPy's sum over a short last axis is ~5-9x slower on large batches, and a
     # BLAS matrix-vector product with ones may start threads (100x slower under load).
     sums = np.einsum("...ij->...i", terms)
-    s0, gsum, bsum = _numbers(sums[..., 0]), _numbers(sums[..., 1]), _numbers(sums[..., 2])
+    single = P.ndim == 2
+    if single:  # Python numbers: the 2x2 algebra below is several times cheaper on them
+        s0, gsum, bsum = sums.tolist()
+    else:
+        s0, gsum, bsum = sums[..., 0], sums[..., 1], sums[..., 2]
     hs, swd = s0.real, s0.imag
     half = 0.5 * (swd + hs)
     yxx = half + 0.5 * gsum.real
@@ -142,9 +136,8 @@ def update(
     # leaves unchanged). Both terms are positive semidefinite: a sum, never a difference.
     # The clamps below change nothing in exact arithmetic (each clamped quantity is a
     # Schur complement or a quadratic form of a PSD matrix); they keep L and M nonsingular.
-    single = P.ndim == 2
-    if single:  # Python floats: plain indexing and comparisons are several times cheaper
-        p00, p01, p11 = P[0, 0].item(), P[0, 1].item(), P[1, 1].item()
+    if single:
+        p00, p01, p11 = P.item(0), P.item(1), P.item(P.shape[1] + 1)
         s = p11 - p01 * p01 / p00
         s = s if s > _FLOOR * p11 else _FLOOR * p11
     else:

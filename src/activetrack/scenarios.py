@@ -324,9 +324,10 @@ def make_scenario(scenario: str | Scenario = "paper", **overrides: Any) -> Scena
                 f"valid scenario fields: {sorted(base)} (and max_cycles for n_steps)"
             )
     m = overrides.get("n_sensors", base["n_sensors"])
-    for key in _PER_SENSOR:
-        val = base[key]
-        if key not in overrides and isinstance(val, (tuple, list)) and len(val) != m:
-            base[key] = val[0]
+    if isinstance(m, (int, np.integer)) and not isinstance(m, (bool, np.bool_)):
+        for key in _PER_SENSOR:  # (an invalid n_sensors is reported by Scenario)
+            val = base[key]
+            if key not in overrides and isinstance(val, (tuple, list)) and len(val) != m:
+                base[key] = val[0]
     base.update(overrides)
     return Scenario(**base)

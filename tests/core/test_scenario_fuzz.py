@@ -49,7 +49,8 @@ numbers = st.one_of(
     st.sampled_from(SPECIAL_FLOATS),
     st.floats(allow_nan=True, allow_infinity=True),
     st.floats(min_value=-1e3, max_value=1e3),
-    st.integers(min_value=-5, max_value=10**400),
+    st.integers(min_value=-5, max_value=10**6),
+    st.sampled_from([2**63, -(2**63), 10**400]),  # beyond int64 and float64
 )
 numpy_scalars = st.one_of(
     st.sampled_from(SPECIAL_FLOATS).map(np.float64),
