@@ -290,6 +290,14 @@ PRESETS: dict[str, dict[str, Any]] = {
 }
 
 
+def _same(a: object, b: object) -> bool:
+    """Return whether ``a == b`` is plainly true (False for arrays and incomparable values)."""
+    try:
+        return bool(a == b)
+    except (TypeError, ValueError):
+        return False
+
+
 def make_scenario(scenario: str | Scenario = "paper", **overrides: Any) -> Scenario:
     """Return the named preset (or a given scenario) with ``overrides`` applied.
 
@@ -311,7 +319,7 @@ def make_scenario(scenario: str | Scenario = "paper", **overrides: Any) -> Scena
         )
     if "max_cycles" in overrides:
         cycles = overrides.pop("max_cycles")
-        if "n_steps" in overrides and overrides["n_steps"] != cycles:
+        if "n_steps" in overrides and not _same(overrides["n_steps"], cycles):
             raise ValueError(
                 f"max_cycles is n_steps: give one of them, got max_cycles={cycles!r} "
                 f"and n_steps={overrides['n_steps']!r}"
