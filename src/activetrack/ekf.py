@@ -74,10 +74,11 @@ def update(
 
     Shapes: ``x`` (..., n), ``P`` (..., n, n), ``z`` and ``sensor_pos`` (..., M, 2),
     variances and ``orientation`` broadcastable to (..., M), ``mask`` (..., M) bool or None.
-    A sensor at zero distance from the estimate contributes no information (see the module
-    docstring). Written with elementwise 2x2 algebra (the sensor offsets as complex numbers,
-    so one filter costs few NumPy calls) because the batched environment runs it on
-    thousands of filters per call and the single environment once per step.
+    ``P`` must be symmetric (as :func:`predict` returns it); the posterior is then exactly
+    symmetric. A sensor at zero distance from the estimate contributes no information (see
+    the module docstring). Written with elementwise 2x2 algebra (the sensor offsets as
+    complex numbers, so one filter costs few NumPy calls) because the batched environment
+    runs it on thousands of filters per call and the single environment once per step.
     """
     # Offsets d = p_T_hat - p_S = -p of eq. (10) as complex numbers dx + i dy, (..., M).
     d = as_complex(x[..., :2])[..., None] - as_complex(sensor_pos)
