@@ -2,19 +2,35 @@
 
 The measurement Jacobian has the block structure ``H = [H_e, 0]`` of eq. (6): only the
 target position is observed. The update of eq. (11) is therefore computed with 2x2
-algebra only, exactly (no 2M x 2M innovation matrix), and in Joseph form so that the
-covariance stays symmetric positive definite:
+algebra only, exactly (no 2M x 2M innovation matrix), in square-root form so that the
+covariance stays symmetric positive definite by construction:
 
-- ``Y = H_e^T R^{-1} H_e = sum_i h_i R_i^{-1} h_i^T`` (the measurement information, eq. 12),
-- ``N = (I + P11 Y)^{-1}``; then by the Woodbury identity
-  ``K nu = P[:, :2] N^T H_e^T R^{-1} nu``, ``K H = P[:, :2] N^T Y E`` and
-  ``K R K^T = P[:, :2] N^T Y N P[:, :2]^T``,
-- ``P+ = (I - K H) P (I - K H)^T + K R K^T`` (Joseph form of eq. 11).
+- ``Y = H_e^T R^{-1} H_e = sum_i h_i R_i^{-1} h_i^T`` (the measurement information, eq. 12)
+  and ``b = H_e^T R^{-1} nu``;
+- ``P11 = L L^T`` (2x2 Cholesky), ``K = L^T Y L``, ``I + K = M M^T``; by the Woodbury
+  identity the Kalman gain of eq. (11) gives ``P11+ = L (I + K)^{-1} L^T`` and
+  ``x+ = x + P[:, :2] L^{-T} (I + K)^{-1} L^T b``;
+- ``P+ = Z Z^T + blockdiag(0, S22)`` with ``Z = P[:, :2] L^{-T} M^{-T}`` and
+  ``S22 = P22 - F F^T``, ``F = P21 L^{-T}``: the prior's Schur complement (the covariance
+  of velocity etc. given the position, which a position measurement leaves unchanged).
 
-Sensors left out of an update (``mask`` False) contribute no information. Bearing
-innovations are wrapped to ``[-pi, pi)``. The pure functions broadcast over leading batch
-axes and are shared by the single and the batched environment; :class:`ExtendedKalmanFilter`
-is a small validated stateful wrapper around them.
+This equals the textbook ``P - K S K^T`` and the Joseph form ``(I - K H) P (I - K H)^T +
+K R K^T`` in exact arithmetic, but is computed as a sum of two positive semidefinite terms
+(a Gram matrix with the nonsingular top block ``L M^{-T}``, and the prior's Schur
+complement), never as a difference: the expanded Joseph form subtracts and lost
+definiteness for large process noise. Every clamp in the code only rounds a quantity that
+is nonnegative in exact arithmetic up to zero (or, for ``P11``'s conditional variance, up
+to its rounding level), so ``L`` and ``M`` are nonsingular and the result is exactly
+symmetric.
+
+Zero-distance rule: a sensor at (numerically) zero distance from the estimated target,
+``|p_T_hat - p_S|^2 < ZERO_DISTANCE2``, contributes no information that step, exactly as
+if it had been left out: its bearing is undefined there and its bearing information
+``1 / (d^2 sigma_theta^2)`` unbounded. Sensors left out of an update (``mask`` False)
+contribute no information either. Bearing innovations are wrapped to ``[-pi, pi)``. The
+pure functions broadcast over leading batch axes and are shared by the single and the
+batched environment; :class:`ExtendedKalmanFilter` is a small validated stateful wrapper
+around them.
 """
 
 from __future__ import annotations
@@ -23,19 +39,16 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from activetrack import measurement
-from activetrack.linalg2 import as_complex, inv2, symmetrize
+from activetrack.linalg2 import as_complex, inv2
+from activetrack.measurement import ZERO_DISTANCE2
 from activetrack.motion import LinearMotionModel
 from activetrack.motion import predict as predict  # re-exported: eq. (3)
 from activetrack.validation import FloatArray, as_finite, per_sensor, spd
 
-
-def _numbers(a: np.ndarray) -> np.ndarray | float | complex:
-    """Return ``a`` as a Python number if it is 0-d (one filter), else unchanged.
-
-    The 2x2 algebra below then runs on Python numbers for a single filter, several times
-    cheaper than on 0-d arrays or NumPy scalars, and on whole arrays for a batch.
-    """
-    return a.item() if a.ndim == 0 else a
+#: Floor of the conditional variance ``p11 - p01^2 / p00`` of a prior's position block,
+#: relative to ``p11``: the rounding level of the stored entries, so the 2x2 Cholesky factor
+#: of a prior that is positive definite in floating point is never singular.
+_FLOOR = 1e-15
 
 
 def update(
@@ -52,20 +65,30 @@ def update(
 
     Shapes: ``x`` (..., n), ``P`` (..., n, n), ``z`` and ``sensor_pos`` (..., M, 2),
     variances and ``orientation`` broadcastable to (..., M), ``mask`` (..., M) bool or None.
-    Written with elementwise 2x2 algebra (the sensor offsets as complex numbers, so one
-    filter costs few NumPy calls) because the batched environment runs it on thousands of
-    filters per call and the single environment once per step.
+    ``P`` must be symmetric (as :func:`predict` returns it); the posterior is then exactly
+    symmetric. A sensor at zero distance from the estimate contributes no information (see
+    the module docstring). Written with elementwise 2x2 algebra (the sensor offsets as
+    complex numbers, so one filter costs few NumPy calls) because the batched environment
+    runs it on thousands of filters per call and the single environment once per step.
     """
     # Offsets d = p_T_hat - p_S = -p of eq. (10) as complex numbers dx + i dy, (..., M).
     d = as_complex(x[..., :2])[..., None] - as_complex(sensor_pos)
     dist = np.abs(d)
-    n2 = dist * dist
-    nu_t = measurement.wrap_angle(z[..., 1] - np.arctan2(d.imag, d.real) + orientation)
     wd = 1.0 / sigma_d2
     wt = 1.0 / sigma_theta2
     if mask is not None:
         wd = wd * mask
         wt = wt * mask
+    n2 = dist * dist
+    if np.count_nonzero(n2 < ZERO_DISTANCE2):
+        # A sensor at zero distance gives no information this step (module docstring).
+        # Its weights vanish; any positive distance keeps the arithmetic finite (d ~ 0).
+        far = n2 >= ZERO_DISTANCE2
+        dist = np.where(far, dist, 1.0)
+        n2 = np.where(far, n2, 1.0)
+        wd = wd * far
+        wt = wt * far
+    nu_t = measurement.wrap_angle(z[..., 1] - np.arctan2(d.imag, d.real) + orientation)
     # Y = sum_i H_i^T R_i^{-1} H_i (eq. 12) with h_d = -p/|p|, h_theta = J p/|p|^2 (eq. 9):
     # since p p^T + (J p)(J p)^T = |p|^2 I, Y = sum_i g_i d d^T + (sum_i h_i) I with
     # h = w_theta / |p|^2 and g = (w_d - h) / |p|^2; and d d^T = (|d|^2 I + [[Re d^2,
@@ -86,46 +109,88 @@ def update(
     # einsum: NumPy's sum over a short last axis is ~5-9x slower on large batches, and a
     # BLAS matrix-vector product with ones may start threads (100x slower under load).
     sums = np.einsum("...ij->...i", terms)
-    s0, gsum, bsum = _numbers(sums[..., 0]), _numbers(sums[..., 1]), _numbers(sums[..., 2])
+    single = P.ndim == 2
+    if single:  # Python numbers: the 2x2 algebra below is several times cheaper on them
+        s0, gsum, bsum = sums.tolist()
+    else:
+        s0, gsum, bsum = sums[..., 0], sums[..., 1], sums[..., 2]
     hs, swd = s0.real, s0.imag
     half = 0.5 * (swd + hs)
     yxx = half + 0.5 * gsum.real
     yyy = half - 0.5 * gsum.real
     yxy = 0.5 * gsum.imag
     bx, by = bsum.real, bsum.imag
-    # N = (I + P11 Y)^{-1}, in closed form.
-    p00, p01, p11 = _numbers(P[..., 0, 0]), _numbers(P[..., 0, 1]), _numbers(P[..., 1, 1])
-    m00 = 1.0 + p00 * yxx + p01 * yxy
-    m01 = p00 * yxy + p01 * yyy
-    m10 = p01 * yxx + p11 * yxy
-    m11 = 1.0 + p01 * yxy + p11 * yyy
-    det = m00 * m11 - m01 * m10
-    n00, n01, n10, n11 = m11 / det, -m01 / det, -m10 / det, m00 / det
-    # K nu = P[:, :2] N^T b.
-    vx = n00 * bx + n10 * by
-    vy = n01 * bx + n11 * by
-    # Joseph form expanded: P+ = P - Pc D Pc^T with D = A + A^T - A P11 A^T - B,
-    # A = K H restricted to the position block = N^T Y, B = K R K^T core = N^T Y N.
-    a00, a01 = n00 * yxx + n10 * yxy, n00 * yxy + n10 * yyy
-    a10, a11 = n01 * yxx + n11 * yxy, n01 * yxy + n11 * yyy
-    b00, b01, b11 = a00 * n00 + a01 * n10, a00 * n01 + a01 * n11, a10 * n01 + a11 * n11
-    # A P11 A^T
-    t00, t01 = a00 * p00 + a01 * p01, a00 * p01 + a01 * p11
-    t10, t11 = a10 * p00 + a11 * p01, a10 * p01 + a11 * p11
-    q00 = t00 * a00 + t01 * a01
-    q01 = t00 * a10 + t01 * a11
-    q11 = t10 * a10 + t11 * a11
-    # One product Pc [N^T b | D] (..., n, 3) gives the state correction and Pc D.
-    V = np.empty(np.shape(vx) + (2, 3))
-    V[..., 0, 0], V[..., 1, 0] = vx, vy
-    V[..., 0, 1] = 2.0 * a00 - q00 - b00
-    V[..., 0, 2] = V[..., 1, 1] = a01 + a10 - q01 - b01
-    V[..., 1, 2] = 2.0 * a11 - q11 - b11
-    Pc = P[..., :, :2]
-    W = Pc @ V
-    x_post = x + W[..., 0]
-    P_post = P - W[..., 1:] @ P[..., :2, :]  # Pc^T: P is symmetric; rows multiply faster
-    return x_post, symmetrize(P_post)
+    # Square-root form. P11 = L L^T (Cholesky, L lower); K = L^T Y L; I + K = M M^T.
+    # Then (Woodbury) P11+ = L (I + K)^{-1} L^T and the posterior is
+    #   P+ = Z Z^T + blockdiag(0, S22),  Z = Pc L^{-T} M^{-T},  S22 = P22 - F F^T,
+    # with Pc = P[:, :2] and F = P21 L^{-T} (so S22 is the prior's Schur complement, the
+    # covariance of the unobserved states given the position, which the measurement
+    # leaves unchanged). Both terms are positive semidefinite: a sum, never a difference.
+    # The clamps below change nothing in exact arithmetic (each clamped quantity is a
+    # Schur complement or a quadratic form of a PSD matrix); they keep L and M nonsingular.
+    if single:
+        p00, p01, p11 = P.item(0), P.item(1), P.item(P.shape[1] + 1)
+        s = p11 - p01 * p01 / p00
+        s = s if s > _FLOOR * p11 else _FLOOR * p11
+    else:
+        p00, p01, p11 = P[..., 0, 0], P[..., 0, 1], P[..., 1, 1]
+        s = np.maximum(p11 - p01 * p01 / p00, _FLOOR * p11)
+    l00, l11 = p00**0.5, s**0.5
+    l10 = p01 / l00
+    yl00, yl10 = yxx * l00 + yxy * l10, yxy * l00 + yyy * l10  # Y L, first column
+    k00 = l00 * yl00 + l10 * yl10
+    m10 = l11 * yl10
+    if single:
+        m00 = (1.0 + k00) ** 0.5 if k00 > 0.0 else 1.0
+        m10 /= m00
+        e = l11 * l11 * yyy - m10 * m10
+        m11 = (1.0 + e) ** 0.5 if e > 0.0 else 1.0
+    else:
+        m00 = np.sqrt(1.0 + np.maximum(k00, 0.0))
+        m10 /= m00
+        m11 = np.sqrt(1.0 + np.maximum(l11 * l11 * yyy - m10 * m10, 0.0))
+    # T = L^{-T} and U = M^{-T}, both upper triangular.
+    t00, t11 = 1.0 / l00, 1.0 / l11
+    t01 = -l10 * t00 * t11
+    u00, u11 = 1.0 / m00, 1.0 / m11
+    u01 = -m10 * u00 * u11
+    # State correction K nu = Pc T (I + K)^{-1} L^T b with (I + K)^{-1} = U U^T.
+    c0, c1 = l00 * bx + l10 * by, l11 * by
+    w0, w1 = u00 * c0, u01 * c0 + u11 * c1
+    v0, v1 = u00 * w0 + u01 * w1, u11 * w1
+    # Z^T = (T U)^T P[:2, :], the correction g^T P[:2, :] with g = T v, and F = P21 T
+    # (rows of P: P is symmetric and its rows are contiguous).
+    z00, z10, z11 = t00 * u00, t00 * u01 + t01 * u11, t11 * u11
+    g0, g1 = t00 * v0 + t01 * v1, t11 * v1
+    if single:
+        # One product of the stacked rows [Z^T; g^T; F^T] with P[:2, :]: fewest NumPy calls.
+        V = np.array([z00, 0.0, z10, z11, g0, g1, t00, 0.0, t01, t11]).reshape(5, 2)
+        W = V @ P[:2, :]
+        Zt, Ft = W[:2], W[3:, 2:]
+        P_post = Zt.T @ Zt  # A^T A of one operand: BLAS syrk, exactly symmetric
+        P_post[2:, 2:] += P[2:, 2:] - Ft.T @ Ft
+        return x + W[2], P_post
+    # A batch: elementwise, with the batch as the innermost axis, i.e. on (n, ..., ) views
+    # of P's rows (NumPy loops over the last axis; a length-n inner loop per filter, or a
+    # stacked matmul with one BLAS call per filter, would be several times slower).
+    rows = np.moveaxis(P[..., :2, :], (-2, -1), (0, 1))  # (2, n, ...)
+    r0, r1 = rows[0], rows[1]
+    z0 = z00 * r0  # the rows of Z^T, (n, ...)
+    z1 = z10 * r0
+    z1 += z11 * r1
+    f0 = t00 * r0[2:]  # the rows of F^T, (n - 2, ...)
+    f1 = t01 * r0[2:]
+    f1 += t11 * r1[2:]
+    # Outer products term by term: exactly symmetric (products commute), (n, n, ...).
+    out = z0[:, None] * z0[None, :]
+    out += z1[:, None] * z1[None, :]
+    s22 = np.moveaxis(P[..., 2:, 2:], (-2, -1), (0, 1)) - f0[:, None] * f0[None, :]
+    s22 -= f1[:, None] * f1[None, :]
+    out[2:, 2:] += s22
+    correction = g0 * r0
+    correction += g1 * r1
+    P_post = np.ascontiguousarray(np.moveaxis(out, (0, 1), (-2, -1)))
+    return x + np.moveaxis(correction, 0, -1), P_post
 
 
 def position_nees(x_true: FloatArray, x_est: FloatArray, P: FloatArray) -> FloatArray:
@@ -174,7 +239,8 @@ class ExtendedKalmanFilter:
     ) -> None:
         """Update with measurements ``z`` (M, 2) from sensors at ``sensor_pos`` (M, 2), eq. (11).
 
-        ``sensors`` optionally selects a subset: a boolean mask of shape (M,) or indices.
+        ``sensors`` optionally selects a subset: a boolean mask of shape (M,) or indices. A
+        sensor at zero distance from the estimate contributes nothing (module docstring).
         """
         sensor_pos = as_finite("sensor_pos", sensor_pos)
         if sensor_pos.ndim != 2 or sensor_pos.shape[1] != 2:
@@ -196,9 +262,4 @@ class ExtendedKalmanFilter:
                 if np.any((sel < 0) | (sel >= m)):
                     raise ValueError(f"sensors indices must lie in [0, {m - 1}], got {sel}")
                 mask[sel] = True
-        dist = np.hypot(*(sensor_pos - self.x[:2]).T)
-        if np.any(dist[mask] == 0.0):
-            raise ValueError(
-                "sensor_pos must differ from the estimated target position (zero distance)"
-            )
         self.x, self.P = update(self.x, self.P, z, sensor_pos, sd2, st2, phi, mask)

@@ -16,6 +16,9 @@ import numpy as np
 from activetrack.linalg2 import as_complex
 from activetrack.validation import FloatArray
 
+#: Squared distance (m^2) below which a sensor is at the target: no information (1e-100 m).
+ZERO_DISTANCE2 = 1e-200
+
 #: ``J = C(-pi/2)`` of eq. (9).
 J = np.array([[0.0, 1.0], [-1.0, 0.0]])
 _TWO_PI = 2.0 * np.pi
@@ -42,8 +45,9 @@ def range_bearing(
     """Return noise-free ``[d_i, theta_i]`` of eq. (4), shape (..., M, 2).
 
     ``target_pos`` has shape (..., 2), ``sensor_pos`` (..., M, 2), ``orientation`` (..., M).
-    The bearing is wrapped to ``[-pi, pi)`` unless ``wrap=False`` (then it is
-    ``atan2(dy, dx) - phi_i``, for callers that add noise and wrap once afterwards).
+    At zero distance the bearing is ``atan2(0, 0) - phi_i = -phi_i`` (finite; the EKF
+    ignores such a sensor). The bearing is wrapped to ``[-pi, pi)`` unless ``wrap=False``
+    (then it is ``atan2(dy, dx) - phi_i``, for callers that add noise and wrap once).
     """
     delta = as_complex(target_pos[..., None, :] - sensor_pos)
     out = np.empty(delta.shape + (2,))
@@ -58,10 +62,17 @@ def jacobian(target_pos: FloatArray, sensor_pos: FloatArray) -> FloatArray:
     """Return the per-sensor Jacobians ``[h_d^T; h_theta^T]`` of eq. (9), shape (..., M, 2, 2).
 
     Derivatives are with respect to the target position; the velocity columns of eq. (6)
-    are zero and left out.
+    are zero and left out. A sensor at zero distance (``d^2 < ZERO_DISTANCE2``) gets zero
+    rows: it carries no information (the EKF's zero-distance rule), never NaN.
     """
     p = sensor_pos - target_pos[..., None, :]
     n2 = p[..., 0] ** 2 + p[..., 1] ** 2
+    # Zero distance (the EKF's rule): no information, so
+    # zero rows instead of 0/0; any positive stand-in distance gives them with p = 0.
+    zero = n2 < ZERO_DISTANCE2
+    if np.any(zero):
+        p = np.where(zero[..., None], 0.0, p)
+        n2 = np.where(zero, 1.0, n2)
     n = np.sqrt(n2)
     h_d = -p / n[..., None]
     h_theta = np.stack([p[..., 1], -p[..., 0]], axis=-1) / n2[..., None]

@@ -15,6 +15,15 @@ from numpy.typing import ArrayLike, NDArray
 FloatArray = NDArray[np.float64]
 
 
+class UnexpectedKeywordError(TypeError, ValueError):
+    """An unknown keyword argument, worded like Python's own ``TypeError``.
+
+    It subclasses :class:`ValueError` too, so callers that catch either keep working (and
+    wrappers such as TorchRL's ``GymEnv``, which probe optional keywords and fall back on
+    ``TypeError: ... unexpected keyword argument``, recognize it).
+    """
+
+
 def as_finite(name: str, value: ArrayLike, shape: Sequence[int | None] | None = None) -> FloatArray:
     """Return ``value`` as a float64 array, checking that it is finite and of ``shape``.
 
@@ -31,6 +40,35 @@ def as_finite(name: str, value: ArrayLike, shape: Sequence[int | None] | None = 
         ):
             want = "(" + ", ".join("n" if s is None else str(s) for s in shape) + ")"
             raise ValueError(f"{name} must have shape {want}, got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} must be finite (no NaN or inf), got {value!r}")
+    return arr
+
+
+def _reject_non_real(name: str, value: object) -> None:
+    """Raise ``ValueError`` if ``value`` holds anything but real numbers (bools and strings too)."""
+    if isinstance(value, (list, tuple)):
+        for v in value:
+            _reject_non_real(name, v)
+    elif isinstance(value, (bool, np.bool_, str, bytes)) or value is None:
+        raise ValueError(f"{name} must hold real numbers, got {value!r}")
+
+
+def real_array(name: str, value: object) -> FloatArray:
+    """Return ``value`` as a float64 array of real, finite numbers.
+
+    Strings, bools, ``None``, complex numbers, ragged nestings and object arrays raise a
+    ``ValueError`` naming ``name``, so a value is converted once here instead of failing
+    later (``np.asarray("0.1", float)`` would silently parse a string).
+    """
+    _reject_non_real(name, value)
+    try:
+        arr = np.asarray(value)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{name} must be real numbers, got {value!r}") from exc
+    if arr.dtype.kind not in "iuf":
+        raise ValueError(f"{name} must be real numbers, got {value!r}")
+    arr = arr.astype(np.float64)
     if not np.all(np.isfinite(arr)):
         raise ValueError(f"{name} must be finite (no NaN or inf), got {value!r}")
     return arr

@@ -88,3 +88,16 @@ def test_range_bearing_batched_against_scalar_trigonometry_and_unwrapped_option(
     wide = np.zeros((50, 4, 4))
     wide[..., ::2] = sensors
     np.testing.assert_array_equal(measurement.range_bearing(targets, wide[..., ::2], phi), z)
+
+
+def test_zero_distance_gives_finite_measurement_and_zero_jacobian_rows():
+    """The zero-distance rule: no information (zero rows), never NaN; other sensors intact."""
+    target = np.array([3.0, -1.0])
+    sensors = np.array([[3.0, -1.0], [3.0 + 1e-120, -1.0], [6.0, 3.0]])
+    z = measurement.range_bearing(target, sensors, np.array([0.5, 0.0, 0.0]))
+    assert np.all(np.isfinite(z))
+    np.testing.assert_array_equal(z[:2, 0], 0.0)
+    H = measurement.jacobian(target, sensors)
+    np.testing.assert_array_equal(H[:2], 0.0)
+    # the third sensor, 5 m away along (3, 4): h_d = -p/|p|, h_theta = J p / |p|^2 (eq. 9)
+    np.testing.assert_allclose(H[2], [[-0.6, -0.8], [4.0 / 25.0, -3.0 / 25.0]], rtol=1e-14)

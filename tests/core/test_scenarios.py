@@ -1,5 +1,7 @@
 """Scenario presets and the shared closed-loop functions."""
 
+import json
+
 import numpy as np
 import pytest
 
@@ -35,3 +37,97 @@ def test_overrides_and_errors_name_the_field():
             at.make_scenario("paper", **kwargs)
     with pytest.raises(ValueError, match="scenario"):
         at.make_scenario("nope")
+
+
+def test_max_cycles_is_accepted_as_n_steps():
+    assert at.make_scenario("paper", max_cycles=7).n_steps == 7
+    assert at.make_scenario("homogeneous", max_cycles=12, n_steps=12).n_steps == 12
+    assert at.make_scenario("paper").replace(max_cycles=3).n_steps == 3
+    with pytest.raises(ValueError, match="max_cycles"):
+        at.make_scenario("paper", max_cycles=7, n_steps=8)
+    with pytest.raises(ValueError, match="n_steps"):
+        at.make_scenario("paper", max_cycles=0)
+
+
+def test_unknown_keyword_is_a_type_error_worded_like_python():
+    with pytest.raises(TypeError, match="unexpected keyword argument 'frameskip'") as info:
+        at.make_scenario("paper", frameskip=4)
+    assert isinstance(info.value, ValueError)  # callers catching ValueError keep working
+    assert "make_scenario() got an unexpected keyword argument 'frameskip'" in str(info.value)
+    assert "n_steps" in str(info.value)  # the valid fields are listed
+    with pytest.raises(ValueError, match="'frameskip'"):
+        at.make_scenario("paper").replace(frameskip=4)
+
+    # the same wording as Python's own error for a function without that keyword
+    def make(n_steps=1):
+        return n_steps
+
+    with pytest.raises(TypeError) as py:
+        make(frameskip=4)
+    assert "got an unexpected keyword argument 'frameskip'" in str(py.value)
+
+
+@pytest.mark.parametrize(
+    "kwargs, field",
+    [
+        ({"dt": "0.1"}, "dt"),
+        ({"reward_scale": "1.0"}, "reward_scale"),
+        ({"max_trace": [1, 2]}, "max_trace"),
+        ({"sensor_radius": [1, 2]}, "sensor_radius"),
+        ({"n_sensors": True}, "n_sensors"),
+        ({"n_sensors": 3.0}, "n_sensors"),
+        ({"n_steps": np.int64(0)}, "n_steps"),
+        ({"motion": ["cv"]}, "motion"),
+        ({"q": 1e200}, "q"),
+        ({"x0": (1e200, 0.0, 0.0, 0.0)}, "x0"),
+        ({"sigma_d2": 1e-160}, "sigma_d2"),
+        ({"sigma_theta2": (0.1, 1e-300, 0.1)}, "sigma_theta2"),
+        ({"P0": (1e-170, 4.0, 100.0, 100.0)}, "P0"),
+        ({"rho": np.nan}, "rho"),
+        ({"vmax": np.inf}, "vmax"),
+        ({"vmax": 1e9, "dt": 10.0}, "vmax"),
+        ({"orientation": 1 + 2j}, "orientation"),
+        ({"sensor_center": (1.0, [2.0])}, "sensor_center"),
+        ({"sensor_center": (True, 0.0)}, "sensor_center"),
+        ({"sigma_d2": None}, "sigma_d2"),
+        ({"name": 3}, "name"),
+        ({"motion": "ca"}, "motion='ca'"),  # x0 has 4 entries: the error says why
+    ],
+)
+def test_invalid_values_are_rejected_naming_the_field(kwargs, field):
+    with pytest.raises(ValueError, match=field):
+        at.make_scenario("paper", **kwargs)
+
+
+def test_values_are_converted_once_and_stored_converted():
+    P0 = np.diag([4.0, 9.0, 1.0, 1.0])
+    sc = at.make_scenario(
+        "paper",
+        n_sensors=np.int64(3),
+        dt=np.float32(0.5),
+        q=2,
+        sigma_d2=[1, 2, 3],
+        sigma_theta2=np.float64(0.5),
+        x0=np.array([1, 2, 3, 4]),
+        P0=P0,
+        max_trace=10,
+        n_steps=np.int32(20),
+    )
+    assert type(sc.n_sensors) is int and type(sc.n_steps) is int
+    assert type(sc.dt) is float and sc.dt == 0.5 and type(sc.q) is float
+    assert sc.sigma_d2 == (1.0, 2.0, 3.0) and all(type(v) is float for v in sc.sigma_d2)
+    assert type(sc.sigma_theta2) is float and type(sc.max_trace) is float
+    assert sc.x0 == (1.0, 2.0, 3.0, 4.0) and type(sc.x0) is tuple
+    assert sc.P0 == tuple(tuple(row) for row in P0.tolist())
+    np.testing.assert_array_equal(sc.initial_cov, P0)
+    assert at.Scenario(**sc.to_dict()) == sc  # to_dict round-trips
+    assert at.Scenario(**json.loads(json.dumps(sc.to_dict()))) == sc  # through JSON too
+    hash(sc)
+
+
+def test_equality_and_hash_compare_field_values():
+    a = at.make_scenario("paper")
+    b = at.make_scenario("paper", sigma_d2=[2, 4, 4], dt=np.float64(0.1), n_sensors=np.int64(3))
+    assert a == b and hash(a) == hash(b)
+    assert a != at.make_scenario("paper", q=11.0)
+    assert a.replace() == a
