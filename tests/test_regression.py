@@ -15,9 +15,14 @@ Gymnasium and batched environments, the expert policies and the evaluation.
 (``np.testing.assert_array_equal``; ``-0.0 == 0.0`` is its only leniency), every
 float32 observation equal to the recorded float32 (stored as the shortest decimal that
 gives it back), every int, bool, string, list length and dict key equal, and SHA-256
-digests of whole observation arrays equal. A case may be given a relative tolerance in
-``RTOL`` below, with the reason beside it; the refactor must reproduce every other value
-exactly. The recording is what the code did, not an independent truth: it
+digests of whole observation arrays equal. The one-world refactor reproduced every case
+exactly (commit 35208e7; one ulp in one position error, see ``RTOL``). The square-root
+EKF that came after it (SPD by construction) changes P in the last bits, so each case now
+has tolerances in ``RTOL``, with the reason beside them: 1e-6 relative where no planner
+closes the loop (close-range sensors amplify it to ~1e-8), 1e-5 where GSR's flat optima
+amplify it further; float32 observations within a float32 ulp. A future change that
+must reproduce today's results exactly should re-record (``tools/record_regression.py``
+at the current commit). The recording is what the code did, not an independent truth: it
 pins behaviour, it does not prove it right (the other tests do that).
 
 Reading a failure: the process noise is ``noise_factor @ w`` with ``noise_factor`` from
@@ -47,11 +52,65 @@ DATA = REPO / "tests" / "data" / "regression_bb51820.json"
 RECORDED_AT = "bb518205aff6ebdc562250b19fb081941ffb6378"
 
 #: Per-case relative tolerance (0 = exact), each with a one-line reason. None today.
-RTOL: dict[str, tuple[float, str]] = {
-    # One step's position error differs by one ulp: the parallel env computed it with
-    # math.hypot, the runner with np.hypot; the one world computes it once, with np.hypot.
-    "expert_rm": (2.3e-16, "position_error: math.hypot -> np.hypot (one ulp, one step)"),
+#: Rounding-level differences since the recording, with their reasons: (rtol, atol).
+_EKF = (
+    "the EKF update in square-root form (SPD by construction, hardening issue) rounds "
+    "differently from the expanded Joseph form: P differs in the last bits"
+)
+_GSR = (
+    _EKF + "; GSR's flat optima move the sensors by up to ~1e-6 relative in response (a "
+    "one-ulp perturbation of P(k+1|k) in the recorded code itself moves them by ~1e-7)"
+)
+RTOL: dict[str, tuple[float, float, str]] = {
+    **dict.fromkeys(
+        [
+            "parallel_paper",
+            "parallel_homogeneous",
+            "parallel_m5",
+            "parallel_max_trace",
+            "aec",
+            "gymnasium_centralized",
+            "batched_next_step_paper",
+            "batched_next_step_homogeneous",
+            "batched_same_step_paper",
+            "batched_same_step_homogeneous",
+            "batched_max_trace",
+            "batched_disabled",
+            "batched_step_agents",
+            "expert_gbes",
+            "max_trace_runner",
+            "planners",
+            "batched_gsr",
+        ],
+        (1e-6, 1e-12, _EKF),
+    ),  # fmt: skip
+    **dict.fromkeys(
+        [
+            "paper_study",
+            "cli_simulate",
+            "homogeneous_study",
+            "ca_motion",
+            "expert_gsr",
+            "expert_batched_gsr",
+            "evaluation",
+            "evaluation_reference",
+        ],
+        (1e-5, 1e-12, _GSR),
+    ),  # fmt: skip
+    # One step's position error also differs by one ulp: the parallel env computed it
+    # with math.hypot, the runner with np.hypot; the one world computes it with np.hypot.
+    "expert_rm": (1e-6, 1e-12, _EKF + "; position_error: math.hypot -> np.hypot"),
 }
+
+#: Keys of float32 observations and states: where a tolerance applies, a value that crossed
+#: a float32 rounding boundary differs by an ulp of float32 (~1e-7 relative), and small
+#: entries (a correlation near 0) carry the float64 difference they were rounded from.
+FLOAT32 = ("obs", "state", "final_obs", "last_obs", "reset_obs", "reset_state")
+FLOAT32_TOL = (3e-6, 1e-6)
+
+#: Recorded values that are only comparable bit for bit: skipped where a tolerance applies
+#: (a hash of float32 observations; whether a batched copy equalled a single env bitwise).
+EXACT_ONLY = ("sha256", "equals_single")
 
 
 def _load_tool() -> Any:
@@ -81,38 +140,47 @@ def _numeric(values: list[Any]) -> np.ndarray | None:
     return arr if arr.dtype.kind in "biuf" and arr.size else None
 
 
-def assert_same(expected: Any, actual: Any, rtol: float = 0.0, path: str = "") -> None:
-    """Assert that ``actual`` equals ``expected`` (JSON values), floats within ``rtol``.
+def assert_same(
+    expected: Any, actual: Any, rtol: float = 0.0, path: str = "", atol: float = 0.0
+) -> None:
+    """Assert that ``actual`` equals ``expected`` (JSON values), floats within tolerances.
 
-    ``rtol = 0``: bit for bit (``assert_array_equal``); otherwise floats are compared with
-    ``assert_allclose(rtol=rtol, atol=0)`` and everything else exactly.
+    ``rtol = atol = 0``: bit for bit (``assert_array_equal``); otherwise floats are
+    compared with ``assert_allclose(rtol=rtol, atol=atol)``, the :data:`EXACT_ONLY` keys
+    are skipped, and everything else is compared exactly.
     """
     where = path or "<root>"
+    tolerant = bool(rtol or atol)
     if isinstance(expected, dict):
         assert isinstance(actual, dict), f"{where}: expected a dict, got {type(actual).__name__}"
         assert sorted(actual) == sorted(expected), f"{where}: keys differ"
         for key in expected:
-            assert_same(expected[key], actual[key], rtol, f"{path}.{key}")
+            if tolerant and key in EXACT_ONLY:
+                continue
+            r, a = rtol, atol
+            if tolerant and key in FLOAT32:
+                r, a = max(rtol, FLOAT32_TOL[0]), max(atol, FLOAT32_TOL[1])
+            assert_same(expected[key], actual[key], r, f"{path}.{key}", a)
         return
     if isinstance(expected, list):
         assert isinstance(actual, list), f"{where}: expected a list, got {type(actual).__name__}"
         e, a = _numeric(expected), _numeric(actual)
         if e is not None and a is not None and e.dtype.kind == a.dtype.kind:
             assert e.shape == a.shape, f"{where}: shape {a.shape} != recorded {e.shape}"
-            if rtol and e.dtype.kind == "f":
-                np.testing.assert_allclose(a, e, rtol=rtol, atol=0.0, err_msg=where)
+            if tolerant and e.dtype.kind == "f":
+                np.testing.assert_allclose(a, e, rtol=rtol, atol=atol, err_msg=where)
             else:
                 np.testing.assert_array_equal(a, e, err_msg=where)
             return
         assert len(actual) == len(expected), f"{where}: length {len(actual)} != {len(expected)}"
         for k, (x, y) in enumerate(zip(expected, actual, strict=True)):
-            assert_same(x, y, rtol, f"{path}[{k}]")
+            assert_same(x, y, rtol, f"{path}[{k}]", atol)
         return
     assert type(actual) is type(expected), (
         f"{where}: type {type(actual).__name__} != recorded {type(expected).__name__}"
     )
-    if rtol and isinstance(expected, float):
-        np.testing.assert_allclose(actual, expected, rtol=rtol, atol=0.0, err_msg=where)
+    if tolerant and isinstance(expected, float):
+        np.testing.assert_allclose(actual, expected, rtol=rtol, atol=atol, err_msg=where)
     else:
         assert actual == expected, f"{where}: {actual!r} != recorded {expected!r}"
 
@@ -135,14 +203,14 @@ def _params() -> list[Any]:
 @pytest.mark.parametrize("name", _params())
 def test_case_reproduces_recording(name: str) -> None:
     data = recording()
-    rtol = RTOL.get(name, (0.0, ""))[0]
+    rtol, atol, _ = RTOL.get(name, (0.0, 0.0, ""))
     actual = tool.compute(name)
     versions = (
         f"(recorded at {RECORDED_AT} with numpy {data['numpy']}, scipy {data['scipy']}, "
         f"BLAS {data['blas']!r}, CPU {data['cpu']!r})"
     )
     try:
-        assert_same(data["cases"][name], actual, rtol, name)
+        assert_same(data["cases"][name], actual, rtol, name, atol)
     except AssertionError as exc:
         raise AssertionError(f"{exc}\n{versions}") from None
 
