@@ -38,10 +38,10 @@ from gymnasium.vector.utils import batch_space
 from activetrack import observation
 from activetrack.problem import PlanningProblem
 from activetrack.scenarios import Scenario, make_scenario
-from activetrack.validation import FloatArray
+from activetrack.validation import FloatArray, real_array
 from activetrack.world import World
 
-from .tracking_env import check_no_options, real_array
+from .tracking_env import check_no_options
 
 StepReturn = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]
 
@@ -169,7 +169,7 @@ class BatchedActiveTracking(VectorEnv):
         if not self._started:
             raise RuntimeError("call reset() before step()")
         N, m = self.num_envs, self.n_sensors
-        a = real_array(name, value)
+        a = real_array(name, value, finite=False)
         if a.shape == (N, 2 * m):
             a = a.reshape(N, m, 2)
         if a.shape != (N, m, 2):

@@ -29,14 +29,13 @@ from gymnasium import spaces
 
 from activetrack.problem import PlanningProblem
 from activetrack.scenarios import Scenario
-from activetrack.validation import FloatArray
+from activetrack.validation import FloatArray, real_array
 
 from .tracking_env import (
     RENDER_MODES,
     TrackingParallelEnv,
     check_no_options,
     positions_array,
-    real_array,
 )
 
 
@@ -87,7 +86,7 @@ class CentralizedTrackingEnv(gym.Env):
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         """Move the team by the joint action ``(2M,)``, advance one step, and observe."""
         self.env._running_agents()
-        a = real_array("action", action)
+        a = real_array("action", action, finite=False)
         if a.shape != (2 * self.n_sensors,) or np.count_nonzero(np.isfinite(a)) != a.size:
             raise ValueError(self._bad_action(a))
         a = a.reshape(self.n_sensors, 2)
@@ -96,7 +95,7 @@ class CentralizedTrackingEnv(gym.Env):
     def step_positions(self, positions: FloatArray) -> tuple[np.ndarray, float, bool, bool, dict]:
         """Move the sensors to absolute next positions (M, 2) or (2M,) (an expert's plan)."""
         agents = self.env._running_agents()
-        p = real_array("positions", positions)
+        p = real_array("positions", positions, finite=False)
         p = positions_array(p.reshape(-1, 2) if p.shape == (2 * self.n_sensors,) else p, agents)
         return self._out(*self.env._advance(self.env.world.step, p))
 

@@ -59,7 +59,7 @@ from pettingzoo.utils.wrappers import OrderEnforcingWrapper
 from activetrack import observation
 from activetrack.problem import PlanningProblem
 from activetrack.scenarios import Scenario, make_scenario
-from activetrack.validation import FloatArray
+from activetrack.validation import FloatArray, real_array
 from activetrack.world import World
 
 from .rendering import EpisodeHistory, TrackingRenderer
@@ -376,7 +376,7 @@ def positions_array(positions: dict[str, Any] | FloatArray, agents: list[str]) -
     """Return next positions as a finite float64 (M, 2) array, or raise ValueError."""
     if isinstance(positions, dict):
         return actions_array(positions, agents, "position")
-    p = real_array("positions", positions)
+    p = real_array("positions", positions, finite=False)
     if p.shape != (len(agents), 2):
         raise ValueError(f"positions must have shape ({len(agents)}, 2), got {p.shape}")
     if not np.isfinite(p).all():
@@ -384,25 +384,9 @@ def positions_array(positions: dict[str, Any] | FloatArray, agents: list[str]) -
     return p
 
 
-def real_array(name: str, value: Any) -> FloatArray:
-    """Return ``value`` as a float64 array of real numbers, or raise ValueError naming ``name``.
-
-    Rejects what ``np.asarray`` cannot shape (ragged sequences), and bool, complex, object
-    and string data, which would otherwise be cast silently (a complex action would lose
-    its imaginary part).
-    """
-    try:
-        a = np.asarray(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be an array of real numbers, got {value!r}") from None
-    if a.dtype.kind not in "iuf":
-        raise ValueError(f"{name} must be real numbers, got {value!r}")
-    return a.astype(np.float64, copy=False)
-
-
 def agent_action(agent: str, value: Any, what: str = "action") -> FloatArray:
     """Return one agent's action (or position) as a finite float64 (2,), or raise ValueError."""
-    a = real_array(f"{what} of agent {agent!r}", value)
+    a = real_array(f"{what} of agent {agent!r}", value, finite=False)
     if a.shape != (2,):
         raise ValueError(f"{what} of agent {agent!r} must have shape (2,), got {a.shape}")
     if not np.all(np.isfinite(a)):

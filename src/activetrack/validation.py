@@ -54,12 +54,14 @@ def _reject_non_real(name: str, value: object) -> None:
         raise ValueError(f"{name} must hold real numbers, got {value!r}")
 
 
-def real_array(name: str, value: object) -> FloatArray:
-    """Return ``value`` as a float64 array of real, finite numbers.
+def real_array(name: str, value: object, *, finite: bool = True) -> FloatArray:
+    """Return ``value`` as a float64 array of real (and, with ``finite``, finite) numbers.
 
     Strings, bools, ``None``, complex numbers, ragged nestings and object arrays raise a
     ``ValueError`` naming ``name``, so a value is converted once here instead of failing
-    later (``np.asarray("0.1", float)`` would silently parse a string).
+    later (``np.asarray("0.1", float)`` would silently parse a string, and a complex
+    action would lose its imaginary part). ``finite=False`` leaves NaN and inf to the
+    caller, for a message that says where they are.
     """
     _reject_non_real(name, value)
     try:
@@ -68,8 +70,8 @@ def real_array(name: str, value: object) -> FloatArray:
         raise ValueError(f"{name} must be real numbers, got {value!r}") from exc
     if arr.dtype.kind not in "iuf":
         raise ValueError(f"{name} must be real numbers, got {value!r}")
-    arr = arr.astype(np.float64)
-    if not np.all(np.isfinite(arr)):
+    arr = arr.astype(np.float64, copy=False)
+    if finite and not np.all(np.isfinite(arr)):
         raise ValueError(f"{name} must be finite (no NaN or inf), got {value!r}")
     return arr
 

@@ -38,21 +38,12 @@ def replaying(actions, key):
     return policy
 
 
-@pytest.mark.xfail(
-    reason="needs make_scenario to accept max_cycles as n_steps", raises=ValueError, strict=True
-)
 def test_pettingzoo_max_cycles_test():
     from pettingzoo.test import max_cycles_test
 
     max_cycles_test(activetrack.envs)  # uses the module's parallel_env and env
 
 
-@pytest.mark.xfail(
-    reason="needs make_scenario to raise TypeError 'got an unexpected keyword argument' "
-    "(TorchRL's GymEnv passes frameskip and drops it on that error)",
-    raises=ValueError,
-    strict=True,
-)
 def test_torchrl_gymenv_rollout_matches_the_environment():
     GymEnv = pytest.importorskip("torchrl.envs").GymEnv
     env = GymEnv(ENV_ID, **CONFIG)
