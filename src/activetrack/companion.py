@@ -21,6 +21,7 @@ from activetrack.validation import FloatArray
 
 IM_TOL = 1e-2  # accept eigenvalues this close to the real axis (extra candidates are harmless)
 RE_TOL = 1e-2  # ... and this far outside [-1, 1] (clipped onto the circle)
+_RE_BOUND = 1.0 + RE_TOL
 
 _SHIFT = np.eye(10, k=-1)  # the companion matrix below its first row
 _COMPANION_TEMPLATE = np.asfortranarray(np.eye(10, k=-1))
@@ -60,7 +61,7 @@ def accept(re, im):
 
     Floats or arrays alike; NaN fails.
     """
-    return (abs(im) <= IM_TOL) & (abs(re) <= 1.0 + RE_TOL)
+    return (abs(im) <= IM_TOL) & (abs(re) <= _RE_BOUND)
 
 
 def accept_roots(ev: np.ndarray) -> tuple[FloatArray, np.ndarray]:
@@ -124,9 +125,10 @@ def real_roots_scalar(gam: tuple[float, ...]) -> list[float]:
         if info != 0:  # QR failed to converge (never seen): numpy's driver instead
             ev = np.linalg.eigvals(companion(np.nan_to_num(np.array(gam))))
             wr, wi = ev.real, ev.imag
-    # NaN fails the acceptance test, so it is dropped.
+    # The rule of accept() written out (a call per root costs more than the test); NaN
+    # fails it, so it is dropped.
     return [
         -1.0 if re < -1.0 else (1.0 if re > 1.0 else re)
         for re, im in zip(wr.tolist(), wi.tolist(), strict=True)
-        if accept(re, im)
+        if -IM_TOL <= im <= IM_TOL and -_RE_BOUND <= re <= _RE_BOUND
     ]

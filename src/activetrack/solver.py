@@ -71,9 +71,11 @@ Accepted scale range (the public functions raise ``ValueError`` naming the param
 outside it; ``check=False`` callers must stay inside it):
 
 - magnitudes: ``r``, ``rho``, ``||c||`` (each 0 allowed), ``sigma_d2``, ``sigma_theta2``
-  and both eigenvalues of ``prior_info`` within ``[1e-100, 1e100]`` (``MIN_SCALE``,
-  ``MAX_SCALE``): then every normalized quantity below (``b / r^2``, ``kappa r^2``,
-  products of prior entries) is a normal float64, with no overflow or underflow to 0;
+  and both eigenvalues of ``prior_info`` within ``[1e-50, 1e50]`` (``MIN_SCALE``,
+  ``MAX_SCALE``): then the quantities formed before normalizing (``b / r^2``,
+  ``kappa r^2``, products of prior entries, ``f0`` of the infeasible and ``r = 0``
+  answers in the original units, whose terms are products of up to four of them) are
+  normal float64 numbers, with no overflow or underflow to 0;
 - ``||c|| <= 1e5 r`` (``MAX_DISTANCE_RATIO``) when ``r > 0``: ``s`` is returned relative
   to the target, so it carries an absolute rounding error of a few ``eps ||c||``; the
   bound keeps that under ``1e-10 r`` (feasibility to ``1e-9`` relative) and the powers
@@ -82,7 +84,12 @@ outside it; ``check=False`` callers must stay inside it):
   floor on ``rho`` (above) would answer a different problem;
 - the prior's condition number ``l1 / l2 <= 1e8`` (``MAX_PRIOR_CONDITION``): ``l2`` is
   computed from the determinant, good to ``~eps l1``, so the objective is good to
-  ``~eps l1 / l2`` relative where the prior dominates it.
+  ``~eps l1 / l2`` relative where the prior dominates it;
+- when ``r > 0``, the second largest of the information scales ``l1``,
+  ``1/sigma_d2`` and ``1/(sigma_theta2 r^2)`` at least ``1e-30`` times the largest
+  (``MIN_INFORMATION_RATIO``): in the normalized units (largest scale 1) the denominator
+  of ``f0`` is then at least that ratio times a geometric factor, and its cube (in the
+  derivatives that Newton uses) stays a normal number.
 
 The implementation, one job a module: the steps written once for floats and arrays
 (:mod:`activetrack.solver_steps`), the companion matrix and its accepted roots
@@ -129,6 +136,7 @@ __all__ = [
     "MAX_DISTANCE_RATIO",
     "MAX_PRIOR_CONDITION",
     "MAX_SCALE",
+    "MIN_INFORMATION_RATIO",
     "MIN_SCALE",
     "RHO_FLOOR",
     "BatchSolution",
@@ -139,10 +147,11 @@ __all__ = [
     "solve_single_sensor_batch",
 ]
 
-MIN_SCALE = 1e-100  # smallest nonzero magnitude accepted (see the module docstring)
-MAX_SCALE = 1e100  # largest magnitude accepted
+MIN_SCALE = 1e-50  # smallest nonzero magnitude accepted (see the module docstring)
+MAX_SCALE = 1e50  # largest magnitude accepted
 MAX_DISTANCE_RATIO = 1e5  # largest ||c|| / r accepted
 MAX_PRIOR_CONDITION = 1e8  # largest condition number l1 / l2 of prior_info accepted
+MIN_INFORMATION_RATIO = 1e-30  # of the two largest of l1, 1/sigma_d2, 1/(sigma_theta2 r^2)
 
 # The private kernels under their historical names (the batched GSR, tests and tools use
 # them): _solve_batch_unchecked(P, c, r, rho, sigma_d2, sigma_theta2, guess=None) ->
@@ -160,7 +169,10 @@ def _check_scale(l1, l2, nc, r, rho, sigma_d2, sigma_theta2) -> None:
     """Raise ValueError unless the (float or array) inputs lie in the accepted scale range.
 
     ``l1 >= l2 > 0`` are the prior's eigenvalues, ``nc = ||c||``; see the module docstring.
+    Floats inside the range pass one test; the checks below name what is outside.
     """
+    if type(l1) is float and _inside_scalar(l1, l2, nc, r, rho, sigma_d2, sigma_theta2):
+        return
     within("prior_info", l1, MIN_SCALE, MAX_SCALE, what="the largest eigenvalue")
     within("prior_info", l2, MIN_SCALE, MAX_SCALE, what="the smallest eigenvalue")
     within("prior_info", l1 / l2, 0.0, MAX_PRIOR_CONDITION, what="the condition number")
@@ -171,13 +183,64 @@ def _check_scale(l1, l2, nc, r, rho, sigma_d2, sigma_theta2) -> None:
     if type(r) is float:
         if r == 0.0:
             return
-        ratio_c, ratio_rho = nc / r, rho / r
+        safe, ratio_c, ratio_rho = r, nc / r, rho / r
     else:
         reach = r > 0.0
         safe = np.where(reach, r, 1.0)
         ratio_c, ratio_rho = np.where(reach, nc / safe, 0.0), np.where(reach, rho / safe, 0.0)
     within("c", ratio_c, 0.0, MAX_DISTANCE_RATIO, what="||c|| / r")
     within("rho", ratio_rho, RHO_FLOOR, math.inf, what="rho / r")
+    _check_information(l1, 1.0 / sigma_d2, 1.0 / (sigma_theta2 * safe * safe), r)
+
+
+def _inside_scalar(l1, l2, nc, r, rho, sigma_d2, sigma_theta2) -> bool:
+    """Return whether float inputs lie in the accepted scale range (all of it, one test)."""
+    lo, hi = MIN_SCALE, MAX_SCALE
+    if not (
+        lo <= l2
+        and l1 <= hi
+        and l1 <= MAX_PRIOR_CONDITION * l2
+        and lo <= sigma_d2 <= hi
+        and lo <= sigma_theta2 <= hi
+        and (r == 0.0 or lo <= r <= hi)
+        and (rho == 0.0 or lo <= rho <= hi)
+        and (nc == 0.0 or lo <= nc <= hi)
+    ):
+        return False
+    if r == 0.0:
+        return True
+    if nc > MAX_DISTANCE_RATIO * r or (rho != 0.0 and rho < RHO_FLOOR * r):
+        return False
+    low, mid, top = sorted((l1, 1.0 / sigma_d2, 1.0 / (sigma_theta2 * r * r)))
+    return mid >= MIN_INFORMATION_RATIO * top
+
+
+_INFO_NAMES = ("prior_info", "sigma_d2", "sigma_theta2")
+
+
+def _check_information(l1, a, b_r2, r) -> None:
+    """Raise unless the two largest information scales ``l1``, ``a = 1/sigma_d^2``,
+    ``b / r^2 = 1/(sigma_theta^2 r^2)`` are within ``1 / MIN_INFORMATION_RATIO`` (rows
+    with ``r > 0``), naming the parameter of the largest (the one that dominates)."""
+    if type(l1) is float:
+        scales = (l1, a, b_r2)
+        low, mid, top = sorted(scales)
+        if mid >= MIN_INFORMATION_RATIO * top:
+            return
+        ratio, name = mid / top, _INFO_NAMES[scales.index(top)]
+    else:
+        scales = np.stack([l1, a, b_r2], axis=-1)
+        srt = np.sort(scales, axis=-1)
+        bad = (srt[:, 1] < MIN_INFORMATION_RATIO * srt[:, 2]) & (r > 0.0)
+        if not np.any(bad):
+            return
+        i = int(np.argmax(bad))
+        ratio, name = srt[i, 1] / srt[i, 2], _INFO_NAMES[int(np.argmax(scales[i]))]
+    raise ValueError(
+        f"{name}: the second largest of the information scales l1 (prior_info), "
+        f"1/sigma_d2 and 1/(sigma_theta2 r^2) must be >= {MIN_INFORMATION_RATIO:g} times "
+        f"the largest, got {ratio:g}"
+    )
 
 
 def _checked_scalars(prior_info, c, r, rho, sigma_d2, sigma_theta2) -> tuple[float, ...]:
@@ -189,7 +252,7 @@ def _checked_scalars(prior_info, c, r, rho, sigma_d2, sigma_theta2) -> tuple[flo
     if P.shape != (2, 2):
         raise ValueError(f"prior_info must have shape (2, 2), got {P.shape}")
     p11, p12, p21, p22 = P.ravel().tolist()
-    spd2_entries("prior_info", p11, p12, p21, p22)
+    spd2_entries("prior_info", p11, p12, p21, p22, max_abs=MAX_SCALE)
     p12 = 0.5 * (p12 + p21)
     cc = _as_array("c", c)
     if cc.shape != (2,):
@@ -238,6 +301,10 @@ def solve_single_sensor(
     """
     if check:
         args = _checked_scalars(prior_info, c, r, rho, sigma_d2, sigma_theta2)
+    elif type(prior_info) is np.ndarray and type(c) is np.ndarray:
+        p11, p12, _, p22 = prior_info.ravel().tolist()
+        c1, c2 = c.tolist()
+        args = (p11, p12, p22, c1, c2, float(r), float(rho), float(sigma_d2), float(sigma_theta2))
     else:
         P = prior_info
         args = (
@@ -290,7 +357,7 @@ def solve_single_sensor_batch(
             raise ValueError(f"c must have shape ({n}, 2), got {cc.shape}")
         if not np.all(np.isfinite(cc)):
             raise ValueError("c must be finite (no NaN or inf)")
-        spd2_stack("prior_info", P)
+        spd2_stack("prior_info", P, max_abs=MAX_SCALE)
     n = P.shape[0]
     args = []
     for name, value, allow_zero in (

@@ -41,7 +41,6 @@ from activetrack.solver_steps import (
     nearest_point,
     newton_step,
     normalize,
-    sign_residuals,
     to_eigen,
     to_original,
     value_at,
@@ -163,12 +162,10 @@ def _circle_candidates(frame, idx, lo, guess, roots_out, swap_out, certified):
     v, ok = accepted_first(v, ok)
     w = circle_offset(v, ARRAY)
     # Both signs are candidates; the critical one(s) are also Newton starts.
-    crit_p, crit_m = critical_signs(*sign_residuals([h[:, None] for h in hk], v, w))
-    v2 = np.concatenate([v, v], axis=1)
-    w2 = np.concatenate([w, -w], axis=1)
+    crit = np.concatenate(critical_signs([h[:, None] for h in hk], v, w), axis=1)
     ok2 = np.concatenate([ok, ok], axis=1)
-    crit = np.concatenate([crit_p, crit_m], axis=1)
-    X, Y = circle_points(C1i[:, None], C2i[:, None], v2, w2, swap[:, None], ARRAY)
+    (xp, yp), (xm, ym) = circle_points(C1i[:, None], C2i[:, None], v, w, swap[:, None], ARRAY)
+    X, Y = np.concatenate([xp, xm], axis=1), np.concatenate([yp, ym], axis=1)
     ok2 &= X * X + Y * Y >= lo[idx, None]
     with np.errstate(divide="ignore", invalid="ignore"):
         F = f0(L1i[:, None], L2i[:, None], Ai[:, None], Bi[:, None], X, Y)

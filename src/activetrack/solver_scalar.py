@@ -37,7 +37,6 @@ from activetrack.solver_steps import (
     nearest_point,
     newton_step,
     normalize,
-    sign_residuals,
     to_eigen,
     to_original,
     value_at,
@@ -121,9 +120,8 @@ def solve_scalar(
         for v in real_roots_scalar(sylvester_gammas(*hk)):
             w = circle_offset(v, SCALAR)
             # Both signs are candidates; the critical one(s) are also Newton starts.
-            crit_p, crit_m = critical_signs(*sign_residuals(hk, v, w))
-            for sgn, crit in ((w, crit_p), (-w, crit_m)):
-                x, y = circle_points(C1, C2, v, sgn, swap, SCALAR)
+            crits = critical_signs(hk, v, w)
+            for (x, y), crit in zip(circle_points(C1, C2, v, w, swap, SCALAR), crits, strict=True):
                 if x * x + y * y >= lo:
                     f = f0(L1, L2, A, Bn, x, y)
                     if f < best_f:

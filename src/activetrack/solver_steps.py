@@ -3,7 +3,8 @@
 Every function here works on Python floats (the scalar path, one problem) and on NumPy
 arrays (the batched path, one problem a row) alike: the arithmetic is ``+ - * /`` and
 ``abs``, and the few functions whose float and array forms differ (``atan2``, ``hypot``,
-``cos``, ``sin``, ``sqrt``, ``maximum``, ``minimum``, ``where``, ``copysign``) come from an ``ops``
+``cos``, ``sin``, ``sqrt``, ``maximum``, ``minimum``, ``where``, ``swap2``: ``(y, x)`` where
+``cond`` else ``(x, y)``, ``copysign``) come from an ``ops``
 namespace, :data:`SCALAR` (``math``, conditional expressions) or :data:`ARRAY` (NumPy).
 ``SCALAR.where`` evaluates both branches, so arguments are kept finite by the callers
 (e.g. a safe divisor) rather than by the branch.
@@ -18,7 +19,7 @@ The steps, in the order the solver uses them:
 - :func:`f0` (eq. 22 in the eigenframe, eq. 18) and :func:`circle_derivatives`
   (``f0`` and its first two derivatives along the speed circle, eq. 30-31).
 - :func:`circle_polynomial`: f1 reduced to the speed circle (eq. 30-32), whose Sylvester
-  resultant is f3 (eq. 33); :func:`sign_residuals` picks which of the two circle points
+  resultant is f3 (eq. 33); :func:`critical_signs` picks which of the two circle points
   of a root of f3 is critical; :func:`circle_points` maps roots to points.
 - :func:`nearest_point` (D), :func:`axis_points` (eq. 36-37: ``x y = 0`` on the ``rho``
   arc), :func:`in_speed_disk`, :func:`arc_ends` (A, B): the other candidates (Lemma 3).
@@ -45,6 +46,7 @@ SCALAR = SimpleNamespace(
     maximum=max,
     minimum=min,
     where=lambda cond, x, y: x if cond else y,
+    swap2=lambda cond, x, y: (y, x) if cond else (x, y),
     copysign=math.copysign,
 )
 ARRAY = SimpleNamespace(
@@ -56,6 +58,7 @@ ARRAY = SimpleNamespace(
     maximum=np.maximum,
     minimum=np.minimum,
     where=np.where,
+    swap2=lambda cond, x, y: (np.where(cond, y, x), np.where(cond, x, y)),
     copysign=np.copysign,
 )
 
@@ -175,9 +178,8 @@ def circle_polynomial(L1, L2, A, Bn, C1, C2, swap, ops):
     ``g0 + g1 w`` and the circle (eq. 30) is f3 (eq. 33):
     :func:`activetrack._coefficients.sylvester_gammas` of these.
     """
-    w = ops.where
-    m1, m2 = w(swap, L2, L1), w(swap, L1, L2)
-    q1, q2 = w(swap, C2, C1), w(swap, C1, C2)
+    m1, m2 = ops.swap2(swap, L1, L2)
+    q1, q2 = ops.swap2(swap, C1, C2)
     return circle_reduction(*alpha_beta(m1, m2, A, Bn, q1, q2), q1, q2)
 
 
@@ -186,25 +188,24 @@ def circle_offset(v, ops):
     return ops.sqrt(ops.maximum(0.0, 1.0 - v * v))
 
 
-def sign_residuals(hk, v, w):
-    """Return ``(|g0(v) + g1(v) w|, |g0(v) - g1(v) w|)``: f1 at the two circle points of ``v``.
+def critical_signs(hk, v, w):
+    """Return whether the circle points ``+w`` and ``-w`` of a root ``v`` look critical.
 
-    ``hk`` from :func:`circle_polynomial` (entries broadcasting with ``v``); Horner's rule.
-    The sign(s) where f1 vanishes are the critical points (Newton starts).
+    f1 (eq. 32) on the circle is ``g0(v) + g1(v) (+-w)`` (``hk`` from
+    :func:`circle_polynomial`, entries broadcasting with ``v``; Horner's rule); a sign is
+    critical (a Newton start) unless f1 there is ``SIGN_RATIO`` times that at the other.
     """
     g0 = ((((hk[5] * v + hk[4]) * v + hk[3]) * v + hk[2]) * v + hk[1]) * v + hk[0]
     g1w = ((((hk[10] * v + hk[9]) * v + hk[8]) * v + hk[7]) * v + hk[6]) * w
-    return abs(g0 + g1w), abs(g0 - g1w)
-
-
-def critical_signs(ep, em):
-    """Return whether ``+w`` and ``-w`` look critical (f1 within ``SIGN_RATIO`` of the other)."""
+    ep, em = abs(g0 + g1w), abs(g0 - g1w)
     return ep <= SIGN_RATIO * em, em <= SIGN_RATIO * ep
 
 
 def circle_points(C1, C2, v, w, swap, ops):
-    """Return the eigenframe point ``c / r + (v, w)`` (``(w, v)`` where ``swap``)."""
-    return C1 + ops.where(swap, w, v), C2 + ops.where(swap, v, w)
+    """Return the eigenframe points ``c / r + (v, +-w)`` (``(+-w, v)`` where ``swap``):
+    ``((x+, y+), (x-, y-))``."""
+    (dxp, dyp), (dxm, dym) = ops.swap2(swap, v, w), ops.swap2(swap, v, -w)
+    return (C1 + dxp, C2 + dyp), (C1 + dxm, C2 + dym)
 
 
 def nearest_point(C1, C2, ncn):

@@ -116,16 +116,21 @@ def real_scalar(name: str, value: ArrayLike, *, allow_zero: bool = False) -> flo
     return v
 
 
-def spd2_entries(name: str, p11: float, p12: float, p21: float, p22: float) -> None:
+def spd2_entries(
+    name: str, p11: float, p12: float, p21: float, p22: float, *, max_abs: float = 1e150
+) -> None:
     """Raise unless ``[[p11, p12], [p21, p22]]`` (floats) is finite, symmetric and SPD.
 
     The one-matrix, float-only form of :func:`spd` for 2x2 matrices (symmetry to a
-    relative ``1e-9``; positive definite: ``p11 > 0`` and ``det > 0``).
+    relative ``1e-9``; positive definite: ``p11 > 0`` and ``det > 0``). Entries must not
+    exceed ``max_abs`` in magnitude (the determinant must not overflow).
     """
     if not (
         math.isfinite(p11) and math.isfinite(p12) and math.isfinite(p21) and math.isfinite(p22)
     ):
         raise ValueError(f"{name} must be finite (no NaN or inf)")
+    if max(abs(p11), abs(p12), abs(p21), abs(p22)) > max_abs:
+        raise ValueError(f"{name}: entries must be within [-{max_abs:g}, {max_abs:g}]")
     scale = max(abs(p11), abs(p22), abs(p12), 1e-300)
     if abs(p12 - p21) > 1e-9 * scale:
         raise ValueError(f"{name} must be symmetric")
@@ -133,13 +138,15 @@ def spd2_entries(name: str, p11: float, p12: float, p21: float, p22: float) -> N
         raise ValueError(f"{name} must be positive definite (eigenvalues > 0)")
 
 
-def spd2_stack(name: str, arr: FloatArray) -> None:
+def spd2_stack(name: str, arr: FloatArray, *, max_abs: float = 1e150) -> None:
     """Raise unless every matrix of ``arr`` (..., 2, 2) is finite, symmetric and SPD.
 
     The stacked form of :func:`spd2_entries` (same rule, vectorized).
     """
     if not np.all(np.isfinite(arr)):
         raise ValueError(f"{name} must be finite (no NaN or inf)")
+    if arr.size and np.max(np.abs(arr)) > max_abs:
+        raise ValueError(f"{name}: entries must be within [-{max_abs:g}, {max_abs:g}]")
     p11, p12, p21, p22 = arr[..., 0, 0], arr[..., 0, 1], arr[..., 1, 0], arr[..., 1, 1]
     scale = np.maximum(np.maximum(np.abs(p11), np.abs(p22)), np.abs(p12))
     if np.any(np.abs(p12 - p21) > 1e-9 * np.maximum(scale, 1e-300)):
