@@ -121,6 +121,7 @@ from activetrack.solver_steps import (
     circle_derivatives,
     circle_polynomial,
     eig_frame,
+    eigenvalues,
     normalize,
     to_original,
 )
@@ -264,7 +265,7 @@ def _checked_scalars(prior_info, c, r, rho, sigma_d2, sigma_theta2) -> tuple[flo
     rho = real_scalar("rho", rho, allow_zero=True)
     sigma_d2 = real_scalar("sigma_d2", sigma_d2)
     sigma_theta2 = real_scalar("sigma_theta2", sigma_theta2)
-    _, _, l1, l2 = eig_frame(p11, p12, p22, SCALAR)
+    l1, l2 = eigenvalues(p11, p12, p22, SCALAR)
     _check_scale(l1, l2, math.hypot(c1, c2), r, rho, sigma_d2, sigma_theta2)
     return p11, p12, p22, c1, c2, r, rho, sigma_d2, sigma_theta2
 
@@ -377,7 +378,7 @@ def solve_single_sensor_batch(
         args.append(np.broadcast_to(arr, (n,)).astype(np.float64))
     if check:
         p12 = 0.5 * (P[:, 0, 1] + P[:, 1, 0])
-        _, _, l1, l2 = eig_frame(P[:, 0, 0], p12, P[:, 1, 1], ARRAY)
+        l1, l2 = eigenvalues(P[:, 0, 0], p12, P[:, 1, 1], ARRAY)
         _check_scale(l1, l2, np.hypot(cc[:, 0], cc[:, 1]), *args)
     return solve_batch(P, cc, *args)[0]
 

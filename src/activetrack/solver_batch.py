@@ -29,10 +29,7 @@ from activetrack.solver_steps import (
     arc_ends,
     axis_points,
     circle_derivatives,
-    circle_offset,
-    circle_points,
     circle_polynomial,
-    critical_signs,
     eig_frame,
     f0,
     fallback_point,
@@ -41,10 +38,10 @@ from activetrack.solver_steps import (
     nearest_point,
     newton_step,
     normalize,
+    root_candidates,
     to_eigen,
     to_original,
     value_at,
-    worth_stepping,
 )
 from activetrack.validation import FloatArray
 
@@ -71,8 +68,8 @@ def polish_rows(
         _, d1, d2 = circle_derivatives(
             L1[act], L2[act], A[act], Bn[act], C1[act], C2[act], np.cos(ta), np.sin(ta)
         )
-        step = newton_step(d1, d2, ARRAY)
-        keep = worth_stepping(step, d1, f[act])  # False for converged rows and NaN
+        with np.errstate(over="ignore"):  # f'' = 0: see newton_step
+            step, keep = newton_step(d1, d2, f[act], ARRAY)  # keep: False when converged
         act, step = act[keep], step[keep]
         moved = np.zeros(t.shape, dtype=bool)
         pend = np.arange(act.size)  # positions in act still looking for a decrease
@@ -160,12 +157,12 @@ def _circle_candidates(frame, idx, lo, guess, roots_out, swap_out, certified):
     ok &= ~bad[:, None]
     # Only the accepted roots matter (most rows accept 2 of the 10): keep their columns.
     v, ok = accepted_first(v, ok)
-    w = circle_offset(v, ARRAY)
-    # Both signs are candidates; the critical one(s) are also Newton starts.
-    crit = np.concatenate(critical_signs([h[:, None] for h in hk], v, w), axis=1)
+    # Both points of each root are candidates; the critical one(s) are also Newton starts.
+    plus, minus = root_candidates(
+        [h[:, None] for h in hk], v, C1i[:, None], C2i[:, None], swap[:, None], ARRAY
+    )
+    X, Y, crit = (np.concatenate(pair, axis=1) for pair in zip(plus, minus, strict=True))
     ok2 = np.concatenate([ok, ok], axis=1)
-    (xp, yp), (xm, ym) = circle_points(C1i[:, None], C2i[:, None], v, w, swap[:, None], ARRAY)
-    X, Y = np.concatenate([xp, xm], axis=1), np.concatenate([yp, ym], axis=1)
     ok2 &= X * X + Y * Y >= lo[idx, None]
     with np.errstate(divide="ignore", invalid="ignore"):
         F = f0(L1i[:, None], L2i[:, None], Ai[:, None], Bi[:, None], X, Y)

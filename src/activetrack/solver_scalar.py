@@ -25,10 +25,7 @@ from activetrack.solver_steps import (
     arc_ends,
     axis_points,
     circle_derivatives,
-    circle_offset,
-    circle_points,
     circle_polynomial,
-    critical_signs,
     eig_frame,
     f0,
     fallback_point,
@@ -37,10 +34,10 @@ from activetrack.solver_steps import (
     nearest_point,
     newton_step,
     normalize,
+    root_candidates,
     to_eigen,
     to_original,
     value_at,
-    worth_stepping,
 )
 
 Point = tuple[float, float, float]  # (f0, x, y)
@@ -56,8 +53,8 @@ def polish(L1, L2, A, Bn, C1, C2, lo, f, x, y) -> Point:
     t = math.atan2(y - C2, x - C1)
     for _ in range(NEWTON_ITERS):
         _, d1, d2 = circle_derivatives(L1, L2, A, Bn, C1, C2, math.cos(t), math.sin(t))
-        step = newton_step(d1, d2, SCALAR)
-        if not worth_stepping(step, d1, f):  # converged (or NaN)
+        step, go = newton_step(d1, d2, f, SCALAR)
+        if not go:  # converged (or NaN)
             break
         while abs(step) >= STEP_TOL:
             tn = t + step
@@ -118,10 +115,8 @@ def solve_scalar(
         swap = abs(C1) > abs(C2)
         hk = circle_polynomial(L1, L2, A, Bn, C1, C2, swap, SCALAR)
         for v in real_roots_scalar(sylvester_gammas(*hk)):
-            w = circle_offset(v, SCALAR)
-            # Both signs are candidates; the critical one(s) are also Newton starts.
-            crits = critical_signs(hk, v, w)
-            for (x, y), crit in zip(circle_points(C1, C2, v, w, swap, SCALAR), crits, strict=True):
+            # Both points are candidates; the critical one(s) are also Newton starts.
+            for x, y, crit in root_candidates(hk, v, C1, C2, swap, SCALAR):
                 if x * x + y * y >= lo:
                     f = f0(L1, L2, A, Bn, x, y)
                     if f < best_f:

@@ -11,7 +11,8 @@ namespace, :data:`SCALAR` (``math``, conditional expressions) or :data:`ARRAY` (
 
 The steps, in the order the solver uses them:
 
-- :func:`eig_frame`: Lemma 2, ``L' = C(phi0) diag(l1, l2) C(-phi0)``.
+- :func:`eig_frame` (and :func:`eigenvalues`): Lemma 2,
+  ``L' = C(phi0) diag(l1, l2) C(-phi0)``.
 - :func:`normalize`: the eigenframe problem in units (lengths in ``r``, information in
   ``kappa = max(l1, 1/sigma_d^2, 1/(sigma_theta^2 r^2))``) that keep the polynomials of
   :mod:`activetrack._coefficients` well scaled.
@@ -19,8 +20,8 @@ The steps, in the order the solver uses them:
 - :func:`f0` (eq. 22 in the eigenframe, eq. 18) and :func:`circle_derivatives`
   (``f0`` and its first two derivatives along the speed circle, eq. 30-31).
 - :func:`circle_polynomial`: f1 reduced to the speed circle (eq. 30-32), whose Sylvester
-  resultant is f3 (eq. 33); :func:`critical_signs` picks which of the two circle points
-  of a root of f3 is critical; :func:`circle_points` maps roots to points.
+  resultant is f3 (eq. 33); :func:`root_candidates`: the two circle points of a root of
+  f3 and which of them is critical.
 - :func:`nearest_point` (D), :func:`axis_points` (eq. 36-37: ``x y = 0`` on the ``rho``
   arc), :func:`in_speed_disk`, :func:`arc_ends` (A, B): the other candidates (Lemma 3).
 - :func:`newton_step`: the damped Newton step on ``d f0 / d theta`` that polishes.
@@ -78,12 +79,17 @@ STEP_TOL = 1e-13  # Newton steps below this (radians) are converged
 SHARP = 0.25
 
 
+def eigenvalues(p11, p12, p22, ops):
+    """Return ``(l1, l2)``, the eigenvalues of ``[[p11, p12], [p12, p22]]`` (``l1 >= l2``)."""
+    l1 = 0.5 * (p11 + p22) + ops.hypot(0.5 * (p11 - p22), p12)
+    # det / l1 is positive whenever the matrix is (validated) positive definite.
+    return l1, (p11 * p22 - p12 * p12) / l1
+
+
 def eig_frame(p11, p12, p22, ops):
     """Return ``(cos phi0, sin phi0, l1, l2)`` of Lemma 2 (``l1 >= l2 > 0``), closed form."""
     phi0 = 0.5 * ops.atan2(2.0 * p12, p11 - p22)
-    l1 = 0.5 * (p11 + p22) + ops.hypot(0.5 * (p11 - p22), p12)
-    # det / l1 is positive whenever the matrix is (validated) positive definite.
-    l2 = (p11 * p22 - p12 * p12) / l1
+    l1, l2 = eigenvalues(p11, p12, p22, ops)
     return ops.cos(phi0), ops.sin(phi0), l1, l2
 
 
@@ -183,29 +189,24 @@ def circle_polynomial(L1, L2, A, Bn, C1, C2, swap, ops):
     return circle_reduction(*alpha_beta(m1, m2, A, Bn, q1, q2), q1, q2)
 
 
-def circle_offset(v, ops):
-    """Return ``w = sqrt(1 - v^2)`` (>= 0) for accepted roots ``v`` in [-1, 1]."""
-    return ops.sqrt(ops.maximum(0.0, 1.0 - v * v))
+def root_candidates(hk, v, C1, C2, swap, ops):
+    """Return ``((x+, y+, crit+), (x-, y-, crit-))``: the speed-circle points of roots ``v``.
 
-
-def critical_signs(hk, v, w):
-    """Return whether the circle points ``+w`` and ``-w`` of a root ``v`` look critical.
-
-    f1 (eq. 32) on the circle is ``g0(v) + g1(v) (+-w)`` (``hk`` from
-    :func:`circle_polynomial`, entries broadcasting with ``v``; Horner's rule); a sign is
-    critical (a Newton start) unless f1 there is ``SIGN_RATIO`` times that at the other.
+    A root ``v`` in [-1, 1] of f3 (eq. 33) is the offset from ``c / r`` along x (along y
+    where ``swap``); the other offset is ``+-w``, ``w = sqrt(1 - v^2)``. f1 (eq. 32) on the
+    circle is ``g0(v) + g1(v) (+-w)`` (``hk`` from :func:`circle_polynomial`, entries
+    broadcasting with ``v``; Horner's rule); a sign is critical (a Newton start) unless f1
+    there is ``SIGN_RATIO`` times that at the other. Both points are candidates.
     """
+    w = ops.sqrt(ops.maximum(0.0, 1.0 - v * v))
     g0 = ((((hk[5] * v + hk[4]) * v + hk[3]) * v + hk[2]) * v + hk[1]) * v + hk[0]
     g1w = ((((hk[10] * v + hk[9]) * v + hk[8]) * v + hk[7]) * v + hk[6]) * w
     ep, em = abs(g0 + g1w), abs(g0 - g1w)
-    return ep <= SIGN_RATIO * em, em <= SIGN_RATIO * ep
-
-
-def circle_points(C1, C2, v, w, swap, ops):
-    """Return the eigenframe points ``c / r + (v, +-w)`` (``(+-w, v)`` where ``swap``):
-    ``((x+, y+), (x-, y-))``."""
-    (dxp, dyp), (dxm, dym) = ops.swap2(swap, v, w), ops.swap2(swap, v, -w)
-    return (C1 + dxp, C2 + dyp), (C1 + dxm, C2 + dym)
+    (dxp, dxm), (dyp, dym) = ops.swap2(swap, (v, v), (w, -w))
+    return (
+        (C1 + dxp, C2 + dyp, ep <= SIGN_RATIO * em),
+        (C1 + dxm, C2 + dym, em <= SIGN_RATIO * ep),
+    )
 
 
 def nearest_point(C1, C2, ncn):
@@ -235,20 +236,18 @@ def arc_ends(C1, C2, ncn, rh2, ops):
     return (along * ux - h * uy, along * uy + h * ux), (along * ux + h * uy, along * uy - h * ux)
 
 
-def newton_step(d1, d2, ops):
-    """Return the damped Newton step ``-f'/|f''|`` in radians, clipped to ``+-MAX_STEP``.
+def newton_step(d1, d2, f, ops):
+    """Return ``(step, go)``: the damped Newton step on ``d f0 / d theta`` and whether to
+    take it (the step and its predicted gain ``|f' step|`` exceed rounding; NaN: not).
 
-    ``-f'/|f''|`` is a descent direction even where f0 is concave; where ``f'' = 0`` the
-    full ``MAX_STEP`` downhill.
+    The step is ``-f'/|f''|`` (a descent direction even where f0 is concave) clipped to
+    ``+-MAX_STEP``. Where ``f'' = 0`` the divisor is the smallest subnormal instead, so
+    ``-f'/divisor`` is beyond ``MAX_STEP`` (or infinite) for every ``f' != 0``: the full
+    ``MAX_STEP`` downhill (arrays: the caller ignores the overflow).
     """
-    flat = d2 == 0.0
-    step = ops.where(flat, -ops.copysign(MAX_STEP, d1), -d1 / ops.where(flat, 1.0, abs(d2)))
-    return ops.maximum(-MAX_STEP, ops.minimum(MAX_STEP, step))
-
-
-def worth_stepping(step, d1, f):
-    """Return whether a step is worth taking: it and its predicted gain exceed rounding."""
-    return (abs(step) >= STEP_TOL) & (abs(d1 * step) > GAIN_TOL * f)
+    step = -d1 / (abs(d2) + (d2 == 0.0) * 5e-324)
+    step = ops.maximum(-MAX_STEP, ops.minimum(MAX_STEP, step))
+    return step, (abs(step) >= STEP_TOL) & (abs(d1 * step) > GAIN_TOL * f)
 
 
 def fallback_point(c1, c2, nc, r, ops):
