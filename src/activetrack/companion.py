@@ -121,7 +121,8 @@ def real_roots_scalar(gam: tuple[float, ...]) -> list[float]:
     else:
         comp = _COMPANION_TEMPLATE.copy(order="F")
         comp[0, :] = [-gam[j] / lead for j in range(9, -1, -1)]
-        wr, wi, _, _, info = lapack.dgeev(comp, compute_vl=0, compute_vr=0, overwrite_a=1)
+        # Positional (keywords cost more): no eigenvectors, lwork = 4 n (its default).
+        wr, wi, _, _, info = lapack.dgeev(comp, 0, 0, 40, 1)
         if info != 0:  # QR failed to converge (never seen): numpy's driver instead
             ev = np.linalg.eigvals(companion(np.nan_to_num(np.array(gam))))
             wr, wi = ev.real, ev.imag

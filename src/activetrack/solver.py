@@ -127,6 +127,8 @@ from activetrack.solver_steps import (
 )
 from activetrack.validation import (
     FloatArray,
+    as_finite,
+    per_sensor,
     real_scalar,
     spd2_entries,
     spd2_stack,
@@ -170,10 +172,9 @@ def _check_scale(l1, l2, nc, r, rho, sigma_d2, sigma_theta2) -> None:
     """Raise ValueError unless the (float or array) inputs lie in the accepted scale range.
 
     ``l1 >= l2 > 0`` are the prior's eigenvalues, ``nc = ||c||``; see the module docstring.
-    Floats inside the range pass one test; the checks below name what is outside.
     """
-    if type(l1) is float and _inside_scalar(l1, l2, nc, r, rho, sigma_d2, sigma_theta2):
-        return
+    if not np.all(l2 > 0.0):  # symmetrized, a nearly singular matrix may lose it
+        raise ValueError("prior_info must be positive definite (eigenvalues > 0)")
     within("prior_info", l1, MIN_SCALE, MAX_SCALE, what="the largest eigenvalue")
     within("prior_info", l2, MIN_SCALE, MAX_SCALE, what="the smallest eigenvalue")
     within("prior_info", l1 / l2, 0.0, MAX_PRIOR_CONDITION, what="the condition number")
@@ -212,8 +213,10 @@ def _inside_scalar(l1, l2, nc, r, rho, sigma_d2, sigma_theta2) -> bool:
         return True
     if nc > MAX_DISTANCE_RATIO * r or (rho != 0.0 and rho < RHO_FLOOR * r):
         return False
-    low, mid, top = sorted((l1, 1.0 / sigma_d2, 1.0 / (sigma_theta2 * r * r)))
-    return mid >= MIN_INFORMATION_RATIO * top
+    # The two largest information scales within the ratio: at least two reach it.
+    a, b = 1.0 / sigma_d2, 1.0 / (sigma_theta2 * r * r)
+    least = MIN_INFORMATION_RATIO * max(l1, a, b)
+    return (l1 >= least) + (a >= least) + (b >= least) >= 2
 
 
 _INFO_NAMES = ("prior_info", "sigma_d2", "sigma_theta2")
@@ -266,7 +269,9 @@ def _checked_scalars(prior_info, c, r, rho, sigma_d2, sigma_theta2) -> tuple[flo
     sigma_d2 = real_scalar("sigma_d2", sigma_d2)
     sigma_theta2 = real_scalar("sigma_theta2", sigma_theta2)
     l1, l2 = eigenvalues(p11, p12, p22, SCALAR)
-    _check_scale(l1, l2, math.hypot(c1, c2), r, rho, sigma_d2, sigma_theta2)
+    nc = math.hypot(c1, c2)
+    if not _inside_scalar(l1, l2, nc, r, rho, sigma_d2, sigma_theta2):
+        _check_scale(l1, l2, nc, r, rho, sigma_d2, sigma_theta2)  # says what is outside
     return p11, p12, p22, c1, c2, r, rho, sigma_d2, sigma_theta2
 
 
@@ -349,37 +354,27 @@ def solve_single_sensor_batch(
         ValueError: naming the offending parameter and its allowed range.
     """
     P = _as_array("prior_info", prior_info)
-    cc = _as_array("c", c)
-    if check:
-        if P.ndim != 3 or P.shape[1:] != (2, 2):
-            raise ValueError(f"prior_info must have shape (B, 2, 2), got {P.shape}")
+    names = ("r", "rho", "sigma_d2", "sigma_theta2")
+    if not check:
         n = P.shape[0]
-        if cc.shape != (n, 2):
-            raise ValueError(f"c must have shape ({n}, 2), got {cc.shape}")
-        if not np.all(np.isfinite(cc)):
-            raise ValueError("c must be finite (no NaN or inf)")
-        spd2_stack("prior_info", P, max_abs=MAX_SCALE)
+        cc = _as_array("c", c)
+        args = [
+            np.broadcast_to(_as_array(k, v), (n,)).astype(np.float64)
+            for k, v in zip(names, (r, rho, sigma_d2, sigma_theta2), strict=True)
+        ]
+        return solve_batch(P, cc, *args)[0]
+    if P.ndim != 3 or P.shape[1:] != (2, 2):
+        raise ValueError(f"prior_info must have shape (B, 2, 2), got {P.shape}")
     n = P.shape[0]
-    args = []
-    for name, value, allow_zero in (
-        ("r", r, True),
-        ("rho", rho, True),
-        ("sigma_d2", sigma_d2, False),
-        ("sigma_theta2", sigma_theta2, False),
-    ):
-        arr = _as_array(name, value)
-        if check:
-            if arr.ndim > 1 or (arr.ndim == 1 and arr.shape[0] != n):
-                raise ValueError(f"{name} must be a scalar or have shape ({n},), got {arr.shape}")
-            bad = ~np.isfinite(arr) | ((arr < 0.0) if allow_zero else (arr <= 0.0))
-            if np.any(bad):
-                bound = ">= 0" if allow_zero else "> 0"
-                raise ValueError(f"{name} must be finite and {bound}, got {value!r}")
-        args.append(np.broadcast_to(arr, (n,)).astype(np.float64))
-    if check:
-        p12 = 0.5 * (P[:, 0, 1] + P[:, 1, 0])
-        l1, l2 = eigenvalues(P[:, 0, 0], p12, P[:, 1, 1], ARRAY)
-        _check_scale(l1, l2, np.hypot(cc[:, 0], cc[:, 1]), *args)
+    cc = as_finite("c", c, (n, 2))
+    spd2_stack("prior_info", P, max_abs=MAX_SCALE)
+    args = [
+        per_sensor(k, v, n, allow_zero=k in ("r", "rho"))
+        for k, v in zip(names, (r, rho, sigma_d2, sigma_theta2), strict=True)
+    ]
+    p12 = 0.5 * (P[:, 0, 1] + P[:, 1, 0])
+    l1, l2 = eigenvalues(P[:, 0, 0], p12, P[:, 1, 1], ARRAY)
+    _check_scale(l1, l2, np.hypot(cc[:, 0], cc[:, 1]), *args)
     return solve_batch(P, cc, *args)[0]
 
 

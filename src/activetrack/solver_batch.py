@@ -239,7 +239,7 @@ def solve_batch(
     b = 1.0 / sigma_theta2
     c1, c2 = c[:, 0], c[:, 1]
     nc = np.hypot(c1, c2)
-    case = geometric_case(nc, r, rho, ARRAY).astype(np.int64)
+    case = geometric_case(nc, r, rho).astype(np.int64)
     feasible = nc + r >= rho
     special = ~feasible | (r == 0.0)
 

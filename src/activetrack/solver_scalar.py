@@ -90,7 +90,7 @@ def solve_scalar(
     a = 1.0 / sigma_d2
     b = 1.0 / sigma_theta2
     nc = math.hypot(c1, c2)
-    case = geometric_case(nc, r, rho, SCALAR)
+    case = geometric_case(nc, r, rho)
 
     if nc + r < rho or r == 0.0:
         # Infeasible (or nowhere to go): the reachable point farthest from the target.

@@ -125,10 +125,15 @@ def normalize(l1, l2, a, b, c1, c2, cph, sph, r, rho, ops):
     )
 
 
-def geometric_case(nc, r, rho, ops):
-    """Return the geometric case (1-4) of Fig. 3 for ``||c|| = nc`` (4: ``||c|| <= r``)."""
-    w = ops.where
-    return w(nc <= r, 4, w(rho <= nc - r, 1, w(rho * rho >= nc * nc - r * r, 2, 3)))
+def geometric_case(nc, r, rho):
+    """Return the geometric case (1-4) of Fig. 3 for ``||c|| = nc`` (4: ``||c|| <= r``).
+
+    ``4 if nc <= r else 1 if rho <= nc - r else 2 if rho^2 >= nc^2 - r^2 else 3``, by
+    arithmetic on the three tests (bools or bool arrays; the result int or int array).
+    """
+    case = 3 - (rho * rho >= nc * nc - r * r)
+    case = case - (case - 1) * (rho <= nc - r)
+    return case + (4 - case) * (nc <= r)
 
 
 def f0(l1, l2, a, b, x, y):

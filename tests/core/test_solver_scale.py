@@ -261,3 +261,14 @@ def test_reported_failures_are_refused(name, kwargs, why):
     batch = {k: np.stack([np.asarray(v, dtype=float)] * 3) for k, v in kw.items()}
     with pytest.raises(ValueError, match=name):
         solve_single_sensor_batch(**batch)
+
+
+def test_nearly_singular_prior_is_refused_without_a_crash():
+    """Symmetric within 1e-9 but singular once symmetrized: refused, naming prior_info."""
+    P = np.array([[1.0, 1.0 + 4e-10], [1.0 - 4e-10, 1.0]])  # det = 1.6e-19 > 0 as given
+    for solve, args in (
+        (solve_single_sensor, (P, [3.0, 1.0], 1.0, 0.5, 0.1, 0.01)),
+        (solve_single_sensor_batch, (P[None], [[3.0, 1.0]], 1.0, 0.5, 0.1, 0.01)),
+    ):
+        out = solve_strictly(solve, *args)
+        assert isinstance(out, ValueError) and "prior_info" in str(out), out
