@@ -204,9 +204,9 @@ def _inside_scalar(l1, l2, nc, r, rho, sigma_d2, sigma_theta2) -> bool:
         and l1 <= MAX_PRIOR_CONDITION * l2
         and lo <= sigma_d2 <= hi
         and lo <= sigma_theta2 <= hi
-        and (r == 0.0 or lo <= r <= hi)
-        and (rho == 0.0 or lo <= rho <= hi)
-        and (nc == 0.0 or lo <= nc <= hi)
+        and (lo <= r <= hi or r == 0.0)
+        and (lo <= rho <= hi or rho == 0.0)
+        and (lo <= nc <= hi or nc == 0.0)
     ):
         return False
     if r == 0.0:

@@ -1,13 +1,14 @@
 """The steps of the single-sensor solver (Section IV-A), written once for floats and arrays.
 
 Every function here works on Python floats (the scalar path, one problem) and on NumPy
-arrays (the batched path, one problem a row) alike: the arithmetic is ``+ - * /`` and
-``abs``, and the few functions whose float and array forms differ (``atan2``, ``hypot``,
-``cos``, ``sin``, ``sqrt``, ``maximum``, ``minimum``, ``where``, ``swap2``: ``(y, x)`` where
-``cond`` else ``(x, y)``, ``copysign``) come from an ``ops``
-namespace, :data:`SCALAR` (``math``, conditional expressions) or :data:`ARRAY` (NumPy).
-``SCALAR.where`` evaluates both branches, so arguments are kept finite by the callers
-(e.g. a safe divisor) rather than by the branch.
+arrays (the batched path, one problem a row) alike, with the same operations in the same
+order on both, so each path gives the results it gave as its own code. The arithmetic is
+``+ - * /``, ``abs`` and comparisons; the few operations whose float and array forms
+differ come from an ``ops`` namespace, :data:`SCALAR` (``math``, builtins, conditional
+expressions) or :data:`ARRAY` (NumPy): ``atan2``, ``hypot``, ``cos``, ``sin``, ``sqrt``,
+``maximum``, ``minimum``, ``copysign``, ``where(cond, x, y)`` and
+``swap2(cond, x, y)`` (``(y, x)`` where ``cond``, else ``(x, y)``). The scalar forms
+evaluate both branches, so callers keep both finite (e.g. a safe divisor).
 
 The steps, in the order the solver uses them:
 

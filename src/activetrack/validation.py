@@ -129,10 +129,10 @@ def spd2_entries(
         math.isfinite(p11) and math.isfinite(p12) and math.isfinite(p21) and math.isfinite(p22)
     ):
         raise ValueError(f"{name} must be finite (no NaN or inf)")
-    if max(abs(p11), abs(p12), abs(p21), abs(p22)) > max_abs:
+    scale = max(abs(p11), abs(p22), abs(p12))
+    if scale > max_abs or abs(p21) > max_abs:
         raise ValueError(f"{name}: entries must be within [-{max_abs:g}, {max_abs:g}]")
-    scale = max(abs(p11), abs(p22), abs(p12), 1e-300)
-    if abs(p12 - p21) > 1e-9 * scale:
+    if abs(p12 - p21) > 1e-9 * max(scale, 1e-300):
         raise ValueError(f"{name} must be symmetric")
     if p11 <= 0.0 or p11 * p22 - p12 * p21 <= 0.0:
         raise ValueError(f"{name} must be positive definite (eigenvalues > 0)")
