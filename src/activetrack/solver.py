@@ -195,28 +195,10 @@ def _check_scale(l1, l2, nc, r, rho, sigma_d2, sigma_theta2) -> None:
     _check_information(l1, 1.0 / sigma_d2, 1.0 / (sigma_theta2 * safe * safe), r)
 
 
-def _inside_scalar(l1, l2, nc, r, rho, sigma_d2, sigma_theta2) -> bool:
-    """Return whether float inputs lie in the accepted scale range (all of it, one test)."""
-    lo, hi = MIN_SCALE, MAX_SCALE
-    if not (
-        lo <= l2
-        and l1 <= hi
-        and l1 <= MAX_PRIOR_CONDITION * l2
-        and lo <= sigma_d2 <= hi
-        and lo <= sigma_theta2 <= hi
-        and (lo <= r <= hi or r == 0.0)
-        and (lo <= rho <= hi or rho == 0.0)
-        and (lo <= nc <= hi or nc == 0.0)
-    ):
-        return False
-    if r == 0.0:
-        return True
-    if nc > MAX_DISTANCE_RATIO * r or (rho != 0.0 and rho < RHO_FLOOR * r):
-        return False
-    # The two largest information scales within the ratio: at least two reach it.
-    a, b = 1.0 / sigma_d2, 1.0 / (sigma_theta2 * r * r)
-    least = MIN_INFORMATION_RATIO * max(l1, a, b)
-    return (l1 >= least) + (a >= least) + (b >= least) >= 2
+def _informative(l1: float, a: float, b_r2: float) -> bool:
+    """Return whether the two largest information scales are within the ratio (floats)."""
+    least = MIN_INFORMATION_RATIO * max(l1, a, b_r2)
+    return (l1 >= least) + (a >= least) + (b_r2 >= least) >= 2
 
 
 _INFO_NAMES = ("prior_info", "sigma_d2", "sigma_theta2")
@@ -256,7 +238,7 @@ def _checked_scalars(prior_info, c, r, rho, sigma_d2, sigma_theta2) -> tuple[flo
     if P.shape != (2, 2):
         raise ValueError(f"prior_info must have shape (2, 2), got {P.shape}")
     p11, p12, p21, p22 = P.ravel().tolist()
-    spd2_entries("prior_info", p11, p12, p21, p22, max_abs=MAX_SCALE)
+    spd2_entries("prior_info", p11, p12, p21, p22, MAX_SCALE)
     p12 = 0.5 * (p12 + p21)
     cc = _as_array("c", c)
     if cc.shape != (2,):
@@ -270,8 +252,27 @@ def _checked_scalars(prior_info, c, r, rho, sigma_d2, sigma_theta2) -> tuple[flo
     sigma_theta2 = real_scalar("sigma_theta2", sigma_theta2)
     l1, l2 = eigenvalues(p11, p12, p22, SCALAR)
     nc = math.hypot(c1, c2)
-    if not _inside_scalar(l1, l2, nc, r, rho, sigma_d2, sigma_theta2):
-        _check_scale(l1, l2, nc, r, rho, sigma_d2, sigma_theta2)  # says what is outside
+    lo, hi = MIN_SCALE, MAX_SCALE
+    # The whole accepted range in one test (every call runs it); _check_scale names what
+    # is outside.
+    inside = (
+        lo <= l2
+        and l1 <= hi
+        and l1 <= MAX_PRIOR_CONDITION * l2
+        and lo <= sigma_d2 <= hi
+        and lo <= sigma_theta2 <= hi
+        and (lo <= rho <= hi or rho == 0.0)
+        and (lo <= nc <= hi or nc == 0.0)
+        and (
+            r == 0.0
+            or lo <= r <= hi
+            and nc <= MAX_DISTANCE_RATIO * r
+            and (rho >= RHO_FLOOR * r or rho == 0.0)
+            and _informative(l1, 1.0 / sigma_d2, 1.0 / (sigma_theta2 * r * r))
+        )
+    )
+    if not inside:
+        _check_scale(l1, l2, nc, r, rho, sigma_d2, sigma_theta2)
     return p11, p12, p22, c1, c2, r, rho, sigma_d2, sigma_theta2
 
 

@@ -117,7 +117,7 @@ def real_scalar(name: str, value: ArrayLike, *, allow_zero: bool = False) -> flo
 
 
 def spd2_entries(
-    name: str, p11: float, p12: float, p21: float, p22: float, *, max_abs: float = 1e150
+    name: str, p11: float, p12: float, p21: float, p22: float, max_abs: float = 1e150
 ) -> None:
     """Raise unless ``[[p11, p12], [p21, p22]]`` (floats) is finite, symmetric and SPD.
 
