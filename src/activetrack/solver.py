@@ -308,7 +308,11 @@ def solve_single_sensor(
     """
     if check:
         args = _checked_scalars(prior_info, c, r, rho, sigma_d2, sigma_theta2)
-    elif type(prior_info) is np.ndarray and type(c) is np.ndarray:
+    elif (
+        type(prior_info) is np.ndarray
+        and type(c) is np.ndarray
+        and prior_info.dtype == c.dtype == np.float64
+    ):  # float64 arrays (GSR's case): their floats at once
         p11, p12, _, p22 = prior_info.ravel().tolist()
         c1, c2 = c.tolist()
         args = (p11, p12, p22, c1, c2, float(r), float(rho), float(sigma_d2), float(sigma_theta2))
