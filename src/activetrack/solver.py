@@ -55,8 +55,8 @@ Deviations from and additions to the paper (deliberate):
   (``|imag| <= 1e-2``, ``|real| <= 1 + 1e-2``), the inside ones are pairwise disjoint (so
   the region holds exactly one root per inside disk), and each of those roots is pinned
   to within 1e-10 (units of ``r``) by a Newton inclusion disk lying in its own
-  (``_certified_roots``). Then its accepted roots are f3's true accepted roots to 1e-10,
-  which the eigenvalues give to their rounding. The starts: the row's roots from the
+  (:mod:`activetrack.certified_roots`). Then its accepted roots are f3's true accepted
+  roots to 1e-10, which the eigenvalues give to their rounding. The starts: the row's roots from the
   caller's previous solve of a nearby problem in the same variable (``swap``), e.g. the
   same sensor one Gauss-Seidel step earlier; for rows without one, when there are at
   least 256, one in 8 takes the eigenvalues and the others start from the roots of the
@@ -66,571 +66,218 @@ Deviations from and additions to the paper (deliberate):
   ``feasible=False``. ``r = 0`` returns ``c`` (feasible iff ``||c|| >= rho``). ``case`` is
   always the geometric case (1-4) of ``(||c||, r, rho)``.
 - The information at ``s`` equals that at ``-s``: optima need not be unique.
+
+Accepted scale range (the public functions raise ``ValueError`` naming the parameter
+outside it; ``check=False`` callers must stay inside it):
+
+- magnitudes: ``r``, ``rho``, ``||c||`` (each 0 allowed), ``sigma_d2``, ``sigma_theta2``
+  and both eigenvalues of ``prior_info`` within ``[1e-50, 1e50]`` (``MIN_SCALE``,
+  ``MAX_SCALE``): then the quantities formed before normalizing (``b / r^2``,
+  ``kappa r^2``, products of prior entries, ``f0`` of the infeasible and ``r = 0``
+  answers in the original units, whose terms are products of up to four of them) are
+  normal float64 numbers, with no overflow or underflow to 0;
+- ``||c|| <= 1e5 r`` (``MAX_DISTANCE_RATIO``) when ``r > 0``: ``s`` is returned relative
+  to the target, so it carries an absolute rounding error of a few ``eps ||c||``; the
+  bound keeps that under ``1e-10 r`` (feasibility to ``1e-9`` relative) and the powers
+  of ``c / r`` in the coefficients of f3 finite;
+- ``rho = 0`` or ``rho >= RHO_FLOOR r`` (``1e-9 r``) when ``r > 0``: below it the solver's
+  floor on ``rho`` (above) would answer a different problem;
+- the prior's condition number ``l1 / l2 <= 1e8`` (``MAX_PRIOR_CONDITION``): ``l2`` is
+  computed from the determinant, good to ``~eps l1``, so the objective is good to
+  ``~eps l1 / l2`` relative where the prior dominates it;
+- when ``r > 0``, the second largest of the information scales ``l1``,
+  ``1/sigma_d2`` and ``1/(sigma_theta2 r^2)`` at least ``1e-30`` times the largest
+  (``MIN_INFORMATION_RATIO``): in the normalized units (largest scale 1) the denominator
+  of ``f0`` is then at least that ratio times a geometric factor, and its cube (in the
+  derivatives that Newton uses) stays a normal number.
+
+The implementation, one job a module: the steps written once for floats and arrays
+(:mod:`activetrack.solver_steps`), the companion matrix and its accepted roots
+(:mod:`activetrack.companion`), the certified warm-started roots
+(:mod:`activetrack.certified_roots`), the one-problem path on Python floats
+(:mod:`activetrack.solver_scalar`), the batched path (:mod:`activetrack.solver_batch`),
+the result types (:mod:`activetrack.solver_results`). This module is the public API
+and its input checks.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike
-from scipy.linalg import lapack
 
-from activetrack._coefficients import (
-    alpha_beta,
-    circle_reduction,
-    sylvester_gammas,
+from activetrack._coefficients import sylvester_gammas
+from activetrack.certified_roots import CircleRoots
+from activetrack.companion import companion
+from activetrack.solver_batch import SCALAR_ROWS, solve_batch
+from activetrack.solver_results import BatchSolution, SingleSensorSolution
+from activetrack.solver_scalar import solve_scalar
+from activetrack.solver_steps import (
+    ARRAY,
+    RHO_FLOOR,
+    SCALAR,
+    SIGN_RATIO,
+    circle_derivatives,
+    circle_polynomial,
+    eig_frame,
+    eigenvalues,
+    normalize,
+    to_original,
 )
-from activetrack.geometry import case_from_norm
-from activetrack.validation import FloatArray
+from activetrack.validation import (
+    FloatArray,
+    as_finite,
+    per_sensor,
+    real_scalar,
+    spd2_entries,
+    spd2_stack,
+    within,
+)
 
-RHO_FLOOR = 1e-9  # minimum rho / r used internally (see the module docstring)
-_IM_TOL = 1e-2  # accept eigenvalues this close to the real axis (extra candidates are harmless)
-_RE_TOL = 1e-2  # ... and this far outside [-1, 1] (clipped onto the circle)
-_FEAS_TOL = 1e-12  # relative slack of the feasibility tests of candidates
-_SIGN_RATIO = 10.0  # a sign of the eliminated coordinate is "critical" unless the other fits
-# f1 10x better; both signs are always evaluated, this only picks where Newton starts
-_NEWTON_ITERS = 12  # damped Newton iterations per start (most starts converge in 1-2)
-_HALVINGS = 40  # backtracking: step, step/2, ..., until f decreases
-_GAIN_TOL = 1e-16  # stop when the predicted decrease |f' step| is below this * f
-_MAX_STEP = 0.5  # radians per Newton step
-_N_POLISH = 2  # polish this many of the best speed-circle candidates (plus D, A, B)
-_STEP_TOL = 1e-13  # Newton steps below this (radians) are converged
-# Polish also from D, A, B when the feasible speed arc passes within _SHARP * r of the
-# target: f0 then has a well of angular width ~ distance / r, the roots of f3 crowd there
-# and lose accuracy (a nearly multiple root), and the root candidates may miss the well.
-_SHARP = 0.25
+__all__ = [
+    "MAX_DISTANCE_RATIO",
+    "MAX_PRIOR_CONDITION",
+    "MAX_SCALE",
+    "MIN_INFORMATION_RATIO",
+    "MIN_SCALE",
+    "RHO_FLOOR",
+    "BatchSolution",
+    "CircleRoots",
+    "SingleSensorSolution",
+    "case1_critical_points",
+    "solve_single_sensor",
+    "solve_single_sensor_batch",
+]
 
+MIN_SCALE = 1e-50  # smallest nonzero magnitude accepted (see the module docstring)
+MAX_SCALE = 1e50  # largest magnitude accepted
+MAX_DISTANCE_RATIO = 1e5  # largest ||c|| / r accepted
+MAX_PRIOR_CONDITION = 1e8  # largest condition number l1 / l2 of prior_info accepted
+MIN_INFORMATION_RATIO = 1e-30  # of the two largest of l1, 1/sigma_d2, 1/(sigma_theta2 r^2)
 
-@dataclass(frozen=True)
-class SingleSensorSolution:
-    """The solution of one single-sensor problem.
-
-    Attributes:
-        s: optimal next position relative to the predicted target, original frame, (2,).
-        value: ``f0(s)``, the trace of the posterior position covariance at ``s`` (eq. 22).
-        case: 1, 2, 3 (paper Fig. 3) or 4 (target within reach, ``||c|| <= r``).
-        feasible: whether the constraints (23)-(24) can be met (and ``s`` meets them).
-    """
-
-    s: FloatArray
-    value: float
-    case: int
-    feasible: bool
-
-
-@dataclass(frozen=True)
-class BatchSolution:
-    """The solutions of ``B`` single-sensor problems (fields as in SingleSensorSolution).
-
-    Attributes:
-        s: (B, 2) optimal relative positions, original frame.
-        value: (B,) objective values.
-        case: (B,) int cases 1-4.
-        feasible: (B,) bool.
-    """
-
-    s: FloatArray
-    value: FloatArray
-    case: np.ndarray
-    feasible: np.ndarray
-
-
-@dataclass(frozen=True)
-class CircleRoots:
-    """The roots of f3 (eq. 33) behind a batch of solutions, for warm starts (private).
-
-    Attributes:
-        roots: (B, 10) complex roots in the polynomial's scaled, centred variable; NaN in
-            rows without a speed-circle polynomial.
-        swap: (B,) bool, which coordinate the variable is (the ``swap`` of the solver).
-        certified: (B,) bool, rows whose roots came from the certified warm start
-            (ignored in a guess).
-    """
-
-    roots: np.ndarray
-    swap: np.ndarray
-    certified: np.ndarray
+# The private kernels under their historical names (the batched GSR, tests and tools use
+# them): _solve_batch_unchecked(P, c, r, rho, sigma_d2, sigma_theta2, guess=None) ->
+# (BatchSolution, CircleRoots) on validated arrays; _SCALAR_ROWS its row-by-row limit.
+_solve_batch_unchecked = solve_batch
+_SCALAR_ROWS = SCALAR_ROWS
 
 
 # ---------------------------------------------------------------------------------------
-# Shared arithmetic kernels (floats or numpy arrays), eigenbasis, normalized units.
+# Input checks: shapes, finiteness and signs, then the accepted scale range.
 # ---------------------------------------------------------------------------------------
 
 
-def _f0(l1, l2, a, b, x, y):
-    """Return f0 of eq. (22) for diagonal prior ``diag(l1, l2)``: ``tr(M) / det(M)``.
+def _check_scale(l1, l2, nc, r, rho, sigma_d2, sigma_theta2) -> None:
+    """Raise ValueError unless the (float or array) inputs lie in the accepted scale range.
 
-    ``a = 1/sigma_d^2``, ``b = 1/sigma_theta^2``. Written as ``P / Q`` with
-    ``P = D ((l1 + l2 + a) D + b)``, ``Q = l1 l2 D^2 + a D (l1 y^2 + l2 x^2)
-    + b (a D + l1 x^2 + l2 y^2)``, ``D = x^2 + y^2``: all terms positive, no cancellation.
+    ``l1 >= l2 > 0`` are the prior's eigenvalues, ``nc = ||c||``; see the module docstring.
     """
-    xx = x * x
-    yy = y * y
-    d = xx + yy
-    return (d * ((l1 + l2 + a) * d + b)) / (
-        l1 * l2 * d * d + a * d * (l1 * yy + l2 * xx) + b * (a * d + l1 * xx + l2 * yy)
-    )
-
-
-def _circle_derivatives(l1, l2, a, b, c1, c2, co, si):
-    """Return ``(f0, df0/dt, d2f0/dt2)`` at ``s = c + (cos t, sin t)`` (unit circle, eq. 30)."""
-    x = c1 + co
-    y = c2 + si
-    # x' = -sin t, y' = cos t, x'' = -cos t, y'' = -sin t.
-    d = x * x + y * y
-    dp = 2.0 * (y * co - x * si)
-    dpp = 2.0 * (1.0 - x * co - y * si)
-    e = l1 * y * y + l2 * x * x
-    ep = 2.0 * (l1 * y * co - l2 * x * si)
-    epp = 2.0 * (l1 * (co * co - y * si) + l2 * (si * si - x * co))
-    fp = 2.0 * (l2 * y * co - l1 * x * si)
-    fpp = 2.0 * (l1 * (si * si - x * co) + l2 * (co * co - y * si))
-    big_a = l1 + l2 + a
-    w = 2.0 * big_a * d + b
-    p = d * (big_a * d + b)
-    pp = w * dp
-    ppp = 2.0 * big_a * dp * dp + w * dpp
-    k = 2.0 * l1 * l2 * d + a * b + a * e
-    q = l1 * l2 * d * d + a * d * e + b * (a * d + l1 * x * x + l2 * y * y)
-    qp = k * dp + a * d * ep + b * fp
-    qpp = 2.0 * l1 * l2 * dp * dp + 2.0 * a * dp * ep + k * dpp + a * d * epp + b * fpp
-    num = pp * q - p * qp
-    f = p / q
-    f1 = num / (q * q)
-    f2 = (ppp * q - p * qpp) / (q * q) - 2.0 * qp * num / (q * q * q)
-    return f, f1, f2
-
-
-_SHIFT = np.eye(10, k=-1)  # the companion matrix below its first row
-
-
-def _monic(gam: FloatArray) -> FloatArray:
-    """Return ``q`` (..., 10): f3 with coefficients ``gam`` (..., 11) is ``z^10 + sum q_k z^k``.
-
-    The polynomial is first scaled by its largest coefficient; a vanishing leading
-    coefficient (a root at infinity) is replaced by a tiny one, which only moves that
-    root far outside the unit interval where no candidate is taken.
-    """
-    scale = np.max(np.abs(gam), axis=-1, keepdims=True)
-    g = gam / np.where(scale > 0.0, scale, 1.0)
-    lead = g[..., 10]
-    lead = np.where(np.abs(lead) < 1e-15, np.where(lead < 0.0, -1e-15, 1e-15), lead)
-    return g[..., :10] / lead[..., None]
-
-
-def _companion_monic(q: FloatArray) -> FloatArray:
-    """Return the companion matrices (..., 10, 10) of ``z^10 + sum q_k z^k`` (``q`` (..., 10))."""
-    comp = np.broadcast_to(_SHIFT, q.shape[:-1] + (10, 10)).copy()
-    comp[..., 0, :] = -q[..., ::-1]
-    return comp
-
-
-def _companion(gam: FloatArray) -> FloatArray:
-    """Return the companion matrices (..., 10, 10) of f3 with coefficients ``gam`` (..., 11).
-
-    Normalized as in :func:`_monic` (scaled; a vanishing leading coefficient made tiny).
-    """
-    return _companion_monic(_monic(gam))
-
-
-def _accept_roots(ev: np.ndarray) -> tuple[FloatArray, np.ndarray]:
-    """Return ``(x, ok)``: real parts clipped to [-1, 1] and which eigenvalues qualify."""
-    re = ev.real
-    ok = (np.abs(ev.imag) <= _IM_TOL) & (np.abs(re) <= 1.0 + _RE_TOL) & np.isfinite(re)
-    return np.clip(re, -1.0, 1.0), ok
-
-
-_WARM_ITERS = 6  # Weierstrass steps from a warm start before falling back to eigvals
-# A round of Weierstrass steps costs ~0.1 ms plus ~1 us a row, an eigenvalue solve ~25 us
-# a row: fewer rows than these are cheaper by eigenvalues (to start, to go on).
-_WARM_MIN_ROWS = 32
-_WARM_MIN_LEFT = 16
-_WARM_RADIUS = 1e-10  # an accepted root must be certified to within this
-_PIN_ITERS = 3  # Newton steps that pin the roots inside the acceptance box
-# Rounding (Higham, Accuracy and Stability, 2nd ed., Sec. 5.1, and Lemma 3.5: a complex
-# multiply errs by at most sqrt(2) gamma_2): Horner's rule on n = 10 complex steps errs
-# by at most ~3.9 n eps sum |q_k| |z|^k = 4.3e-15 sum |q_k| |z|^k (_HORNER_ERR, 2.3x
-# that), its derivative recurrence by at most twice that times sum k |q_k| |z|^(k-1).
-# The product of 9 differences errs by ~32 eps relative, each radius formula by a few
-# eps (_PROD_ERR). The comparisons with the box get an absolute slack of
-# _BOX_ERR (1 + |z|) for the rounding of |Re z| +- radius.
-_HORNER_ERR = 1e-14
-_PROD_ERR = 1e-13
-_BOX_ERR = 1e-15
-
-
-def _weierstrass(q: FloatArray, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Return ``(p(z_i), prod_{j != i} (z_i - z_j))``, each (n, m), for ``z`` (n, m).
-
-    Layout: one polynomial per column, ``p = z^n + sum_k q[k] z^k`` with ``q`` (n, m).
-    Their ratio is the Weierstrass correction ``W_i``.
-    """
-    n = z.shape[0]
-    p = _horner(q, z)
-    z2 = np.concatenate([z, z])  # z2[s:s + n] is z rolled by s
-    prod = z - z2[1 : n + 1]
-    diff = np.empty_like(z)
-    for shift in range(2, n):
-        np.subtract(z, z2[shift : shift + n], out=diff)
-        prod *= diff
-    return p, prod
-
-
-def _horner(q: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """Return ``p(x)`` for ``p = z^n + sum_k q[k] z^k`` (``q`` (n, ...) broadcasts with ``x``)."""
-    n = q.shape[0]
-    p = x + q[n - 1]
-    for k in range(n - 2, -1, -1):
-        p *= x
-        p += q[k]
-    return p
-
-
-def _inclusion_radii(
-    abs_q: FloatArray, z: np.ndarray, w: np.ndarray, prod: np.ndarray
-) -> FloatArray:
-    """Return radii ``R_i >= n |W_i|`` (n, m) that also cover rounding.
-
-    ``w = p / prod`` and ``prod`` as from :func:`_weierstrass` at ``z``; ``abs_q`` (n, m)
-    is ``|q|`` (for Horner's rounding error scale).
-    """
-    n = z.shape[0]
-    # Horner's rounding error scale sum_k |q_k| |z|^k.
-    radius = _horner(abs_q, np.abs(z))
-    radius *= _HORNER_ERR
-    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        radius /= np.abs(prod)
-        radius += np.abs(w)
-    radius *= n * (1.0 + _PROD_ERR)
-    return radius
-
-
-def _classify(z: np.ndarray, radius: FloatArray) -> tuple[np.ndarray, np.ndarray]:
-    """Return ``(ok, inside)`` for the disks ``|x - z_i| <= radius_i`` (n, m).
-
-    ``inside`` (n, m): the disk lies in the acceptance box of :func:`_accept_roots`
-    (``|imag| <= _IM_TOL``, ``|real| <= 1 + _RE_TOL``). ``ok`` (m,): every disk of the
-    column lies entirely inside or entirely outside the box and the inside ones are
-    pairwise disjoint (an inside and an outside disk cannot meet). NaN fails.
-    """
-    n = z.shape[0]
-    are, aim = np.abs(z.real), np.abs(z.imag)
-    # Signed excess over the box: inside iff <= -radius, outside iff > radius.
-    excess = np.maximum(aim - _IM_TOL, are - (1.0 + _RE_TOL))
-    are += aim
-    are += 1.0
-    are *= _BOX_ERR
-    radius = radius + are  # slack for the rounding of the comparisons
-    inside = excess <= -radius
-    settled = excess > radius
-    settled |= inside
-    ok = np.all(settled, axis=0)
-    count = inside.sum(axis=0)
-    # Two inside disks must not meet. Most columns have two: compare first and last.
-    two = np.flatnonzero(ok & (count == 2))
-    if two.size:
-        first = np.argmax(inside[:, two], axis=0)
-        last = n - 1 - np.argmax(inside[::-1, two], axis=0)
-        gap = np.abs(z[first, two] - z[last, two])
-        ok[two] = gap > radius[first, two] + radius[last, two]
-    # More: all pairs (i, i + s mod n), s = 1..n/2.
-    cols = np.flatnonzero(ok & (count > 2))
-    if cols.size:
-        zc, rc, ic = z[:, cols], radius[:, cols], inside[:, cols]
-        z2 = np.concatenate([zc, zc])
-        r2 = np.concatenate([rc, rc])
-        i2 = np.concatenate([ic, ic])
-        meet = np.zeros(zc.shape, dtype=bool)
-        for shift in range(1, n // 2 + 1):
-            sl = slice(shift, shift + n)
-            meet |= (np.abs(zc - z2[sl]) <= rc + r2[sl]) & i2[sl]
-        ok[cols] = ~np.any(meet & ic, axis=0)
-    return ok, inside
-
-
-def _horner_with_derivative(q: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Return ``(p(x), p'(x))`` for ``p = z^n + sum_k q[k] z^k`` (``q`` (n, ...), Horner)."""
-    n = q.shape[0]
-    p = x + q[n - 1]
-    dp = np.ones_like(p)
-    for k in range(n - 2, -1, -1):
-        dp *= x
-        dp += p
-        p *= x
-        p += q[k]
-    return p, dp
-
-
-def _pin(
-    q: FloatArray, x: np.ndarray, centre: np.ndarray, radius: FloatArray
-) -> tuple[np.ndarray, np.ndarray]:
-    """Return ``(x, ok)``: Newton-refined roots (K,) and whether each is pinned.
-
-    Root ``k`` of polynomial ``q[:, k]`` (``z^n + sum_j q[j, k] z^j``, ``q`` (n, K)) is
-    known to be the only root in the disk ``|x - centre_k| <= radius_k``. Since
-    ``p'/p (x) = sum_j 1 / (x - r_j)``, some root lies within ``n |p(x) / p'(x)|`` of any
-    ``x``; when that disk (with rounding) fits in the known one, it holds that root. ``ok``
-    when it does and is no wider than ``_WARM_RADIUS``; up to ``_PIN_ITERS`` Newton steps.
-    The returned root is within ``1.1 _WARM_RADIUS`` of the true one.
-    """
-    n = q.shape[0]
-    # Error scales sum |q_k| a^k and sum k |q_k| a^(k-1) at a = |centre| + radius, which
-    # bound those at any x in the known disk (the only x that can be accepted).
-    bp, bd = _horner_with_derivative(np.abs(q), np.abs(centre) + radius)
-    err_p, err_d = _HORNER_ERR * bp, (2.0 * _HORNER_ERR) * bd
-    ok = np.zeros(x.shape, dtype=bool)
-    x = x.copy()
-    act = np.arange(x.size)
-    xa, qa, ca, ra = x, q, centre, radius
-    for it in range(_PIN_ITERS):
-        p, dp = _horner_with_derivative(qa, xa)
-        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-            # n |p / p'| with |p| bounded above and |p'| below, rounding included.
-            den = np.abs(dp) - err_d
-            rho = (n * (1.0 + _PROD_ERR)) * (np.abs(p) + err_p) / den
-            step = p / dp
-        inner = (np.abs(xa - ca) + rho) * (1.0 + _PROD_ERR) <= ra
-        good = (den > 0.0) & (rho <= _WARM_RADIUS) & inner
-        # The root is within rho of xa; xa - step (|step| <= rho / n) is within 1.1 rho
-        # of it and still in the known disk.
-        x[act[good]] = xa[good] - step[good]
-        ok[act[good]] = True
-        keep = ~good
-        if it == _PIN_ITERS - 1 or not keep.any():
-            break
-        act, xa, qa = act[keep], xa[keep] - step[keep], qa.compress(keep, axis=1)
-        ca, ra, err_p, err_d = ca[keep], ra[keep], err_p[keep], err_d[keep]
-    return x, ok
-
-
-def _certified_roots(q: FloatArray, guess: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Return ``(z, ok)``: the roots (m, 10) of ``z^10 + sum q_k z^k`` (``q`` (m, 10)).
-
-    From ``guess`` (m, 10), e.g. the roots of a nearby polynomial, Weierstrass (Durand-
-    Kerner) steps ``z_i <- z_i - W_i`` run (quadratic convergence near simple roots) until
-    a row is certified, at most ``_WARM_ITERS`` steps (fewer once under
-    ``_WARM_MIN_LEFT`` rows are left). The certificate, in two parts:
-
-    1. Which roots are accepted. With the Weierstrass corrections
-       ``W_i = p(z_i) / prod_{j != i} (z_i - z_j)``, Lagrange interpolation gives
-       ``p(x) = prod_j (x - z_j) (1 + sum_i W_i / (x - z_i))``, the characteristic
-       polynomial of ``diag(z) - W 1^T``; by Gerschgorin's theorem every root of ``p``
-       lies in a disk ``|x - z_i + W_i| <= (n - 1) |W_i|``, hence in ``|x - z_i| <= R_i``
-       (:func:`_inclusion_radii`: ``R_i >= n |W_i|`` with rounding), and a union of k
-       disks disjoint from the others holds exactly k roots. When every disk lies
-       entirely inside or outside the acceptance box of :func:`_accept_roots` and the
-       inside ones are disjoint (:func:`_classify`), the box holds exactly one root per
-       inside disk.
-    2. Where they are: each inside root is within ``R_i`` of ``z_i``; where ``R_i`` is
-       wider than ``_WARM_RADIUS`` it is pinned by :func:`_pin` (Newton from
-       ``z_i - W_i``, an inclusion disk inside ``R_i``).
-
-    Then the returned ``z`` (the pinned roots; ``z_i - W_i`` outside the box) classify as
-    the true roots do. Rows not ``ok`` hold garbage.
-    """
-    qt = q_all = np.ascontiguousarray(q.T)
-    abs_qt = np.abs(qt)
-    z = np.ascontiguousarray(guess.T, dtype=np.complex128)
-    out = np.empty_like(z)
-    ok = np.zeros(z.shape[1], dtype=bool)
-    act = np.arange(z.shape[1])
-    to_pin = []  # (column, root row, centre, radius) of accepted roots wider than wanted
-    for it in range(_WARM_ITERS + 1):
-        p, prod = _weierstrass(qt, z)
-        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-            w = p / prod
-        radius = _inclusion_radii(abs_qt, z, w, prod)
-        good, inside = _classify(z, radius)
-        cols = np.flatnonzero(good)
-        if cols.size:
-            ri, ci = np.nonzero(inside[:, cols] & (radius[:, cols] > _WARM_RADIUS))
-            col = cols[ci]
-            to_pin.append((act[col], ri, z[ri, col], radius[ri, col]))
-        z -= w
-        if cols.size:
-            out[:, act[cols]] = z[:, cols]
-            ok[act[cols]] = True
-        keep = ~good & np.all(np.isfinite(z), axis=0)
-        if it == _WARM_ITERS or np.count_nonzero(keep) < _WARM_MIN_LEFT:
-            break
-        if not keep.all():
-            act = act[keep]
-            z, qt, abs_qt = (a.compress(keep, axis=1) for a in (z, qt, abs_qt))
-    if to_pin:
-        # All at once: Newton from z_i - W_i (now in out), within the known disks.
-        col, ri, centre, radius = (np.concatenate(v) for v in zip(*to_pin, strict=True))
-        x, pinned = _pin(q_all[:, col], out[ri, col], centre, radius)
-        out[ri, col] = x
-        ok[col[~pinned]] = False  # a column is done when all its inside roots are pinned
-    return out.T, ok
-
-
-def _accepted_first(v: FloatArray, ok: np.ndarray) -> tuple[FloatArray, np.ndarray]:
-    """Return ``(v, ok)`` cut to the accepted entries of each row, in order, (m, kmax).
-
-    ``kmax`` is the most any row accepts; shorter rows are padded with ``ok = False``.
-    """
-    rows = np.arange(v.shape[0])
-    rest = ok.copy()
-    kmax = int(np.max(np.count_nonzero(ok, axis=1)))
-    out_v = np.empty((v.shape[0], kmax))
-    out_ok = np.empty((v.shape[0], kmax), dtype=bool)
-    for j in range(kmax):
-        first = np.argmax(rest, axis=1)  # the first accepted entry left (0 if none)
-        out_v[:, j] = v[rows, first]
-        out_ok[:, j] = rest[rows, first]
-        rest[rows, first] = False
-    return out_v, out_ok
-
-
-def _eig_frame(p11: float, p12: float, p22: float) -> tuple[float, float, float, float]:
-    """Return ``(cos phi0, sin phi0, l1, l2)`` of Lemma 2 (l1 >= l2 > 0), closed form."""
-    phi0 = 0.5 * math.atan2(2.0 * p12, p11 - p22)
-    mean = 0.5 * (p11 + p22)
-    l1 = mean + math.hypot(0.5 * (p11 - p22), p12)
-    # det / l1 is positive whenever the matrix is (validated) positive definite.
-    l2 = (p11 * p22 - p12 * p12) / l1
-    return math.cos(phi0), math.sin(phi0), l1, l2
-
-
-def _case(nc, r, rho):
-    """Return the geometric case (1-4) of Fig. 3 for ``||c|| = nc`` (floats or arrays)."""
-    return np.where(
-        nc <= r,
-        4,
-        np.where(rho <= nc - r, 1, np.where(rho * rho >= nc * nc - r * r, 2, 3)),
-    )
-
-
-_case_scalar = case_from_norm  # the geometric case (1-4) of Fig. 3 for one problem
-
-
-_COMPANION_TEMPLATE = np.asfortranarray(np.eye(10, k=-1))
-
-
-def _real_roots_scalar(gam: tuple[float, ...]) -> list[float]:
-    """Return the near-real roots of f3 in [-1, 1] (clipped), via its companion matrix.
-
-    Scalar twin of ``_companion`` + ``np.linalg.eigvals`` + ``_accept_roots``, calling
-    LAPACK ``dgeev`` directly (numpy's wrapper costs more than the 10x10 solve; ``dgeev``
-    balances the matrix, so no scaling is needed here).
-    """
-    lead = gam[10]
-    if not (lead != 0.0 and math.isfinite(lead)):
-        ev = np.linalg.eigvals(_companion(np.nan_to_num(np.array(gam))))
-        wr, wi = ev.real, ev.imag
-    else:
-        comp = _COMPANION_TEMPLATE.copy(order="F")
-        comp[0, :] = [-gam[j] / lead for j in range(9, -1, -1)]
-        wr, wi, _, _, info = lapack.dgeev(comp, compute_vl=0, compute_vr=0, overwrite_a=1)
-        if info != 0:  # QR failed to converge (never seen): numpy's driver instead
-            ev = np.linalg.eigvals(_companion(np.nan_to_num(np.array(gam))))
-            wr, wi = ev.real, ev.imag
-    out = []
-    for re, im in zip(wr.tolist(), wi.tolist(), strict=True):
-        # NaN fails these comparisons, so it is dropped.
-        if -_IM_TOL <= im <= _IM_TOL and -1.0 - _RE_TOL <= re <= 1.0 + _RE_TOL:
-            out.append(-1.0 if re < -1.0 else (1.0 if re > 1.0 else re))
-    return out
-
-
-def _newton_scalar(L1, L2, A, Bn, C1, C2, lo, f, x, y):
-    """Return ``(f, x, y)`` after damped Newton on df0/dt from the circle point (x, y).
-
-    The step ``-f'/|f''|`` (a descent direction even where f0 is concave) is halved until
-    it lowers ``f`` and stays feasible (``x^2 + y^2 >= lo``): sharp wells of f0 near the
-    target (width ~ (||c|| - r) / r radians) are entered instead of jumped over.
-    """
-    t = math.atan2(y - C2, x - C1)
-    for _ in range(_NEWTON_ITERS):
-        co, si = math.cos(t), math.sin(t)
-        _, d1, d2 = _circle_derivatives(L1, L2, A, Bn, C1, C2, co, si)
-        step = -d1 / abs(d2) if d2 != 0.0 else -math.copysign(_MAX_STEP, d1)
-        step = max(-_MAX_STEP, min(_MAX_STEP, step))
-        # Converged (or NaN): the step or its predicted gain is below rounding.
-        if not (abs(step) >= _STEP_TOL and abs(d1 * step) > _GAIN_TOL * f):
-            break
-        while abs(step) >= _STEP_TOL:
-            tn = t + step
-            xn, yn = C1 + math.cos(tn), C2 + math.sin(tn)
-            if xn * xn + yn * yn >= lo:
-                fn = _f0(L1, L2, A, Bn, xn, yn)
-                if fn < f:
-                    t, f, x, y = tn, fn, xn, yn
-                    break
-            step *= 0.5
-        else:
-            break
-    return f, x, y
-
-
-def _value_at(l1: float, l2: float, a: float, b: float, x: float, y: float) -> float:
-    """Return f0 at eigenframe point (x, y); at s = 0 its infimum ``1 / (l1 + a)``."""
-    if x == 0.0 and y == 0.0:
-        return 1.0 / (l1 + a)
-    return float(_f0(l1, l2, a, b, x, y))
-
-
-# ---------------------------------------------------------------------------------------
-# Input validation.
-# ---------------------------------------------------------------------------------------
-
-
-def _scalar(name: str, value: ArrayLike, *, positive: bool) -> float:
-    """Return ``value`` as a float, checking it is finite and > 0 (or >= 0)."""
-    if type(value) is float or isinstance(value, np.floating):
-        v = float(value)
-    else:
-        try:
-            arr = np.asarray(value, dtype=np.float64)
-        except (TypeError, ValueError) as exc:
-            raise ValueError(f"{name} must be a real number, got {value!r}") from exc
-        if arr.ndim != 0:
-            raise ValueError(f"{name} must be a scalar, got shape {arr.shape}")
-        v = float(arr)
-    if not (v > 0.0 if positive else v >= 0.0) or v == math.inf:  # NaN fails both
-        bound = "> 0" if positive else ">= 0"
-        raise ValueError(f"{name} must be finite and {bound}, got {value!r}")
-    return v
-
-
-def _check_prior(name: str, arr: FloatArray) -> None:
-    """Raise ValueError unless ``arr`` (..., 2, 2) is finite, symmetric, positive definite."""
-    if not np.all(np.isfinite(arr)):
-        raise ValueError(f"{name} must be finite (no NaN or inf)")
-    p11, p12, p21, p22 = arr[..., 0, 0], arr[..., 0, 1], arr[..., 1, 0], arr[..., 1, 1]
-    scale = np.maximum(np.maximum(np.abs(p11), np.abs(p22)), np.abs(p12))
-    if np.any(np.abs(p12 - p21) > 1e-9 * np.maximum(scale, 1e-300)):
-        raise ValueError(f"{name} must be symmetric")
-    if np.any(p11 <= 0.0) or np.any(p11 * p22 - p12 * p21 <= 0.0):
-        raise ValueError(f"{name} must be positive definite (eigenvalues > 0)")
-
-
-def _check_prior_scalar(p11: float, p12: float, p21: float, p22: float) -> None:
-    """Raise ValueError unless [[p11, p12], [p21, p22]] is finite, symmetric and SPD."""
-    if not (
-        math.isfinite(p11) and math.isfinite(p12) and math.isfinite(p21) and math.isfinite(p22)
-    ):
-        raise ValueError("prior_info must be finite (no NaN or inf)")
-    scale = max(abs(p11), abs(p22), abs(p12), 1e-300)
-    if abs(p12 - p21) > 1e-9 * scale:
-        raise ValueError("prior_info must be symmetric")
-    if p11 <= 0.0 or p11 * p22 - p12 * p21 <= 0.0:
+    if not np.all(l2 > 0.0):  # symmetrized, a nearly singular matrix may lose it
         raise ValueError("prior_info must be positive definite (eigenvalues > 0)")
+    within("prior_info", l1, MIN_SCALE, MAX_SCALE, what="the largest eigenvalue")
+    within("prior_info", l2, MIN_SCALE, MAX_SCALE, what="the smallest eigenvalue")
+    within("prior_info", l1 / l2, 0.0, MAX_PRIOR_CONDITION, what="the condition number")
+    for name, value in (("r", r), ("rho", rho), ("sigma_d2", sigma_d2)):
+        within(name, value, MIN_SCALE, MAX_SCALE)
+    within("sigma_theta2", sigma_theta2, MIN_SCALE, MAX_SCALE)
+    within("c", nc, MIN_SCALE, MAX_SCALE, what="||c||")
+    if type(r) is float:
+        if r == 0.0:
+            return
+        safe, ratio_c, ratio_rho = r, nc / r, rho / r
+    else:
+        reach = r > 0.0
+        safe = np.where(reach, r, 1.0)
+        ratio_c, ratio_rho = np.where(reach, nc / safe, 0.0), np.where(reach, rho / safe, 0.0)
+    within("c", ratio_c, 0.0, MAX_DISTANCE_RATIO, what="||c|| / r")
+    within("rho", ratio_rho, RHO_FLOOR, math.inf, what="rho / r")
+    _check_information(l1, 1.0 / sigma_d2, 1.0 / (sigma_theta2 * safe * safe), r)
 
 
-def _as_array(name: str, value: ArrayLike) -> FloatArray:
-    """Return ``value`` as a float64 array or raise ValueError naming ``name``."""
-    try:
-        return np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"{name} must be numeric, got {value!r}") from exc
+def _informative(l1: float, a: float, b_r2: float) -> bool:
+    """Return whether the two largest information scales are within the ratio (floats)."""
+    least = MIN_INFORMATION_RATIO * max(l1, a, b_r2)
+    return (l1 >= least) + (a >= least) + (b_r2 >= least) >= 2
+
+
+_INFO_NAMES = ("prior_info", "sigma_d2", "sigma_theta2")
+
+
+def _check_information(l1, a, b_r2, r) -> None:
+    """Raise unless the two largest information scales ``l1``, ``a = 1/sigma_d^2``,
+    ``b / r^2 = 1/(sigma_theta^2 r^2)`` are within ``1 / MIN_INFORMATION_RATIO`` (rows
+    with ``r > 0``), naming the parameter of the largest (the one that dominates)."""
+    if type(l1) is float:
+        scales = (l1, a, b_r2)
+        low, mid, top = sorted(scales)
+        if mid >= MIN_INFORMATION_RATIO * top:
+            return
+        ratio, name = mid / top, _INFO_NAMES[scales.index(top)]
+    else:
+        scales = np.stack([l1, a, b_r2], axis=-1)
+        srt = np.sort(scales, axis=-1)
+        bad = (srt[:, 1] < MIN_INFORMATION_RATIO * srt[:, 2]) & (r > 0.0)
+        if not np.any(bad):
+            return
+        i = int(np.argmax(bad))
+        ratio, name = srt[i, 1] / srt[i, 2], _INFO_NAMES[int(np.argmax(scales[i]))]
+    raise ValueError(
+        f"{name}: the second largest of the information scales l1 (prior_info), "
+        f"1/sigma_d2 and 1/(sigma_theta2 r^2) must be >= {MIN_INFORMATION_RATIO:g} times "
+        f"the largest, got {ratio:g}"
+    )
+
+
+def _checked_scalars(prior_info, c, r, rho, sigma_d2, sigma_theta2) -> tuple[float, ...]:
+    """Return ``(p11, p12, p22, c1, c2, r, rho, sigma_d2, sigma_theta2)`` as checked floats.
+
+    Float-only after the two array conversions: a check costs about a microsecond.
+    """
+    P = _as_array("prior_info", prior_info)
+    if P.shape != (2, 2):
+        raise ValueError(f"prior_info must have shape (2, 2), got {P.shape}")
+    p11, p12, p21, p22 = P.ravel().tolist()
+    spd2_entries("prior_info", p11, p12, p21, p22, MAX_SCALE)
+    p12 = 0.5 * (p12 + p21)
+    cc = _as_array("c", c)
+    if cc.shape != (2,):
+        raise ValueError(f"c must have shape (2,), got {cc.shape}")
+    c1, c2 = cc.tolist()
+    if not (math.isfinite(c1) and math.isfinite(c2)):
+        raise ValueError(f"c must be finite (no NaN or inf), got {c!r}")
+    r = real_scalar("r", r, allow_zero=True)
+    rho = real_scalar("rho", rho, allow_zero=True)
+    sigma_d2 = real_scalar("sigma_d2", sigma_d2)
+    sigma_theta2 = real_scalar("sigma_theta2", sigma_theta2)
+    l1, l2 = eigenvalues(p11, p12, p22, SCALAR)
+    nc = math.hypot(c1, c2)
+    lo, hi = MIN_SCALE, MAX_SCALE
+    # The whole accepted range in one test (every call runs it); _check_scale names what
+    # is outside.
+    inside = (
+        lo <= l2
+        and l1 <= hi
+        and l1 <= MAX_PRIOR_CONDITION * l2
+        and lo <= sigma_d2 <= hi
+        and lo <= sigma_theta2 <= hi
+        and (lo <= rho <= hi or rho == 0.0)
+        and (lo <= nc <= hi or nc == 0.0)
+        and (
+            r == 0.0
+            or lo <= r <= hi
+            and nc <= MAX_DISTANCE_RATIO * r
+            and (rho >= RHO_FLOOR * r or rho == 0.0)
+            and _informative(l1, 1.0 / sigma_d2, 1.0 / (sigma_theta2 * r * r))
+        )
+    )
+    if not inside:
+        _check_scale(l1, l2, nc, r, rho, sigma_d2, sigma_theta2)
+    return p11, p12, p22, c1, c2, r, rho, sigma_d2, sigma_theta2
 
 
 # ---------------------------------------------------------------------------------------
-# Scalar solver.
+# The public solvers.
 # ---------------------------------------------------------------------------------------
 
 
@@ -653,146 +300,36 @@ def solve_single_sensor(
         rho: minimum distance to the predicted target (>= 0).
         sigma_d2: range noise variance (> 0).
         sigma_theta2: bearing noise variance (> 0).
-        check: validate the inputs (``False`` is the unchecked fast path used by GSR).
+        check: validate the inputs, including the accepted scale range of the module
+            docstring (``False`` is the unchecked fast path used by GSR).
 
     Raises:
         ValueError: naming the offending parameter and its allowed range.
     """
     if check:
-        P = _as_array("prior_info", prior_info)
-        if P.shape != (2, 2):
-            raise ValueError(f"prior_info must have shape (2, 2), got {P.shape}")
-        p11, p12, p21, p22 = P.ravel().tolist()
-        _check_prior_scalar(p11, p12, p21, p22)
-        p12 = 0.5 * (p12 + p21)
-        cc = _as_array("c", c)
-        if cc.shape != (2,):
-            raise ValueError(f"c must have shape (2,), got {cc.shape}")
-        c1, c2 = cc.tolist()
-        if not (math.isfinite(c1) and math.isfinite(c2)):
-            raise ValueError(f"c must be finite (no NaN or inf), got {c!r}")
-        r = _scalar("r", r, positive=False)
-        rho = _scalar("rho", rho, positive=False)
-        sigma_d2 = _scalar("sigma_d2", sigma_d2, positive=True)
-        sigma_theta2 = _scalar("sigma_theta2", sigma_theta2, positive=True)
+        args = _checked_scalars(prior_info, c, r, rho, sigma_d2, sigma_theta2)
+    elif (
+        type(prior_info) is np.ndarray
+        and type(c) is np.ndarray
+        and prior_info.dtype == c.dtype == np.float64
+    ):  # float64 arrays (GSR's case): their floats at once
+        p11, p12, _, p22 = prior_info.ravel().tolist()
+        c1, c2 = c.tolist()
+        args = (p11, p12, p22, c1, c2, float(r), float(rho), float(sigma_d2), float(sigma_theta2))
     else:
         P = prior_info
-        p11, p12, p22 = float(P[0][0]), float(P[0][1]), float(P[1][1])
-        c1, c2 = float(c[0]), float(c[1])
-    return _solve_unchecked(
-        p11, p12, p22, c1, c2, float(r), float(rho), float(sigma_d2), float(sigma_theta2)
-    )
-
-
-def _solve_unchecked(
-    p11: float,
-    p12: float,
-    p22: float,
-    c1: float,
-    c2: float,
-    r: float,
-    rho: float,
-    sigma_d2: float,
-    sigma_theta2: float,
-) -> SingleSensorSolution:
-    """Return the solution for validated float inputs (prior entries, c, r, rho, variances)."""
-    cph, sph, l1, l2 = _eig_frame(p11, p12, p22)
-    a = 1.0 / sigma_d2
-    b = 1.0 / sigma_theta2
-    nc = math.hypot(c1, c2)
-    case = _case_scalar(nc, r, rho)
-
-    if nc + r < rho or r == 0.0:
-        # Infeasible (or nowhere to go): the reachable point farthest from the target.
-        ux, uy = (c1 / nc, c2 / nc) if nc > 0.0 else (1.0, 0.0)
-        sx, sy = c1 + r * ux, c2 + r * uy
-        ex, ey = cph * sx + sph * sy, -sph * sx + cph * sy
-        value = _value_at(l1, l2, a, b, ex, ey)
-        return SingleSensorSolution(np.array([sx, sy]), value, case, nc + r >= rho)
-
-    # Eigenframe (Lemma 2), lengths in units of r, information in units of kappa.
-    kappa = max(l1, a, b / (r * r))
-    L1, L2, A, Bn = l1 / kappa, l2 / kappa, a / kappa, b / (r * r * kappa)
-    C1 = (cph * c1 + sph * c2) / r
-    C2 = (-sph * c1 + cph * c2) / r
-    ncn = nc / r
-    rh = max(rho / r, RHO_FLOOR)
-    rh2 = rh * rh
-    lo = rh2 * (1.0 - _FEAS_TOL)
-
-    best_f = math.inf
-    best = (0.0, 0.0)
-    circle: list[tuple[float, float, float]] = []  # (f, x, y) of critical points on it
-    starts: list[tuple[float, float, float]] = []  # where to polish on the speed circle
-
-    on_speed_circle = ncn > 1.0 and rh2 < ncn * ncn - 1.0
-    sharp = False
-    if on_speed_circle:
-        # Cases I and III: critical points on the speed circle (eq. 30-33).
-        swap = abs(C1) > abs(C2)
-        # If swapped, eliminate x instead: the mirrored problem (x <-> y, l1 <-> l2).
-        m1, m2, q1, q2 = (L2, L1, C2, C1) if swap else (L1, L2, C1, C2)
-        hk = circle_reduction(*alpha_beta(m1, m2, A, Bn, q1, q2), q1, q2)
-        for v in _real_roots_scalar(sylvester_gammas(*hk)):
-            w = math.sqrt(max(0.0, 1.0 - v * v))
-            # f1 on the circle is g0(v) + g1(v) * (+-w): the sign(s) where it vanishes are
-            # critical points (Newton starts); both signs are candidates regardless.
-            g0 = (((((hk[5] * v + hk[4]) * v + hk[3]) * v + hk[2]) * v + hk[1]) * v) + hk[0]
-            g1w = ((((hk[10] * v + hk[9]) * v + hk[8]) * v + hk[7]) * v + hk[6]) * w
-            ep, em = abs(g0 + g1w), abs(g0 - g1w)
-            for sgn, crit in ((w, ep <= _SIGN_RATIO * em), (-w, em <= _SIGN_RATIO * ep)):
-                x, y = (C1 + sgn, C2 + v) if swap else (C1 + v, C2 + sgn)
-                if x * x + y * y >= lo:
-                    f = _f0(L1, L2, A, Bn, x, y)
-                    if f < best_f:
-                        best_f, best = f, (x, y)
-                    if crit:  # polish only from (what looks like) critical points
-                        circle.append((f, x, y))
-        circle.sort()
-        starts = circle[:_N_POLISH]
-        sharp = max(ncn - 1.0, rh) < _SHARP
-        if ncn - 1.0 >= rh:  # the nearest point D of the speed circle (case I)
-            t = 1.0 - 1.0 / ncn
-            x, y = C1 * t, C2 * t
-            f = _f0(L1, L2, A, Bn, x, y)
-            if f < best_f:
-                best_f, best = f, (x, y)
-            if sharp:
-                starts.append((f, x, y))
-
-    if rh >= ncn - 1.0:
-        # Cases II, III and 4: the rho arc inside the speed disk (eq. 36-37) and its ends.
-        for x, y in ((rh, 0.0), (-rh, 0.0), (0.0, rh), (0.0, -rh)):
-            if (x - C1) ** 2 + (y - C2) ** 2 <= 1.0 + _FEAS_TOL:
-                f = _f0(L1, L2, A, Bn, x, y)
-                if f < best_f:
-                    best_f, best = f, (x, y)
-        if ncn > 0.0 and rh >= abs(ncn - 1.0):
-            along = (rh2 - 1.0 + ncn * ncn) / (2.0 * ncn)
-            h = math.sqrt(max(0.0, rh2 - along * along))
-            ux, uy = C1 / ncn, C2 / ncn
-            for sgn in (h, -h):
-                x, y = along * ux - sgn * uy, along * uy + sgn * ux
-                f = _f0(L1, L2, A, Bn, x, y)
-                if f < best_f:
-                    best_f, best = f, (x, y)
-                if on_speed_circle and sharp:  # case III: the speed arcs end at A, B
-                    starts.append((f, x, y))
-
-    # Polish on the speed circle: damped Newton on df0/dt (t: circle angle).
-    for f, x, y in starts:
-        f, x, y = _newton_scalar(L1, L2, A, Bn, C1, C2, lo, f, x, y)
-        if f < best_f:
-            best_f, best = f, (x, y)
-
-    ex, ey = best[0] * r, best[1] * r
-    s = np.array([cph * ex - sph * ey, sph * ex + cph * ey])
-    return SingleSensorSolution(s, best_f / kappa, case, True)
-
-
-# ---------------------------------------------------------------------------------------
-# Batched solver.
-# ---------------------------------------------------------------------------------------
+        args = (
+            float(P[0][0]),
+            float(P[0][1]),
+            float(P[1][1]),
+            float(c[0]),
+            float(c[1]),
+            float(r),
+            float(rho),
+            float(sigma_d2),
+            float(sigma_theta2),
+        )
+    return SingleSensorSolution(*solve_scalar(*args))
 
 
 def solve_single_sensor_batch(
@@ -815,440 +352,43 @@ def solve_single_sensor_batch(
         c: (B, 2) current positions relative to the predicted target.
         r, rho: (B,) or scalars, >= 0.
         sigma_d2, sigma_theta2: (B,) or scalars, > 0.
-        check: validate the inputs.
+        check: validate the inputs, including the accepted scale range of the module
+            docstring.
 
     Raises:
         ValueError: naming the offending parameter and its allowed range.
     """
     P = _as_array("prior_info", prior_info)
-    cc = _as_array("c", c)
-    if check:
-        if P.ndim != 3 or P.shape[1:] != (2, 2):
-            raise ValueError(f"prior_info must have shape (B, 2, 2), got {P.shape}")
+    names = ("r", "rho", "sigma_d2", "sigma_theta2")
+    if not check:
         n = P.shape[0]
-        if cc.shape != (n, 2):
-            raise ValueError(f"c must have shape ({n}, 2), got {cc.shape}")
-        if not np.all(np.isfinite(cc)):
-            raise ValueError("c must be finite (no NaN or inf)")
-        _check_prior("prior_info", P)
+        cc = _as_array("c", c)
+        args = [
+            np.broadcast_to(_as_array(k, v), (n,)).astype(np.float64)
+            for k, v in zip(names, (r, rho, sigma_d2, sigma_theta2), strict=True)
+        ]
+        return solve_batch(P, cc, *args)[0]
+    if P.ndim != 3 or P.shape[1:] != (2, 2):
+        raise ValueError(f"prior_info must have shape (B, 2, 2), got {P.shape}")
     n = P.shape[0]
-    args = []
-    for name, value, pos in (
-        ("r", r, False),
-        ("rho", rho, False),
-        ("sigma_d2", sigma_d2, True),
-        ("sigma_theta2", sigma_theta2, True),
-    ):
-        arr = _as_array(name, value)
-        if check:
-            if arr.ndim > 1 or (arr.ndim == 1 and arr.shape[0] != n):
-                raise ValueError(f"{name} must be a scalar or have shape ({n},), got {arr.shape}")
-            bad = ~np.isfinite(arr) | ((arr <= 0.0) if pos else (arr < 0.0))
-            if np.any(bad):
-                bound = "> 0" if pos else ">= 0"
-                raise ValueError(f"{name} must be finite and {bound}, got {value!r}")
-        args.append(np.broadcast_to(arr, (n,)).astype(np.float64))
-    return _solve_batch_unchecked(P, cc, *args)[0]
-
-
-def _eigvals_stacked(comp: FloatArray) -> np.ndarray:
-    """Return the eigenvalues of stacked matrices (n, 10, 10) in one LAPACK sweep.
-
-    If QR fails to converge for some matrix (never seen), the stack is redone one matrix
-    at a time and a failing matrix gets NaN eigenvalues (no root candidates).
-    """
-    try:
-        return np.linalg.eigvals(comp)
-    except np.linalg.LinAlgError:
-        out = np.full(comp.shape[:-1], np.nan, dtype=complex)
-        for i, m in enumerate(comp):
-            try:
-                out[i] = np.linalg.eigvals(m)
-            except np.linalg.LinAlgError:
-                pass
-        return out
-
-
-def _newton_batch(
-    sub: tuple[FloatArray, ...], f: FloatArray, x: FloatArray, y: FloatArray
-) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Return ``(f, x, y)`` after damped Newton on df0/dt, vectorized twin of _newton_scalar.
-
-    ``sub`` holds ``(L1, L2, A, Bn, C1, C2, lo)`` per row; rows drop out once converged,
-    so the cost is set by the few rows that need many steps.
-    """
-    f, x, y = f.copy(), x.copy(), y.copy()
-    L1, L2, A, Bn, C1, C2, lo = sub
-    t = np.arctan2(y - C2, x - C1)
-    act = np.flatnonzero(np.isfinite(f))
-    for _ in range(_NEWTON_ITERS):
-        if act.size == 0:
-            break
-        ta = t[act]
-        _, d1, d2 = _circle_derivatives(
-            L1[act], L2[act], A[act], Bn[act], C1[act], C2[act], np.cos(ta), np.sin(ta)
-        )
-        with np.errstate(divide="ignore", invalid="ignore"):
-            step = np.where(d2 != 0.0, -d1 / np.abs(d2), -np.sign(d1) * _MAX_STEP)
-        step = np.clip(step, -_MAX_STEP, _MAX_STEP)
-        # False for converged rows (step or predicted gain below rounding) and NaN.
-        keep = (np.abs(step) >= _STEP_TOL) & (np.abs(d1 * step) > _GAIN_TOL * f[act])
-        act, step = act[keep], step[keep]
-        moved = np.zeros(t.shape, dtype=bool)
-        pend = np.arange(act.size)  # positions in act still looking for a decrease
-        for _ in range(_HALVINGS):
-            if pend.size == 0:
-                break
-            rows = act[pend]
-            tn = t[rows] + step[pend]
-            xn = C1[rows] + np.cos(tn)
-            yn = C2[rows] + np.sin(tn)
-            fn = _f0(L1[rows], L2[rows], A[rows], Bn[rows], xn, yn)
-            ok = (xn * xn + yn * yn >= lo[rows]) & (fn < f[rows])
-            good = rows[ok]
-            t[good], f[good], x[good], y[good] = tn[ok], fn[ok], xn[ok], yn[ok]
-            moved[good] = True
-            pend = pend[~ok]
-            step[pend] *= 0.5
-            pend = pend[np.abs(step[pend]) >= _STEP_TOL]
-        act = act[moved[act]]
-    return f, x, y
-
-
-_SEED_MIN_ROWS = 256  # rows without a guess needed before seeding them from the batch
-_SEED_EVERY = 8  # of those, one in this many takes eigenvalues and seeds its neighbours
-_SEED_PROBE = 64  # seeded rows tried first; the rest only if at least
-_SEED_PROBE_OK = 0.5  # this fraction of them is certified
-
-
-def _nearest_seed(
-    q: FloatArray, swap: np.ndarray, seeds: np.ndarray, rows: np.ndarray
-) -> np.ndarray:
-    """Return, for each of ``rows``, the nearest of ``seeds`` with the same ``swap`` (or -1).
-
-    Distance: Euclidean in ``sign(q) log(1 + |q|)`` (the monic coefficients, (m, 10)),
-    where nearby polynomials have nearby roots; k-d tree search.
-    """
-    from scipy.spatial import cKDTree  # here: importing scipy.spatial costs ~0.1 s
-
-    feat = np.sign(q) * np.log1p(np.abs(q))
-    out = np.full(rows.size, -1, dtype=np.int64)
-    for value in (False, True):
-        have = seeds[swap[seeds] == value]
-        need = np.flatnonzero(swap[rows] == value)
-        if have.size and need.size:
-            _, k = cKDTree(feat[have]).query(feat[rows[need]])
-            out[need] = have[k]
-    return out
-
-
-def _circle_roots(
-    q: FloatArray,
-    swap: np.ndarray,
-    bad: np.ndarray,
-    guess: CircleRoots | None,
-    idx: np.ndarray,
-    certified: np.ndarray,
-) -> np.ndarray:
-    """Return the roots (m, 10) of the monic f3 ``q`` (m, 10) of rows ``idx``.
-
-    Without ``guess``: the companion-matrix eigenvalues, the method of record. With it,
-    rows with a usable guess (finite, same variable ``swap``) try
-    :func:`_certified_roots`; when at least ``_SEED_MIN_ROWS`` rows have none, one in
-    ``_SEED_EVERY`` of them takes the eigenvalues and the others start from their
-    nearest such seed's roots (:func:`_nearest_seed`), if the first ``_SEED_PROBE`` of
-    them certify well enough (a batch of dissimilar problems makes poor seeds). Certified
-    rows are marked in ``certified`` (length B, by ``idx``); all others take the
-    eigenvalues.
-    """
-    if guess is None:
-        return _eigvals_stacked(_companion_monic(q))
-    m = q.shape[0]
-    ev = np.empty(q.shape, dtype=np.complex128)
-    done = np.zeros(m, dtype=bool)
-    start = guess.roots[idx]
-    warm = (guess.swap[idx] == swap) & ~bad & np.all(np.isfinite(start), axis=1)
-    cold = np.flatnonzero(~warm & ~bad)
-    if cold.size >= _SEED_MIN_ROWS:
-        seeds = cold[::_SEED_EVERY]
-        ev[seeds] = _eigvals_stacked(_companion_monic(q[seeds]))
-        done[seeds] = True
-        rows = np.setdiff1d(cold, seeds, assume_unique=True)
-        near = _nearest_seed(q, swap, seeds, rows)
-        keep = near >= 0
-        keep[keep] = np.all(np.isfinite(ev[near[keep]]), axis=1)
-        rows, near = rows[keep], near[keep]
-        start[rows] = ev[near]
-        # Seeds are only as good as the batch is homogeneous: try a few rows first.
-        probe = rows[:_SEED_PROBE]
-        if probe.size:
-            z, ok = _certified_roots(q[probe], start[probe])
-            ev[probe[ok]] = z[ok]
-            done[probe[ok]] = True
-            certified[idx[probe[ok]]] = True
-            if ok.mean() >= _SEED_PROBE_OK:
-                warm[rows[_SEED_PROBE:]] = True
-    use = np.flatnonzero(warm)
-    if use.size >= _WARM_MIN_ROWS:
-        z, ok = _certified_roots(q[use], start[use])
-        ev[use[ok]] = z[ok]
-        done[use[ok]] = True
-        certified[idx[use[ok]]] = True
-    rest = np.flatnonzero(~done)
-    if rest.size:
-        ev[rest] = _eigvals_stacked(_companion_monic(q[rest]))
-    return ev
-
-
-_SCALAR_ROWS = 8  # up to this many rows the scalar solver is faster than the vectorized
-
-
-def _solve_rows_scalar(
-    P: FloatArray,
-    c: FloatArray,
-    r: FloatArray,
-    rho: FloatArray,
-    sigma_d2: FloatArray,
-    sigma_theta2: FloatArray,
-) -> tuple[BatchSolution, CircleRoots]:
-    """Return the scalar solver's solutions of a few rows, in the batch layout.
-
-    Each row is :func:`_solve_unchecked` (the same method; a vectorized call costs ~1 ms
-    of numpy overhead whatever its size). No roots are returned (NaN).
-    """
-    n = P.shape[0]
-    sols = [
-        _solve_unchecked(
-            float(P[i, 0, 0]),
-            0.5 * float(P[i, 0, 1] + P[i, 1, 0]),
-            float(P[i, 1, 1]),
-            float(c[i, 0]),
-            float(c[i, 1]),
-            float(r[i]),
-            float(rho[i]),
-            float(sigma_d2[i]),
-            float(sigma_theta2[i]),
-        )
-        for i in range(n)
+    cc = as_finite("c", c, (n, 2))
+    spd2_stack("prior_info", P, max_abs=MAX_SCALE)
+    args = [
+        per_sensor(k, v, n, allow_zero=k in ("r", "rho"))
+        for k, v in zip(names, (r, rho, sigma_d2, sigma_theta2), strict=True)
     ]
-    sol = BatchSolution(
-        s=np.array([q.s for q in sols]).reshape(n, 2),
-        value=np.array([q.value for q in sols], dtype=np.float64),
-        case=np.array([q.case for q in sols], dtype=np.int64),
-        feasible=np.array([q.feasible for q in sols], dtype=bool),
-    )
-    roots = CircleRoots(
-        np.full((n, 10), np.nan, dtype=np.complex128),
-        np.zeros(n, dtype=bool),
-        np.zeros(n, dtype=bool),
-    )
-    return sol, roots
-
-
-def _solve_batch_unchecked(
-    P: FloatArray,
-    c: FloatArray,
-    r: FloatArray,
-    rho: FloatArray,
-    sigma_d2: FloatArray,
-    sigma_theta2: FloatArray,
-    guess: CircleRoots | None = None,
-) -> tuple[BatchSolution, CircleRoots]:
-    """Return the batched solution for validated arrays of shapes (B,2,2), (B,2), (B,)x4.
-
-    Also returns the roots of f3 used per row (NaN off the speed circle). Without
-    ``guess`` the roots are the companion-matrix eigenvalues. With it (the roots returned
-    by an earlier call on nearby problems, row by row) rows may take certified roots
-    instead, as :func:`_circle_roots` says; the result is the same to rounding; and a
-    call of up to ``_SCALAR_ROWS`` rows is solved row by row by the scalar kernel
-    (faster there; no roots returned). The public batch solver passes no ``guess``, so
-    its answers never depend on the batch size.
-    """
-    n = P.shape[0]
-    if guess is not None and n <= _SCALAR_ROWS:
-        return _solve_rows_scalar(P, c, r, rho, sigma_d2, sigma_theta2)
-    p11, p22 = P[:, 0, 0], P[:, 1, 1]
     p12 = 0.5 * (P[:, 0, 1] + P[:, 1, 0])
-    phi0 = 0.5 * np.arctan2(2.0 * p12, p11 - p22)
-    cph, sph = np.cos(phi0), np.sin(phi0)
-    l1 = 0.5 * (p11 + p22) + np.hypot(0.5 * (p11 - p22), p12)
-    l2 = (p11 * p22 - p12 * p12) / l1
-    a = 1.0 / sigma_d2
-    b = 1.0 / sigma_theta2
-    c1, c2 = c[:, 0], c[:, 1]
-    nc = np.hypot(c1, c2)
-    case = _case(nc, r, rho).astype(np.int64)
-    feasible = nc + r >= rho
-    special = ~feasible | (r == 0.0)
+    l1, l2 = eigenvalues(P[:, 0, 0], p12, P[:, 1, 1], ARRAY)
+    _check_scale(l1, l2, np.hypot(cc[:, 0], cc[:, 1]), *args)
+    return solve_batch(P, cc, *args)[0]
 
-    # Normalized eigenframe quantities (rows with r == 0 get a dummy r = 1).
-    rr = np.where(r > 0.0, r, 1.0)
-    kappa = np.maximum(np.maximum(l1, a), b / (rr * rr))
-    L1, L2, A, Bn = l1 / kappa, l2 / kappa, a / kappa, b / (rr * rr * kappa)
-    C1 = (cph * c1 + sph * c2) / rr
-    C2 = (-sph * c1 + cph * c2) / rr
-    ncn = nc / rr
-    rh = np.maximum(rho / rr, RHO_FLOOR)
-    rh2 = rh * rh
-    lo = rh2 * (1.0 - _FEAS_TOL)
-    col = (slice(None), None)
 
-    need_circle = ~special & (ncn > 1.0) & (rh2 < ncn * ncn - 1.0)
-    need_arc = ~special & (rh >= ncn - 1.0)
-
-    roots_out = np.full((n, 10), np.nan, dtype=np.complex128)
-    swap_out = np.zeros(n, dtype=bool)
-    certified = np.zeros(n, dtype=bool)
-    # Candidate blocks (x, y, f0 or inf where not a candidate), each (n, k), joined below.
-    cand_x, cand_y, cand_f = [], [], []
-    # Speed-circle candidates (cases I, III): companion-matrix roots of f3 (eq. 33).
-    idx = np.flatnonzero(need_circle)
-    every = idx.size == n  # GSR's usual batch: no row needs scattering
-    n_circle = 0
-    if idx.size:
-        L1i, L2i, Ai, Bi = L1[idx], L2[idx], A[idx], Bn[idx]
-        C1i, C2i = C1[idx], C2[idx]
-        swap = np.abs(C1i) > np.abs(C2i)
-        ia, ib = np.where(swap, L2i, L1i), np.where(swap, L1i, L2i)
-        ca, cb = np.where(swap, C2i, C1i), np.where(swap, C1i, C2i)
-        hk = circle_reduction(*alpha_beta(ia, ib, Ai, Bi, ca, cb), ca, cb)
-        gam = np.stack(sylvester_gammas(*hk), axis=-1)
-        bad = ~np.all(np.isfinite(gam), axis=-1)
-        gam[bad] = 0.0
-        gam[bad, 10] = 1.0  # no finite polynomial: all roots at zero, masked below
-        q = _monic(gam)
-        ev = _circle_roots(q, swap, bad, guess, idx, certified)
-        roots_out[idx] = np.where(bad[:, None], np.nan, ev)
-        swap_out[idx] = swap
-        v, ok = _accept_roots(ev)
-        ok &= ~bad[:, None]
-        # Only the accepted roots matter (most rows accept 2 of the 10): keep their columns.
-        v, ok = _accepted_first(v, ok)
-        w = np.sqrt(np.maximum(0.0, 1.0 - v * v))
-        # f1 on the circle is g0(v) + g1(v) * (+-w): the sign(s) where it vanishes are
-        # critical points (Newton starts); both signs are candidates regardless.
-        h = [q[:, None] for q in hk]
-        g0 = ((((h[5] * v + h[4]) * v + h[3]) * v + h[2]) * v + h[1]) * v + h[0]
-        g1w = ((((h[10] * v + h[9]) * v + h[8]) * v + h[7]) * v + h[6]) * w
-        ep, em = np.abs(g0 + g1w), np.abs(g0 - g1w)
-        v2 = np.concatenate([v, v], axis=1)
-        w2 = np.concatenate([w, -w], axis=1)
-        ok2 = np.concatenate([ok, ok], axis=1)
-        crit = np.concatenate([ep <= _SIGN_RATIO * em, em <= _SIGN_RATIO * ep], axis=1)
-        sw = swap[:, None]
-        X = C1i[:, None] + np.where(sw, w2, v2)
-        Y = C2i[:, None] + np.where(sw, v2, w2)
-        ok2 &= X * X + Y * Y >= lo[idx, None]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            F = _f0(L1i[:, None], L2i[:, None], Ai[:, None], Bi[:, None], X, Y)
-        F = np.where(ok2 & np.isfinite(F), F, np.inf)
-        n_circle = X.shape[1]
-        if every:
-            cand_x.append(X)
-            cand_y.append(Y)
-            cand_f.append(F)
-        else:
-            xs = np.zeros((n, n_circle))
-            ys = np.zeros((n, n_circle))
-            fs = np.full((n, n_circle), np.inf)
-            xs[idx], ys[idx], fs[idx] = X, Y, F
-            cand_x.append(xs)
-            cand_y.append(ys)
-            cand_f.append(fs)
-    d_col = n_circle
-    with np.errstate(divide="ignore", invalid="ignore"):
-        # Nearest point D of the speed circle (case I).
-        t = 1.0 - 1.0 / np.where(ncn > 0.0, ncn, 1.0)
-        dx, dy = C1 * t, C2 * t
-        fd = _f0(L1, L2, A, Bn, dx, dy)
-        ok_d = need_circle & (ncn - 1.0 >= rh) & np.isfinite(fd)
-        cand_x.append(dx[col])
-        cand_y.append(dy[col])
-        cand_f.append(np.where(ok_d, fd, np.inf)[col])
-        if np.any(need_arc):
-            # rho-arc candidates (cases II, III, 4): axis points inside the speed disk
-            # (eq. 36-37), then the arc ends A, B: intersections of the two circles.
-            zero = np.zeros(n)
-            ax = np.stack([rh, -rh, zero, zero], axis=1)
-            ay = np.stack([zero, zero, rh, -rh], axis=1)
-            inside = (ax - C1[col]) ** 2 + (ay - C2[col]) ** 2 <= 1.0 + _FEAS_TOL
-            meet = need_arc & (ncn > 0.0) & (rh >= np.abs(ncn - 1.0))
-            safe = np.where(ncn > 0.0, ncn, 1.0)
-            along = (rh2 - 1.0 + ncn * ncn) / (2.0 * safe)
-            h = np.sqrt(np.maximum(0.0, rh2 - along * along))
-            ux, uy = C1 / safe, C2 / safe
-            bx_ = np.stack([along * ux - h * uy, along * ux + h * uy], axis=1)
-            by_ = np.stack([along * uy + h * ux, along * uy - h * ux], axis=1)
-            for x_, y_, ok_ in (
-                (ax, ay, inside & need_arc[col]),
-                (bx_, by_, np.stack([meet, meet], axis=1)),
-            ):
-                f_ = _f0(L1[col], L2[col], A[col], Bn[col], x_, y_)
-                cand_x.append(x_)
-                cand_y.append(y_)
-                cand_f.append(np.where(ok_ & np.isfinite(f_), f_, np.inf))
-
-    xs = np.concatenate(cand_x, axis=1)
-    ys = np.concatenate(cand_y, axis=1)
-    fs = np.concatenate(cand_f, axis=1)
-    rows = np.arange(n)
-    j = np.argmin(fs, axis=1)
-    best_f = fs[rows, j]
-    bx, by = xs[rows, j], ys[rows, j]
-
-    # Polish on the speed circle (damped Newton on df0/dt), rows in idx only: from the
-    # best root candidates, from D and, in case III, from the arc ends A, B. All starts
-    # run in one batch; their results are then taken in order (strictly better wins).
-    if idx.size:
-        starts = []
-        sharp = np.maximum(ncn[idx] - 1.0, rh[idx]) < _SHARP
-        if np.any(sharp):
-            ab = (xs.shape[1] - 2, xs.shape[1] - 1) if np.any(need_arc) else ()
-            for col_j in (d_col, *ab):
-                starts.append(np.where(sharp, col_j, -1))
-        if n_circle:
-            fcrit = np.where(crit, fs[idx, :n_circle], np.inf)
-            rows_i = np.arange(idx.size)
-            for _ in range(min(_N_POLISH, n_circle)):  # the best, then the next best
-                jm = np.argmin(fcrit, axis=1)
-                starts.append(np.where(np.isfinite(fcrit[rows_i, jm]), jm, -1))
-                fcrit[rows_i, jm] = np.inf
-        if starts:
-            jj = np.stack(starts)  # (starts, rows of idx); -1: no start there
-            ii = np.broadcast_to(idx, jj.shape)
-            f0s = np.where(jj >= 0, fs[ii, jj], np.inf).ravel()
-            sub = tuple(np.tile(q[idx], len(starts)) for q in (L1, L2, A, Bn, C1, C2, lo))
-            f, x, y = _newton_batch(sub, f0s, xs[ii, jj].ravel(), ys[ii, jj].ravel())
-            f, x, y = (q.reshape(jj.shape) for q in (f, x, y))
-            bfi, bxi, byi = best_f[idx], bx[idx], by[idx]
-            for k in range(len(starts)):
-                win = f[k] < bfi
-                bfi = np.where(win, f[k], bfi)
-                bxi = np.where(win, x[k], bxi)
-                byi = np.where(win, y[k], byi)
-            best_f[idx], bx[idx], by[idx] = bfi, bxi, byi
-
-    ex, ey = bx * rr, by * rr
-    s = np.stack([cph * ex - sph * ey, sph * ex + cph * ey], axis=1)
-    value = best_f / kappa
-
-    if np.any(special):
-        k = np.flatnonzero(special)
-        nck = nc[k]
-        safe_k = np.where(nck > 0.0, nck, 1.0)
-        ux_k = np.where(nck > 0.0, c1[k] / safe_k, 1.0)
-        uy_k = np.where(nck > 0.0, c2[k] / safe_k, 0.0)
-        sx = c1[k] + r[k] * ux_k
-        sy = c2[k] + r[k] * uy_k
-        s[k, 0], s[k, 1] = sx, sy
-        exk = cph[k] * sx + sph[k] * sy
-        eyk = -sph[k] * sx + cph[k] * sy
-        origin = (exk == 0.0) & (eyk == 0.0)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            vk = _f0(l1[k], l2[k], a[k], b[k], exk, eyk)
-        value[k] = np.where(origin, 1.0 / (l1[k] + a[k]), vk)
-    sol = BatchSolution(s=s, value=value, case=case, feasible=feasible)
-    return sol, CircleRoots(roots_out, swap_out, certified)
+def _as_array(name: str, value: ArrayLike) -> FloatArray:
+    """Return ``value`` as a float64 array or raise ValueError naming ``name``."""
+    try:
+        return np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{name} must be numeric, got {value!r}") from exc
 
 
 # ---------------------------------------------------------------------------------------
@@ -1278,25 +418,18 @@ def case1_critical_points(
     scaled, centred variable of :mod:`activetrack._coefficients`), so that callers can see
     how close roots crowd (a root's accuracy degrades like eps / distance to its neighbour).
     """
-    P = _as_array("prior_info", prior_info)
-    if P.shape != (2, 2):
-        raise ValueError(f"prior_info must have shape (2, 2), got {P.shape}")
-    _check_prior("prior_info", P)
-    cc = _as_array("c", c)
-    if cc.shape != (2,) or not np.all(np.isfinite(cc)):
-        raise ValueError(f"c must be a finite array of shape (2,), got {c!r}")
-    r = _scalar("r", r, positive=True)
-    a = 1.0 / _scalar("sigma_d2", sigma_d2, positive=True)
-    b = 1.0 / _scalar("sigma_theta2", sigma_theta2, positive=True)
-    cph, sph, l1, l2 = _eig_frame(float(P[0, 0]), 0.5 * float(P[0, 1] + P[1, 0]), float(P[1, 1]))
-    kappa = max(l1, a, b / (r * r))
-    L1, L2, A, Bn = l1 / kappa, l2 / kappa, a / kappa, b / (r * r * kappa)
-    C1 = (cph * float(cc[0]) + sph * float(cc[1])) / r
-    C2 = (-sph * float(cc[0]) + cph * float(cc[1])) / r
+    p11, p12, p22, c1, c2, r, _, sigma_d2, sigma_theta2 = _checked_scalars(
+        prior_info, c, r, 0.0, sigma_d2, sigma_theta2
+    )
+    if r == 0.0:
+        raise ValueError("r must be > 0, got 0.0")
+    cph, sph, l1, l2 = eig_frame(p11, p12, p22, SCALAR)
+    _, L1, L2, A, Bn, C1, C2, _ = normalize(
+        l1, l2, 1.0 / sigma_d2, 1.0 / sigma_theta2, c1, c2, cph, sph, r, 0.0, SCALAR
+    )
     swap = abs(C1) > abs(C2)
-    m1, m2, q1, q2 = (L2, L1, C2, C1) if swap else (L1, L2, C1, C2)
-    hk = circle_reduction(*alpha_beta(m1, m2, A, Bn, q1, q2), q1, q2)
-    ev = np.linalg.eigvals(_companion(np.array(sylvester_gammas(*hk))))
+    hk = circle_polynomial(L1, L2, A, Bn, C1, C2, swap, SCALAR)
+    ev = np.linalg.eigvals(companion(np.array(sylvester_gammas(*hk))))
     keep = (np.abs(ev.imag) <= im_tol) & (np.abs(ev.real) <= 1.0 + 1e-9)
     pts, roots = [], []
     for v in np.clip(ev.real[keep], -1.0, 1.0).tolist():
@@ -1305,13 +438,12 @@ def case1_critical_points(
         resid = []
         for X, Y in cand:
             # The Newton distance |f0' / f0''| (radians) to a critical point of f0(t).
-            _, d1, d2 = _circle_derivatives(L1, L2, A, Bn, C1, C2, X, Y)
+            _, d1, d2 = circle_derivatives(L1, L2, A, Bn, C1, C2, X, Y)
             resid.append(abs(d1) / max(abs(d2), 1e-300))
         for k, (X, Y) in enumerate(cand):
             # The sign where df0/dt vanishes; both if they fit equally well (a double root).
-            if resid[k] <= _SIGN_RATIO * min(resid):
-                ex, ey = (C1 + X) * r, (C2 + Y) * r
-                pts.append([cph * ex - sph * ey, sph * ex + cph * ey])
+            if resid[k] <= SIGN_RATIO * min(resid):
+                pts.append(to_original((C1 + X) * r, (C2 + Y) * r, cph, sph))
                 roots.append(v)
     out = np.array(pts, dtype=np.float64).reshape(-1, 2)
     return (out, np.array(roots, dtype=np.float64)) if return_roots else out

@@ -7,6 +7,7 @@ inside numpy. Hot loops call the unchecked private kernels directly.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import numpy as np
@@ -132,3 +133,83 @@ def psd(name: str, value: ArrayLike, *, rtol: float = 1e-9) -> FloatArray:
     if np.min(np.linalg.eigvalsh(arr)) < -1e-10 * scale:
         raise ValueError(f"{name} must be positive semidefinite")
     return arr
+
+
+def real_scalar(name: str, value: ArrayLike, *, allow_zero: bool = False) -> float:
+    """Return ``value`` as a float, checking that it is a finite scalar > 0 (or >= 0).
+
+    Python and NumPy floats take a fast path (no array is made).
+    """
+    if type(value) is float or isinstance(value, np.floating):
+        v = float(value)
+    else:
+        try:
+            arr = np.asarray(value, dtype=np.float64)
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"{name} must be a real number, got {value!r}") from exc
+        if arr.ndim != 0:
+            raise ValueError(f"{name} must be a scalar, got shape {arr.shape}")
+        v = float(arr)
+    if not (v >= 0.0 if allow_zero else v > 0.0) or v == np.inf:  # NaN fails both
+        bound = ">= 0" if allow_zero else "> 0"
+        raise ValueError(f"{name} must be finite and {bound}, got {value!r}")
+    return v
+
+
+def spd2_entries(
+    name: str, p11: float, p12: float, p21: float, p22: float, max_abs: float = 1e150
+) -> None:
+    """Raise unless ``[[p11, p12], [p21, p22]]`` (floats) is finite, symmetric and SPD.
+
+    The one-matrix, float-only form of :func:`spd` for 2x2 matrices (symmetry to a
+    relative ``1e-9``; positive definite: ``p11 > 0`` and ``det > 0``). Entries must not
+    exceed ``max_abs`` in magnitude (the determinant must not overflow).
+    """
+    if not (
+        math.isfinite(p11) and math.isfinite(p12) and math.isfinite(p21) and math.isfinite(p22)
+    ):
+        raise ValueError(f"{name} must be finite (no NaN or inf)")
+    scale = max(abs(p11), abs(p22), abs(p12))
+    if scale > max_abs or abs(p21) > max_abs:
+        raise ValueError(f"{name}: entries must be within [-{max_abs:g}, {max_abs:g}]")
+    if abs(p12 - p21) > 1e-9 * max(scale, 1e-300):
+        raise ValueError(f"{name} must be symmetric")
+    if p11 <= 0.0 or p11 * p22 - p12 * p21 <= 0.0:
+        raise ValueError(f"{name} must be positive definite (eigenvalues > 0)")
+
+
+def spd2_stack(name: str, arr: FloatArray, *, max_abs: float = 1e150) -> None:
+    """Raise unless every matrix of ``arr`` (..., 2, 2) is finite, symmetric and SPD.
+
+    The stacked form of :func:`spd2_entries` (same rule, vectorized).
+    """
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} must be finite (no NaN or inf)")
+    if arr.size and np.max(np.abs(arr)) > max_abs:
+        raise ValueError(f"{name}: entries must be within [-{max_abs:g}, {max_abs:g}]")
+    p11, p12, p21, p22 = arr[..., 0, 0], arr[..., 0, 1], arr[..., 1, 0], arr[..., 1, 1]
+    scale = np.maximum(np.maximum(np.abs(p11), np.abs(p22)), np.abs(p12))
+    if np.any(np.abs(p12 - p21) > 1e-9 * np.maximum(scale, 1e-300)):
+        raise ValueError(f"{name} must be symmetric")
+    if np.any(p11 <= 0.0) or np.any(p11 * p22 - p12 * p21 <= 0.0):
+        raise ValueError(f"{name} must be positive definite (eigenvalues > 0)")
+
+
+def within(name: str, value: ArrayLike, low: float, high: float, *, what: str = "") -> None:
+    """Raise unless every nonzero ``value`` lies in ``[low, high]`` (zeros pass).
+
+    ``what`` names the quantity when it is not ``name`` itself (e.g. ``"||c|| / r"``).
+    Python floats take a fast path (no array is made).
+    """
+    if type(value) is float:
+        if value == 0.0 or low <= value <= high:
+            return
+        got = value
+    else:
+        arr = np.asarray(value, dtype=np.float64)
+        bad = (arr != 0.0) & ~((arr >= low) & (arr <= high))
+        if not np.any(bad):
+            return
+        got = float(arr[bad].flat[0])
+    bound = f"<= {high:g}" if low == 0.0 else f"0 or within [{low:g}, {high:g}]"
+    raise ValueError(f"{name}: {what or name} must be {bound}, got {got:g}")

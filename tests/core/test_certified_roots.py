@@ -17,13 +17,10 @@ import numpy as np
 import pytest
 
 from activetrack._coefficients import f3_coefficients
-from activetrack.solver import (
-    CircleRoots,
-    _certified_roots,
-    _monic,
-    _nearest_seed,
-    _solve_batch_unchecked,
-)
+from activetrack.certified_roots import certified_roots as _certified_roots
+from activetrack.certified_roots import nearest_seed as _nearest_seed
+from activetrack.companion import monic as _monic
+from activetrack.solver import CircleRoots, _solve_batch_unchecked
 
 IM_TOL, RE_TOL = 1e-2, 1e-2  # the solver's acceptance rule for eigenvalues
 PINNED = 1.1e-10  # the certificate's accuracy for accepted roots
