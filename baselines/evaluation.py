@@ -11,8 +11,10 @@ return (sum of rewards). Per policy: the means with Student-t 95% intervals, and
 of its mean trace to GSR's with a paired bootstrap 95% interval. GSR is always evaluated
 (the ratio's reference) even when it is not asked for; it is then reported separately.
 
-A policy is anything with ``act(env) -> {agent: action}`` (e.g.
-:class:`~activetrack.baselines.policies.GSRPolicy`), or a name: ``gsr``, ``gsr-restarts``
+A policy is an expert with ``plan(problem) -> next positions`` (e.g.
+:class:`~activetrack.baselines.policies.GSRPolicy`; its positions are executed with
+``step_positions``), anything with ``act(observations) -> {agent: action}`` (e.g. a
+learned policy), or a name: ``gsr``, ``gsr-restarts``
 (``GSR(restarts=True)``), ``gbes``, ``rm``, or the path of a trained ``policy.zip``
 (loaded through :func:`activetrack.train.policy_io.load_policy`, imported only then:
 baselines never imports ``train`` at module level). Every policy is loaded and checked

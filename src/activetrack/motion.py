@@ -71,6 +71,12 @@ def predict(
     x: FloatArray, P: FloatArray, Phi: FloatArray, Q: FloatArray
 ) -> tuple[FloatArray, FloatArray]:
     """Return the propagated mean and symmetric covariance of eq. (3) (batched, unchecked)."""
+    if P.ndim == 2:  # one filter: two small products are cheaper than the batch reshapes
+        P_pred = Phi @ (P @ Phi.T)
+        P_pred += Q
+        P_pred += P_pred.T
+        P_pred *= 0.5
+        return Phi @ x, P_pred
     x_pred = x @ Phi.T
     n = Phi.shape[0]
     batch = P.shape[:-2]
