@@ -1,7 +1,7 @@
 """Long runs at the extremes of the accepted scenario ranges: P stays symmetric positive
 definite, every state and trace finite.
 
-The loop uses the core kernels only (:func:`activetrack.tracking.initial_conditions`,
+The loop uses the core kernels only (the initial conditions of :class:`activetrack.world.World`,
 :func:`~activetrack.tracking.advance`, :func:`activetrack.motion.predict`); the sensors
 move by random feasible displacements (within their reach ``r``, pushed out to ``rho``
 from the predicted target), standing in for a planner. Positive definiteness is checked
@@ -16,6 +16,7 @@ import pytest
 
 import activetrack as at
 from activetrack import motion, scenarios, tracking
+from activetrack.world import World
 
 
 def random_feasible_move(sensors, x_pred, r, rho, rng):
@@ -46,7 +47,14 @@ def run_closed_loop(sc, steps, seed=0):
     """Run ``steps`` steps of the core loop on ``sc``; assert finite values and SPD P."""
     params = tracking.LoopParams.from_scenario(sc)
     rng = np.random.default_rng(seed)
-    x_true, x_hat, P, sensors = tracking.initial_conditions(sc, rng)
+    world = World(sc)
+    world.reset(seeds=[rng])  # the initial conditions, drawn from rng (which continues below)
+    x_true, x_hat, P, sensors = (
+        world.x_true[0].copy(),
+        world.x_hat[0].copy(),
+        world.P[0].copy(),
+        world.sensors[0].copy(),
+    )
     check_spd("P0", P, 0)
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # no overflow or invalid-value warning either
