@@ -84,8 +84,9 @@ def simulate(scenario: Scenario, planner: Planner, seed: int) -> RunRecord:
     world.reset(seeds=[seed])
     plan_rng = np.random.default_rng([seed, 1])
     m = world.n_sensors
-    true_states, estimates = [world.x_true[0].copy()], [world.x_hat[0].copy()]
-    sensor_hist, covs = [world.sensors[0].copy()], [world.P[0, :2, :2].copy()]
+    g = world.get
+    true_states, estimates = [g("x_true", 0).copy()], [g("x_hat", 0).copy()]
+    sensor_hist, covs = [g("sensors", 0).copy()], [g("P", 0)[:2, :2].copy()]
     trace, error, nees, plan_time, violation = [], [], [], [], []
     terminated = truncated = False
     while not (terminated or truncated):
@@ -100,13 +101,13 @@ def simulate(scenario: Scenario, planner: Planner, seed: int) -> RunRecord:
             )
         violation.append(float(np.max(problem.violation(nxt))))
         _, terminated, truncated = world.step(nxt[None])
-        trace.append(float(world.trace[0]))
+        trace.append(float(g("trace", 0)))
         error.append(float(world.position_error(0)))
         nees.append(float(world.position_nees(0)))
-        true_states.append(world.x_true[0].copy())
-        estimates.append(world.x_hat[0].copy())
-        sensor_hist.append(world.sensors[0].copy())
-        covs.append(world.P[0, :2, :2].copy())
+        true_states.append(g("x_true", 0).copy())
+        estimates.append(g("x_hat", 0).copy())
+        sensor_hist.append(g("sensors", 0).copy())
+        covs.append(g("P", 0)[:2, :2].copy())
     return RunRecord(
         seed=int(seed),
         trace=np.array(trace),

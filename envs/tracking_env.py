@@ -158,19 +158,29 @@ class TrackingParallelEnv(ParallelEnv):
 
     # State of the one copy (views of the world) -----------------------------------------
     # Copies, so that a reference a user keeps does not change with the next step.
-    x_true = property(lambda self: self.world.x_true[0].copy(), doc="True target state x(k).")
-    x_hat = property(lambda self: self.world.x_hat[0].copy(), doc="Posterior mean x_hat(k|k).")
-    P = property(lambda self: self.world.P[0].copy(), doc="Posterior covariance P(k|k).")
-    x_pred = property(lambda self: self.world.x_pred[0].copy(), doc="Prediction x_hat(k+1|k).")
-    P_pred = property(lambda self: self.world.P_pred[0].copy(), doc="Prediction P(k+1|k).")
-    sensors = property(lambda self: self.world.sensors[0].copy(), doc="Sensor positions (M, 2).")
-    k = property(lambda self: int(self.world.k[0]), doc="Steps taken in the episode.")
-    trace = property(lambda self: float(self.world.trace[0]), doc="tr P(k|k)_11 (m^2).")
+    x_true = property(
+        lambda self: self.world.get("x_true", 0).copy(), doc="True target state x(k)."
+    )
+    x_hat = property(
+        lambda self: self.world.get("x_hat", 0).copy(), doc="Posterior mean x_hat(k|k)."
+    )
+    P = property(lambda self: self.world.get("P", 0).copy(), doc="Posterior covariance P(k|k).")
+    x_pred = property(
+        lambda self: self.world.get("x_pred", 0).copy(), doc="Prediction x_hat(k+1|k)."
+    )
+    P_pred = property(lambda self: self.world.get("P_pred", 0).copy(), doc="Prediction P(k+1|k).")
+    sensors = property(
+        lambda self: self.world.get("sensors", 0).copy(), doc="Sensor positions (M, 2)."
+    )
+    k = property(lambda self: int(self.world.get("k", 0)), doc="Steps taken in the episode.")
+    trace = property(lambda self: float(self.world.get("trace", 0)), doc="tr P(k|k)_11 (m^2).")
     n_projected = property(
-        lambda self: self.world.n_projected[0].copy(), doc="Projections per agent this episode."
+        lambda self: self.world.get("n_projected", 0).copy(),
+        doc="Projections per agent this episode.",
     )
     last_projected = property(
-        lambda self: self.world.projected[0].copy(), doc="Which agents were projected this step."
+        lambda self: self.world.get("projected", 0).copy(),
+        doc="Which agents were projected this step.",
     )
 
     @property
@@ -203,7 +213,10 @@ class TrackingParallelEnv(ParallelEnv):
         if self._history is not None:
             w = self.world
             self._history.clear()
-            self._history.append(0, w.x_true[0], w.x_hat[0], w.P[0], w.sensors[0], w.x_hat[0])
+            x_hat = w.get("x_hat", 0)
+            self._history.append(
+                0, w.get("x_true", 0), x_hat, w.get("P", 0), w.get("sensors", 0), x_hat
+            )
             if self._renderer is not None:
                 self._renderer.reset()
         self._obs = self.world.observe(0)
@@ -237,12 +250,13 @@ class TrackingParallelEnv(ParallelEnv):
     def _advance(self, step: Any, moves: FloatArray) -> tuple[np.ndarray, float, bool, bool]:
         """Run the world's ``step`` (positions or actions) and return the array results."""
         w = self.world
-        planned_from = w.x_pred[0].copy() if self._history is not None else None
+        planned_from = w.get("x_pred", 0).copy() if self._history is not None else None
         res = step(moves[None])
         terminated, truncated = bool(res.terminated), bool(res.truncated)
         if self._history is not None:
+            g = w.get
             self._history.append(
-                w.k[0], w.x_true[0], w.x_hat[0], w.P[0], w.sensors[0], planned_from
+                g("k", 0), g("x_true", 0), g("x_hat", 0), g("P", 0), g("sensors", 0), planned_from
             )
         if terminated or truncated:
             self.agents = []  # PettingZoo: finished agents leave the list
@@ -265,8 +279,8 @@ class TrackingParallelEnv(ParallelEnv):
 
     def _infos(self, agents: list[str], exceeded: bool) -> dict[str, dict[str, Any]]:
         w = self.world
-        k, trace, err = int(w.k[0]), float(w.trace[0]), float(w.position_error(0))
-        proj, nproj = w.projected[0].tolist(), w.n_projected[0].tolist()
+        k, trace, err = int(w.get("k", 0)), float(w.get("trace", 0)), float(w.position_error(0))
+        proj, nproj = w.get("projected", 0).tolist(), w.get("n_projected", 0).tolist()
         return {
             a: {
                 "step": k,

@@ -98,7 +98,7 @@ def move_to(
     ``rho`` rule applies; feasible positions (a planner's) come back unchanged. Shapes as
     in :func:`apply_actions`; inputs are not validated.
     """
-    p = np.asarray(positions, dtype=np.float64)
+    p = np.array(positions, dtype=np.float64)  # a copy: the caller may reuse its array
     r = np.asarray(r, dtype=np.float64)
     d = p - sensors
     far = np.abs(as_complex(np.ascontiguousarray(d))) > r * _LONG

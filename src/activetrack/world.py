@@ -33,6 +33,7 @@ what makes a single environment fast.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from typing import Any, NamedTuple
 
@@ -109,7 +110,6 @@ class World:
         self.num_copies = N = int(num_copies)
         self.noise_block = int(noise_block)
         self.n_sensors = m = sc.n_sensors
-        n = p.Phi.shape[0]
         self._n_noise = p.n_noise
         self._n_steps = int(sc.n_steps)
         self._max_trace = np.inf if sc.max_trace is None else float(sc.max_trace)
@@ -136,20 +136,56 @@ class World:
         self._noise_left = np.zeros(N, dtype=np.int64)
         # Copies not yet reset hold a valid placeholder (the prior, sensors one length scale
         # away), since whole-batch steps compute them too before discarding the result.
-        self.x_true = np.broadcast_to(self._x0_hat, (N, n)).copy()
-        self.x_hat = self.x_true.copy()
-        self.P = np.broadcast_to(self._P0, (N, n, n)).copy()
-        self.x_pred, self.P_pred = predict(self.x_hat, self.P, p.Phi, p.Q)
-        self.sensors = np.broadcast_to(
-            self._x0_hat[:2] + np.array([self.length_scale, 0.0]), (N, m, 2)
-        ).copy()
-        self.k = np.zeros(N, dtype=np.int64)
-        self.trace = np.zeros(N)
-        self.projected = np.zeros((N, m), dtype=bool)
-        self.n_projected = np.zeros((N, m), dtype=np.int64)
-        self.terminated = np.zeros(N, dtype=bool)
-        self.truncated = np.zeros(N, dtype=bool)
-        self._ended = np.ones(N, dtype=bool)  # not started, or its episode is over
+        # One copy keeps its state unbatched (Python numbers for the counters): a step then
+        # stores by rebinding, with no NumPy indexing, which costs microseconds per call.
+        self._one = N == 1
+        P_pred = predict(self._x0_hat, self._P0, p.Phi, p.Q)[1]
+        state = {
+            "x_true": self._x0_hat.copy(),
+            "x_hat": self._x0_hat.copy(),
+            "P": self._P0.copy(),
+            "x_pred": p.Phi @ self._x0_hat,
+            "P_pred": P_pred,
+            "sensors": np.broadcast_to(
+                self._x0_hat[:2] + np.array([self.length_scale, 0.0]), (m, 2)
+            ).copy(),
+            "k": 0,
+            "trace": 0.0,
+            "projected": np.zeros(m, dtype=bool),
+            "n_projected": np.zeros(m, dtype=np.int64),
+            "terminated": False,
+            "truncated": False,
+            "ended": True,  # not started, or its episode is over
+        }
+        if not self._one:
+            state = {k: np.broadcast_to(v, (N, *np.shape(v))).copy() for k, v in state.items()}
+        self._s: dict[str, Any] = state
+
+    def get(self, name: str, index: int | None = None) -> Any:
+        """Return state field ``name`` of copy ``index`` (unbatched), or of all copies (N, ...).
+
+        Fields: ``x_true``, ``x_hat``, ``P``, ``x_pred``, ``P_pred``, ``sensors``, ``k``,
+        ``trace``, ``projected``, ``n_projected``, ``terminated``, ``truncated``. The
+        attributes of the same names are ``get(name)``: read-only views, refreshed by every
+        step (keep a copy, not a reference).
+        """
+        v = self._s[name]
+        if self._one:
+            return v if index is not None else np.asarray(v)[None]
+        return v if index is None else v[index]
+
+    x_true = property(lambda self: self.get("x_true"), doc="True target states (N, n).")
+    x_hat = property(lambda self: self.get("x_hat"), doc="Posterior means x_hat(k|k) (N, n).")
+    P = property(lambda self: self.get("P"), doc="Posterior covariances (N, n, n).")
+    x_pred = property(lambda self: self.get("x_pred"), doc="Predictions x_hat(k+1|k) (N, n).")
+    P_pred = property(lambda self: self.get("P_pred"), doc="Predicted P(k+1|k) (N, n, n).")
+    sensors = property(lambda self: self.get("sensors"), doc="Sensor positions (N, M, 2).")
+    k = property(lambda self: self.get("k"), doc="Steps taken in each episode (N,).")
+    trace = property(lambda self: self.get("trace"), doc="Posterior traces tr P_11 (N,).")
+    projected = property(lambda self: self.get("projected"), doc="Moves pushed out of rho (N, M).")
+    n_projected = property(lambda self: self.get("n_projected"), doc="Their count (N, M).")
+    terminated = property(lambda self: self.get("terminated"), doc="Trace above max_trace (N,).")
+    truncated = property(lambda self: self.get("truncated"), doc="Reached n_steps (N,).")
 
     # Random streams ---------------------------------------------------------------------
     def rng(self, i: int = 0) -> np.random.Generator:
@@ -167,7 +203,7 @@ class World:
         """Refill the noise blocks of copies ``rows``, never past their episode's last step."""
         b = self.noise_block
         for i in rows.tolist():
-            steps = int(min(b, max(self._n_steps - self.k[i], 1)))
+            steps = int(min(b, max(self._n_steps - self.get("k", i), 1)))
             self._noise[i, b - steps :] = self.rng(i).standard_normal((steps, self._n_noise))
             self._noise_left[i] = steps
 
@@ -243,20 +279,32 @@ class World:
             u, g = u[0], None if g is None else g[0]
         radius = self.scenario.sensor_radius * np.sqrt(u[..., 0])  # uniform by area
         angle = 2.0 * np.pi * u[..., 1]
-        self.sensors[sel] = self._center + radius[..., None] * np.stack(
-            [np.cos(angle), np.sin(angle)], -1
-        )
-        self.x_true[sel] = self._x0_hat + g @ self._chol0.T if gaussian else self._x0
-        self.x_hat[sel] = self._x0_hat
-        self.P[sel] = self._P0
-        self.x_pred[sel], self.P_pred[sel] = predict(
-            self.x_hat[sel], self.P[sel], self.params.Phi, self.params.Q
-        )
-        self.k[sel] = 0
-        self.trace[sel] = self.objective.of_covariance(self._P0[:2, :2])
-        self.projected[sel] = False
-        self.n_projected[sel] = 0
-        self.terminated[sel] = self.truncated[sel] = self._ended[sel] = False
+        x_hat = np.broadcast_to(self._x0_hat, (*u.shape[:-2], self._x0.shape[0])).copy()
+        P = np.broadcast_to(self._P0, (*u.shape[:-2], *self._P0.shape)).copy()
+        x_pred, P_pred = predict(x_hat, P, self.params.Phi, self.params.Q)
+        new = {
+            "sensors": self._center
+            + radius[..., None] * np.stack([np.cos(angle), np.sin(angle)], -1),
+            "x_true": self._x0_hat + g @ self._chol0.T if gaussian else self._x0.copy(),
+            "x_hat": x_hat,
+            "P": P,
+            "x_pred": x_pred,
+            "P_pred": P_pred,
+            "k": 0,
+            "trace": float(self.objective.of_covariance(self._P0[:2, :2])),
+            "projected": False,
+            "n_projected": 0,
+            "terminated": False,
+            "truncated": False,
+            "ended": False,
+        }
+        if self._one:
+            new["projected"] = np.zeros(self.n_sensors, dtype=bool)
+            new["n_projected"] = np.zeros(self.n_sensors, dtype=np.int64)
+            self._s.update(new)
+        else:
+            for key, value in new.items():
+                self._s[key][sel] = value
         self._noise_left[sel] = 0
         if self._noise is not None:
             self._draw_noise(rows)
@@ -280,12 +328,14 @@ class World:
 
     def _step(self, move: Any, moves: FloatArray, live: Any) -> StepResult | None:
         """Move the sensors of the copies ``live`` by ``move`` and advance them (steps 1-5)."""
-        sel = 0 if live is None and self.num_copies == 1 else self._select(live)
+        sel = 0 if live is None and self._one else self._select(live)
         if sel is None:
             return None
-        if self._ended[sel] if isinstance(sel, int) else self._ended[sel].any():
+        st = self._s
+        if st["ended"] if self._one else st["ended"][sel].any():
             rows = self._rows(sel)
-            bad = rows[self._ended[rows]].tolist()
+            bad = [i for i in rows.tolist() if self.get("terminated", i) or self.get("truncated", i)
+                   or not self._started(i)]  # fmt: skip
             raise RuntimeError(
                 f"copies {bad[:10]} have no running episode (never reset, or ended): reset them"
                 " before stepping"
@@ -296,16 +346,24 @@ class World:
         partial = isinstance(sel, np.ndarray)
         calc = slice(None) if partial else sel
         p = self.params
-        x_pred = self.x_pred[calc]
-        sensors, projected = move(moves[calc], self.sensors[calc], x_pred[..., :2], p.r, p.rho)
+        if self._one:
+            x_true, x_pred, P_pred, sensors = (
+                st["x_true"],
+                st["x_pred"],
+                st["P_pred"],
+                st["sensors"],
+            )
+        else:
+            x_true, x_pred, P_pred, sensors = (
+                st[key][calc] for key in ("x_true", "x_pred", "P_pred", "sensors")
+            )
+        sensors, projected = move(moves[calc], sensors, x_pred[..., :2], p.r, p.rho)
         noise = self._step_noise(sel)
         if partial:
             full = np.zeros((self.num_copies, self._n_noise))
             full[sel] = noise
             noise = full
-        x_true, _, x_post, P_post = tracking.advance(
-            p, self.x_true[calc], x_pred, self.P_pred[calc], sensors, noise
-        )
+        x_true, _, x_post, P_post = tracking.advance(p, x_true, x_pred, P_pred, sensors, noise)
         x_next, P_next = predict(x_post, P_post, p.Phi, p.Q)
         if partial:
             x_true, x_post, P_post, x_next, P_next = (
@@ -313,20 +371,38 @@ class World:
             )
             sensors, projected = sensors[sel], projected[sel]
         trace = self.objective.of_covariance(P_post[..., :2, :2])
-        self.x_true[sel], self.x_hat[sel], self.P[sel] = x_true, x_post, P_post
-        self.x_pred[sel], self.P_pred[sel] = x_next, P_next
-        self.sensors[sel] = sensors
-        self.projected[sel] = projected
-        if np.count_nonzero(projected):  # rare; the mixed-type add costs microseconds
-            self.n_projected[sel] += projected
-        k = self.k[sel] + 1
-        self.k[sel] = k
-        self.trace[sel] = trace
         terminated = trace > self._max_trace  # never when max_trace is None (inf)
-        truncated = k >= self._n_steps
-        self.terminated[sel], self.truncated[sel] = terminated, truncated
-        self._ended[sel] = terminated | truncated
+        new = {
+            "x_true": x_true,
+            "x_hat": x_post,
+            "P": P_post,
+            "x_pred": x_next,
+            "P_pred": P_next,
+            "sensors": sensors,
+            "projected": projected,
+            "trace": trace,
+            "terminated": terminated,
+        }
+        if self._one:
+            k = st["k"] + 1
+            truncated = k >= self._n_steps
+            if projected.any():
+                st["n_projected"] = st["n_projected"] + projected
+            st.update(new, k=k, truncated=truncated, ended=bool(terminated) or truncated)
+        else:
+            k = st["k"][sel] + 1
+            truncated = k >= self._n_steps
+            if np.count_nonzero(projected):  # rare; the mixed-type add costs microseconds
+                st["n_projected"][sel] += projected
+            for key, value in new.items():
+                st[key][sel] = value
+            st["k"][sel], st["truncated"][sel] = k, truncated
+            st["ended"][sel] = terminated | truncated
         return StepResult(-self._scale * trace, terminated, truncated)
+
+    def _started(self, i: int) -> bool:
+        """Return whether copy ``i`` was ever reset."""
+        return self._rngs[i] is not None
 
     # What adapters read -----------------------------------------------------------------
     def planning_problem(self, index: int | None = None) -> PlanningProblem:
@@ -334,12 +410,11 @@ class World:
 
         ``index`` None: every copy (leading batch axis N); an int: that copy, unbatched.
         """
-        sel = slice(None) if index is None else index
         p = self.params
         return PlanningProblem(
-            prior_cov=self.P_pred[sel, :2, :2],
-            target=self.x_pred[sel, :2],
-            sensors=self.sensors[sel],
+            prior_cov=self.get("P_pred", index)[..., :2, :2],
+            target=self.get("x_pred", index)[..., :2],
+            sensors=self.get("sensors", index),
             r=p.r,
             rho=p.rho,
             sigma_d2=p.sigma_d2,
@@ -353,29 +428,39 @@ class World:
         The layout is :mod:`activetrack.observation`'s: the prediction and the team as seen
         from each agent's seat.
         """
-        target, sensor = self._features(slice(None) if index is None else index)
+        target, sensor = self._features(index)
         return observation.observations(target, sensor, self._order)
 
     def state(self, index: int | None = None) -> np.ndarray:
         """Return the global state, float32 (N, 6 + 6M) or (6 + 6M,) for one copy."""
-        sel = slice(None) if index is None else index
-        target, sensor = self._features(sel)
-        return observation.global_state(target, sensor, self.k[sel] / self._n_steps)
+        target, sensor = self._features(index)
+        return observation.global_state(target, sensor, self.get("k", index) / self._n_steps)
 
-    def _features(self, sel: _Selection) -> tuple[FloatArray, FloatArray]:
-        x_pred = self.x_pred[sel]
+    def _features(self, index: int | None) -> tuple[FloatArray, FloatArray]:
+        if self._one and index is not None:  # the common single-env call: no get() calls
+            st = self._s
+            x_pred, P_pred, sensors = st["x_pred"], st["P_pred"], st["sensors"]
+        else:
+            x_pred, P_pred, sensors = (self.get(k, index) for k in ("x_pred", "P_pred", "sensors"))
         L = self.length_scale
-        target = observation.target_features(x_pred, self.P_pred[sel], self._dt, L)
-        sensor = observation.sensor_features(self.sensors[sel], x_pred[..., :2], self._constants, L)
+        target = observation.target_features(x_pred, P_pred, self._dt, L)
+        sensor = observation.sensor_features(sensors, x_pred[..., :2], self._constants, L)
         return target, sensor
 
     def position_error(self, index: int | None = None) -> FloatArray:
         """Return ``||p_T(k) - p_hat_T(k|k)||`` (m) per copy, or of copy ``index``."""
-        sel = slice(None) if index is None else index
-        d = self.x_true[sel, :2] - self.x_hat[sel, :2]
+        if self._one and index is not None:
+            x, h = self._s["x_true"], self._s["x_hat"]
+        else:
+            x, h = self.get("x_true", index), self.get("x_hat", index)
+        if index is not None:  # one copy: Python numbers (NumPy calls cost microseconds)
+            (x0, x1), (h0, h1) = x[:2].tolist(), h[:2].tolist()
+            return np.float64(math.hypot(x0 - h0, x1 - h1))
+        d = x[..., :2] - h[..., :2]
         return np.hypot(d[..., 0], d[..., 1])
 
     def position_nees(self, index: int | None = None) -> FloatArray:
         """Return the position NEES ``e^T P_11^{-1} e`` per copy, or of copy ``index``."""
-        sel = slice(None) if index is None else index
-        return position_nees(self.x_true[sel], self.x_hat[sel], self.P[sel])
+        return position_nees(
+            self.get("x_true", index), self.get("x_hat", index), self.get("P", index)
+        )
