@@ -278,9 +278,7 @@ class TrackingParallelEnv(ParallelEnv):
         return out
 
     def _infos(self, agents: list[str], exceeded: bool) -> dict[str, dict[str, Any]]:
-        w = self.world
-        k, trace, err = int(w.get("k", 0)), float(w.get("trace", 0)), float(w.position_error(0))
-        proj, nproj = w.get("projected", 0).tolist(), w.get("n_projected", 0).tolist()
+        k, trace, err, proj, nproj = self.world.copy_info(0)
         return {
             a: {
                 "step": k,
@@ -383,7 +381,7 @@ def actions_array(actions: dict[str, Any], agents: list[str], what: str = "actio
         or np.count_nonzero(np.isfinite(a)) != a.size
     ):
         raise ValueError(_bad_action_message(actions, agents, what))
-    return a.astype(np.float64, copy=False)
+    return a if a.dtype == np.float64 else a.astype(np.float64)
 
 
 def positions_array(positions: dict[str, Any] | FloatArray, agents: list[str]) -> FloatArray:

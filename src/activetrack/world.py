@@ -358,7 +358,10 @@ class World:
                 st[key][calc] for key in ("x_true", "x_pred", "P_pred", "sensors")
             )
         sensors, projected = move(moves[calc], sensors, x_pred[..., :2], p.r, p.rho)
-        noise = self._step_noise(sel)
+        if self._one and self._noise is None:  # the single env's draw, without a call
+            noise = (self._rngs[0] or self.rng(0)).standard_normal(self._n_noise)
+        else:
+            noise = self._step_noise(sel)
         if partial:
             full = np.zeros((self.num_copies, self._n_noise))
             full[sel] = noise
@@ -458,6 +461,18 @@ class World:
             return np.float64(math.hypot(x0 - h0, x1 - h1))
         d = x[..., :2] - h[..., :2]
         return np.hypot(d[..., 0], d[..., 1])
+
+    def copy_info(self, index: int) -> tuple[int, float, float, list[bool], list[int]]:
+        """Return copy ``index``'s ``(k, trace, position_error, projected, n_projected)`` as
+        Python values (lists per sensor): what an environment's infos report."""
+        get = self._s.__getitem__ if self._one else (lambda key: self._s[key][index])
+        return (
+            int(get("k")),
+            float(get("trace")),
+            float(self.position_error(index)),
+            get("projected").tolist(),
+            get("n_projected").tolist(),
+        )
 
     def position_nees(self, index: int | None = None) -> FloatArray:
         """Return the position NEES ``e^T P_11^{-1} e`` per copy, or of copy ``index``."""
