@@ -14,6 +14,12 @@ older ``BatchedGSRPolicy`` actions). Run::
 
     OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/side_by_side.py --old ../baseline
 
+On a shared virtual machine wall-clock rates can swing by 30% between rounds.
+``--instructions`` counts executed instructions instead (valgrind's callgrind, which
+must be installed: ``apt-get install valgrind``): a fixed number of calls of each kind,
+minus a run with a few calls, so start-up cancels. The count does not depend on the
+machine's load, and it is the stable way to compare two checkouts within a few percent.
+
 where ``../baseline`` is a checkout with its own ``.venv`` (``git worktree add ../baseline
 <commit> && make -C ../baseline install``).
 """
@@ -23,6 +29,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import re
 import statistics
 import subprocess
 import sys
@@ -32,8 +39,25 @@ from pathlib import Path
 KINDS = ("single", "batched-1024", "batched-8192", "gsr", "batched-gsr")
 
 
+#: Calls of each kind for ``--instructions`` (per-call cost = difference / (hi - lo)).
+COUNTS = {
+    "single": (100, 1100),
+    "batched-1024": (2, 12),
+    "batched-8192": (2, 12),
+    "gsr": (20, 220),
+    "batched-gsr": (2, 12),
+}
+
+
 def _rate(step, seconds: float) -> float:
-    """Return calls per second of ``step()`` over about ``seconds`` (after a warm-up)."""
+    """Return calls per second of ``step()`` over about ``seconds`` (after a warm-up).
+
+    With a negative ``seconds``, make exactly ``-seconds`` calls and return 0 (for counts).
+    """
+    if seconds < 0:
+        for _ in range(int(-seconds)):
+            step()
+        return 0.0
     step()
     n, t0 = 0, time.perf_counter()
     while (elapsed := time.perf_counter() - t0) < seconds:
@@ -91,7 +115,8 @@ def worker(kind: str, seconds: float) -> float:
             gsr.plan(problems[i[0] % len(problems)])
             i[0] += 1
 
-        return 1e3 / _rate(plan, seconds)  # ms per plan
+        rate = _rate(plan, seconds)
+        return 1e3 / rate if rate else 0.0  # ms per plan
     if kind == "batched-gsr":
         n = 1024
         env = envs.BatchedActiveTracking(n, "paper")
@@ -115,17 +140,27 @@ def worker(kind: str, seconds: float) -> float:
     raise ValueError(f"unknown kind {kind!r}")
 
 
-def _run(python: Path, cwd: Path, kind: str, seconds: float) -> float:
+def _run(python: Path, cwd: Path, kind: str, seconds: float, valgrind: bool = False) -> float:
+    """Return the worker's rate, or with ``valgrind`` the instructions it executed."""
     env = {**os.environ, "OPENBLAS_NUM_THREADS": "1"}
-    out = subprocess.run(
-        [str(python), str(Path(__file__).resolve()), "--worker", kind, "--seconds", str(seconds)],
-        cwd=cwd,
-        env=env,
-        capture_output=True,
-        text=True,
-        check=True,
-    )
+    cmd = [str(python), str(Path(__file__).resolve()), "--worker", kind, "--seconds", str(seconds)]
+    if valgrind:
+        cmd = ["valgrind", "--tool=callgrind", "--callgrind-out-file=/dev/null", *cmd]
+    out = subprocess.run(cmd, cwd=cwd, env=env, capture_output=True, text=True, check=True)
+    if valgrind:
+        match = re.search(r"Collected : (\d+)", out.stderr)
+        if match is None:
+            raise RuntimeError(f"no instruction count from callgrind:\n{out.stderr[-2000:]}")
+        return float(match.group(1))
     return float(out.stdout.strip().splitlines()[-1])
+
+
+def _instructions(python: Path, cwd: Path, kind: str) -> float:
+    """Return the instructions per call of ``kind`` (fixed call counts, start-up cancelled)."""
+    lo, hi = COUNTS[kind]
+    a = _run(python, cwd, kind, -lo, valgrind=True)
+    b = _run(python, cwd, kind, -hi, valgrind=True)
+    return (b - a) / (hi - lo)
 
 
 def main() -> None:
@@ -136,6 +171,9 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=3.0, help="per measurement")
     parser.add_argument("--worker", choices=KINDS, help=argparse.SUPPRESS)
     parser.add_argument("--json", type=Path, help="also write the table as JSON here")
+    parser.add_argument(
+        "--instructions", action="store_true", help="count instructions (callgrind) instead"
+    )
     args = parser.parse_args()
     if args.worker:
         print(worker(args.worker, args.seconds))
@@ -146,6 +184,13 @@ def main() -> None:
     sides = {"old": args.old.resolve(), "new": new_root}
     rows = {}
     for kind in args.kinds:
+        if args.instructions:
+            old, new = (_instructions(r / ".venv/bin/python", r, kind) for r in sides.values())
+            rows[kind] = {"old": old, "new": new, "ratio": new / old, "unit": "instructions"}
+            print(f"{kind:14s} old {old:12.4g}  new {new:12.4g} instructions per call, "
+                  f"new/old {new / old:.3f}")  # fmt: skip
+            sys.stdout.flush()
+            continue
         rates: dict[str, list[float]] = {"old": [], "new": []}
         for r in range(args.rounds):
             order = ("old", "new") if r % 2 == 0 else ("new", "old")

@@ -224,8 +224,12 @@ class TrackingParallelEnv(ParallelEnv):
 
     def step(self, actions: dict[str, Any]) -> StepReturn:
         """Move every sensor by its action, advance the world one step, and observe."""
-        agents = self._running_agents()
-        return self._dicts(agents, *self.step_arrays(actions_array(actions, agents)))
+        agents = self.agents
+        if not agents:
+            self._running_agents()  # raises
+        return self._dicts(
+            agents, *self._advance(self.world.step_actions, actions_array(actions, agents))
+        )
 
     def step_positions(self, positions: dict[str, Any] | FloatArray) -> StepReturn:
         """Move the sensors to absolute next positions (an expert's plan) and advance.
@@ -251,7 +255,7 @@ class TrackingParallelEnv(ParallelEnv):
         """Run the world's ``step`` (positions or actions) and return the array results."""
         w = self.world
         planned_from = w.get("x_pred", 0).copy() if self._history is not None else None
-        res = step(moves[None])
+        res = step(moves)  # (M, 2): a world of one copy takes it unbatched
         terminated, truncated = bool(res.terminated), bool(res.truncated)
         if self._history is not None:
             g = w.get

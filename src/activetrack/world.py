@@ -313,9 +313,10 @@ class World:
     def step(self, positions: FloatArray, live: Any = None) -> StepResult | None:
         """Advance the copies ``live`` (None: all) with the sensors' proposed next positions.
 
-        ``positions`` (N, M, 2) are absolute; a move beyond reach or into a ``rho`` disk is
-        mended by :func:`activetrack.sensor_motion.move_to` (a planner's feasible positions
-        pass unchanged). Returns the advanced copies' :class:`StepResult` (None if none).
+        ``positions`` (N, M, 2) are absolute (a world of one copy also takes (M, 2)); a move
+        beyond reach or into a ``rho`` disk is mended by
+        :func:`activetrack.sensor_motion.move_to` (a planner's feasible positions pass
+        unchanged). Returns the advanced copies' :class:`StepResult` (None if none).
         """
         return self._step(sensor_motion.move_to, positions, live)
 
@@ -357,7 +358,8 @@ class World:
             x_true, x_pred, P_pred, sensors = (
                 st[key][calc] for key in ("x_true", "x_pred", "P_pred", "sensors")
             )
-        sensors, projected = move(moves[calc], sensors, x_pred[..., :2], p.r, p.rho)
+        mv = moves if self._one and moves.ndim == 2 else moves[calc]
+        sensors, projected = move(mv, sensors, x_pred[..., :2], p.r, p.rho)
         if self._one and self._noise is None:  # the single env's draw, without a call
             noise = (self._rngs[0] or self.rng(0)).standard_normal(self._n_noise)
         else:
