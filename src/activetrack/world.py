@@ -169,7 +169,11 @@ class World:
         attributes of the same names are ``get(name)``: read-only views, refreshed by every
         step (keep a copy, not a reference).
         """
-        v = self._s[name]
+        try:
+            v = self._s[name]
+        except KeyError:
+            fields = sorted(k for k in self._s if k != "ended")
+            raise ValueError(f"name must be one of {fields}, got {name!r}") from None
         if self._one:
             return v if index is not None else np.asarray(v)[None]
         return v if index is None else v[index]

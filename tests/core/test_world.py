@@ -173,3 +173,8 @@ def test_bad_copy_selections_raise():
         world.reset(np.array([True, False]))
     with pytest.raises(ValueError, match="seeds"):
         world.reset([0, 1], seeds=[1])
+
+
+def test_unknown_state_field_names_the_choices():
+    with pytest.raises(ValueError, match="x_true"):
+        World("paper").get("x_ture")
