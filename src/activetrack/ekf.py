@@ -88,7 +88,9 @@ def update(
         n2 = np.where(far, n2, 1.0)
         wd = wd * far
         wt = wt * far
-    nu_t = measurement.wrap_angle(z[..., 1] - np.arctan2(d.imag, d.real) + orientation)
+    nu_t = z[..., 1] - np.arctan2(d.imag, d.real)
+    nu_t += orientation
+    measurement.wrap_angle(nu_t, inplace=True)
     # Y = sum_i H_i^T R_i^{-1} H_i (eq. 12) with h_d = -p/|p|, h_theta = J p/|p|^2 (eq. 9):
     # since p p^T + (J p)(J p)^T = |p|^2 I, Y = sum_i g_i d d^T + (sum_i h_i) I with
     # h = w_theta / |p|^2 and g = (w_d - h) / |p|^2; and d d^T = (|d|^2 I + [[Re d^2,
@@ -108,11 +110,12 @@ def update(
     ef *= d
     # einsum: NumPy's sum over a short last axis is ~5-9x slower on large batches, and a
     # BLAS matrix-vector product with ones may start threads (100x slower under load).
-    sums = np.einsum("...ij->...i", terms)
     single = P.ndim == 2
     if single:  # Python numbers: the 2x2 algebra below is several times cheaper on them
-        s0, gsum, bsum = sums.tolist()
+        # (and the ufunc's reduce directly: einsum's wrapper costs more than 3 terms)
+        s0, gsum, bsum = np.add.reduce(terms, axis=-1).tolist()
     else:
+        sums = np.einsum("...ij->...i", terms)
         s0, gsum, bsum = sums[..., 0], sums[..., 1], sums[..., 2]
     hs, swd = s0.real, s0.imag
     half = 0.5 * (swd + hs)

@@ -38,6 +38,9 @@ def rotation(phi: float | FloatArray) -> FloatArray:
     return np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)
 
 
+_FLOAT64 = np.dtype(np.float64)
+
+
 def as_complex(v: FloatArray) -> np.ndarray:
     """Return 2-vectors ``v`` (..., 2) as complex numbers ``x + i y``, shape (...).
 
@@ -45,7 +48,9 @@ def as_complex(v: FloatArray) -> np.ndarray:
     complex operation replaces two or three real ones on the coordinates, which matters
     when the arrays are small and every NumPy call costs about a microsecond.
     """
-    if v.dtype == np.float64 and v.strides[-1] == v.itemsize:
+    # ``is``: builtin dtypes are singletons, and ``==`` with a type object costs a
+    # conversion per call (a few such calls per environment step).
+    if v.dtype is _FLOAT64 and v.strides[-1] == 8:
         return v.view(np.complex128)[..., 0]
     return v[..., 0] + 1j * v[..., 1]
 

@@ -24,15 +24,20 @@ J = np.array([[0.0, 1.0], [-1.0, 0.0]])
 _TWO_PI = 2.0 * np.pi
 
 
-def wrap_angle(angle: FloatArray | float) -> FloatArray:
-    """Return ``angle`` wrapped to ``[-pi, pi)`` (a new array for array input)."""
+def wrap_angle(angle: FloatArray | float, *, inplace: bool = False) -> FloatArray:
+    """Return ``angle`` wrapped to ``[-pi, pi)``: a new array, or with ``inplace`` (for a
+    float64 array the caller owns) ``angle`` itself, wrapped in place."""
     a = np.asarray(angle, dtype=np.float64)
     # Bearings and innovations are mostly in range already: one test costs fewer NumPy
     # calls than the wrap itself for the single environment's few angles.
     if a.ndim and not np.count_nonzero(np.abs(a) >= np.pi):
-        return a.copy()
+        return a if inplace else a.copy()
     # floor is several times faster than np.mod on large arrays
-    return a - _TWO_PI * np.floor((a + np.pi) / _TWO_PI)
+    wrapped = a - _TWO_PI * np.floor((a + np.pi) / _TWO_PI)
+    if inplace and a.ndim:
+        a[...] = wrapped
+        return a
+    return wrapped
 
 
 def range_bearing(
@@ -54,7 +59,7 @@ def range_bearing(
     np.abs(delta, out=out[..., 0])
     np.subtract(np.arctan2(delta.imag, delta.real), orientation, out=out[..., 1])
     if wrap:
-        out[..., 1] = wrap_angle(out[..., 1])
+        wrap_angle(out[..., 1], inplace=True)
     return out
 
 
@@ -91,5 +96,5 @@ def sample(
     z = range_bearing(target_pos, sensor_pos, orientation)
     std = np.stack(np.broadcast_arrays(np.sqrt(sigma_d2), np.sqrt(sigma_theta2)), axis=-1)
     z = z + rng.standard_normal(z.shape) * std
-    z[..., 1] = wrap_angle(z[..., 1])
+    wrap_angle(z[..., 1], inplace=True)
     return z

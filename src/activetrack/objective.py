@@ -81,9 +81,13 @@ class TraceObjective:
         """
         return self.of_entries(Y[..., 0, 0], Y[..., 0, 1], Y[..., 1, 1])
 
-    def of_covariance(self, P11: FloatArray) -> FloatArray:
-        """Return the objective of position covariances ``P11`` (..., 2, 2): their trace."""
-        return P11[..., 0, 0] + P11[..., 1, 1]
+    def of_covariance(self, P: FloatArray) -> FloatArray:
+        """Return the objective of position covariances: the trace of ``P11``.
+
+        ``P`` (..., n, n) is ``P11`` itself (n = 2) or a whole state covariance whose
+        top-left 2x2 block is the position's (read in place, no slice).
+        """
+        return P[..., 0, 0] + P[..., 1, 1]
 
     def tangent(
         self, a: FloatArray, b: FloatArray, c: FloatArray

@@ -39,8 +39,11 @@ def _unit_disk(a: FloatArray) -> FloatArray:
     """Return vectors ``a`` (..., 2) with those longer than ``1 + TOL`` scaled to length 1."""
     norm = np.abs(as_complex(a))
     long = norm > _LONG
-    if not np.count_nonzero(long):
-        return a
+    return _to_unit(a, norm, long) if np.count_nonzero(long) else a
+
+
+def _to_unit(a: FloatArray, norm: FloatArray, long: np.ndarray) -> FloatArray:
+    """Return ``a`` with the vectors marked ``long`` (norms ``norm``) scaled to length 1."""
     huge = np.isinf(norm)
     if np.count_nonzero(huge):  # |a| overflowed: divide by the larger component first
         big = np.maximum(np.abs(a[..., 0]), np.abs(a[..., 1]))
@@ -80,7 +83,11 @@ def apply_actions(
     ``rho`` broadcastable to (..., M). ``projected`` (..., M) marks the moves that were
     moved out of the ``rho`` disk. Inputs are not validated (finite values assumed).
     """
-    a = _unit_disk(np.asarray(actions, dtype=np.float64))
+    a = np.asarray(actions, dtype=np.float64)
+    norm = np.abs(as_complex(a))  # _unit_disk inline: one call fewer per env step
+    long = norm > _LONG
+    if np.count_nonzero(long):
+        a = _to_unit(a, norm, long)
     r = np.asarray(r, dtype=np.float64)
     return keep_distance(sensors + a * r[..., None], sensors, target_pred, r, rho)
 

@@ -78,7 +78,7 @@ def advance(
     x_next = x_true @ params.Phi.T + noise[..., :n] @ params.noise_factor.T
     z = measurement.range_bearing(x_next[..., :2], sensors, params.orientation, wrap=False)
     z += noise[..., n:].reshape(*noise.shape[:-1], -1, 2) * params.noise_std
-    z[..., 1] = measurement.wrap_angle(z[..., 1])  # wrapped once, after the noise
+    measurement.wrap_angle(z[..., 1], inplace=True)  # wrapped once, after the noise
     x_post, P_post = ekf.update(
         x_pred, P_pred, z, sensors, params.sigma_d2, params.sigma_theta2, params.orientation
     )
