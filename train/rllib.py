@@ -19,7 +19,8 @@ imports it; ``activetrack train rllib-ppo`` loads it on use.
   (parameter sharing, as the SB3 path), PPO-clip without RLlib's KL penalty, SB3's
   defaults for the rest.
 - :func:`train_rllib_ppo`: trains on a local Ray or a running cluster (``address``) and
-  writes ``policy.zip``, ``config.json``, ``checkpoints/`` and ``tb/``.
+  writes ``policy.zip``, ``config.json``, ``checkpoints/`` and ``tb/``;
+  :func:`load_checkpoint_module` reads the module back from a checkpoint.
 
 Reward scale. RLlib has no running reward normalization like SB3's ``VecNormalize``; the
 env's own scenario field ``reward_scale`` (:attr:`RLlibPPOConfig.reward_scale`) multiplies
@@ -336,6 +337,23 @@ def export_policy(
     )
 
 
+def load_checkpoint_module(checkpoint: str | Path) -> SharedTrackingModule:
+    """Return the trained shared module of an RLlib checkpoint folder (``checkpoints/iter_N``).
+
+    With :func:`export_policy` this turns any checkpoint of a run (one that was stopped,
+    say) into a ``policy.zip``. Raises ``ValueError`` naming the folder if it holds none.
+    """
+    folder = Path(checkpoint) / "learner_group" / "learner" / "rl_module" / MODULE_ID
+    if not folder.is_dir():
+        raise ValueError(f"{checkpoint}: not an RLlib checkpoint of a shared module ({folder})")
+    from ray.rllib.core.rl_module.rl_module import RLModule
+
+    module = RLModule.from_checkpoint(str(folder.resolve()))
+    if not isinstance(module, SharedTrackingModule):
+        raise ValueError(f"{checkpoint}: holds a {type(module).__name__}, not a shared module")
+    return module.eval()
+
+
 @contextlib.contextmanager
 def ray_session(address: str | None = None, num_cpus: int | None = None) -> Iterator[None]:
     """Connect to the Ray cluster at ``address`` or start a local Ray; shut down what we start.
@@ -604,6 +622,7 @@ __all__ = [
     "deterministic_actions",
     "env_config_for",
     "export_policy",
+    "load_checkpoint_module",
     "make_env",
     "policy_mapping_fn",
     "ray_session",

@@ -29,7 +29,7 @@ from activetrack.envs import parallel_env  # noqa: E402
 from activetrack.train import (  # noqa: E402
     NetConfig,
     load_policy,
-    rllib,  # noqa: E402
+    rllib,
 )
 from activetrack.train import cli as train_cli  # noqa: E402
 
@@ -140,6 +140,8 @@ def test_config_validation_names_the_field():
         rllib.check_address("  ")
     with pytest.raises(ValueError, match="iterations"):
         rllib.train_rllib_ppo("paper", iterations=0)
+    with pytest.raises(ValueError, match="not an RLlib checkpoint"):
+        rllib.load_checkpoint_module("/nonexistent")
 
 
 def test_cli_defaults_are_the_config_defaults():
@@ -201,8 +203,6 @@ def _mean_trace_by_hand(path, seeds) -> float:
 
 @pytest.mark.slow
 def test_train_rllib_ppo_two_iterations_then_evaluate(tmp_path):
-    from ray.rllib.core.rl_module.rl_module import RLModule
-
     out = tmp_path / "run"
     argv = ["train", "rllib-ppo", "--scenario", "paper", "--seed", "0"]
     argv += ["--num-env-runners", "1", "--envs-per-runner", "2", "--iterations", "2"]
@@ -218,9 +218,7 @@ def test_train_rllib_ppo_two_iterations_then_evaluate(tmp_path):
     assert (checkpoint / "rllib_checkpoint.json").is_file()
 
     # The checkpoint's learner module is the exported network.
-    module = RLModule.from_checkpoint(
-        checkpoint / "learner_group" / "learner" / "rl_module" / rllib.MODULE_ID
-    )
+    module = rllib.load_checkpoint_module(checkpoint)
     learned = load_policy(out / "policy.zip")
     obs, _ = parallel_env("paper").reset(seed=11)
     stacked = np.stack(list(obs.values()))
