@@ -89,7 +89,8 @@ def main() -> None:
 
     configure_torch(1)
     m = make_scenario(args.scenario).n_sensors
-    ray.init(num_cpus=max(os.cpu_count() or 1, sum(args.runners)), include_dashboard=False)
+    cpus = max(os.cpu_count() or 1, sum(args.runners))
+    ray.init(address="local", num_cpus=cpus, include_dashboard=False, log_to_driver=False)
     samplers = {"sb3": sb3_sampler(args.scenario, args.sb3_copies, args.rollout, 0)}
     algos = []
     for k in args.runners:

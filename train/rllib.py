@@ -358,14 +358,17 @@ def load_checkpoint_module(checkpoint: str | Path) -> SharedTrackingModule:
 def ray_session(address: str | None = None, num_cpus: int | None = None) -> Iterator[None]:
     """Connect to the Ray cluster at ``address`` or start a local Ray; shut down what we start.
 
-    A Ray already initialized in this process is used as it is.
+    ``address=None`` always starts a new local Ray with ``num_cpus`` CPUs. A Ray already
+    initialized in this process is used as it is.
     """
     if ray.is_initialized():
         yield
         return
     kwargs: dict[str, Any] = {"include_dashboard": False, "log_to_driver": False}
     if address is None:
-        kwargs["num_cpus"] = num_cpus
+        # "local": a new Ray for this run, even if `ray start` left a cluster on this
+        # machine (ray.init() would connect to that one).
+        address, kwargs["num_cpus"] = "local", num_cpus
     ray.init(address=address, **kwargs)
     try:
         yield
