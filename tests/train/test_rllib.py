@@ -235,3 +235,26 @@ def test_train_rllib_ppo_two_iterations_then_evaluate(tmp_path):
     rows = {r["policy"]: r for r in json.loads((ev / "results.json").read_text())}
     row = rows[policy]
     assert row["mean_trace"] == pytest.approx(_mean_trace_by_hand(policy, [1000, 1001]), rel=1e-12)
+
+
+@pytest.mark.slow
+def test_train_rllib_ppo_on_a_running_cluster_via_address(tmp_path):
+    """--address: the command (another process) joins a running Ray and trains on it."""
+    import ray
+
+    ray.init(address="local", num_cpus=2, include_dashboard=False)
+    try:
+        address = ray.get_runtime_context().gcs_address
+        out = tmp_path / "run"
+        argv = ["train", "rllib-ppo", "--address", address, "--num-env-runners", "1"]
+        argv += ["--iterations", "1", "--train-batch-size", "100", "--minibatch-size", "50"]
+        argv += ["--num-epochs", "1", "--hidden", "16", "--no-progress", "--out", str(out)]
+        code = "import sys; from activetrack.cli import main; sys.exit(main(sys.argv[1:]))"
+        subprocess.run([sys.executable, "-c", code, *argv], check=True, timeout=600)
+        # The command disconnected from the cluster it joined and left it running.
+        assert ray.get(ray.put(7)) == 7 and all(n["Alive"] for n in ray.nodes())
+        config = json.loads((out / "config.json").read_text())
+        assert config["address"] == address and config["env_steps"] >= 100
+        load_policy(out / "policy.zip")
+    finally:
+        ray.shutdown()
