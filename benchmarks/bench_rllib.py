@@ -25,6 +25,7 @@ Run (needs the [ray] extra)::
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import platform
 import time
@@ -106,7 +107,10 @@ def main() -> None:
             steps = run()
             rates[name].append(steps / (time.perf_counter() - t0))
     for algo in algos:
+        logdir = algo.logdir
         algo.stop()
+        with contextlib.suppress(OSError):  # the empty folder RLlib makes in ~/ray_results
+            os.rmdir(logdir)
     ray.shutdown()
 
     sb3 = float(np.median(rates["sb3"]))

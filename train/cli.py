@@ -266,12 +266,14 @@ def _add_rllib_parser(methods: argparse._SubParsersAction, common: argparse.Argu
     )
     q.add_argument(
         "--iterations",
+        metavar="N",
         type=int,
         default=RLLIB_ITERATIONS,
         help="training iterations, >= 1 (default %(default)s)",
     )
     q.add_argument(
         "--address",
+        metavar="ADDR",
         default=None,
         help="a running Ray cluster ('auto', HOST:PORT or ray://HOST:PORT; default: start a "
         "local Ray for the run)",
@@ -280,6 +282,7 @@ def _add_rllib_parser(methods: argparse._SubParsersAction, common: argparse.Argu
         q.add_argument(
             option,
             dest=f"rllib_{name}",
+            metavar="N" if type_ is int else "X",
             type=type_,
             default=None,
             help=f"{text} (default {_RLLIB_DEFAULTS[name]})",
