@@ -1,8 +1,10 @@
-"""The training command: ``activetrack train bc|dagger|ppo``.
+"""The training command: ``activetrack train bc|dagger|ppo|rllib-ppo``.
 
 Each method writes ``OUT/policy.zip`` (loadable by ``activetrack evaluate --policy``),
 ``OUT/config.json`` and TensorBoard logs in ``OUT/tb``; PPO also writes ``model.zip`` and
-``checkpoints/``. Every option's default is the field default of
+``checkpoints/``; ``rllib-ppo`` (:mod:`activetrack.train.rllib`, the ``[ray]`` extra, imported
+only when that method runs) writes RLlib checkpoints in ``checkpoints/``. Every option's
+default is the field default of
 :class:`~activetrack.train.imitation.ImitationConfig` (DAgger:
 :data:`~activetrack.train.imitation.DAGGER_DEFAULTS`),
 :class:`~activetrack.train.ppo.PPOConfig` or :class:`~activetrack.train.networks.NetConfig`:
@@ -213,6 +215,120 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         "--keep-best", action="store_true", help="save the best validated policy, not the last"
     )
     q.set_defaults(func=run_train, parser=q)
+    _add_rllib_parser(methods, common)
+
+
+#: ``train rllib-ppo`` option -> :class:`~activetrack.train.rllib.RLlibPPOConfig` field. The
+#: defaults are repeated here only for the help text (the parser's defaults are None, so
+#: the config's own defaults apply); a test checks that they agree.
+_RLLIB_OPTIONS: dict[str, tuple[str, Any, str]] = {
+    "--num-env-runners": ("num_env_runners", int, "Ray actors that sample, >= 0 (0: the driver)"),
+    "--envs-per-runner": ("num_envs_per_env_runner", int, "env copies per runner, >= 1"),
+    "--train-batch-size": ("train_batch_size", int, "env steps per iteration"),
+    "--minibatch-size": ("minibatch_size", int, "agent-steps per SGD minibatch"),
+    "--num-epochs": ("num_epochs", int, "SGD passes per iteration"),
+    "--lr": ("lr", float, "Adam learning rate, in (0, 1]"),
+    "--gamma": ("gamma", float, "discount, in (0, 1]"),
+    "--lambda": ("lambda_", float, "GAE lambda, in [0, 1]"),
+    "--clip-param": ("clip_param", float, "PPO clip, > 0"),
+    "--entropy-coeff": ("entropy_coeff", float, ">= 0"),
+    "--reward-scale": ("reward_scale", float, "the env's reward_scale while training, > 0"),
+    "--checkpoint-every": ("checkpoint_every", int, "iterations between checkpoints (0: last)"),
+}
+_RLLIB_DEFAULTS = {
+    "num_env_runners": 1,
+    "num_envs_per_env_runner": 4,
+    "train_batch_size": 2048,
+    "minibatch_size": 512,
+    "num_epochs": 10,
+    "lr": 3e-4,
+    "gamma": 0.99,
+    "lambda_": 0.95,
+    "clip_param": 0.2,
+    "entropy_coeff": 0.0,
+    "reward_scale": 0.05,
+    "checkpoint_every": 10,
+}
+#: Default of ``train rllib-ppo --iterations``.
+RLLIB_ITERATIONS = 10
+
+
+def _add_rllib_parser(methods: argparse._SubParsersAction, common: argparse.ArgumentParser) -> None:
+    """Add ``train rllib-ppo`` (RLlib PPO with one shared module; needs the [ray] extra)."""
+    q = methods.add_parser(
+        "rllib-ppo",
+        parents=[common],
+        help='RLlib PPO on Ray, one policy shared by the sensors (pip install "activetrack[ray]")',
+        description="Multi-agent PPO with RLlib (new API stack, torch): every sensor maps to "
+        "one shared module, the network of the SB3 path. Runs on a local Ray, or on the "
+        "cluster at --address. Writes OUT/policy.zip (for 'activetrack evaluate --policy'), "
+        "OUT/config.json, RLlib checkpoints in OUT/checkpoints and TensorBoard logs in OUT/tb.",
+    )
+    q.add_argument(
+        "--iterations",
+        metavar="N",
+        type=int,
+        default=RLLIB_ITERATIONS,
+        help="training iterations, >= 1 (default %(default)s)",
+    )
+    q.add_argument(
+        "--address",
+        metavar="ADDR",
+        default=None,
+        help="a running Ray cluster ('auto', HOST:PORT or ray://HOST:PORT; default: start a "
+        "local Ray for the run)",
+    )
+    for option, (name, type_, text) in _RLLIB_OPTIONS.items():
+        q.add_argument(
+            option,
+            dest=f"rllib_{name}",
+            metavar="N" if type_ is int else "X",
+            type=type_,
+            default=None,
+            help=f"{text} (default {_RLLIB_DEFAULTS[name]})",
+        )
+    q.set_defaults(func=run_rllib, parser=q)
+
+
+def run_rllib(args: argparse.Namespace) -> int:
+    """Run ``activetrack train rllib-ppo``; return the exit code.
+
+    Checks the configuration, ``--iterations``, ``--address``, ``--threads`` and the output
+    folder before Ray starts. Without Ray installed it prints how to install it (exit 2).
+    """
+    try:
+        from activetrack.train import rllib
+    except ImportError as exc:
+        args.parser.print_usage()
+        print(f"{args.parser.prog}: error: {exc}")
+        return 2
+    given = {}
+    for name, _, _ in _RLLIB_OPTIONS.values():
+        value = getattr(args, f"rllib_{name}")
+        if value is not None:
+            given[name] = value
+    cfg = rllib.RLlibPPOConfig(**given, net=_net_config(args))
+    iterations = check_int("iterations", args.iterations, 1, rllib.MAX_ITERATIONS)
+    threads = check_int("threads", args.threads, 1, MAX_THREADS)
+    address = rllib.check_address(args.address)
+    outputs = prepare_output_dir(args.out, rllib.OUTPUTS, args.overwrite)
+    result = rllib.train_rllib_ppo(
+        args.scenario,
+        seed=args.seed,
+        iterations=iterations,
+        config=cfg,
+        out_dir=outputs,
+        address=address,
+        progress=not args.no_progress,
+        threads=threads,
+    )
+    ret = result.history[-1].get("episode_return_mean", float("nan"))
+    print(
+        f"rllib-ppo: {iterations} iterations, {result.env_steps} env steps "
+        f"({result.agent_steps} agent-steps), {result.seconds:.1f} s, last mean episode return "
+        f"(all sensors, scaled) {ret:.3f} -> {result.policy_path}"
+    )
+    return 0
 
 
 def _net_config(args: argparse.Namespace) -> NetConfig:
