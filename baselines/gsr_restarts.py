@@ -55,10 +55,16 @@ GRID_BUDGET = 20000
 
 #: Fewer grid points per sensor than this: the grid start is replaced by greedy.
 GRID_MIN_POINTS = 5
-#: A second grid start is used if it is within this (relative) of the grid optimum ...
-GRID_SECOND = 1e-3
-#: ... and some sensor lies more than this many grid steps away from the optimum.
+#: Grid local minima within this (relative) of the grid optimum are refined ...
+GRID_WINDOW = 1e-2
+#: ... at most this many, each with some sensor more than GRID_AWAY grid steps away from
+#: its place in every one taken before.
+GRID_CANDIDATES = 8
 GRID_AWAY = 3
+#: Refined, those within this (relative) of the best refined one are relaxed, at most
+#: GRID_BASINS.
+GRID_SECOND = 1e-3
+GRID_BASINS = 3
 
 #: The restart starts GSR knows (see the module docstring).
 STARTS = ("grid", "mirror", "independent", "greedy", "greedy-reversed")
@@ -73,15 +79,29 @@ def best_of_restarts(
 ) -> tuple[FloatArray, float, bool, str]:
     """Return ``(s, value, converged, start)``: the best of ``first`` (the relaxed warm
     start) and the relaxed ``starts``, by objective (the first found wins ties)."""
-    s, val, conv = first
-    start = "warm"
-    found = [s]
-    for name, s0, feasible in restart_points(run, warm, starts, found):
-        rs, rval, rconv = run.relax(s0, feasible, accelerate, found)
-        found.append(rs)
-        if rval < val:
-            s, val, conv, start = rs, rval, rconv, name
-    return s, val, conv, start
+    results = [(first[1], 0, first[0], first[2], "warm")]
+    found = [first[0]]
+    max_sweeps = run.max_sweeps
+    # A crawling run is finished by the joint refinement of polish, not by more sweeps.
+    run.max_sweeps = min(max_sweeps, RESTART_SWEEPS)
+    try:
+        for name, s0, feasible in restart_points(run, warm, starts, found):
+            rs, rval, rconv = run.relax(s0, feasible, accelerate, found)
+            found.append(rs)
+            results.append((rval, len(results), rs, rconv, name))
+        # Polish the answers near the best: a crawling run may have stopped above the
+        # bottom of a basin that is in fact the lowest.
+        results.sort(key=lambda r: r[:2])
+        best = results[0][0]
+        polished = []
+        for val, k, s, conv, name in results[:POLISH_ANSWERS]:
+            if val <= (1.0 + POLISH_WINDOW) * best:
+                s, val, conv = polish(run, s, val, conv)
+            polished.append((val, k, s, conv, name))
+    finally:
+        run.max_sweeps = max_sweeps
+    val, _, s, conv, name = min(polished, key=lambda r: r[:2])
+    return s, val, conv, name
 
 
 def restart_points(
@@ -158,24 +178,49 @@ def grid_points(run: Relaxation, budget: int = GRID_BUDGET) -> int:
 
 
 class _Curve:
-    """One sensor's curve ADB (Lemma 3) parametrized by arc length ``u`` in ``[0, length]``."""
+    """One sensor's curve ADB (Lemma 3) parametrized by ``u`` in ``[0, length]``.
+
+    ``u`` measures how much the sensor's information changes along the curve, not metres:
+    on each arc it grows uniformly in the arc's angle, at a rate that makes its increase
+    over the arc the turn of the sensor's direction seen from the target plus the change
+    of the log of its distance (eq. 17: the information depends on the direction modulo
+    pi and on the distance, the bearing part as its inverse square). A small ``rho``
+    circle is short in metres but not in ``u``. An arc of a ``rho`` circle turning by
+    more than pi is cut to pi: its points pi apart carry the same information.
+    """
 
     def __init__(self, arcs: list[geometry.Arc]) -> None:
-        self.arcs = arcs
-        self.cum = np.concatenate([[0.0], np.cumsum([a.length for a in arcs])])
+        self.arcs = [_fold(a) for a in arcs]
+        self.cum = np.concatenate([[0.0], np.cumsum([_change(a) for a in self.arcs])])
         self.length = float(self.cum[-1])
 
     def points(self, u: FloatArray) -> FloatArray:
-        """Return the points at arc lengths ``u`` (K,) (clipped to the curve), (K, 2)."""
+        """Return the points at parameters ``u`` (K,) (clipped to the curve), (K, 2)."""
         u = np.clip(u, 0.0, self.length)
         k = np.clip(np.searchsorted(self.cum, u, side="right") - 1, 0, len(self.arcs) - 1)
         out = np.empty((len(u), 2))
         for j, arc in enumerate(self.arcs):
             m = k == j
             if np.any(m):
-                frac = np.clip((u[m] - self.cum[j]) / max(arc.length, 1e-300), 0.0, 1.0)
+                span = self.cum[j + 1] - self.cum[j]
+                frac = np.clip((u[m] - self.cum[j]) / max(span, 1e-300), 0.0, 1.0)
                 out[m] = arc.points(arc.t0 + frac * (arc.t1 - arc.t0))
         return out
+
+
+def _fold(arc: geometry.Arc) -> geometry.Arc:
+    """Return ``arc`` cut to an angle of pi if it is a circle about the target (a rho arc)."""
+    if arc.center == (0.0, 0.0) and arc.t1 - arc.t0 > math.pi:
+        return geometry.Arc(arc.center, arc.radius, arc.t0, arc.t0 + math.pi)
+    return arc
+
+
+def _change(arc: geometry.Arc, n: int = 9) -> float:
+    """Return the turn of the direction plus the change of log distance along ``arc``."""
+    p = arc.points(np.linspace(arc.t0, arc.t1, n))
+    ang = np.unwrap(np.arctan2(p[:, 1], p[:, 0]))
+    logd = 0.5 * np.log(p[:, 0] ** 2 + p[:, 1] ** 2)
+    return float(np.sum(np.abs(np.diff(ang))) + np.sum(np.abs(np.diff(logd))))
 
 
 def combination_values(run: Relaxation, cands: list[FloatArray]) -> FloatArray:
@@ -195,29 +240,55 @@ def combination_values(run: Relaxation, cands: list[FloatArray]) -> FloatArray:
 def grid_starts(run: Relaxation, cands: list[FloatArray]) -> list[tuple[int, ...]]:
     """Return the indices of the best combinations of small candidate sets, by broadcasting.
 
-    The first is the grid optimum. The second, if its objective is within
-    :data:`GRID_SECOND` (relative) of the first, is the best combination in which some
-    sensor lies more than :data:`GRID_AWAY` grid steps (in distance) from its place in the
-    optimum: a second basin that the coarse grid cannot tell apart from the first.
+    The first is the grid optimum. The others are the next best local minima of the grid
+    (no better neighbour one grid step along any sensor's curve) within
+    :data:`GRID_SECOND` (relative) of the optimum, each with some sensor more than
+    :data:`GRID_AWAY` grid steps (in distance) from its place in every start chosen
+    before: other basins that the coarse grid cannot tell apart from the first (its error
+    at a smooth minimum is of that order), at most :data:`GRID_BASINS` starts in all.
     """
-    m = len(cands)
     val = combination_values(run, cands)
-    best = np.unravel_index(int(np.argmin(val)), val.shape)
-    out = [tuple(int(k) for k in best)]
-    near = np.ones(val.shape, dtype=bool)
-    for i, pts in enumerate(cands):
-        if len(pts) < 2:
-            continue
-        step = float(np.median(np.hypot(*np.diff(pts, axis=0).T)))
-        dist = np.hypot(*(pts - pts[best[i]]).T)
-        shape = [1] * m
-        shape[i] = len(pts)
-        near = near & (dist <= (GRID_AWAY + 0.5) * step).reshape(shape)
-    far = np.where(near, np.inf, val)
-    k = np.unravel_index(int(np.argmin(far)), val.shape)
-    if far[k] <= (1.0 + GRID_SECOND) * float(val[best]):
-        out.append(tuple(int(j) for j in k))
+    idx, v = _local_minima(val)
+    order = np.argsort(v, kind="stable")
+    best = float(v[order[0]])
+    steps = [
+        float(np.median(np.hypot(*np.diff(pts, axis=0).T))) if len(pts) > 1 else 0.0
+        for pts in cands
+    ]
+    out: list[tuple[int, ...]] = []
+    for j in order:
+        if len(out) >= GRID_CANDIDATES or v[j] > (1.0 + GRID_WINDOW) * best:
+            break
+        k = tuple(int(q) for q in idx[j])
+        if all(_away(cands, steps, k, o) for o in out):
+            out.append(k)
     return out
+
+
+def _local_minima(val: FloatArray) -> tuple[np.ndarray, FloatArray]:
+    """Return the indices (K, M) and values (K,) of the grid points no worse than any
+    neighbour one step along one axis."""
+    loc = np.ones(val.shape, dtype=bool)
+    for ax, n in enumerate(val.shape):
+        if n < 2:
+            continue
+        lo = [slice(None)] * val.ndim
+        hi = [slice(None)] * val.ndim
+        lo[ax], hi[ax] = slice(0, n - 1), slice(1, n)
+        lo, hi = tuple(lo), tuple(hi)
+        loc[hi] &= val[hi] <= val[lo]
+        loc[lo] &= val[lo] <= val[hi]
+    return np.argwhere(loc), val[loc]
+
+
+def _away(cands: list[FloatArray], steps: list[float], k: tuple, o: tuple) -> bool:
+    """Return whether some sensor of grid point ``k`` is over GRID_AWAY steps from ``o``'s."""
+    return any(
+        min(np.hypot(*(pts[k[i]] - pts[o[i]])), np.hypot(*(pts[k[i]] + pts[o[i]])))
+        > (GRID_AWAY + 0.5) * steps[i]
+        for i, pts in enumerate(cands)
+        if len(pts) > 1
+    )
 
 
 def coarse_grid(
@@ -232,23 +303,30 @@ def coarse_grid(
     dropped.
     """
     k = grid_points(run, budget)
-    curves = {
-        i: _Curve(geometry.facing_boundary(run.c[i], run.r[i], run.rho[i])) for i in run.free_idx
+    curves = {i: _Curve(_arcs_of(run, i)) for i in run.free_idx}
+    # The arcs' end points (the corners A, B of Fig. 3, where optima often sit) are grid
+    # points too: near a corner the objective changes to first order, so a grid that
+    # straddles it can misjudge that basin by more than the gap between basins.
+    grid_u = {
+        i: np.union1d(np.linspace(0.0, cv.length, max(k + 2 - len(cv.cum), 2)), cv.cum)
+        for i, cv in curves.items()
     }
-    grid_u = {i: np.linspace(0.0, cv.length, k) for i, cv in curves.items()}
     cands = [
         curves[i].points(grid_u[i]) if run.free[i] else run.fixed_rel[i : i + 1]
         for i in range(len(run.c))
     ]
     step = {i: cv.length / (k - 1) for i, cv in curves.items()}
-    starts = []
+    metres = {i: float(np.median(np.hypot(*np.diff(cands[i], axis=0).T))) for i in run.free_idx}
+    refined = []
     for idx in grid_starts(run, cands):
         s = np.stack([cands[i][idx[i]] for i in range(len(run.c))])
-        if any(_near(run, s, x, step) for x in known):
+        if any(_near(run, s, x, metres) for x in known):
             continue
         u = {i: float(grid_u[i][idx[i]]) for i in run.free_idx}
-        starts.append(refine(run, s, u, curves, step))
-    return starts
+        s = refine(run, s, u, curves, step)
+        refined.append((run.value(s), len(refined), s))
+    refined.sort(key=lambda vks: vks[:2])
+    return [s for v, _, s in refined[:GRID_BASINS] if v <= (1.0 + GRID_SECOND) * refined[0][0]]
 
 
 def _near(run: Relaxation, s: FloatArray, known: FloatArray, step: dict) -> bool:
@@ -281,3 +359,201 @@ def refine(
             u[i], s[i] = float(trial[i][best[i]]), cands[i][best[i]]
             step[i] /= 8.0
     return s
+
+
+#: Sweeps per run of the restarts (and of polish) at most, below ``GSR.max_sweeps``.
+RESTART_SWEEPS = 20
+#: Rounds of :func:`polish` (joint refinement, then sweeps) at most.
+POLISH_ROUNDS = 4
+#: The best answers of the starts, at most this many, ...
+POLISH_ANSWERS = 3
+#: ... within this (relative) of the best are polished.
+POLISH_WINDOW = 1e-3
+
+
+def polish(
+    run: Relaxation, s: FloatArray, val: float, converged: bool
+) -> tuple[FloatArray, float, bool]:
+    """Return ``(s, value, converged)`` refined jointly, never worse than ``(s, val)``.
+
+    Coordinate descent crawls where two sensors' best directions coincide (a narrow
+    valley in which they must turn together) and may stop far from its bottom. Each round
+    places every free sensor on the arc of its curve ADB it lies on (at a corner, the arc
+    into which the objective descends), minimizes the objective over all their angles on
+    those arcs at once (:func:`_newton`), then sweeps (the exact single-sensor solves,
+    which may move a sensor onto another arc). Rounds stop when one improves by at most
+    1e-13 (relative), or when ``s`` came from sweeps that ``converged`` and the joint
+    step gains nothing. Returns ``converged`` of the last sweeps.
+    """
+    conv, conv_sweeps = converged, converged
+    for _ in range(POLISH_ROUNDS):
+        par = _arc_params(run, s)
+        if not par:
+            break
+        arcs = _ArcSet(run, s, par)
+        theta, f = _newton(arcs, np.array([_angle(a, s[i]) for i, a in par]))
+        if val - f <= 1e-13 * val and conv_sweeps:
+            break  # no sensor can improve alone (swept before) nor all together on their arcs
+        start, fstart = (arcs.positions(theta), f) if f < val else (s, val)
+        rs, rval, conv = run.relax(start, True, False)
+        conv_sweeps = True
+        if rval >= fstart:
+            rs, rval = start, fstart
+        gain = val - rval
+        if gain > 0:
+            s, val = rs, rval
+        if gain <= 1e-13 * val:
+            break
+    return s, val, conv
+
+
+class _ArcSet:
+    """The objective over the free sensors' angles on given arcs (trace objective, eq. 17).
+
+    ``derivatives`` returns the value, the gradient and the Hessian in the angles: with
+    ``Y`` the total information, ``W = Y^{-1}`` and ``I_i(theta_i)`` sensor ``i``'s
+    information, ``d tr(W) / d theta_i = -tr(W I_i' W)`` and
+    ``d^2 tr(W) / d theta_i d theta_j = 2 tr(W I_i' W I_j' W) - delta_ij tr(W I_i'' W)``.
+    ``I_i'`` is exact (complex step); ``I_i''`` a central difference of it.
+    """
+
+    def __init__(self, run: Relaxation, s: FloatArray, par: list) -> None:
+        self.s = s
+        self.idx = [i for i, _ in par]
+        arcs = [a for _, a in par]
+        self.lo = np.array([a.t0 for a in arcs])
+        self.hi = np.array([a.t1 for a in arcs])
+        self.cx = np.array([a.center[0] for a in arcs])
+        self.cy = np.array([a.center[1] for a in arcs])
+        self.rad = np.array([a.radius for a in arcs])
+        self.sd2, self.st2 = run.sd2[self.idx], run.st2[self.idx]
+        others = [i for i in range(len(s)) if i not in self.idx]
+        self.base = run.prior + sensor_information(s[others], run.sd2[others], run.st2[others]).sum(
+            axis=0
+        )
+
+    def positions(self, theta: FloatArray) -> FloatArray:
+        """Return the configuration (M, 2) with the free sensors at angles ``theta``."""
+        out = self.s.copy()
+        out[self.idx, 0] = self.cx + self.rad * np.cos(theta)
+        out[self.idx, 1] = self.cy + self.rad * np.sin(theta)
+        return out
+
+    def _info(self, theta) -> np.ndarray:
+        """Return the sensors' information at angles ``theta`` (..., n) as (..., n, 2, 2)."""
+        x = self.cx + self.rad * np.cos(theta)
+        y = self.cy + self.rad * np.sin(theta)
+        return sensor_information(np.stack([x, y], -1), self.sd2, self.st2)
+
+    def value(self, theta: FloatArray) -> float:
+        """Return the objective at angles ``theta``."""
+        y = self.base + self._info(theta).sum(axis=0)
+        return float((y[0, 0] + y[1, 1]) / (y[0, 0] * y[1, 1] - y[0, 1] ** 2))
+
+    def derivatives(self, theta: FloatArray) -> tuple[float, FloatArray, FloatArray]:
+        """Return the objective, its gradient (n,) and Hessian (n, n) at angles ``theta``."""
+        h, d = 1e-30, 1e-5
+        shifts = np.array([0.0, d, -d])[:, None]
+        info = self._info(theta[None, :] + shifts + 1j * h)  # (3, n, 2, 2) complex
+        i0 = info[0].real
+        di = info.imag / h  # I' at theta, theta + d, theta - d
+        ddi = (di[1] - di[2]) / (2.0 * d)
+        y = self.base + i0.sum(axis=0)
+        w = np.linalg.inv(y)
+        wa = w @ di[0]  # (n, 2, 2)
+        f = float(np.trace(w))
+        g = -np.einsum("ab,nbc,ca->n", w, di[0], w)
+        hess = 2.0 * np.einsum("iab,jbc,ca->ij", wa, wa, w)
+        hess[np.diag_indices_from(hess)] -= np.einsum("ab,nbc,ca->n", w, ddi, w)
+        return f, g, hess
+
+
+def _newton(arcs: _ArcSet, theta: FloatArray, iters: int = 50) -> tuple[FloatArray, float]:
+    """Return ``(theta, value)``: a bounded local minimum of ``arcs`` from ``theta``.
+
+    Projected Newton: angles at a bound whose gradient points outward are held; the
+    others take a Newton step with the Hessian's eigenvalues made positive (a saddle
+    point repels), projected onto the bounds and halved until the objective decreases.
+    Stops when no step decreases it or a step gains at most 1e-15 (relative).
+    """
+    theta = np.clip(theta, arcs.lo, arcs.hi)
+    f = math.inf
+    for _ in range(iters):
+        f, g, hess = arcs.derivatives(theta)
+        eps = 1e-12 * (1.0 + np.abs(theta))
+        held = ((theta <= arcs.lo + eps) & (g > 0)) | ((theta >= arcs.hi - eps) & (g < 0))
+        move = ~held
+        if not move.any():
+            break
+        lam, vec = np.linalg.eigh(hess[np.ix_(move, move)])
+        lam = np.maximum(np.abs(lam), 1e-9 * max(float(np.max(np.abs(lam))), 1e-300))
+        proj = vec.T @ g[move]
+        if 0.5 * float(proj @ (proj / lam)) <= 1e-15 * f:
+            break  # the model predicts no gain beyond rounding: a stationary point
+        step = np.zeros_like(theta)
+        step[move] = -vec @ (proj / lam)
+        for _ in range(30):  # halve the step until the objective decreases
+            trial = np.clip(theta + step, arcs.lo, arcs.hi)
+            ft = arcs.value(trial)
+            if ft < f:
+                break
+            step *= 0.5
+        else:
+            break
+        gain = f - ft
+        theta, f = trial, ft
+        if gain <= 1e-15 * f:
+            break
+    return theta, f
+
+
+def _angle(arc: geometry.Arc, p: FloatArray) -> float:
+    """Return the angle of ``p`` on ``arc``, in ``[t0, t1]``."""
+    t = math.atan2(p[1] - arc.center[1], p[0] - arc.center[0])
+    t = arc.t0 + (t - arc.t0) % (2.0 * math.pi)
+    if t > arc.t1:  # past the end: the nearer end
+        t = arc.t1 if t - arc.t1 < arc.t0 + 2.0 * math.pi - t else arc.t0
+    return t
+
+
+def _arc_params(run: Relaxation, s: FloatArray) -> list[tuple[int, geometry.Arc]]:
+    """Return ``(sensor, arc)`` for the free sensors of ``s`` on an arc of their curve ADB.
+
+    A sensor at a corner (on two arcs) takes the arc along which the objective, with the
+    others fixed, descends from the corner; a sensor on no arc (to 1e-9) is left out.
+    """
+    out = []
+    base = None
+    for i in run.free_idx:
+        on = []
+        for arc in _arcs_of(run, i):
+            t = _angle(arc, s[i])
+            px = arc.center[0] + arc.radius * math.cos(t)
+            py = arc.center[1] + arc.radius * math.sin(t)
+            if math.hypot(px - s[i, 0], py - s[i, 1]) <= 1e-9 * (1.0 + arc.radius):
+                on.append((arc, t))
+        if len(on) == 1:
+            out.append((i, on[0][0]))
+        elif on:
+            base = run.value(s) if base is None else base
+            out.append((i, min(on, key=lambda at: _one_sided(run, s, i, at, base))[0]))
+    return out
+
+
+def _arcs_of(run: Relaxation, i: int) -> list[geometry.Arc]:
+    """Return sensor ``i``'s curve ADB (:func:`activetrack.geometry.facing_boundary`), cached
+    on ``run``."""
+    cache = run.__dict__.setdefault("_adb_arcs", {})
+    if i not in cache:
+        cache[i] = geometry.facing_boundary(run.c[i], run.r[i], run.rho[i])
+    return cache[i]
+
+
+def _one_sided(run: Relaxation, s: FloatArray, i: int, at: tuple, base: float) -> float:
+    """Return the objective change of moving sensor ``i`` a little into arc ``at[0]``."""
+    arc, t = at
+    span = arc.t1 - arc.t0
+    step = min(1e-6, 0.5 * span) * (1.0 if t - arc.t0 <= arc.t1 - t else -1.0)
+    trial = s.copy()
+    trial[i] = arc.points(np.array([t + step]))[0]
+    return run.value(trial) - base
