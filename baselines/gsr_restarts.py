@@ -1,26 +1,37 @@
-"""Restarts for GSR: relax from other starts and keep the best (``GSR(restarts=True)``).
+"""Restarts for GSR: relax from other starts, polish, keep the best (``GSR(restarts=True)``).
 
 Each GSR step is the exact optimum of one sensor given the others, so GSR ends in a
 configuration no single sensor can improve, which need not be the team optimum. The
 objective depends on each sensor's information, i.e. on its distance and its direction
 modulo pi; near the target the sensors sit on the ``rho`` circle and the team's job is to
-spread its directions. When two sensors' feasible arcs overlap, "A takes the low end, B
-the high end" and the swapped assignment are both stable: moving one sensor alone to the
-other assignment stacks it onto its partner, which is worse, so coordinate descent cannot
-swap roles; near-ties between such basins make the basin GSR lands in depend on the order
-of the sweep. ``benchmarks/bench_gsr_restarts.py`` measures how often each variant
-reaches the GBES grid optimum.
+spread its directions. GSR misses the optimum in two ways:
+
+- **Another basin.** When two sensors' feasible arcs overlap, "A takes the low end, B
+  the high end" and the swapped assignment are both stable: moving one sensor alone to
+  the other assignment stacks it onto its partner, which is worse, so coordinate descent
+  cannot swap roles. Optima also sit at corners of the curves ADB (a ``rho`` arc meeting
+  a reach arc, Fig. 3) or at an arc's end, where one sensor would need to jump to the
+  other end of its arc (its directions modulo pi wrap around) while the others turn.
+  Basins come within 1e-5 of each other.
+- **A valley.** When the prior is weak or nearly isotropic next to the sensors'
+  information (sensors close to the target), turning the whole team together barely
+  changes the objective while moving one sensor alone does: coordinate descent then
+  crawls along the valley by small steps and stops (``tol`` per sweep, or
+  ``max_sweeps``) far from its bottom, up to 2e-4 above it.
 
 The starts (:data:`STARTS`), each relaxed by the same scalar sweep as plain GSR
-(:class:`activetrack.baselines.gsr.Relaxation`):
+(:class:`activetrack.baselines.gsr.Relaxation`), at most :data:`RESTART_SWEEPS` sweeps:
 
 - ``"grid"`` (the default) looks at the joint problem coarsely: an exhaustive search over
   a coarse grid of the curves ADB (about :data:`GRID_BUDGET` combinations, vectorized, no
-  solves) gives its best point and, if within :data:`GRID_SECOND`, the best point of a
-  second basin; each is refined by finer local grids to the bottom of its basin before
-  the sweeps, which never raise the objective, so a refined start cannot slide into a
-  worse basin. Teams too large for a grid of :data:`GRID_MIN_POINTS` points per sensor
-  use ``"greedy-reversed"`` instead.
+  solves). The grid is spaced by how much a sensor's information changes (its direction
+  seen from the target and its log distance, :class:`_Curve`), not by metres, so a small
+  ``rho`` circle gets as many points as a large one, and it contains every corner. Its
+  best point and the best other local minima within :data:`GRID_WINDOW` (the coarse
+  grid's own error reaches 2e-3 at a smooth minimum) are refined by finer local grids
+  to the bottom of their basin; those within :data:`GRID_SECOND` of the best refined
+  one are relaxed. Teams too large for a grid of :data:`GRID_MIN_POINTS` points per
+  sensor use ``"greedy-reversed"`` instead.
 - ``"mirror"``: the warm start reflected across the prior's principal axis, under which
   the objective is invariant (Lemma 2).
 - ``"independent"``: every sensor at its own optimum given the prior alone.
@@ -29,7 +40,11 @@ The starts (:data:`STARTS`), each relaxed by the same scalar sweep as plain GSR
 
 A restart that comes within :data:`MERGE_TOL` of a solution already found is stopped
 there (it is in that solution's basin); grid points near a known solution are dropped.
-Grid combinations are scored with the problem's objective (``of_entries``).
+The best answers (:data:`POLISH_ANSWERS`, within :data:`POLISH_WINDOW` of the best) are
+then polished (:func:`polish`): a projected Newton method over all free sensors' angles
+on their arcs at once goes down the valley, and sweeps follow. Grid combinations are
+scored with the problem's objective (``of_entries``); the polish is written for the
+trace (eq. 17), which GSR requires.
 """
 
 from __future__ import annotations
