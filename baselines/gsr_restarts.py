@@ -81,6 +81,10 @@ GRID_AWAY = 3
 GRID_SECOND = 1e-3
 GRID_BASINS = 3
 
+#: Points per sensor and rounds of the local grids that refine a grid start.
+REFINE_POINTS = 17
+REFINE_ROUNDS = 2
+
 #: The restart starts GSR knows (see the module docstring).
 STARTS = ("grid", "mirror", "independent", "greedy", "greedy-reversed")
 
@@ -145,11 +149,23 @@ def restart_points(
 def merged(run: Relaxation, s: FloatArray, known: FloatArray) -> bool:
     """Return whether every free sensor of ``s`` is within :data:`MERGE_TOL` of ``known``.
 
-    Positions are compared up to ``s -> -s`` (the same information).
+    Positions are compared up to ``s -> -s`` (:func:`apart`).
     """
-    f = run.free
-    d = np.minimum(np.hypot(*(s[f] - known[f]).T), np.hypot(*(s[f] + known[f]).T))
-    return bool(np.all(d <= MERGE_TOL * np.maximum(np.asarray(run.r)[f], 1e-300)))
+    return all(apart(run, i, s[i], known[i]) <= MERGE_TOL * run.r[i] for i in run.free_idx)
+
+
+def apart(run: Relaxation, i: int, a: FloatArray, b: FloatArray) -> float:
+    """Return how far sensor ``i``'s positions ``a`` and ``b`` are apart.
+
+    Up to ``b -> -b`` (the same information) if ``-b`` is reachable too: on a ``rho``
+    arc whose two ends are nearly opposite, a point near one end and the reflection of a
+    point near the other carry nearly the same information but lie in different basins.
+    """
+    d = math.hypot(a[0] - b[0], a[1] - b[1])
+    c = run.c[i]
+    if math.hypot(b[0] + c[0], b[1] + c[1]) <= run.r[i] * (1.0 + 1e-9):
+        d = min(d, math.hypot(a[0] + b[0], a[1] + b[1]))
+    return d
 
 
 def independent(run: Relaxation) -> FloatArray:
@@ -275,7 +291,7 @@ def grid_starts(run: Relaxation, cands: list[FloatArray]) -> list[tuple[int, ...
         if len(out) >= GRID_CANDIDATES or v[j] > (1.0 + GRID_WINDOW) * best:
             break
         k = tuple(int(q) for q in idx[j])
-        if all(_away(cands, steps, k, o) for o in out):
+        if all(_away(run, cands, steps, k, o) for o in out):
             out.append(k)
     return out
 
@@ -296,11 +312,10 @@ def _local_minima(val: FloatArray) -> tuple[np.ndarray, FloatArray]:
     return np.argwhere(loc), val[loc]
 
 
-def _away(cands: list[FloatArray], steps: list[float], k: tuple, o: tuple) -> bool:
+def _away(run: Relaxation, cands: list[FloatArray], steps: list[float], k: tuple, o: tuple) -> bool:
     """Return whether some sensor of grid point ``k`` is over GRID_AWAY steps from ``o``'s."""
     return any(
-        min(np.hypot(*(pts[k[i]] - pts[o[i]])), np.hypot(*(pts[k[i]] + pts[o[i]])))
-        > (GRID_AWAY + 0.5) * steps[i]
+        apart(run, i, pts[k[i]], pts[o[i]]) > (GRID_AWAY + 0.5) * steps[i]
         for i, pts in enumerate(cands)
         if len(pts) > 1
     )
@@ -346,25 +361,23 @@ def coarse_grid(
 
 def _near(run: Relaxation, s: FloatArray, known: FloatArray, step: dict) -> bool:
     """Return whether every free sensor of ``s`` is within 1.5 grid steps of ``known``."""
-    for i in run.free_idx:
-        d = min(np.hypot(*(s[i] - known[i])), np.hypot(*(s[i] + known[i])))
-        if d > 1.5 * step[i]:
-            return False
-    return True
+    return all(apart(run, i, s[i], known[i]) <= 1.5 * step[i] for i in run.free_idx)
 
 
 def refine(
-    run: Relaxation, s: FloatArray, u: dict, curves: dict, step: dict, rounds: int = 2
+    run: Relaxation, s: FloatArray, u: dict, curves: dict, step: dict, rounds: int | None = None
 ) -> FloatArray:
     """Return ``s`` refined by exhaustive local grids along the curves, (M, 2).
 
-    Each round tries every combination of ``u_i + step_i * t``, ``t`` in 17 points of
-    ``[-1, 1]`` (``t = 0`` included, so the objective never increases), then divides the
-    steps by 8: two rounds reach 1/64 of the coarse grid step.
+    Each round tries every combination of ``u_i + step_i * t``, ``t`` in
+    :data:`REFINE_POINTS` (odd) points of ``[-1, 1]`` (``t = 0`` included, so the
+    objective never increases), then divides the steps by ``(REFINE_POINTS - 1) / 2``, the
+    local grid's own step: :data:`REFINE_ROUNDS` rounds.
     """
-    t = np.linspace(-1.0, 1.0, 17)
+    t = np.linspace(-1.0, 1.0, REFINE_POINTS)
+    shrink = (REFINE_POINTS - 1) / 2.0
     s, u, step = s.copy(), dict(u), dict(step)
-    for _ in range(rounds):
+    for _ in range(REFINE_ROUNDS if rounds is None else rounds):
         trial = {i: np.clip(u[i] + step[i] * t, 0.0, curves[i].length) for i in u}
         cands = [curves[i].points(trial[i]) if i in u else s[i : i + 1] for i in range(len(s))]
         best = np.unravel_index(
@@ -372,7 +385,7 @@ def refine(
         )
         for i in u:
             u[i], s[i] = float(trial[i][best[i]]), cands[i][best[i]]
-            step[i] /= 8.0
+            step[i] /= shrink
     return s
 
 
