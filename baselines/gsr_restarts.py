@@ -85,6 +85,15 @@ GRID_BASINS = 3
 REFINE_POINTS = 17
 REFINE_ROUNDS = 2
 
+#: Sweeps per run of the restarts (and of polish) at most, below ``GSR.max_sweeps``.
+RESTART_SWEEPS = 20
+#: Rounds of :func:`polish` (joint refinement, then sweeps) at most.
+POLISH_ROUNDS = 4
+#: The best answers of the starts, at most this many, ...
+POLISH_ANSWERS = 3
+#: ... within this (relative) of the best are polished.
+POLISH_WINDOW = 1e-3
+
 #: The restart starts GSR knows (see the module docstring).
 STARTS = ("grid", "mirror", "independent", "greedy", "greedy-reversed")
 
@@ -97,7 +106,8 @@ def best_of_restarts(
     accelerate: bool,
 ) -> tuple[FloatArray, float, bool, str]:
     """Return ``(s, value, converged, start)``: the best of ``first`` (the relaxed warm
-    start) and the relaxed ``starts``, by objective (the first found wins ties)."""
+    start) and the relaxed ``starts``, the best of them polished (:func:`polish`), by
+    objective (the first found wins ties). Never worse than ``first``."""
     results = [(first[1], 0, first[0], first[2], "warm")]
     found = [first[0]]
     max_sweeps = run.max_sweeps
@@ -273,10 +283,10 @@ def grid_starts(run: Relaxation, cands: list[FloatArray]) -> list[tuple[int, ...
 
     The first is the grid optimum. The others are the next best local minima of the grid
     (no better neighbour one grid step along any sensor's curve) within
-    :data:`GRID_SECOND` (relative) of the optimum, each with some sensor more than
-    :data:`GRID_AWAY` grid steps (in distance) from its place in every start chosen
-    before: other basins that the coarse grid cannot tell apart from the first (its error
-    at a smooth minimum is of that order), at most :data:`GRID_BASINS` starts in all.
+    :data:`GRID_WINDOW` (relative) of the optimum, each with some sensor more than
+    :data:`GRID_AWAY` grid steps (in distance, :func:`apart`) from its place in every one
+    chosen before: other basins that the coarse grid cannot tell apart from the first (its
+    error at a smooth minimum is of that order), at most :data:`GRID_CANDIDATES` in all.
     """
     val = combination_values(run, cands)
     idx, v = _local_minima(val)
@@ -326,10 +336,12 @@ def coarse_grid(
 ) -> list[FloatArray]:
     """Return starts (M, 2) from a coarse grid of every free sensor's curve ADB.
 
-    Each free sensor gets about ``budget ** (1 / n_free)`` points evenly spaced along its
-    curve and every combination is evaluated (no solves). The best one or two
-    (:func:`grid_starts`) are then refined by finer local grids (:func:`refine`). A grid
-    point within 1.5 grid steps of a ``known`` solution is in that solution's basin and is
+    Each free sensor gets about ``budget ** (1 / n_free)`` points evenly spaced in the
+    parameter of :class:`_Curve`, its corners included, and every combination is evaluated
+    (no solves). The grid's best local minima (:func:`grid_starts`) are refined by finer
+    local grids (:func:`refine`); the refined ones within :data:`GRID_SECOND` of the best
+    refined one, at most :data:`GRID_BASINS`, best first, are returned. A grid point
+    within 1.5 grid steps of a ``known`` solution is in that solution's basin and is
     dropped.
     """
     k = grid_points(run, budget)
@@ -389,23 +401,13 @@ def refine(
     return s
 
 
-#: Sweeps per run of the restarts (and of polish) at most, below ``GSR.max_sweeps``.
-RESTART_SWEEPS = 20
-#: Rounds of :func:`polish` (joint refinement, then sweeps) at most.
-POLISH_ROUNDS = 4
-#: The best answers of the starts, at most this many, ...
-POLISH_ANSWERS = 3
-#: ... within this (relative) of the best are polished.
-POLISH_WINDOW = 1e-3
-
-
 def polish(
     run: Relaxation, s: FloatArray, val: float, converged: bool
 ) -> tuple[FloatArray, float, bool]:
     """Return ``(s, value, converged)`` refined jointly, never worse than ``(s, val)``.
 
-    Coordinate descent crawls where two sensors' best directions coincide (a narrow
-    valley in which they must turn together) and may stop far from its bottom. Each round
+    Coordinate descent crawls along a valley (the team turning together, see the module
+    docstring) and may stop far from its bottom. Each round
     places every free sensor on the arc of its curve ADB it lies on (at a corner, the arc
     into which the objective descends), minimizes the objective over all their angles on
     those arcs at once (:func:`_newton`), then sweeps (the exact single-sensor solves,
