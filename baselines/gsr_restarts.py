@@ -108,7 +108,7 @@ def best_of_restarts(
     """Return ``(s, value, converged, start)``: the best of ``first`` (the relaxed warm
     start) and the relaxed ``starts``, the best of them polished (:func:`polish`), by
     objective (the first found wins ties). Never worse than ``first``."""
-    results = [(first[1], 0, first[0], first[2], "warm")]
+    results = [(first[1], 0, first[0], first[2], "warm", False)]
     found = [first[0]]
     max_sweeps = run.max_sweeps
     # A crawling run is finished by the joint refinement of polish, not by more sweeps.
@@ -116,15 +116,17 @@ def best_of_restarts(
     try:
         for name, s0, feasible in restart_points(run, warm, starts, found):
             rs, rval, rconv = run.relax(s0, feasible, accelerate, found)
+            # A run stopped in a known solution's basin needs no polish of its own.
+            same = any(merged(run, rs, k) for k in found)
             found.append(rs)
-            results.append((rval, len(results), rs, rconv, name))
+            results.append((rval, len(results), rs, rconv, name, same))
         # Polish the answers near the best: a crawling run may have stopped above the
         # bottom of a basin that is in fact the lowest.
         results.sort(key=lambda r: r[:2])
         best = results[0][0]
         polished = []
-        for val, k, s, conv, name in results[:POLISH_ANSWERS]:
-            if val <= (1.0 + POLISH_WINDOW) * best:
+        for val, k, s, conv, name, same in results[:POLISH_ANSWERS]:
+            if val <= (1.0 + POLISH_WINDOW) * best and not (same and k > 0 and val > best):
                 s, val, conv = polish(run, s, val, conv)
             polished.append((val, k, s, conv, name))
     finally:
@@ -258,10 +260,20 @@ def _fold(arc: geometry.Arc) -> geometry.Arc:
 
 def _change(arc: geometry.Arc, n: int = 9) -> float:
     """Return the turn of the direction plus the change of log distance along ``arc``."""
-    p = arc.points(np.linspace(arc.t0, arc.t1, n))
-    ang = np.unwrap(np.arctan2(p[:, 1], p[:, 0]))
-    logd = 0.5 * np.log(p[:, 0] ** 2 + p[:, 1] ** 2)
-    return float(np.sum(np.abs(np.diff(ang))) + np.sum(np.abs(np.diff(logd))))
+    if arc.center == (0.0, 0.0):  # a rho arc: the distance is constant
+        return arc.t1 - arc.t0
+    turn = logd = 0.0
+    prev = None
+    for k in range(n):
+        t = arc.t0 + (arc.t1 - arc.t0) * k / (n - 1)
+        x = arc.center[0] + arc.radius * math.cos(t)
+        y = arc.center[1] + arc.radius * math.sin(t)
+        ang, ld = math.atan2(y, x), 0.5 * math.log(x * x + y * y)
+        if prev is not None:
+            turn += abs((ang - prev[0] + math.pi) % (2.0 * math.pi) - math.pi)
+            logd += abs(ld - prev[1])
+        prev = (ang, ld)
+    return turn + logd
 
 
 def combination_values(run: Relaxation, cands: list[FloatArray]) -> FloatArray:
