@@ -102,6 +102,17 @@ RTOL: dict[str, tuple[float, float, str]] = {
     "expert_rm": (1e-6, 1e-12, _EKF + "; position_error: math.hypot -> np.hypot"),
 }
 
+#: Results changed by design since the recording, per case: the key, and why. Their
+#: recorded values bound the new ones (a value never above the recorded one, to 1e-12
+#: relative), the rest of the case is compared as usual.
+IMPROVED: dict[str, tuple[str, str]] = {
+    "planners": (
+        "gsr_restarts",
+        "GSR(restarts=True) closes its gap near the target (issue 14): other starts, a "
+        "joint polish, so other sweeps/solves and never a worse value",
+    ),
+}
+
 #: Keys of float32 observations and states: where a tolerance applies, a value that crossed
 #: a float32 rounding boundary differs by an ulp of float32 (~1e-7 relative), and small
 #: entries (a correlation near 0) carry the float64 difference they were rounded from.
@@ -209,8 +220,15 @@ def test_case_reproduces_recording(name: str) -> None:
         f"(recorded at {RECORDED_AT} with numpy {data['numpy']}, scipy {data['scipy']}, "
         f"BLAS {data['blas']!r}, CPU {data['cpu']!r})"
     )
+    expected = data["cases"][name]
+    if name in IMPROVED:
+        key = IMPROVED[name][0]
+        expected = json.loads(json.dumps(expected))
+        for exp, act in zip(expected["problems"], actual["problems"], strict=True):
+            old_value, new_value = exp.pop(key)["value"], act.pop(key)["value"]
+            assert new_value <= old_value * (1 + 1e-12), f"{name}.{key}: {new_value} > {old_value}"
     try:
-        assert_same(data["cases"][name], actual, rtol, name, atol)
+        assert_same(expected, actual, rtol, name, atol)
     except AssertionError as exc:
         raise AssertionError(f"{exc}\n{versions}") from None
 
