@@ -264,3 +264,29 @@ def test_realized_violations_no_worse_than_gsr():
     la = _realized_violations("paper", seeds, Lookahead())
     assert np.count_nonzero(la > 0) <= np.count_nonzero(gsr > 0)
     assert la.max() <= gsr.max()
+
+
+def test_simulate_and_evaluate_commands_run_the_lookahead(tmp_path, capsys):
+    import json
+
+    from activetrack.cli import main
+
+    out = tmp_path / "sim"
+    argv = ["simulate", "--planner", "gsr", "--planner", "lookahead", "--runs", "2"]
+    argv += ["--steps", "3", "--lookahead-horizon", "4", "--no-plot", "--no-progress"]
+    assert main([*argv, "--out", str(out)]) == 0
+    results = json.loads((out / "results.json").read_text())
+    assert results["lookahead"]["config"]["planner"]["horizon"] == 4
+    assert results["lookahead"]["max_violation"] <= results["gsr"]["max_violation"] + 1e-9
+    out = tmp_path / "eval"
+    argv = ["evaluate", "--scenario", "homogeneous", "--policy", "lookahead", "--episodes", "1"]
+    assert main([*argv, "--no-plot", "--no-progress", "--out", str(out)]) == 0
+    rows = json.loads((out / "results.json").read_text())
+    assert [r["policy"] for r in rows] == ["lookahead", "gsr"]
+
+
+def test_evaluate_resolves_lookahead_for_a_preset():
+    from activetrack.baselines.evaluation import evaluate
+
+    res = evaluate(["lookahead", "gsr"], "homogeneous", episodes=2, progress=False, n_steps=4)
+    assert res[0].policy == "lookahead" and np.all(np.isfinite(res[0].mean_trace))
