@@ -101,8 +101,8 @@ class Lookahead:
     horizon: int = 10
     discount: float = 1.0
     headings: int = 16
-    bearings: int = 16
-    passes: int = 2
+    bearings: int = 0
+    passes: int = 1
     margin: float = 0.0
     gsr_tol: float = 1e-9
     gsr_max_sweeps: int = 100

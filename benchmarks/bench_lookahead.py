@@ -29,10 +29,11 @@ from activetrack.world import World
 
 #: The searches compared: label -> Lookahead settings (the horizon is varied separately).
 SEARCHES = {
-    "shift only": {"headings": 0, "bearings": 0},
-    "headings 8": {"headings": 8, "bearings": 0},
-    "headings 16": {"headings": 16, "bearings": 0},
-    "headings 16 + bearings 16": {"headings": 16, "bearings": 16},
+    "GSR rollout + shifted plan": {"headings": 0, "bearings": 0, "passes": 1},
+    "headings 8": {"headings": 8, "bearings": 0, "passes": 1},
+    "headings 16": {"headings": 16, "bearings": 0, "passes": 1},
+    "headings 16, 2 passes": {"headings": 16, "bearings": 0, "passes": 2},
+    "headings 16 + bearings 16": {"headings": 16, "bearings": 16, "passes": 1},
 }
 DEFAULT_SEARCH = "headings 16"
 HORIZONS = (1, 3, 5, 10, 15)
