@@ -103,7 +103,7 @@ class Lookahead:
     headings: int = 16
     bearings: int = 0
     passes: int = 1
-    margin: float = 0.0
+    margin: float = 0.5
     gsr_tol: float = 1e-9
     gsr_max_sweeps: int = 100
     _gsr: object = field(default=None, init=False, repr=False)
