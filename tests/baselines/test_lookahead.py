@@ -84,9 +84,11 @@ def test_model_covariances_equal_the_filter():
         np.testing.assert_allclose(score, traces.sum(), 1e-12)
 
 
-def _gsr_rollout_score(x, P, model, problem, H, weights):
-    """Return GSR's rollout score through the filter (independent of horizon_model)."""
+def _gsr_rollout_score(x, P, model, problem, H, weights, margin):
+    """Return GSR's rollout score through the filter (independent of horizon_model), GSR
+    keeping ``rho + margin * sigma`` (sigma from the largest eigenvalue of P11)."""
     gsr = GSR()
+    rho = problem.rho + margin * np.sqrt(np.linalg.eigvalsh(P[:2, :2]).max())
     sensors, total = problem.sensors, 0.0
     for h in range(H):
         step = PlanningProblem(
@@ -94,7 +96,7 @@ def _gsr_rollout_score(x, P, model, problem, H, weights):
             target=x[:2],
             sensors=sensors,
             r=problem.r,
-            rho=problem.rho,
+            rho=rho,
             sigma_d2=problem.sigma_d2,
             sigma_theta2=problem.sigma_theta2,
         )
@@ -106,15 +108,16 @@ def _gsr_rollout_score(x, P, model, problem, H, weights):
     return total
 
 
-@pytest.mark.parametrize("discount", [1.0, 0.9])
-def test_model_score_never_above_gsr_rollout(discount):
+@pytest.mark.parametrize(("discount", "margin"), [(1.0, 0.0), (0.9, 0.0), (1.0, 0.5)])
+def test_model_score_never_above_gsr_rollout(discount, margin):
     rng = np.random.default_rng(1)
     for _ in range(40):
         x, P, model, problem = _random_state(rng, int(rng.integers(1, 5)))
         H = int(rng.integers(1, 12))
-        la = Lookahead(horizon=H, discount=discount, headings=8, bearings=4)
-        res = la.plan_prediction(problem, x, P, model.Phi, model.Q)
-        ref = _gsr_rollout_score(x, P, model, problem, H, discount ** np.arange(H))
+        la = Lookahead(horizon=H, discount=discount, headings=8, bearings=4, margin=margin)
+        previous = problem.sensors[:, None] + rng.normal(0, 2.0, (problem.n_sensors, H, 2))
+        res = la.plan_prediction(problem, x, P, model.Phi, model.Q, previous)
+        ref = _gsr_rollout_score(x, P, model, problem, H, discount ** np.arange(H), margin)
         assert res.score <= res.gsr_score
         # GSR stops at a relative improvement of 1e-9 per sweep: rollouts from priors that
         # agree to rounding agree to about that.
