@@ -142,9 +142,18 @@ def plot(results: dict, out: Path) -> None:
                     ]
                 ).T
                 ax.errorbar(x, y, yerr=err, marker="o", capsize=3, label=search)
+                if xkey == "ms_per_step":
+                    for r in grp:
+                        ax.annotate(
+                            f"H={r['horizon']}",
+                            (r[xkey], r["ratio"]),
+                            fontsize=7,
+                            xytext=(4, 4),
+                            textcoords="offset points",
+                        )
             if xkey == "ms_per_step":
                 ax.axvline(rows["gsr_ms_per_step"], color="gray", ls=":", label="GSR ms/step")
-                ax.set_xscale("log")
+                ax.set_xlim(left=0)
             ax.axhline(1.0, color="k", lw=0.8)
             ax.axhline(0.96, color="r", lw=0.8, ls="--", label="target 0.96")
             ax.set_title(f"{scenario}: mean trace / GSR's ({rows['episodes']} seeds)")
@@ -166,9 +175,26 @@ def main() -> None:
     parser.add_argument("--timing-episodes", type=int, default=4)
     parser.add_argument("--horizons", type=int, nargs="+", default=list(HORIZONS))
     parser.add_argument("--searches", nargs="+", default=list(SEARCHES))
+    parser.add_argument(
+        "--margin", type=float, default=0.0, help="rho margin of every search (default 0)"
+    )
     parser.add_argument("--out", type=Path, default=Path("results/lookahead"))
+    parser.add_argument(
+        "--plot-only",
+        type=Path,
+        nargs="+",
+        default=None,
+        help="merge these lookahead.json files into OUT/lookahead.json and plot them",
+    )
     args = parser.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
+    if args.plot_only:
+        merged: dict = {}
+        for path in args.plot_only:
+            merged.update(json.loads(path.read_text()))
+        write_atomic(args.out / "lookahead.json", json.dumps(merged, indent=2).encode())
+        plot(merged, args.out)
+        return
     seeds = list(range(args.seed, args.seed + args.episodes))
     tseeds = seeds[: args.timing_episodes]
     results: dict = {}
@@ -179,8 +205,9 @@ def main() -> None:
         settings = [(DEFAULT_SEARCH, h) for h in args.horizons]
         settings += [(s, 10) for s in args.searches if s != DEFAULT_SEARCH]
         for search, horizon in settings:
-            planner = Lookahead(horizon=horizon, **SEARCHES[search])
-            row = {"search": search, "horizon": horizon, **SEARCHES[search]}
+            planner = Lookahead(horizon=horizon, margin=args.margin, **SEARCHES[search])
+            row = {"search": search, "horizon": horizon, "margin": args.margin}
+            row.update(SEARCHES[search])
             row.update(summarize(closed_loop(scenario, seeds, planner), ref))
             row["ms_per_step"], g = timing(scenario, tseeds, planner) if tseeds else (None, 0)
             gsr_ms.append(g)
