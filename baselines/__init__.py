@@ -5,8 +5,11 @@
   copies), optionally with restarts that escape its local optima.
 - :class:`GBES`: grid-based exhaustive search over the curves ADB (exact grid optimum).
 - :class:`RandomMotion`: each sensor to a uniformly random point of its curve ADB.
-- :class:`GSRPolicy`, :class:`GBESPolicy`, :class:`RMPolicy`: the planners as expert
-  policies for the environments (planning problems to next positions);
+- :class:`Lookahead` / :class:`LookaheadPlanner`: a receding-horizon planner that scores
+  H steps of team motion in the deterministic covariance model (eq. 3, 11, 17).
+- :class:`GSRPolicy`, :class:`GBESPolicy`, :class:`RMPolicy`, :class:`LookaheadPolicy`:
+  the planners as expert policies for the environments (planning problems to next
+  positions);
 - :func:`simulate` / :func:`run_monte_carlo`: a planner driving the closed tracking loop
   (:class:`activetrack.world.World`) with per-step metrics, over seeds.
 
@@ -17,7 +20,14 @@ A planner is anything with ``plan(problem, rng) -> next_positions`` of shape
 from activetrack.baselines._common import random_problem
 from activetrack.baselines.gbes import GBES, GBESResult
 from activetrack.baselines.gsr import GSR, GSRBatchResult, GSRResult
-from activetrack.baselines.policies import GBESPolicy, GSRPolicy, PlannerPolicy, RMPolicy
+from activetrack.baselines.lookahead import Lookahead, LookaheadPlanner, LookaheadResult
+from activetrack.baselines.policies import (
+    GBESPolicy,
+    GSRPolicy,
+    LookaheadPolicy,
+    PlannerPolicy,
+    RMPolicy,
+)
 from activetrack.baselines.random_motion import RandomMotion
 from activetrack.baselines.simulation import (
     MonteCarloResult,
@@ -35,6 +45,10 @@ __all__ = [
     "GSRBatchResult",
     "GSRPolicy",
     "GSRResult",
+    "Lookahead",
+    "LookaheadPlanner",
+    "LookaheadPolicy",
+    "LookaheadResult",
     "MonteCarloResult",
     "PlannerPolicy",
     "RMPolicy",

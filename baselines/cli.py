@@ -14,12 +14,14 @@ holds results needs ``--overwrite``); the outputs are committed together.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import inspect
 from pathlib import Path
 from typing import Any
 
 from activetrack.baselines import GBES, GSR, RandomMotion, evaluation, run_monte_carlo, simulation
 from activetrack.baselines.evaluation import run_evaluation
+from activetrack.baselines.lookahead import Lookahead, LookaheadPlanner
 from activetrack.cli import (
     COMMANDS,
     add_output_arguments,
@@ -32,7 +34,7 @@ from activetrack.files import prepare_output_dir
 from activetrack.scenarios import PRESETS, make_scenario
 
 #: Planner names accepted by ``simulate --planner``, and those run when none is given.
-PLANNERS = ("gsr", "gsr-restarts", "gbes", "rm")
+PLANNERS = ("gsr", "gsr-restarts", "gbes", "rm", "lookahead")
 DEFAULT_PLANNERS = ("gsr", "gbes", "rm")
 #: The files ``simulate`` writes in its output folder.
 SIMULATE_OUTPUTS = ("results.json", "trajectories.png")
@@ -94,6 +96,13 @@ def _add_simulate(sub: argparse._SubParsersAction) -> None:
         default=None,
         help=f"GSR sweep cap (default {field_default(GSR, 'max_sweeps')})",
     )
+    p.add_argument(
+        "--lookahead-horizon",
+        type=positive_int,
+        default=None,
+        help="look-ahead planner's horizon in steps "
+        f"(default {field_default(Lookahead, 'horizon')})",
+    )
     p.add_argument("--no-plot", action="store_true", help="do not write trajectories.png")
     p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     p.set_defaults(func=_cmd_simulate, parser=p)
@@ -122,6 +131,13 @@ def make_planner(name: str, args: argparse.Namespace) -> tuple[Any, dict[str, An
         return gbes, {"type": "GBES", "spacing": gbes.spacing}
     if name == "rm":
         return RandomMotion(), {"type": "RandomMotion"}
+    if name == "lookahead":
+        planner = LookaheadPlanner(
+            make_scenario(args.scenario), **_given(horizon=args.lookahead_horizon)
+        )
+        cfg = dataclasses.asdict(planner.search)
+        cfg.pop("_gsr", None)
+        return planner, {"type": "Lookahead", **cfg}
     raise ValueError(f"unknown planner {name!r}: use one of {list(PLANNERS)}")
 
 
@@ -206,9 +222,10 @@ def _add_evaluate(sub: argparse._SubParsersAction) -> None:
         "evaluate",
         help=COMMANDS["evaluate"][1],
         description=(
-            "Run every --policy (gsr, gsr-restarts, gbes, rm, or the path of a policy.zip "
-            "written by 'activetrack train') in the environment on the same --episodes seeds "
-            "(seed, seed+1, ...). Prints mean trace and RMSE with 95% intervals, mean return "
+            "Run every --policy (gsr, gsr-restarts, gbes, rm, lookahead, or the path of a "
+            "policy.zip written by 'activetrack train') in the environment on the same "
+            "--episodes seeds (seed, seed+1, ...). Prints mean trace and RMSE with 95% "
+            "intervals, mean return "
             "and the ratio of mean trace to GSR's (GSR is evaluated as the reference even if "
             "not listed); writes OUT/results.json (a list, one object per policy), "
             "OUT/episodes.json and OUT/mean_trace.png. Every policy file is checked before "
@@ -226,7 +243,7 @@ def _add_evaluate(sub: argparse._SubParsersAction) -> None:
         action="append",
         required=True,
         metavar="NAME|PATH",
-        help="gsr, gsr-restarts, gbes, rm or PATH/policy.zip (repeatable)",
+        help="gsr, gsr-restarts, gbes, rm, lookahead or PATH/policy.zip (repeatable)",
     )
     p.add_argument(
         "--episodes",
@@ -247,8 +264,17 @@ def _add_evaluate(sub: argparse._SubParsersAction) -> None:
 
 
 def _cmd_evaluate(args: argparse.Namespace) -> int:
+    policies: Any = args.policy
+    if any(p.lower() == "lookahead" for p in policies):
+        # The look-ahead policy recovers the full prediction with the scenario's model.
+        from activetrack.baselines.policies import LookaheadPolicy
+
+        policies = {
+            p: LookaheadPolicy(scenario=args.scenario) if p.lower() == "lookahead" else p
+            for p in policies
+        }
     run_evaluation(
-        args.policy,
+        policies,
         args.scenario,
         args.episodes,
         args.seed,

@@ -37,7 +37,7 @@ from activetrack.baselines.simulation import mean_ci
 from activetrack.files import RunOutputs, prepare_output_dir
 
 #: Names that resolve to the planners' expert policies.
-EXPERT_NAMES = ("gsr", "gsr-restarts", "gbes", "rm")
+EXPERT_NAMES = ("gsr", "gsr-restarts", "gbes", "rm", "lookahead")
 
 
 @dataclass(eq=False)
@@ -122,6 +122,9 @@ def resolve_policy(spec: Any) -> Any:
             "gsr-restarts": lambda: policies.GSRPolicy(restarts=True),
             "gbes": policies.GBESPolicy,
             "rm": policies.RMPolicy,
+            # The scenario is recognized from the first problem (a preset); bind another
+            # scenario with LookaheadPolicy(scenario=...).
+            "lookahead": lambda: policies.LookaheadPolicy(scenario=None),
         }[name.lower()]()
     path = Path(name)
     if not path.is_file():

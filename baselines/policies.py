@@ -94,3 +94,23 @@ class RMPolicy(PlannerPolicy):
         from activetrack.baselines.random_motion import RandomMotion
 
         super().__init__(RandomMotion(**planner_kwargs), seed)
+
+
+class LookaheadPolicy(PlannerPolicy):
+    """The receding-horizon planner as a policy (:class:`~activetrack.baselines.lookahead.
+    LookaheadPlanner`); ``scenario`` names the problems' scenario (``None``: the matching
+    preset), ``settings`` go to :class:`~activetrack.baselines.lookahead.Lookahead`.
+
+    It must see every planning problem of an episode in order (it recovers the full
+    prediction from them); :meth:`reset` starts a new episode.
+    """
+
+    def __init__(self, seed: int | None = None, scenario: Any = "paper", **settings: Any) -> None:
+        from activetrack.baselines.lookahead import LookaheadPlanner
+
+        super().__init__(LookaheadPlanner(scenario, **settings), seed)
+
+    def reset(self, seed: int | None = None) -> None:
+        """Re-seed and forget the episode (the next problem starts one)."""
+        super().reset(seed)
+        self.planner.reset()

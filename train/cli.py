@@ -34,6 +34,8 @@ from activetrack.train.utils import DEFAULT_THREADS, MAX_THREADS, check_int, con
 
 #: CLI option (argparse dest) -> config field, where the names differ.
 _RENAMES = {"lr": "learning_rate"}
+#: Planners ``train bc|dagger --expert`` can imitate.
+EXPERTS = ("gsr", "lookahead")
 
 
 #: What ``--action-gain none`` parses to (None means "not given").
@@ -156,6 +158,13 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
                 help="round i executes the expert with probability beta**i "
                 f"(default {default('beta')})",
             )
+        q.add_argument(
+            "--expert",
+            choices=EXPERTS,
+            default="gsr",
+            help="the planner to imitate: gsr, or lookahead (the receding-horizon planner "
+            "of activetrack.baselines.lookahead) (default %(default)s)",
+        )
         q.set_defaults(func=run_train, parser=q, method_defaults=own)
 
     imitation("bc", "behaviour cloning of GSR", {"iterations": 1})
@@ -418,16 +427,23 @@ def _run_imitation(
 ) -> int:
     from activetrack.scenarios import make_scenario
 
+    expert = None
+    if args.expert == "lookahead":
+        from activetrack.baselines.policies import LookaheadPolicy
+
+        expert = LookaheadPolicy(scenario=args.scenario)
     result = train_imitation(
         args.scenario,
         seed=args.seed,
         config=cfg,
         tensorboard_dir=str(outputs.path("tb/")),
         progress=progress,
+        expert=expert,
         threads=threads,
     )
     train_config = {
         "algo": args.method,
+        "expert": args.expert,
         **cfg.to_dict(),
         "labels": len(result.data),
         "final_mse": result.losses,

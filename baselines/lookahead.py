@@ -1,0 +1,379 @@
+"""A receding-horizon planner: H steps of team motion scored in the deterministic model.
+
+GSR (Section IV-B) minimizes the objective of eq. (17) for the next step only. Under the
+EKF linearized at the predicted mean, the covariances a plan produces over H steps are a
+deterministic function of the sensors' positions relative to the predicted target path
+(:mod:`activetrack.baselines.horizon_model`), so a plan of H steps can be scored exactly
+in that model: ``sum_h gamma^h tr P+_11(h)``. :class:`Lookahead` searches plans, executes
+the first step and replans at the next step (receding horizon).
+
+The search (:meth:`Lookahead.plan_prediction`), batched over copies and candidates:
+
+1. **Options per sensor**, each a feasible path of H positions (every position within
+   reach of the previous one and outside the ``rho`` disk, plus a margin, about that
+   step's predicted target; :func:`activetrack.geometry.project_feasible` mends a move
+   exactly as the world does):
+
+   - GSR's own rollout: GSR planned step after step in the model (option 0);
+   - the previous call's plan shifted by one step (warm start, option 1, when given);
+   - ``headings`` constant headings at full speed;
+   - ``bearings`` target-relative waypoints: full speed towards the point at distance
+     ``rho`` (plus margin) from the predicted target in a fixed direction.
+
+2. **Coordinate descent over the team**: starting from the better of GSR's rollout and the
+   shifted plan, each sensor in turn takes its best option given the others', for
+   ``passes`` passes. Each sensor's paths and information are computed once, so a team
+   candidate costs one covariance rollout; the score never increases, so the result is
+   never worse in the model than GSR's rollout.
+
+Minimum-distance margin: the true target is not where it is predicted; a sensor placed
+on the ``rho`` circle of the predicted target ends inside the true target's ``rho`` disk
+when the prediction is off. The planner keeps ``rho + margin * sigma``, with ``sigma`` the
+standard deviation of the predicted position along its principal axis, in every option
+(GSR's rollout included).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from activetrack.baselines import horizon_model as hm
+from activetrack.baselines.prediction_tracker import PredictionTracker
+from activetrack.geometry import project_feasible
+from activetrack.objective import sensor_information
+from activetrack.problem import PlanningProblem
+from activetrack.validation import FloatArray
+
+
+@dataclass(frozen=True)
+class LookaheadResult:
+    """What one :meth:`Lookahead.plan_prediction` call returns (``batch`` = problem batch).
+
+    Attributes:
+        positions: next absolute positions, ``batch + (M, 2)``.
+        plan: the chosen plan, ``batch + (M, H, 2)`` (``plan[..., 0, :] == positions``).
+        score: its model score, ``batch``.
+        gsr_plan: GSR's rollout in the model, ``batch + (M, H, 2)``.
+        gsr_score: its model score, ``batch``.
+    """
+
+    positions: FloatArray
+    plan: FloatArray
+    score: FloatArray
+    gsr_plan: FloatArray
+    gsr_score: FloatArray
+
+
+def _check_int(name: str, value: object, low: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
+        raise ValueError(f"{name} must be an integer >= {low}, got {value!r}")
+    return int(value)
+
+
+def _check_real(name: str, value: object, low: float, high: float) -> float:
+    if (
+        isinstance(value, bool)
+        or not isinstance(value, (int, float, np.integer, np.floating))
+        or not math.isfinite(value)
+        or not low <= value <= high
+    ):
+        raise ValueError(f"{name} must be a number in [{low}, {high}], got {value!r}")
+    return float(value)
+
+
+@dataclass
+class Lookahead:
+    """Receding-horizon planner (see the module docstring).
+
+    Attributes:
+        horizon: steps planned, H >= 1 (H = 1 is GSR's problem).
+        discount: weight ``gamma^h`` of step h's trace, in (0, 1].
+        headings: constant-heading options per sensor (>= 0).
+        bearings: target-relative waypoint options per sensor (>= 0).
+        passes: coordinate-descent passes over the sensors (>= 0).
+        margin: the ``rho`` margin in standard deviations of the predicted position, >= 0.
+        gsr_tol, gsr_max_sweeps: GSR's settings for its rollout.
+    """
+
+    horizon: int = 10
+    discount: float = 1.0
+    headings: int = 16
+    bearings: int = 0
+    passes: int = 1
+    margin: float = 0.5
+    gsr_tol: float = 1e-9
+    gsr_max_sweeps: int = 100
+    _gsr: object = field(default=None, init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        from activetrack.baselines.gsr import GSR
+
+        self.horizon = _check_int("horizon", self.horizon, 1)
+        self.discount = _check_real("discount", self.discount, 1e-6, 1.0)
+        self.headings = _check_int("headings", self.headings, 0)
+        self.bearings = _check_int("bearings", self.bearings, 0)
+        self.passes = _check_int("passes", self.passes, 0)
+        self.margin = _check_real("margin", self.margin, 0.0, 100.0)
+        self._gsr = GSR(tol=self.gsr_tol, max_sweeps=self.gsr_max_sweeps)
+
+    # ------------------------------------------------------------------------------
+    def plan_prediction(
+        self,
+        problem: PlanningProblem,
+        x_pred: FloatArray,
+        P_pred: FloatArray,
+        Phi: FloatArray,
+        Q: FloatArray,
+        previous: FloatArray | None = None,
+    ) -> LookaheadResult:
+        """Return the plan for ``problem`` given the full prediction.
+
+        ``x_pred`` (batch + (n,)) and ``P_pred`` (batch + (n, n)) are the prediction
+        ``x_hat(k+1|k), P(k+1|k)`` whose position parts are ``problem.target`` and
+        ``problem.prior_cov``; ``Phi``, ``Q`` the motion model (eq. 2-3); ``previous``
+        (batch + (M, H, 2)) the last plan, whose shift by one step is a warm-start option.
+        """
+        shape, M, H = problem.batch_shape, problem.n_sensors, self.horizon
+        B = math.prod(shape)
+        n = Phi.shape[0]
+        x_pred = np.asarray(x_pred, dtype=np.float64).reshape(B, n)
+        P_pred = np.asarray(P_pred, dtype=np.float64).reshape(B, n, n)
+        start = problem.sensors.reshape(B, M, 2)
+        r, rho, sd2, st2 = (
+            getattr(problem, k).reshape(B, M) for k in ("r", "rho", "sigma_d2", "sigma_theta2")
+        )
+        means = hm.predicted_means(x_pred, Phi, H)[..., :2]  # (B, H, 2)
+        rho_eff = rho + self.margin * _principal_std(P_pred[:, :2, :2])[:, None]
+        weights = hm.discount_weights(H, self.discount)
+
+        gsr_paths = self._gsr_rollout(problem, shape, P_pred, means, start, rho_eff, Phi, Q)
+        options = [gsr_paths[:, :, None]]  # (B, M, 1, H, 2)
+        if previous is not None:
+            prev = np.asarray(previous, dtype=np.float64).reshape(B, M, -1, 2)
+            options.append(_shifted_paths(prev, start, means, r, rho_eff)[:, :, None])
+        if self.headings:
+            ang = 2.0 * np.pi * np.arange(self.headings) / self.headings
+            dirs = np.stack([np.cos(ang), np.sin(ang)], -1)
+            options.append(_heading_paths(start, means, r, rho_eff, dirs))
+        if self.bearings:
+            ang = 2.0 * np.pi * (np.arange(self.bearings) + 0.5) / self.bearings
+            dirs = np.stack([np.cos(ang), np.sin(ang)], -1)
+            options.append(_bearing_paths(start, means, r, rho_eff, dirs))
+        paths = np.concatenate(options, axis=2)  # (B, M, O, H, 2)
+        still = r <= 0.0  # a sensor that cannot move has one option: stay
+        if np.any(still):
+            paths = np.where(still[:, :, None, None, None], gsr_paths[:, :, None], paths)
+        info = hm.path_information(
+            paths, means[:, None, None], sd2[:, :, None], st2[:, :, None]
+        )  # (B, M, O, H, 2, 2)
+
+        choice, score, gsr_score = self._descend(info, P_pred, Phi, Q, weights, previous)
+        b = np.arange(B)[:, None]
+        plan = paths[b, np.arange(M)[None, :], choice]  # (B, M, H, 2)
+        return LookaheadResult(
+            positions=plan[:, :, 0].reshape(shape + (M, 2)),
+            plan=plan.reshape(shape + (M, H, 2)),
+            score=score.reshape(shape),
+            gsr_plan=gsr_paths.reshape(shape + (M, H, 2)),
+            gsr_score=gsr_score.reshape(shape),
+        )
+
+    # ------------------------------------------------------------------------------
+    def _gsr_rollout(self, problem, shape, P_pred, means, start, rho_eff, Phi, Q) -> FloatArray:
+        """Return GSR's rollout in the model, (B, M, H, 2): GSR at each step's prediction."""
+        B, M = start.shape[:2]
+        H = self.horizon
+        paths = np.empty((B, M, H, 2))
+        P, sensors = P_pred, start
+        sd2 = problem.sigma_d2.reshape(B, M)
+        st2 = problem.sigma_theta2.reshape(B, M)
+        x0 = np.zeros((B, P_pred.shape[-1]))
+        for h in range(H):
+            # Arrays built here from a validated problem: no second validation.
+            step = PlanningProblem._validated(
+                prior_cov=np.ascontiguousarray(P[:, :2, :2]).reshape(shape + (2, 2)),
+                target=means[:, h].reshape(shape + (2,)),
+                sensors=sensors.reshape(shape + (M, 2)),
+                r=problem.r,
+                rho=rho_eff.reshape(shape + (M,)),
+                sigma_d2=problem.sigma_d2,
+                sigma_theta2=problem.sigma_theta2,
+                objective=problem.objective,
+            )
+            sensors = np.asarray(self._gsr.plan(step), dtype=np.float64).reshape(B, M, 2)
+            paths[:, :, h] = sensors
+            if h + 1 < H:
+                rel = sensors - means[:, h, None]
+                Y = sensor_information(rel, sd2, st2).sum(axis=1)
+                P = hm.predict_covariance(hm.information_update(P, Y), Phi, Q, x0)
+        return paths
+
+    def _descend(self, info, P_pred, Phi, Q, weights, previous):
+        """Return ``(choice (B, M), score (B,), gsr_score (B,))``: coordinate descent."""
+        B, M, O = info.shape[:3]
+        b = np.arange(B)
+        Pb = P_pred[:, None]
+        # Starts: GSR's rollout (option 0 for every sensor) and the shifted plan (option 1).
+        starts = [np.zeros((B, M), dtype=np.int64)]
+        if previous is not None:
+            starts.append(np.ones((B, M), dtype=np.int64))
+        Ys = np.stack(
+            [info[b[:, None], np.arange(M)[None], s].sum(axis=1) for s in starts], axis=1
+        )  # (B, S, H, 2, 2)
+        scores = hm.rollout(Pb, Ys, Phi, Q, weights)[0]  # (B, S)
+        gsr_score = scores[:, 0].copy()
+        best = np.argmin(scores, axis=1)
+        choice = np.stack(starts, 1)[b, best]
+        score = scores[b, best]
+        for _ in range(self.passes):
+            changed = False
+            for i in range(M):
+                chosen = info[b[:, None], np.arange(M)[None], choice]  # (B, M, H, 2, 2)
+                others = chosen.sum(axis=1) - chosen[:, i]
+                cand = others[:, None] + info[:, i]  # (B, O, H, 2, 2)
+                s = hm.rollout(Pb, cand, Phi, Q, weights)[0]
+                k = np.argmin(s, axis=1)
+                better = s[b, k] < score
+                if np.any(better):
+                    changed = True
+                    choice[better, i] = k[better]
+                    score = np.where(better, s[b, k], score)
+            if not changed:
+                break
+        return choice, score, gsr_score
+
+
+def _principal_std(P11: FloatArray) -> FloatArray:
+    """Return the square root of the larger eigenvalue of 2x2 covariances (...,)."""
+    a, b, c = P11[..., 0, 0], P11[..., 0, 1], P11[..., 1, 1]
+    return np.sqrt(0.5 * (a + c) + np.hypot(0.5 * (a - c), b))
+
+
+def _mend(prop: FloatArray, prev: FloatArray, t: FloatArray, r: FloatArray, rho: FloatArray):
+    """Return ``prop`` (within reach of ``prev``) pushed out of the ``rho`` disk about ``t``."""
+    return project_feasible(prop - t, prev - t, r, rho) + t
+
+
+def _heading_paths(start, means, r, rho, dirs) -> FloatArray:
+    """Return constant-heading paths at full speed, (B, M, O, H, 2), mended each step."""
+    B, M = start.shape[:2]
+    O, H = dirs.shape[0], means.shape[1]
+    out = np.empty((B, M, O, H, 2))
+    prev = np.broadcast_to(start[:, :, None], (B, M, O, 2))
+    step = r[:, :, None, None] * dirs
+    rr, rh = r[:, :, None], rho[:, :, None]
+    for h in range(H):
+        t = means[:, None, None, h]
+        prev = _mend(prev + step, prev, t, rr, rh)
+        out[:, :, :, h] = prev
+    return out
+
+
+def _toward(prev: FloatArray, goal: FloatArray, r: FloatArray) -> FloatArray:
+    """Return the point at most ``r`` from ``prev`` on the way to ``goal``."""
+    d = goal - prev
+    dist = np.hypot(d[..., 0], d[..., 1])
+    scale = np.where(dist > r, r / np.where(dist > 0.0, dist, 1.0), 1.0)
+    return prev + d * scale[..., None]
+
+
+def _bearing_paths(start, means, r, rho, dirs) -> FloatArray:
+    """Return paths towards target-relative waypoints ``t(h) + rho u``, (B, M, O, H, 2)."""
+    B, M = start.shape[:2]
+    O, H = dirs.shape[0], means.shape[1]
+    out = np.empty((B, M, O, H, 2))
+    prev = np.broadcast_to(start[:, :, None], (B, M, O, 2))
+    offset = rho[:, :, None, None] * dirs  # (B, M, O, 2)
+    rr, rh = r[:, :, None], rho[:, :, None]
+    for h in range(H):
+        t = means[:, None, None, h]
+        prev = _mend(_toward(prev, t + offset, rr), prev, t, rr, rh)
+        out[:, :, :, h] = prev
+    return out
+
+
+def _shifted_paths(previous, start, means, r, rho) -> FloatArray:
+    """Return the previous plan shifted by one step and mended, (B, M, H, 2)."""
+    B, M, Hp = previous.shape[:3]
+    H = means.shape[1]
+    goals = np.empty((B, M, H, 2))
+    k = min(Hp - 1, H)
+    goals[:, :, :k] = previous[:, :, 1 : 1 + k]
+    last = previous[:, :, -1]
+    vel = previous[:, :, -1] - previous[:, :, -2] if Hp > 1 else np.zeros_like(last)
+    for h in range(k, H):
+        last = last + vel
+        goals[:, :, h] = last
+    out = np.empty((B, M, H, 2))
+    prev = start
+    for h in range(H):
+        t = means[:, None, h]
+        prev = _mend(_toward(prev, goals[:, :, h], r), prev, t, r, rho)
+        out[:, :, h] = prev
+    return out
+
+
+class LookaheadPlanner:
+    """:class:`Lookahead` behind the planner interface ``plan(problem, rng) -> positions``.
+
+    A :class:`~activetrack.PlanningProblem` holds the position part of the prediction
+    only; the planner recovers the full prediction from the episode's problems with a
+    :class:`~activetrack.baselines.prediction_tracker.PredictionTracker` (one per copy of
+    a batched problem), so it must see every problem of an episode in order, from the
+    first. It keeps each copy's last plan as the next call's warm start.
+
+    Args:
+        scenario: the scenario the problems come from (name or Scenario); ``None``: the
+            preset whose initial prediction matches the first problem.
+        **settings: :class:`Lookahead`'s fields (horizon, discount, ...).
+    """
+
+    def __init__(self, scenario: object = "paper", **settings: object) -> None:
+        self.search = Lookahead(**settings)
+        self.scenario = scenario
+        self._trackers: list[PredictionTracker] = []
+        self._previous: FloatArray | None = None
+        self.last_result: LookaheadResult | None = None
+
+    def reset(self) -> None:
+        """Forget the episodes: the next problems must be the first of theirs."""
+        for tracker in self._trackers:
+            tracker.reset()
+        self._previous = None
+
+    def plan(self, problem: PlanningProblem, rng: np.random.Generator | None = None) -> FloatArray:
+        """Return the next absolute positions, ``batch_shape + (M, 2)`` (``rng`` unused)."""
+        shape, M = problem.batch_shape, problem.n_sensors
+        B = math.prod(shape)
+        while len(self._trackers) < B:
+            self._trackers.append(PredictionTracker(self.scenario))
+        flat = [problem] if not shape else [problem[np.unravel_index(b, shape)] for b in range(B)]
+        states = [tracker.observe(p) for tracker, p in zip(self._trackers, flat, strict=False)]
+        x_pred = np.stack([s[0] for s in states])
+        P_pred = np.stack([s[1] for s in states])
+        new = np.array([s[2] for s in states])
+        tracker = self._trackers[0]
+        previous = self._previous
+        if previous is not None and previous.shape[:2] != (B, M):
+            previous = None
+        if previous is not None and np.any(new):
+            # A copy that starts an episode has no plan: "stay" is its warm-start option.
+            start = problem.sensors.reshape(B, M, 1, 2)
+            previous = np.where(new[:, None, None, None], start, previous)
+        res = self.search.plan_prediction(
+            problem,
+            x_pred.reshape(shape + x_pred.shape[-1:]),
+            P_pred.reshape(shape + P_pred.shape[-2:]),
+            tracker.Phi,
+            tracker.Q,
+            None if previous is None else previous.reshape(shape + previous.shape[-3:]),
+        )
+        self._previous = res.plan.reshape(B, M, -1, 2)
+        self.last_result = res
+        return res.positions
+
+    def __repr__(self) -> str:
+        return f"LookaheadPlanner({self.search!r})"

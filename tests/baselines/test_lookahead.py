@@ -1,0 +1,295 @@
+"""Tests of the receding-horizon planner (activetrack.baselines.lookahead).
+
+Independent computations: the EKF of activetrack.ekf driven as the world drives it (the
+filter's square-root update and prediction) for the planning model's covariances and for
+GSR's rollout score; the world's own state for the recovered prediction; the world's
+constraint check (PlanningProblem.violation) for feasibility; GSR on the same seeds for
+the realized minimum-distance violations.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from activetrack import ekf, measurement
+from activetrack.baselines import GSR, Lookahead, LookaheadPlanner, LookaheadPolicy
+from activetrack.baselines import horizon_model as hm
+from activetrack.baselines.prediction_tracker import PredictionTracker
+from activetrack.motion import constant_velocity, predict
+from activetrack.problem import PlanningProblem
+from activetrack.world import World
+
+
+def _random_state(rng: np.random.Generator, m: int = 3):
+    """Return a random prediction (x, P), the CV model and a planning problem around it."""
+    model = constant_velocity(q=float(rng.uniform(0.5, 20.0)), dt=0.1)
+    A = rng.normal(size=(4, 4))
+    P = A @ A.T * rng.uniform(0.05, 3.0) + np.diag([0.05, 0.05, 0.5, 0.5])
+    P = 0.5 * (P + P.T)
+    x = np.concatenate([rng.uniform(-5, 5, 2), rng.uniform(-10, 10, 2)])
+    dist = rng.uniform(1.0, 25.0, m)
+    ang = rng.uniform(0.0, 2 * np.pi, m)
+    sensors = x[:2] + dist[:, None] * np.stack([np.cos(ang), np.sin(ang)], -1)
+    problem = PlanningProblem(
+        prior_cov=P[:2, :2],
+        target=x[:2],
+        sensors=sensors,
+        r=rng.uniform(0.5, 1.5, m),
+        rho=rng.uniform(0.5, 2.5, m),
+        sigma_d2=rng.uniform(0.5, 5.0, m),
+        sigma_theta2=rng.uniform(0.05, 1.0, m),
+    )
+    return x, P, model, problem
+
+
+def _filter_along(plan, x, P, model, problem, orientation=0.0):
+    """Return the filter's (priors, posteriors) along ``plan`` (M, H, 2): the target moves
+    exactly as predicted, measurements are noise-free, as the world's step drives the EKF."""
+    priors, posts = [], []
+    for h in range(plan.shape[1]):
+        sensors = plan[:, h]
+        z = measurement.range_bearing(x[:2], sensors, orientation, wrap=True)
+        priors.append(P)
+        x_post, P_post = ekf.update(
+            x, P, z, sensors, problem.sigma_d2, problem.sigma_theta2, orientation
+        )
+        np.testing.assert_allclose(x_post, x, rtol=0, atol=1e-9 * (1 + np.abs(x).max()))
+        posts.append(P_post)
+        x, P = predict(x_post, P_post, model.Phi, model.Q)
+    return np.array(priors), np.array(posts)
+
+
+def test_model_covariances_equal_the_filter():
+    rng = np.random.default_rng(0)
+    for _ in range(50):
+        x, P, model, problem = _random_state(rng)
+        H = int(rng.integers(1, 15))
+        plan = problem.sensors[:, None] + rng.normal(0, 3.0, (problem.n_sensors, H, 2))
+        orientation = rng.uniform(-1, 1, problem.n_sensors)
+        priors, posts = _filter_along(plan, x, P, model, problem, orientation)
+        means = hm.predicted_means(x, model.Phi, H)
+        Y = hm.path_information(plan, means[:, :2], problem.sigma_d2, problem.sigma_theta2).sum(
+            axis=0
+        )
+        score, traces, model_posts = hm.rollout(
+            P, Y, model.Phi, model.Q, np.ones(H), return_covariances=True
+        )
+        scale = np.abs(posts).max(axis=(1, 2))[:, None, None]
+        assert np.all(np.abs(model_posts - posts) <= 1e-9 * scale)
+        pscale = np.abs(priors).max(axis=(1, 2))[:, None, None]
+        model_priors = hm.prior_sequence(P, Y, model.Phi, model.Q)
+        assert np.all(np.abs(model_priors - priors) <= 1e-9 * pscale)
+        np.testing.assert_allclose(traces, np.trace(posts[:, :2, :2], axis1=1, axis2=2), 1e-9)
+        np.testing.assert_allclose(score, traces.sum(), 1e-12)
+
+
+def _gsr_rollout_score(x, P, model, problem, H, weights, margin):
+    """Return GSR's rollout score through the filter (independent of horizon_model), GSR
+    keeping ``rho + margin * sigma`` (sigma from the largest eigenvalue of P11)."""
+    gsr = GSR()
+    rho = problem.rho + margin * np.sqrt(np.linalg.eigvalsh(P[:2, :2]).max())
+    sensors, total = problem.sensors, 0.0
+    for h in range(H):
+        step = PlanningProblem(
+            prior_cov=P[:2, :2],
+            target=x[:2],
+            sensors=sensors,
+            r=problem.r,
+            rho=rho,
+            sigma_d2=problem.sigma_d2,
+            sigma_theta2=problem.sigma_theta2,
+        )
+        sensors = gsr.plan(step)
+        z = measurement.range_bearing(x[:2], sensors, 0.0)
+        x, P_post = ekf.update(x, P, z, sensors, problem.sigma_d2, problem.sigma_theta2)
+        total += weights[h] * (P_post[0, 0] + P_post[1, 1])
+        x, P = predict(x, P_post, model.Phi, model.Q)
+    return total
+
+
+@pytest.mark.parametrize(("discount", "margin"), [(1.0, 0.0), (0.9, 0.0), (1.0, 0.5)])
+def test_model_score_never_above_gsr_rollout(discount, margin):
+    rng = np.random.default_rng(1)
+    for _ in range(40):
+        x, P, model, problem = _random_state(rng, int(rng.integers(1, 5)))
+        H = int(rng.integers(1, 12))
+        la = Lookahead(horizon=H, discount=discount, headings=8, bearings=4, margin=margin)
+        previous = problem.sensors[:, None] + rng.normal(0, 2.0, (problem.n_sensors, H, 2))
+        res = la.plan_prediction(problem, x, P, model.Phi, model.Q, previous)
+        ref = _gsr_rollout_score(x, P, model, problem, H, discount ** np.arange(H), margin)
+        assert res.score <= res.gsr_score
+        # GSR stops at a relative improvement of 1e-9 per sweep: rollouts from priors that
+        # agree to rounding agree to about that.
+        np.testing.assert_allclose(res.gsr_score, ref, rtol=1e-7)
+        assert res.score <= ref * (1 + 1e-7)
+
+
+def _feasible(problem: PlanningProblem, positions: np.ndarray) -> bool:
+    """Return whether every position satisfies the world's constraints (eq. 15-16), except
+    sensors that cannot keep rho at all (they go to the farthest reachable point)."""
+    viol = problem.violation(positions)
+    c = problem.rel_sensors
+    cannot = np.hypot(c[..., 0], c[..., 1]) + problem.r < problem.rho
+    scale = 1e-9 * (1.0 + np.abs(problem.rel_sensors).max())
+    return bool(np.all((viol <= scale) | cannot))
+
+
+@pytest.mark.parametrize("scenario", ["paper", "homogeneous"])
+def test_planned_positions_feasible_in_100_episodes(scenario):
+    world = World(scenario, 100, n_steps=12)
+    world.reset(seeds=list(range(2000, 2100)))
+    la = Lookahead(horizon=6, headings=8, bearings=4, margin=0.5)
+    prev = None
+    while not world.truncated.all():
+        problem = world.planning_problem()
+        res = la.plan_prediction(
+            problem, world.x_pred, world.P_pred, world.params.Phi, world.params.Q, prev
+        )
+        assert _feasible(problem, res.positions)
+        # Every later step of the plan is feasible about that step's predicted target.
+        means = hm.predicted_means(world.x_pred, world.params.Phi, la.horizon)
+        for h in range(1, la.horizon):
+            step = PlanningProblem(
+                prior_cov=problem.prior_cov,
+                target=means[:, h, :2],
+                sensors=res.plan[:, :, h - 1],
+                r=problem.r,
+                rho=problem.rho,
+                sigma_d2=problem.sigma_d2,
+                sigma_theta2=problem.sigma_theta2,
+            )
+            assert _feasible(step, res.plan[:, :, h])
+        prev = res.plan
+        world.step(res.positions)
+        # The world executed the plan unchanged (a sensor that cannot keep rho is flagged
+        # as projected, onto the same farthest reachable point).
+        np.testing.assert_allclose(world.sensors, res.positions, rtol=0, atol=1e-9)
+
+
+def test_tracker_recovers_the_world_prediction():
+    for scenario in ("paper", "homogeneous"):
+        world = World(scenario, 1)
+        tracker = PredictionTracker(None)
+        gsr = GSR()
+        for seed in range(3):
+            world.reset(seeds=[seed])
+            first = True
+            while not world.truncated[0]:
+                problem = world.planning_problem(0)
+                x, P, new = tracker.observe(problem)
+                assert new == first
+                first = False
+                x_w, P_w = world.get("x_pred", 0), world.get("P_pred", 0)
+                np.testing.assert_allclose(x, x_w, rtol=1e-9, atol=1e-9)
+                np.testing.assert_allclose(P, P_w, rtol=1e-9, atol=1e-12)
+                world.step(gsr.plan(problem)[None])
+        assert tracker.scenario.name == scenario
+
+
+def test_tracker_rejects_a_foreign_problem():
+    tracker = PredictionTracker("paper")
+    world = World("paper", 1, q=3.0)
+    world.reset(seeds=[0])
+    with pytest.raises(ValueError, match="neither continues the episode nor starts one"):
+        tracker.observe(world.planning_problem(0))
+
+
+def test_policy_equals_planning_from_the_world_state():
+    world = World("paper", 1, n_steps=8)
+    world.reset(seeds=[5])
+    policy = LookaheadPolicy(scenario="paper", horizon=5, headings=8, bearings=0)
+    direct = Lookahead(horizon=5, headings=8, bearings=0)
+    prev = None
+    while not world.truncated[0]:
+        problem = world.planning_problem(0)
+        got = policy.plan(problem)
+        res = direct.plan_prediction(
+            problem,
+            world.get("x_pred", 0),
+            world.get("P_pred", 0),
+            world.params.Phi,
+            world.params.Q,
+            prev,
+        )
+        prev = res.plan
+        np.testing.assert_allclose(got, res.positions, rtol=0, atol=1e-9)
+        world.step(got[None])
+
+
+def test_batched_planner_equals_copy_by_copy():
+    world = World("homogeneous", 3, n_steps=4)
+    world.reset(seeds=[7, 8, 9])
+    planner = LookaheadPlanner("homogeneous", horizon=4, headings=8, bearings=4)
+    singles = [LookaheadPlanner("homogeneous", horizon=4, headings=8, bearings=4) for _ in range(3)]
+    while not world.truncated.all():
+        problem = world.planning_problem()
+        batch = planner.plan(problem)
+        one = np.stack([s.plan(problem[i]) for i, s in enumerate(singles)])
+        np.testing.assert_allclose(batch, one, rtol=0, atol=1e-7)
+        world.step(batch)
+
+
+@pytest.mark.parametrize(
+    ("field", "value"),
+    [("horizon", 0), ("discount", 0.0), ("discount", 1.5), ("headings", -1), ("margin", -1.0)],
+)
+def test_settings_are_checked(field, value):
+    with pytest.raises(ValueError, match=field):
+        Lookahead(**{field: value})
+
+
+def _realized_violations(scenario: str, seeds: list[int], planner: Lookahead | None):
+    """Return each episode's deepest realized rho violation of the true target (m, 0: none)."""
+    world = World(scenario, len(seeds))
+    world.reset(seeds=seeds)
+    gsr, prev = GSR(), None
+    deepest = np.zeros(len(seeds))
+    while not world.truncated.all():
+        problem = world.planning_problem()
+        if planner is None:
+            positions = gsr.plan(problem)
+        else:
+            res = planner.plan_prediction(
+                problem, world.x_pred, world.P_pred, world.params.Phi, world.params.Q, prev
+            )
+            positions, prev = res.positions, res.plan
+        world.step(positions)
+        d = np.linalg.norm(world.sensors - world.x_true[:, None, :2], axis=-1)
+        deepest = np.maximum(deepest, np.max(world.params.rho - d, axis=1))
+    return deepest
+
+
+@pytest.mark.slow
+def test_realized_violations_no_worse_than_gsr():
+    seeds = list(range(1000, 1100))  # the README's held-out evaluation seeds
+    gsr = _realized_violations("paper", seeds, None)
+    la = _realized_violations("paper", seeds, Lookahead())
+    assert np.count_nonzero(la > 0) <= np.count_nonzero(gsr > 0)
+    assert la.max() <= gsr.max()
+
+
+def test_simulate_and_evaluate_commands_run_the_lookahead(tmp_path, capsys):
+    import json
+
+    from activetrack.cli import main
+
+    out = tmp_path / "sim"
+    argv = ["simulate", "--planner", "gsr", "--planner", "lookahead", "--runs", "2"]
+    argv += ["--steps", "3", "--lookahead-horizon", "4", "--no-plot", "--no-progress"]
+    assert main([*argv, "--out", str(out)]) == 0
+    results = json.loads((out / "results.json").read_text())
+    assert results["lookahead"]["config"]["planner"]["horizon"] == 4
+    assert results["lookahead"]["max_violation"] <= results["gsr"]["max_violation"] + 1e-9
+    out = tmp_path / "eval"
+    argv = ["evaluate", "--scenario", "homogeneous", "--policy", "lookahead", "--episodes", "1"]
+    assert main([*argv, "--no-plot", "--no-progress", "--out", str(out)]) == 0
+    rows = json.loads((out / "results.json").read_text())
+    assert [r["policy"] for r in rows] == ["lookahead", "gsr"]
+
+
+def test_evaluate_resolves_lookahead_for_a_preset():
+    from activetrack.baselines.evaluation import evaluate
+
+    res = evaluate(["lookahead", "gsr"], "homogeneous", episodes=2, progress=False, n_steps=4)
+    assert res[0].policy == "lookahead" and np.all(np.isfinite(res[0].mean_trace))
