@@ -76,3 +76,20 @@ def test_train_command_checks_workers_before_training(tmp_path, capsys):
         assert code == 2
         assert "address must be a non-empty string" in capsys.readouterr().err
         assert not (tmp_path / method).exists()
+
+
+@pytest.mark.slow
+def test_a_trained_policy_evaluated_on_workers_equals_serial(tmp_path):
+    """The learned policy is shipped to the workers: same episodes as in this process."""
+    common = ["--seed", "2", "--hidden", "16", "16", "--no-progress"]
+    bc = ["train", "bc", *common, "--episodes", "1", "--epochs", "2"]
+    assert main([*bc, "--out", str(tmp_path / "bc")]) == 0
+    policy = str(tmp_path / "bc" / "policy.zip")
+    ev = ["evaluate", "--policy", policy, "--episodes", "4", "--no-plot", "--no-progress"]
+    assert main([*ev, "--out", str(tmp_path / "serial")]) == 0
+    assert main([*ev, "--out", str(tmp_path / "ray"), "--workers", "2"]) == 0
+    assert not ray.is_initialized()
+    for name in ("results.json", "episodes.json"):
+        serial = (tmp_path / "serial" / name).read_text()
+        assert (tmp_path / "ray" / name).read_text() == serial, name
+    assert policy in serial  # the learned policy was evaluated, beside GSR
