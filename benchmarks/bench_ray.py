@@ -11,6 +11,11 @@ again), and the median is reported with the speed-up over the serial loop:
   the study's; Ray's start-up is reported on its own line.
 
 Every Ray study is checked against the serial one (same mean traces, to the last bit).
+
+On a shared machine the wall clock measures the scheduler as much as the code, so the
+CPU time is reported beside it (Linux ``/proc``): the serial loop's, and each Ray
+worker's during the study. ``cpu speed-up`` = serial CPU s / the busiest worker's CPU s,
+the speed-up the study would have with a core per worker and nothing else running.
 Run with numpy single-threaded, as the workers are::
 
     OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/bench_ray.py           # ~2 min
@@ -29,30 +34,44 @@ import time
 import numpy as np
 
 
-def study(runs: int, workers: int) -> tuple[float, np.ndarray]:
-    """Return the seconds of one GSR study and its per-run mean traces."""
+def study(runs: int, workers: int) -> tuple[float, float, np.ndarray]:
+    """Return the wall and this process's CPU seconds of one GSR study, and its mean traces."""
     from activetrack import make_scenario
     from activetrack.baselines import GSR, run_monte_carlo
 
     scenario = make_scenario("paper")
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     res = run_monte_carlo(scenario, {"gsr": GSR()}, runs, 0, progress=False, workers=workers)
-    return time.perf_counter() - t0, res["gsr"].mean_trace
+    return time.perf_counter() - t0, time.process_time() - c0, res["gsr"].mean_trace
 
 
-def on_ray(runs: int, workers: int) -> tuple[float, float, np.ndarray]:
-    """Return (Ray start-up seconds, study seconds, mean traces) with a fresh local Ray."""
+def _cpu_seconds(pid: int) -> float:
+    """Return the user + system CPU seconds of process ``pid`` (Linux /proc)."""
+    fields = open(f"/proc/{pid}/stat").read().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def _pid(_: int) -> int:
+    time.sleep(0.3)  # long enough that every worker takes one
+    return os.getpid()
+
+
+def on_ray(runs: int, workers: int) -> tuple[float, float, float, np.ndarray]:
+    """Return (start-up s, study wall s, busiest worker's CPU s, mean traces), a fresh Ray."""
     import ray
 
     t0 = time.perf_counter()
     ray.init(address="local", num_cpus=workers, include_dashboard=False, logging_level="error")
     try:
         study(2 * workers, max(workers, 2))  # warm up: start the workers, import the library
+        pids = set(ray.get([ray.remote(_pid).remote(k) for k in range(3 * workers)]))
         startup = time.perf_counter() - t0
-        seconds, traces = study(runs, max(workers, 2))  # >1 selects Ray; this Ray has N CPUs
+        before = {p: _cpu_seconds(p) for p in pids}
+        seconds, _, traces = study(runs, max(workers, 2))  # >1 selects Ray; it has N CPUs
+        cpu = max(_cpu_seconds(p) - before[p] for p in pids)
     finally:
         ray.shutdown()
-    return startup, seconds, traces
+    return startup, seconds, cpu, traces
 
 
 def main() -> None:
@@ -62,15 +81,19 @@ def main() -> None:
     args = parser.parse_args()
 
     times: dict[str, list[float]] = {"serial": [], "ray 1": [], "ray 2": []}
+    cpus: dict[str, list[float]] = {mode: [] for mode in times}
     startups: dict[str, list[float]] = {"ray 1": [], "ray 2": []}
+    study(2, 1)  # warm up the serial path too (lazy imports, first-call caches)
     for _ in range(args.repeats):
-        seconds, reference = study(args.runs, 1)
+        seconds, cpu, reference = study(args.runs, 1)
         times["serial"].append(seconds)
+        cpus["serial"].append(cpu)
         for n in (1, 2):
-            startup, seconds, traces = on_ray(args.runs, n)
+            startup, seconds, cpu, traces = on_ray(args.runs, n)
             if not np.array_equal(traces, reference):
                 raise SystemExit(f"ray {n}: results differ from the serial study")
             times[f"ray {n}"].append(seconds)
+            cpus[f"ray {n}"].append(cpu)
             startups[f"ray {n}"].append(startup)
 
     serial = statistics.median(times["serial"])
@@ -79,13 +102,20 @@ def main() -> None:
         f"(machine: {os.cpu_count()} CPUs, {platform.processor() or platform.machine()}; "
         f"OPENBLAS_NUM_THREADS={os.environ.get('OPENBLAS_NUM_THREADS', 'unset')})"
     )
-    print(f"{'mode':<8} {'seconds':>8} {'runs/s':>8} {'speed-up':>9} {'ray start-up s':>15}")
+    serial_cpu = statistics.median(cpus["serial"])
+    print(
+        f"{'mode':<8} {'seconds':>8} {'runs/s':>8} {'speed-up':>9} {'cpu s':>7} "
+        f"{'cpu speed-up':>13} {'ray start-up s':>15}"
+    )
     summary = {}
     for mode, values in times.items():
-        med = statistics.median(values)
+        med, cpu = statistics.median(values), statistics.median(cpus[mode])
         start = f"{statistics.median(startups[mode]):15.1f}" if mode in startups else " " * 15
-        print(f"{mode:<8} {med:8.2f} {args.runs / med:8.1f} {serial / med:8.2f}x {start}")
-        summary[mode] = {"seconds": values, "speedup": serial / med}
+        print(
+            f"{mode:<8} {med:8.2f} {args.runs / med:8.1f} {serial / med:8.2f}x {cpu:7.2f} "
+            f"{serial_cpu / cpu:12.2f}x {start}"
+        )
+        summary[mode] = {"seconds": values, "cpu_seconds": cpus[mode], "speedup": serial / med}
     print(json.dumps(summary))
 
 
