@@ -18,7 +18,7 @@ worker's during the study. ``cpu speed-up`` = serial CPU s / the busiest worker'
 the speed-up the study would have with a core per worker and nothing else running.
 Run with numpy single-threaded, as the workers are::
 
-    OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/bench_ray.py           # ~2 min
+    OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/bench_ray.py           # a few minutes
     OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/bench_ray.py --runs 40 --repeats 1
 """
 
