@@ -12,7 +12,7 @@ $(STAMP): pyproject.toml
 	$(PY) -m pip install --quiet --upgrade pip
 	# torch first and pinned, so pip never pulls a multi-GB CUDA build for the [rl] extra.
 	$(PY) -m pip install --quiet "torch==2.13.0"
-	$(PY) -m pip install --quiet -e ".[rl,dev]"
+	$(PY) -m pip install --quiet -e ".[rl,dev,ray]"
 	touch $(STAMP)
 
 install: $(STAMP)

@@ -7,8 +7,10 @@
 
 The planners' options take their defaults from the planner dataclasses (:class:`GSR`,
 :class:`GBES`) and ``evaluate``'s from :func:`run_evaluation`. Everything is checked
-before computing: the planners' settings, the policies and the output folder (one that
-holds results needs ``--overwrite``); the outputs are committed together.
+before computing: the planners' settings, the policies, ``--workers``/``--address`` (Ray
+installed when they ask for it) and the output folder (one that holds results needs
+``--overwrite``); the outputs are committed together. With ``--workers N`` or ``--address``
+the runs are Ray tasks (:mod:`activetrack.baselines.distributed`), with the same results.
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from activetrack.baselines import GBES, GSR, RandomMotion, evaluation, run_monte_carlo, simulation
+from activetrack.baselines.distributed import check_options
 from activetrack.baselines.evaluation import run_evaluation
 from activetrack.baselines.lookahead import Lookahead, LookaheadPlanner
 from activetrack.cli import (
@@ -105,7 +108,26 @@ def _add_simulate(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--no-plot", action="store_true", help="do not write trajectories.png")
     p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    add_ray_arguments(p, "runs")
     p.set_defaults(func=_cmd_simulate, parser=p)
+
+
+def add_ray_arguments(p: argparse.ArgumentParser, what: str) -> None:
+    """Add ``--workers`` and ``--address`` (Ray; :mod:`activetrack.baselines.distributed`)."""
+    p.add_argument(
+        "--workers",
+        type=positive_int,
+        default=1,
+        help=f"spread the {what} over this many Ray workers on this machine (default "
+        "%(default)s: no Ray); needs the [ray] extra",
+    )
+    p.add_argument(
+        "--address",
+        default=None,
+        metavar="ADDR",
+        help=f"run the {what} on the Ray cluster at ADDR (HOST:PORT of 'ray start --head', "
+        "or 'auto'); its CPUs replace --workers",
+    )
 
 
 def _given(**kwargs: Any) -> dict[str, Any]:
@@ -182,10 +204,17 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     planners, configs = {}, {}
     for name in names:
         planners[name], configs[name] = make_planner(name, args)
+    workers, address = check_options(args.workers, args.address)
     outputs = prepare_output_dir(args.out, SIMULATE_OUTPUTS, args.overwrite)
 
     results = run_monte_carlo(
-        scenario, planners, args.runs, args.seed, progress=not args.no_progress
+        scenario,
+        planners,
+        args.runs,
+        args.seed,
+        progress=not args.no_progress,
+        workers=workers,
+        address=address,
     )
     summaries = {}
     for name, res in results.items():
@@ -260,6 +289,7 @@ def _add_evaluate(sub: argparse._SubParsersAction) -> None:
     add_output_arguments(p, None)
     p.add_argument("--no-plot", action="store_true", help="do not write mean_trace.png")
     p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    add_ray_arguments(p, "episodes")
     p.set_defaults(func=_cmd_evaluate, parser=p)
 
 
@@ -282,5 +312,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         plot=not args.no_plot,
         progress=not args.no_progress,
         overwrite=args.overwrite,
+        workers=args.workers,
+        address=args.address,
     )
     return 0

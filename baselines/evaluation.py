@@ -21,7 +21,9 @@ baselines never imports ``train`` at module level). Every policy is loaded and c
 before the first episode runs.
 
 :func:`write_results` writes a run's files together (:mod:`activetrack.files`); the
-figure is :func:`activetrack.baselines.plotting.plot_evaluation`.
+figure is :func:`activetrack.baselines.plotting.plot_evaluation`. With ``workers`` or an
+``address`` the episodes run as Ray tasks (:mod:`activetrack.baselines.distributed`), with
+the same results.
 """
 
 from __future__ import annotations
@@ -187,19 +189,27 @@ def evaluate(
     episodes: int = 100,
     seed: int = 1000,
     progress: bool = True,
+    *,
+    workers: int = 1,
+    address: str | None = None,
     **overrides: Any,
 ) -> list[PolicyEvaluation]:
     """Return one :class:`PolicyEvaluation` per policy (GSR first added if it is missing).
 
     ``policies`` is a list of specs (names, paths or objects; labels are ``str(spec)``
     for names and paths, the class name otherwise) or a mapping from label to spec.
+    ``workers > 1`` or an ``address`` runs the episodes as Ray tasks
+    (:mod:`activetrack.baselines.distributed`), each :func:`run_episode` on its seed in
+    an environment of its own, so the results equal the serial ones.
     """
     from tqdm.auto import tqdm
 
+    from activetrack.baselines import distributed
     from activetrack.envs import parallel_env
 
     if episodes < 1:
         raise ValueError(f"episodes must be >= 1, got {episodes}")
+    workers, address = distributed.check_options(workers, address)
     if isinstance(policies, Mapping):
         items = list(policies.items())
     else:
@@ -214,7 +224,6 @@ def evaluate(
         items.append(("gsr", "gsr"))
     seeds = [seed + j for j in range(episodes)]
     env = parallel_env(scenario, **overrides)
-    results = []
     try:
         # Every policy loaded and checked before the first episode.
         resolved = []
@@ -227,21 +236,66 @@ def evaluate(
         raise
     bar = tqdm(total=episodes * len(items), disable=not progress, unit="ep", leave=False)
     try:
-        for index, ((label, _), policy) in enumerate(zip(items, resolved, strict=True)):
-            bar.set_description(label)
-            rows = []
-            for s in seeds:
-                rows.append(run_episode(env, policy, s))
-                bar.update()
-            arr = np.asarray(rows)
-            requested = has_gsr or index < len(items) - 1
-            results.append(
-                PolicyEvaluation(label, seeds, arr[:, 0], arr[:, 1], arr[:, 2], requested)
+        if distributed.is_distributed(workers, address):
+            per_policy = _episodes_on_ray(
+                scenario, overrides, resolved, seeds, workers, address, bar
             )
+        else:
+            per_policy = []
+            for (label, _), policy in zip(items, resolved, strict=True):
+                bar.set_description(label)
+                rows = []
+                for s in seeds:
+                    rows.append(run_episode(env, policy, s))
+                    bar.update()
+                per_policy.append(rows)
     finally:
         bar.close()
         env.close()
+    results = []
+    for index, ((label, _), rows) in enumerate(zip(items, per_policy, strict=True)):
+        arr = np.asarray(rows)
+        requested = has_gsr or index < len(items) - 1
+        results.append(PolicyEvaluation(label, seeds, arr[:, 0], arr[:, 1], arr[:, 2], requested))
     return results
+
+
+def run_episodes(
+    scenario: Any, overrides: dict[str, Any], policy: Any, seeds: list[int]
+) -> list[tuple[float, float, float]]:
+    """Return :func:`run_episode` on each of ``seeds`` in a new environment (one Ray task)."""
+    from activetrack.envs import parallel_env
+
+    env = parallel_env(scenario, **overrides)
+    try:
+        return [run_episode(env, policy, s) for s in seeds]
+    finally:
+        env.close()
+
+
+def _episodes_on_ray(
+    scenario: Any,
+    overrides: dict[str, Any],
+    policies: list[Any],
+    seeds: list[int],
+    workers: int,
+    address: str | None,
+    bar: Any,
+) -> list[list[tuple[float, float, float]]]:
+    """Return every policy's episode rows, computed as Ray tasks over chunks of ``seeds``."""
+    from activetrack.baselines import distributed
+
+    bar.set_description("ray")
+    with distributed.session(workers, address) as cpus:
+        parts = distributed.chunks(seeds, distributed.JOBS_PER_CPU * cpus)
+        jobs = [(scenario, overrides, policy, part) for policy in policies for part in parts]
+        done = distributed.run_tasks(
+            run_episodes, jobs, on_done=lambda i: bar.update(len(jobs[i][3]))
+        )
+    return [
+        [row for chunk in done[k : k + len(parts)] for row in chunk]
+        for k in range(0, len(done), len(parts))
+    ]
 
 
 def _gsr_of(results: Sequence[PolicyEvaluation]) -> PolicyEvaluation:
@@ -335,16 +389,25 @@ def run_evaluation(
     plot: bool = True,
     progress: bool = True,
     overwrite: bool = False,
+    *,
+    workers: int = 1,
+    address: str | None = None,
     **overrides: Any,
 ) -> list[dict[str, Any]]:
     """Evaluate, print the table, write ``out_dir`` if given; return the JSON summaries.
 
     The command ``activetrack evaluate`` is this function. Everything that can be checked
     before the episodes is: the output folder (one holding results needs ``overwrite``)
-    and every policy (names, policy files, their observation size).
+    and every policy (names, policy files, their observation size), and ``workers`` and
+    ``address`` (:func:`evaluate`).
     """
+    from activetrack.baselines.distributed import check_options
+
+    workers, address = check_options(workers, address)
     outputs = None if out_dir is None else prepare_output_dir(out_dir, OUTPUTS, overwrite)
-    results = evaluate(policies, scenario, episodes, seed, progress, **overrides)
+    results = evaluate(
+        policies, scenario, episodes, seed, progress, workers=workers, address=address, **overrides
+    )
     rows = summaries(results)
     print(f"scenario {scenario!r}, {episodes} episodes, seeds {seed}..{seed + episodes - 1}")
     print(format_table(rows))

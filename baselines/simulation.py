@@ -187,12 +187,19 @@ def run_monte_carlo(
     *,
     progress: bool = True,
     keep_records: int = 1,
+    workers: int = 1,
+    address: str | None = None,
 ) -> dict[str, MonteCarloResult]:
     """Return each planner's :class:`MonteCarloResult` over seeds ``seed .. seed + runs - 1``.
 
     All planners face the same seeds (the same initial conditions and the same noise
     draws), so their differences are paired. ``keep_records`` first runs keep their full
     trajectories (for plotting). A tqdm progress bar counts runs unless ``progress`` is False.
+
+    ``workers > 1`` or an ``address`` runs the seeds as Ray tasks
+    (:mod:`activetrack.baselines.distributed`: a local Ray with ``workers`` CPUs, or the
+    cluster at ``address``); every run is :func:`simulate` on its seed as in the serial
+    loop, so the results equal the serial ones (planning times aside).
     """
     if not isinstance(runs, (int, np.integer)) or runs < 1:
         raise ValueError(f"runs must be an integer >= 1, got {runs!r}")
@@ -200,29 +207,70 @@ def run_monte_carlo(
         raise ValueError(f"seed must be an integer >= 0, got {seed!r}")
     if not planners:
         raise ValueError("planners must name at least one planner")
+    from activetrack.baselines import distributed
+
+    workers, address = distributed.check_options(workers, address)
     from tqdm.auto import tqdm
 
     seeds = [int(seed) + k for k in range(runs)]
-    results = {}
     bar = tqdm(total=runs * len(planners), disable=not progress, unit="run", leave=False)
     try:
-        for name, planner in planners.items():
-            bar.set_description(name)
-            recs = []
-            for s in seeds:
-                recs.append(simulate(scenario, planner, s))
-                bar.update()
-            results[name] = MonteCarloResult(
-                name=name,
-                seeds=seeds,
-                mean_trace=np.array([r.mean_trace for r in recs]),
-                rmse=np.array([r.rmse for r in recs]),
-                nees=np.array([r.mean_nees for r in recs]),
-                plan_times=np.concatenate([r.plan_time for r in recs]),
-                max_violation=float(max(np.max(r.violation) for r in recs)),
-                n_terminated=sum(r.terminated for r in recs),
-                records=recs[: max(0, keep_records)],
-            )
+        if distributed.is_distributed(workers, address):
+            records = _records_on_ray(scenario, planners, seeds, workers, address, bar)
+        else:
+            records = {}
+            for name, planner in planners.items():
+                bar.set_description(name)
+                recs = []
+                for s in seeds:
+                    recs.append(simulate(scenario, planner, s))
+                    bar.update()
+                records[name] = recs
     finally:
         bar.close()
-    return results
+    return {name: _result(name, seeds, recs, keep_records) for name, recs in records.items()}
+
+
+def simulate_seeds(scenario: Scenario, planner: Planner, seeds: list[int]) -> list[RunRecord]:
+    """Return :func:`simulate` on each of ``seeds`` (one Ray task's chunk of a study)."""
+    return [simulate(scenario, planner, s) for s in seeds]
+
+
+def _records_on_ray(
+    scenario: Scenario,
+    planners: Mapping[str, Planner],
+    seeds: list[int],
+    workers: int,
+    address: str | None,
+    bar: Any,
+) -> dict[str, list[RunRecord]]:
+    """Return every planner's run records, computed as Ray tasks over chunks of ``seeds``."""
+    from activetrack.baselines import distributed
+
+    bar.set_description("ray")
+    with distributed.session(workers, address) as cpus:
+        parts = distributed.chunks(seeds, distributed.JOBS_PER_CPU * cpus)
+        jobs = [(scenario, planner, part) for planner in planners.values() for part in parts]
+        done = distributed.run_tasks(
+            simulate_seeds, jobs, on_done=lambda i: bar.update(len(jobs[i][2]))
+        )
+    per_planner = [done[k : k + len(parts)] for k in range(0, len(done), len(parts))]
+    return {
+        name: [rec for chunk in chunked for rec in chunk]
+        for name, chunked in zip(planners, per_planner, strict=True)
+    }
+
+
+def _result(name: str, seeds: list[int], recs: list[RunRecord], keep: int) -> MonteCarloResult:
+    """Return the :class:`MonteCarloResult` of one planner's runs (in seed order)."""
+    return MonteCarloResult(
+        name=name,
+        seeds=seeds,
+        mean_trace=np.array([r.mean_trace for r in recs]),
+        rmse=np.array([r.rmse for r in recs]),
+        nees=np.array([r.mean_nees for r in recs]),
+        plan_times=np.concatenate([r.plan_time for r in recs]),
+        max_violation=float(max(np.max(r.violation) for r in recs)),
+        n_terminated=sum(r.terminated for r in recs),
+        records=recs[: max(0, keep)],
+    )

@@ -22,6 +22,8 @@ from dataclasses import fields
 from pathlib import Path
 from typing import Any
 
+from activetrack.baselines.cli import add_ray_arguments
+from activetrack.baselines.distributed import check_options
 from activetrack.cli import COMMANDS, add_output_arguments, field_default, nonneg_int
 from activetrack.files import RunOutputs, prepare_output_dir
 from activetrack.scenarios import PRESETS
@@ -165,6 +167,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
             help="the planner to imitate: gsr, or lookahead (the receding-horizon planner "
             "of activetrack.baselines.lookahead) (default %(default)s)",
         )
+        add_ray_arguments(q, "expert-labelled episodes")
         q.set_defaults(func=run_train, parser=q, method_defaults=own)
 
     imitation("bc", "behaviour cloning of GSR", {"iterations": 1})
@@ -393,6 +396,8 @@ def run_train(args: argparse.Namespace) -> int:
     init = getattr(args, "init", None)
     if init is not None:
         load_policy(init)  # a bad file fails now, with its path and problem
+    if args.method in ("bc", "dagger"):
+        check_options(args.workers, args.address)  # Ray installed if asked for
     outputs = prepare_output_dir(args.out, OUTPUTS, args.overwrite)
     configure_torch(threads)
     progress = not args.no_progress
@@ -440,6 +445,8 @@ def _run_imitation(
         progress=progress,
         expert=expert,
         threads=threads,
+        workers=args.workers,
+        address=args.address,
     )
     train_config = {
         "algo": args.method,

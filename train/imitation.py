@@ -13,7 +13,12 @@ counts them.
   rounds: round 0 is expert rollouts (BC), round ``i >= 1`` rolls out the mixture that
   executes the expert's action with probability ``beta_i = beta ** i`` at each step and the
   learner's otherwise, labels every visited state with the expert, aggregates and retrains.
-  With one round it is BC.
+  With one round it is BC. Each episode's coin (and the expert's generator) is seeded
+  from the episode's seed, so an episode's labels do not depend on the others.
+
+Labels can be collected on Ray workers (``workers``/``address`` of :func:`train_imitation`,
+chunks of episodes as tasks, :mod:`activetrack.baselines.distributed`): the same labels,
+in the same order, as the serial loop; the network is trained in this process.
 
 The network is an SB3 ``ActorCriticPolicy`` (:mod:`activetrack.train.networks`); only its
 actor (features -> actor MLP -> ``action_net``) is trained, so ``PPO(...).policy`` can load
@@ -23,6 +28,7 @@ its state dict and fine-tune it. Training episodes use seeds drawn from ``seed``
 
 from __future__ import annotations
 
+import contextlib
 import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
@@ -139,17 +145,25 @@ def rollout_labels(
     seeds: list[int],
     learner: Callable[[np.ndarray], np.ndarray] | None = None,
     beta: float = 1.0,
-    rng: np.random.Generator | None = None,
 ) -> tuple[Dataset, list[float]]:
     """Return the expert-labelled states visited on ``seeds`` and each episode's mean trace.
 
     At every step the expert labels all agents' observations; the team then executes the
     expert's actions with probability ``beta`` (or always, without a ``learner``) and the
     learner's otherwise (``learner`` maps observations (M, D) to actions (M, 2)).
+
+    Every episode draws from its own generators, made from its seed: the expert's is reset
+    with ``reset(seed)`` when it has one (:class:`~activetrack.baselines.PlannerPolicy`:
+    ``default_rng([seed, 1])``, as the simulation runner) and the mixing coin is
+    ``default_rng([seed, 2])``. So an episode's labels do not depend on which episodes ran
+    before it, and seeds split over Ray workers give the same labels as one loop.
     """
-    rng = rng if rng is not None else np.random.default_rng()
     obs_list, act_list, traces = [], [], []
     for s in seeds:
+        reset = getattr(expert, "reset", None)
+        if callable(reset):
+            reset(s)
+        coin = np.random.default_rng([s, 2])
         obs_dict, _ = env.reset(seed=s)
         episode_trace = []
         while env.agents:
@@ -161,7 +175,7 @@ def rollout_labels(
             labels = actions_to_reach(planned, problem.sensors, problem.r).astype(np.float32)
             obs_list.append(obs)
             act_list.append(labels)
-            if learner is None or rng.random() < beta:
+            if learner is None or coin.random() < beta:
                 obs_dict, _, _, _, infos = env.step_positions(planned)
             else:
                 actions = learner(obs)
@@ -170,6 +184,54 @@ def rollout_labels(
         traces.append(float(np.mean(episode_trace)))
     data = Dataset(np.concatenate(obs_list).astype(np.float32), np.concatenate(act_list))
     return data, traces
+
+
+def label_seeds(
+    scenario: Any,
+    overrides: dict[str, Any],
+    expert: Any,
+    seeds: list[int],
+    policy: ActorCriticPolicy | None = None,
+    beta: float = 1.0,
+    threads: int = DEFAULT_THREADS,
+) -> tuple[Dataset, list[float]]:
+    """Return :func:`rollout_labels` on ``seeds`` in a new environment (one Ray task's chunk).
+
+    ``policy`` is the learner (DAgger rounds >= 1), run with ``threads`` torch threads as
+    in the training process.
+    """
+    from activetrack.envs import parallel_env
+
+    env = parallel_env(scenario, **overrides)
+    try:
+        if policy is None:
+            return rollout_labels(env, expert, seeds)
+        configure_torch(threads)
+        return rollout_labels(env, expert, seeds, learner_fn(policy), beta)
+    finally:
+        env.close()
+
+
+def _labels_on_ray(
+    scenario: Any,
+    overrides: dict[str, Any],
+    expert: Any,
+    seeds: list[int],
+    policy: ActorCriticPolicy | None,
+    beta: float,
+    threads: int,
+    cpus: int,
+) -> tuple[Dataset, list[float]]:
+    """Return :func:`label_seeds` over ``seeds``, as Ray tasks on chunks, joined in order."""
+    from activetrack.baselines import distributed
+
+    parts = distributed.chunks(seeds, distributed.JOBS_PER_CPU * cpus)
+    jobs = [(scenario, overrides, expert, part, policy, beta, threads) for part in parts]
+    done = distributed.run_tasks(label_seeds, jobs)
+    data = Dataset(
+        np.concatenate([d.obs for d, _ in done]), np.concatenate([d.actions for d, _ in done])
+    )
+    return data, [t for _, traces in done for t in traces]
 
 
 def fit(
@@ -250,6 +312,9 @@ def train_imitation(
     progress: bool = False,
     expert: Any | None = None,
     threads: int = DEFAULT_THREADS,
+    *,
+    workers: int = 1,
+    address: str | None = None,
     **overrides: Any,
 ) -> ImitationResult:
     """Return a policy trained by BC (``iterations == 1``) or DAgger on the expert's labels.
@@ -258,15 +323,22 @@ def train_imitation(
     :func:`activetrack.envs.parallel_env`. The expert defaults to ``GSRPolicy()``; any
     object with ``plan(problem) -> positions`` works. ``threads`` torch threads (1: see
     :mod:`activetrack.train.utils`). Deterministic for a given ``seed``.
+
+    ``workers > 1`` or an ``address`` collects each round's labels as Ray tasks
+    (:mod:`activetrack.baselines.distributed`: a local Ray with ``workers`` CPUs, or the
+    cluster at ``address``), the same labels as the serial loop; training stays here.
     """
+    from activetrack.baselines import distributed
     from activetrack.envs import parallel_env
 
     cfg = config or ImitationConfig()
     if not isinstance(cfg, ImitationConfig):
         raise TypeError(f"config must be an ImitationConfig, got {type(cfg).__name__}")
+    workers, address = distributed.check_options(workers, address)
+    on_ray = distributed.is_distributed(workers, address)
     configure_torch(threads)
     t0 = time.perf_counter()
-    rng = seed_everything(seed)
+    seed_everything(seed)
     gen = torch.Generator().manual_seed(seed)
     env = parallel_env(scenario, **overrides)
     agent = env.possible_agents[0]
@@ -290,31 +362,37 @@ def train_imitation(
     losses, traces = [], []
     from tqdm.auto import tqdm
 
-    for i, idx in enumerate(tqdm(splits, desc="imitation rounds", disable=not progress)):
-        round_seeds = [seeds[j] for j in idx]
-        if i == 0:
-            new, tr = rollout_labels(env, expert, round_seeds)
-        else:
-            new, tr = rollout_labels(
-                env, expert, round_seeds, learner_fn(policy), beta=cfg.beta**i, rng=rng
+    # One Ray for all rounds (started once); the serial loop uses this process's env.
+    ray_or_none = distributed.session(workers, address) if on_ray else contextlib.nullcontext(1)
+    with ray_or_none as cpus:
+        for i, idx in enumerate(tqdm(splits, desc="imitation rounds", disable=not progress)):
+            round_seeds = [seeds[j] for j in idx]
+            learner, beta = (None, 1.0) if i == 0 else (policy, cfg.beta**i)
+            if on_ray:
+                new, tr = _labels_on_ray(
+                    scenario, overrides, expert, round_seeds, learner, beta, threads, cpus
+                )
+            elif learner is None:
+                new, tr = rollout_labels(env, expert, round_seeds)
+            else:
+                new, tr = rollout_labels(env, expert, round_seeds, learner_fn(learner), beta)
+            data = data.extend(new)
+            traces.append(float(np.mean(tr)))
+            epoch_losses = fit(
+                policy,
+                data,
+                cfg.epochs,
+                cfg.batch_size,
+                cfg.lr,
+                cfg.weight_decay,
+                gen,
+                log,
+                step0=i * cfg.epochs,
             )
-        data = data.extend(new)
-        traces.append(float(np.mean(tr)))
-        epoch_losses = fit(
-            policy,
-            data,
-            cfg.epochs,
-            cfg.batch_size,
-            cfg.lr,
-            cfg.weight_decay,
-            gen,
-            log,
-            step0=i * cfg.epochs,
-        )
-        losses.append(epoch_losses[-1])
-        if log is not None:
-            log("imitation/rollout_mean_trace", traces[-1], i)
-            log("imitation/samples", len(data), i)
+            losses.append(epoch_losses[-1])
+            if log is not None:
+                log("imitation/rollout_mean_trace", traces[-1], i)
+                log("imitation/samples", len(data), i)
     if writer is not None:
         writer.close()
     env.close()

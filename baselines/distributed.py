@@ -1,0 +1,155 @@
+"""Studies spread over Ray tasks by seed: Monte Carlo runs, evaluation episodes, expert labels.
+
+A study is a list of *jobs*, each a chunk of seeds; :func:`run_tasks` computes
+``fn(*job)`` for every job as a Ray task and returns the results in job order, so the
+caller assembles exactly what its serial loop would have (the task runs the serial code
+path on its seeds: the same function, the same per-seed random streams, so the numbers
+are bit-identical whatever the number of workers). No equation is computed here.
+
+- Ray: ``ray.init(address=ADDR)`` joins a running cluster; without an address a local Ray
+  with ``num_cpus=workers`` is started for the study (``address="local"``, so a cluster
+  someone else started on the machine is never joined by accident) and shut down after
+  it. A Ray already initialized by the caller (a notebook, the tests) is used as it is and
+  left running.
+- Failures: a task whose worker process dies is resubmitted by Ray (``max_retries``);
+  results are keyed by job, each job's result is taken once, so a retried chunk is neither
+  lost nor counted twice. An exception raised by the code itself is not retried: it
+  reaches the caller (as Ray's ``RayTaskError``, which is also an instance of the
+  original exception's class).
+- Progress: ``on_done(job_index)`` is called as each job completes (``ray.wait``), which
+  the callers use to advance their tqdm bar by the chunk's runs.
+
+Ray is imported only inside these functions: the library imports without it, and asking
+for workers without it raises :class:`RayNotInstalledError`, which names the extra.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
+from typing import Any, TypeVar
+
+import numpy as np
+
+R = TypeVar("R")
+
+#: How to install Ray with the library.
+INSTALL_HINT = 'pip install "activetrack[ray]"'
+#: Resubmissions of a task whose worker died (Ray's own default is 3 as well).
+MAX_RETRIES = 3
+#: Jobs per CPU: small enough chunks for a steady progress bar and little lost on a retry,
+#: large enough that Ray's per-task overhead stays small beside the runs.
+JOBS_PER_CPU = 4
+
+
+class RayNotInstalledError(ImportError, ValueError):
+    """Workers or an address were asked for without Ray installed.
+
+    An ``ImportError`` for library callers, and a ``ValueError`` so the command line
+    reports it like any other bad option (usage line, exit status 2).
+    """
+
+
+def check_options(workers: Any = 1, address: Any = None) -> tuple[int, str | None]:
+    """Return ``(workers, address)`` checked and converted (ValueError naming the field).
+
+    ``workers`` is an integer >= 1 (1 with no address: the serial code path);
+    ``address`` is None or a non-empty string (a Ray cluster, e.g. ``"auto"`` or
+    ``"HOST:6379"``). Either one asking for Ray needs it installed.
+    """
+    ok = isinstance(workers, (int, np.integer)) and not isinstance(workers, (bool, np.bool_))
+    if not ok or workers < 1:
+        raise ValueError(f"workers must be an integer >= 1, got {workers!r}")
+    if address is not None and (not isinstance(address, str) or not address.strip()):
+        raise ValueError(f"address must be a non-empty string (a Ray cluster), got {address!r}")
+    workers, address = int(workers), None if address is None else address.strip()
+    if is_distributed(workers, address):
+        try:
+            import ray  # noqa: F401 (installed and importable; used by the caller next)
+        except ImportError:
+            what = f"address={address!r}" if address is not None else f"workers={workers}"
+            raise RayNotInstalledError(
+                f"{what} runs on Ray, which is not installed: {INSTALL_HINT}"
+            ) from None
+    return workers, address
+
+
+def is_distributed(workers: int, address: str | None) -> bool:
+    """Return whether ``(workers, address)`` asks for Ray (else: the serial code path)."""
+    return workers > 1 or address is not None
+
+
+def chunks(seeds: Sequence[int], n_chunks: int) -> list[list[int]]:
+    """Return ``seeds`` split in order into at most ``n_chunks`` non-empty consecutive chunks."""
+    n = max(1, min(int(n_chunks), len(seeds)))
+    return [[int(s) for s in part] for part in np.array_split(np.asarray(seeds), n)]
+
+
+@contextmanager
+def session(workers: int = 1, address: str | None = None) -> Iterator[int]:
+    """Use Ray inside the block; yield the number of CPUs it offers.
+
+    Joins ``address`` or starts a local Ray with ``workers`` CPUs, and shuts down on exit
+    only a Ray it started or joined; a Ray already initialized is used as it is.
+    """
+    try:
+        import ray
+    except ImportError:
+        raise RayNotInstalledError(f"distributed runs need Ray: {INSTALL_HINT}") from None
+    started = not ray.is_initialized()
+    if started:
+        if address is not None:
+            ray.init(address=address, logging_level="warning")
+        else:
+            ray.init(
+                address="local",
+                num_cpus=workers,
+                include_dashboard=False,
+                logging_level="warning",
+            )
+    try:
+        yield max(1, int(ray.cluster_resources().get("CPU", workers)))
+    finally:
+        if started:
+            ray.shutdown()
+
+
+def run_tasks(
+    fn: Callable[..., R],
+    jobs: Sequence[tuple[Any, ...]],
+    *,
+    workers: int = 1,
+    address: str | None = None,
+    on_done: Callable[[int], None] | None = None,
+    max_retries: int = MAX_RETRIES,
+) -> list[R]:
+    """Return ``[fn(*job) for job in jobs]``, each computed as a Ray task, in job order.
+
+    ``fn`` must be importable on the workers (a module-level function of the library);
+    its arguments are pickled. ``on_done(i)`` is called once per job as it completes.
+    """
+    import ray
+
+    with session(workers, address):
+        remote = ray.remote(max_retries=max_retries)(fn)
+        index = {remote.remote(*job): i for i, job in enumerate(jobs)}
+        results: dict[int, R] = {}
+        pending = list(index)
+        try:
+            while pending:
+                ready, pending = ray.wait(pending, num_returns=1)
+                for ref in ready:
+                    i = index[ref]
+                    if i in results:  # cannot happen: one ref, one result
+                        raise RuntimeError(f"job {i} completed twice")
+                    results[i] = ray.get(ref)
+                    if on_done is not None:
+                        on_done(i)
+        except BaseException:
+            for ref in pending:
+                ray.cancel(ref)
+            raise
+    missing = sorted(set(range(len(jobs))) - set(results))
+    if missing:
+        raise RuntimeError(f"jobs {missing} returned no result")
+    return [results[i] for i in range(len(jobs))]
