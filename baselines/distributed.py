@@ -50,6 +50,10 @@ class RayNotInstalledError(ImportError, ValueError):
     """
 
 
+#: The most local Ray workers a study asks for (a cluster's size comes from --address).
+MAX_WORKERS = 1024
+
+
 def check_options(workers: Any = 1, address: Any = None) -> tuple[int, str | None]:
     """Return ``(workers, address)`` checked and converted (ValueError naming the field).
 
@@ -58,8 +62,8 @@ def check_options(workers: Any = 1, address: Any = None) -> tuple[int, str | Non
     ``"HOST:6379"``). Either one asking for Ray needs it installed.
     """
     ok = isinstance(workers, (int, np.integer)) and not isinstance(workers, (bool, np.bool_))
-    if not ok or workers < 1:
-        raise ValueError(f"workers must be an integer >= 1, got {workers!r}")
+    if not ok or not 1 <= workers <= MAX_WORKERS:
+        raise ValueError(f"workers must be an integer in [1, {MAX_WORKERS}], got {workers!r}")
     if address is not None and (not isinstance(address, str) or not address.strip()):
         raise ValueError(f"address must be a non-empty string (a Ray cluster), got {address!r}")
     workers, address = int(workers), None if address is None else address.strip()

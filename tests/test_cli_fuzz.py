@@ -27,6 +27,8 @@ NUMBERS = st.sampled_from(
     ["0", "1", "2", "3", "-1", "0.5", "2.5", "1e-300", "1e308", "-1e308", "nan", "inf", "-inf"]
     + ["99999999999999999999", "x", "", "1e3", "0x10"]
 )
+#: ``--workers`` values that never start Ray (1: serial) or are rejected before it starts.
+WORKERS = st.sampled_from(["1", "0", "-1", "x", "1.5", "nan", "", "99999999999999999999"])
 ERROR = re.compile(r"^activetrack [a-z]+( [a-z]+)?: error: .+")
 SETTINGS = settings(
     max_examples=25,
@@ -93,6 +95,8 @@ def test_simulate_fuzz(folders):
                 "--seed": NUMBERS,
                 "--steps": st.sampled_from(["1", "2", "0", "-1", "x", "1.5"]),
                 "--scenario": st.sampled_from(["paper", "homogeneous", "nope"]),
+                "--workers": WORKERS,
+                "--address": st.just(""),
             }
         ),
         out_choices(folders),
@@ -133,6 +137,8 @@ def test_evaluate_fuzz(folders):
                 "--seed": NUMBERS,
                 "--scenario": st.sampled_from(["paper", "homogeneous", "nope"]),
                 "--out": out_choices(folders),
+                "--workers": WORKERS,
+                "--address": st.just(""),
             }
         ),
         st.booleans(),
@@ -177,6 +183,8 @@ def test_train_fuzz(folders):
         "--batch-size": NUMBERS,
         "--lr": NUMBERS,
         "--weight-decay": NUMBERS,
+        "--workers": NUMBERS,  # training is stubbed: no Ray starts
+        "--address": st.sampled_from(["", "auto", "127.0.0.1:1"]),
     }
     dagger = {**imitation, "--iterations": NUMBERS, "--beta": NUMBERS}
     ppo = {
