@@ -39,8 +39,9 @@ this is ``(J0^{-1} + Sigma_s)^{-1}``). The numerator is a sum of two PSD matrice
 denominator is >= 1, so ``J_eff`` is PSD by construction, ``J_eff <= J0``, and it equals
 ``J0`` exactly for ``Sigma_s = 0``. ``det(J0) = w_d w_theta / |p|^2`` and
 ``tr(J0 Sigma_s) = w_d u^T Sigma_s u + (w_theta / |p|^2) v^T Sigma_s v`` are evaluated
-in these nonnegative forms. The EKF's gradient term ``b_i = H^T R_eff^{-1} nu`` is
-``(I + J0 Sigma_s)^{-1} H^T W nu = adj(I + J0 Sigma_s) b0 / den`` with the same ``den``.
+in these nonnegative forms. The EKF's gradient term is ``b_i = H^T R_eff^{-1} nu =
+J_eff delta`` with ``delta = -nu_d u + |p| nu_theta v`` (the innovation in position units,
+``H delta = nu`` on the used rows; for ``Sigma_s = 0`` this is ``H^T W nu``).
 
 **Zero distance** (the EKF's rule, :data:`activetrack.measurement.ZERO_DISTANCE2`): a
 sensor at (numerically) zero distance from the target has zero Jacobian rows and
@@ -227,6 +228,33 @@ def effective_noise(
     return R
 
 
+def _j0_terms(rel: FloatArray, w_d: FloatArray, w_theta: FloatArray) -> tuple[FloatArray, ...]:
+    """Return ``(a0, b0, c0, ux, uy, n2, wd, wv)``: ``J0``'s entries and the unit offset.
+
+    ``wd`` and ``wv = w_theta / |p|^2`` are the weights of ``u u^T`` and ``v v^T``, zero at
+    zero distance.
+    """
+    ux, uy, n2, far = _unit(rel)
+    wd = w_d * far
+    wv = (w_theta * far) / n2  # weight of v v^T, v = (uy, -ux)
+    uxx, uxy, uyy = ux * ux, ux * uy, uy * uy
+    return wd * uxx + wv * uyy, (wd - wv) * uxy, wd * uyy + wv * uxx, ux, uy, n2, wd, wv
+
+
+def _pose_denominator(
+    ux: FloatArray, uy: FloatArray, wd: FloatArray, wv: FloatArray, pose_cov: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """Return ``(det(J0), 1 + tr(J0 Sigma) + det(J0) det(Sigma))``, both >= 0 by construction."""
+    s11, s12, s22 = pose_cov[..., 0, 0], pose_cov[..., 0, 1], pose_cov[..., 1, 1]
+    # Quadratic forms of Sigma_s (nonnegative in exact arithmetic; clamp the rounding).
+    cross = 2.0 * s12 * ux * uy
+    q_u = np.maximum(s11 * ux * ux + cross + s22 * uy * uy, 0.0)
+    q_v = np.maximum(s11 * uy * uy - cross + s22 * ux * ux, 0.0)
+    det_s = np.maximum(s11 * s22 - s12 * s12, 0.0)
+    det_j = wd * wv
+    return det_j, 1.0 + wd * q_u + wv * q_v + det_j * det_s
+
+
 def information_entries(
     rel: FloatArray,
     w_d: FloatArray,
@@ -239,22 +267,11 @@ def information_entries(
     ``pose_cov`` (..., M, 2, 2) PSD or None. ``J = J_eff`` of the module docstring
     (``J0`` of eq. 17 when ``pose_cov`` is None or zero); a sensor at zero distance gives 0.
     """
-    ux, uy, n2, far = _unit(rel)
-    wd = w_d * far
-    wv = (w_theta * far) / n2  # weight of v v^T, v = (uy, -ux)
-    uxx, uxy, uyy = ux * ux, ux * uy, uy * uy
-    a = wd * uxx + wv * uyy
-    b = (wd - wv) * uxy
-    c = wd * uyy + wv * uxx
+    a, b, c, ux, uy, _, wd, wv = _j0_terms(rel, w_d, w_theta)
     if pose_cov is None:
         return a, b, c
+    det_j, den = _pose_denominator(ux, uy, wd, wv, pose_cov)
     s11, s12, s22 = pose_cov[..., 0, 0], pose_cov[..., 0, 1], pose_cov[..., 1, 1]
-    # Quadratic forms of Sigma_s (nonnegative in exact arithmetic; clamp the rounding).
-    q_u = np.maximum(s11 * uxx + 2.0 * s12 * uxy + s22 * uyy, 0.0)
-    q_v = np.maximum(s11 * uyy - 2.0 * s12 * uxy + s22 * uxx, 0.0)
-    det_s = np.maximum(s11 * s22 - s12 * s12, 0.0)
-    det_j = wd * wv
-    den = 1.0 + wd * q_u + wv * q_v + det_j * det_s
     return (a + det_j * s22) / den, (b - det_j * s12) / den, (c + det_j * s11) / den
 
 
@@ -327,25 +344,15 @@ def update_terms(
     """
     rel = sensor_pos - target_hat[..., None, :]
     nu = innovation(z, target_hat, sensor_pos, models, orientation)
-    ux, uy, n2, far = _unit(rel)
-    # b0 = H^T W nu = -w_d nu_d u + (w_theta nu_theta / |p|) v, v = (uy, -ux).
-    kd = -(w_d * far) * nu[..., 0]
-    kt = (w_theta * far) * nu[..., 1] / np.sqrt(n2)
-    bx, by = kd * ux + kt * uy, kd * uy - kt * ux
-    a0, b0, c0 = information_entries(rel, w_d, w_theta)
-    if pose_cov is None:
-        return _matrix(a0, b0, c0), np.stack([bx, by], -1)
+    ux, uy, n2, _ = _unit(rel)
+    # b_i = J_i delta_i with delta = -nu_d u + |p| nu_theta v, the innovation in position
+    # units (H delta = nu on the used rows): H^T W nu = J0 delta, and with pose uncertainty
+    # H^T R_eff^{-1} nu = (I + J0 Sigma)^{-1} J0 delta = J_eff delta. J_eff is bounded where
+    # (I + J0 Sigma)^{-1} J0 delta would cancel large terms (a sensor close to the target).
+    kd, kt = -nu[..., 0], np.sqrt(n2) * nu[..., 1]
+    dx, dy = kd * ux + kt * uy, kd * uy - kt * ux
     a, b, c = information_entries(rel, w_d, w_theta, pose_cov)
-    s11, s12, s22 = pose_cov[..., 0, 0], pose_cov[..., 0, 1], pose_cov[..., 1, 1]
-    # T = I + J0 Sigma_s; b = T^{-1} b0 = adj(T) b0 / det(T).
-    t00 = 1.0 + a0 * s11 + b0 * s12
-    t01 = a0 * s12 + b0 * s22
-    t10 = b0 * s11 + c0 * s12
-    t11 = 1.0 + b0 * s12 + c0 * s22
-    det = t00 * t11 - t01 * t10
-    return _matrix(a, b, c), np.stack(
-        [(t11 * bx - t01 * by) / det, (t00 * by - t10 * bx) / det], -1
-    )
+    return _matrix(a, b, c), np.stack([a * dx + b * dy, b * dx + c * dy], -1)
 
 
 def _codes(value: Any) -> np.ndarray:

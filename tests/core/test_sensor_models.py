@@ -387,6 +387,15 @@ def test_sensor_at_target_contributes_nothing_and_no_nan():
         assert np.all(Y[:2] == 0.0) and np.all(b[:2] == 0.0) and np.all(np.isfinite(b))
         z = sm.measure(target, sensors, codes)
         assert np.all(np.isfinite(z))
+    # a very close (but not zero-distance) sensor with strong weights and pose uncertainty:
+    # huge but finite information, and a finite EKF gradient term
+    origin, close = np.zeros(2), np.array([[1e-99, 1e-99]] * 3)
+    w_d, w_t = sm.weights(codes, 1e-4, 1e-6)
+    aniso = np.broadcast_to(np.array([[0.2, 0.05], [0.05, 0.3]]), (3, 2, 2))
+    with np.errstate(all="raise"):
+        Y, b = sm.update_terms(np.ones((3, 2)), origin, close, codes, w_d, w_t, 0.0, aniso)
+        assert np.all(np.isfinite(Y)) and np.all(np.isfinite(b))
+        assert np.all(np.abs(b).max(axis=-1) > 0.0)  # informative, not zeroed
 
 
 # --- EKF terms --------------------------------------------------------------------------
