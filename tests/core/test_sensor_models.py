@@ -476,3 +476,49 @@ def test_team_validation_and_storage():
         sm.SensorTeam([0], 1.0, 1.0, pose_cov=[[[1.0, 0.2], [0.0, 1.0]]])
     with pytest.raises(ValueError, match="pose_cov must be finite"):
         sm.SensorTeam([0], 1.0, 1.0, pose_cov=[[[np.nan, 0.0], [0.0, 1.0]]])
+
+
+def test_k_target_axis_broadcasts():
+    # rel (K, M, 2) against per-sensor weights (M,) and pose covariances (M, 2, 2)
+    rng = np.random.default_rng(50)
+    targets = rng.uniform(-5, 5, (3, 2))
+    _, sensors, sd2, st2 = _team(rng)
+    cov = _random_psd(rng, 6, 0.3)
+    prior = np.stack([np.eye(2) * (1 + k) for k in range(3)])
+    w_d, w_t = sm.weights(ALL, sd2, st2)
+    rel = sensors[None] - targets[:, None, :]
+    a, b, c = sm.team_entries(prior, rel, w_d, w_t, cov)
+    for k in range(3):
+        ref = sm.team_information(rel[k], w_d, w_t, cov, prior_info=prior[k])
+        np.testing.assert_allclose([a[k], b[k], c[k]], [ref[0, 0], ref[0, 1], ref[1, 1]], 1e-13)
+
+
+@pytest.mark.slow
+def test_pose_accounting_update_is_consistent_and_ignoring_is_not():
+    # One EKF update on N independent trials (position-only state): truth drawn from the
+    # prior, measurements from the true sensor positions, the filter at the believed ones
+    # (true + N(0, Sigma_s)). Mean NEES of the posterior: chi^2_2 has mean 2 and variance
+    # 4, so over N trials the mean has standard deviation 2 / sqrt(N) (0.032 for N = 4000).
+    rng = np.random.default_rng(60)
+    n, m = 4000, 6
+    x_hat = np.array([1.0, -2.0])
+    P = np.array([[0.3, 0.1], [0.1, 0.2]])
+    x_true = rng.multivariate_normal(x_hat, P, size=n)
+    ang = np.linspace(0, 2 * np.pi, m, endpoint=False)
+    sensors = x_hat + 40.0 * np.column_stack([np.cos(ang), np.sin(ang)])
+    sd2, st2 = np.full(m, 0.01), np.full(m, 2e-5)
+    cov = np.broadcast_to(np.array([[0.2, 0.08], [0.08, 0.1]]), (m, 2, 2))
+    believed = sensors + rng.multivariate_normal(np.zeros(2), cov[0], size=(n, m))
+    z = sm.sample(x_true, sensors, ALL, sd2, st2, rng)
+    w_d, w_t = sm.weights(ALL, sd2, st2)
+    x_b = np.broadcast_to(x_hat, (n, 2))
+    nees = {}
+    for name, pc in (("accounting", cov), ("ignoring", None)):
+        Yi, bi = sm.update_terms(z, x_b, believed, ALL, w_d, w_t, 0.0, pc)
+        P_post = np.linalg.inv(np.linalg.inv(P) + Yi.sum(axis=1))
+        x_post = x_b + np.einsum("nij,nj->ni", P_post, bi.sum(axis=1))
+        e = x_true - x_post
+        nees[name] = np.einsum("ni,nij,nj->n", e, np.linalg.inv(P_post), e).mean()
+    band = 4 * 2 / np.sqrt(n)  # 4 standard deviations of the mean, plus linearization slack
+    assert abs(nees["accounting"] - 2.0) < band + 0.05, nees
+    assert nees["ignoring"] > 2.0 + 10 * band, nees
