@@ -24,7 +24,7 @@ rows ``h_d = -p / |p|`` and ``h_theta = J p / |p|^2`` with ``p = p_S - p_T`` (eq
 ``J0_i = H_i^T W_i H_i = w_d u u^T + (w_theta / |p|^2) v v^T``, where ``W_i`` holds the
 weights with zeros for unused components. Range only is ``w_theta = 0`` and bearing only
 ``w_d = 0``: the same formula as today's eq. (17), so passing those weights (or
-``sigma^2 = inf``) through today's code gives these models exactly.
+``sigma^2 = inf``) through today's code gives these models (equal to rounding).
 
 **Uncertain sensor poses.** The believed sensor position has error ``e ~ N(0, Sigma_s)``
 (2x2 PSD, per sensor); linearized, the measurement noise becomes
