@@ -42,7 +42,7 @@ KINDS = ("single", "batched-1024", "batched-8192", "gsr", "batched-gsr")
 #: Calls of each kind for ``--instructions`` (per-call cost = difference / (hi - lo)).
 COUNTS = {
     "single": (100, 1100),
-    "batched-1024": (2, 12),
+    "batched-1024": (2, 32),
     "batched-8192": (2, 12),
     "gsr": (20, 220),
     "batched-gsr": (2, 12),

@@ -403,8 +403,11 @@ class World:
             truncated = k >= self._n_steps
             if np.count_nonzero(projected):  # rare; the mixed-type add costs microseconds
                 st["n_projected"][sel] += projected
-            for key, value in new.items():
-                st[key][sel] = value
+            if partial:
+                for key, value in new.items():
+                    st[key][sel] = value
+            else:  # every copy: the step's fresh arrays become the state (no copies)
+                st.update(new)
             st["k"][sel], st["truncated"][sel] = k, truncated
             st["ended"][sel] = terminated | truncated
         return StepResult(-self._scale * trace, terminated, truncated)
