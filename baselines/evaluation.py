@@ -124,8 +124,8 @@ def resolve_policy(spec: Any) -> Any:
             "gsr-restarts": lambda: policies.GSRPolicy(restarts=True),
             "gbes": policies.GBESPolicy,
             "rm": policies.RMPolicy,
-            # The scenario is recognized from the first problem (a preset); bind another
-            # scenario with LookaheadPolicy(scenario=...).
+            # It plans from the prediction each problem carries, for any scenario (the
+            # scenario, here the matching preset, serves problems without one only).
             "lookahead": lambda: policies.LookaheadPolicy(scenario=None),
         }[name.lower()]()
     path = Path(name)

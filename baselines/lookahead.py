@@ -123,19 +123,32 @@ class Lookahead:
     def plan_prediction(
         self,
         problem: PlanningProblem,
-        x_pred: FloatArray,
-        P_pred: FloatArray,
-        Phi: FloatArray,
-        Q: FloatArray,
+        x_pred: FloatArray | None = None,
+        P_pred: FloatArray | None = None,
+        Phi: FloatArray | None = None,
+        Q: FloatArray | None = None,
         previous: FloatArray | None = None,
     ) -> LookaheadResult:
         """Return the plan for ``problem`` given the full prediction.
 
         ``x_pred`` (batch + (n,)) and ``P_pred`` (batch + (n, n)) are the prediction
         ``x_hat(k+1|k), P(k+1|k)`` whose position parts are ``problem.target`` and
-        ``problem.prior_cov``; ``Phi``, ``Q`` the motion model (eq. 2-3); ``previous``
-        (batch + (M, H, 2)) the last plan, whose shift by one step is a warm-start option.
+        ``problem.prior_cov``; ``Phi``, ``Q`` the motion model (eq. 2-3). All four
+        ``None`` (the default): ``problem.prediction``'s. ``previous`` (batch + (M, H, 2))
+        is the last plan, whose shift by one step is a warm-start option.
         """
+        given = [v is not None for v in (x_pred, P_pred, Phi, Q)]
+        if not any(given):
+            pred = problem.prediction
+            if pred is None:
+                raise ValueError(
+                    "problem.prediction is None: pass x_pred, P_pred, Phi and Q, or a problem "
+                    "that carries its prediction (World.planning_problem, "
+                    "PlanningProblem.from_prediction)"
+                )
+            x_pred, P_pred, Phi, Q = pred.mean, pred.cov, pred.Phi, pred.Q
+        elif not all(given):
+            raise ValueError("give all of x_pred, P_pred, Phi and Q, or none of them")
         shape, M, H = problem.batch_shape, problem.n_sensors, self.horizon
         B = math.prod(shape)
         n = Phi.shape[0]
@@ -319,17 +332,29 @@ def _shifted_paths(previous, start, means, r, rho) -> FloatArray:
 class LookaheadPlanner:
     """:class:`Lookahead` behind the planner interface ``plan(problem, rng) -> positions``.
 
-    A :class:`~activetrack.PlanningProblem` holds the position part of the prediction
-    only; the planner recovers the full prediction from the episode's problems with a
-    :class:`~activetrack.baselines.prediction_tracker.PredictionTracker` (one per copy of
-    a batched problem), so it must see every problem of an episode in order, from the
-    first. It keeps each copy's last plan as the next call's warm start.
+    The planner reads the full prediction from ``problem.prediction`` (the world's
+    problems carry it), so problems may come in any order, from any scenario. For a
+    problem without one (built by hand from the position blocks only) it falls back on a
+    :class:`~activetrack.baselines.prediction_tracker.PredictionTracker` per copy, which
+    recovers the prediction from the episode's problems: it must then see every problem of
+    an episode in order, from the first, of the scenario ``scenario``.
+
+    Warm start: the planner keeps each copy's last plan. The next problem's option 1 is
+    that plan shifted by one step where the copy continues it (its sensors stand where
+    the plan's first step put them; with the tracker: the tracker continues the episode),
+    "stay" for a copy that does not; with no copy continuing (or no plan yet) there is
+    no warm-start option.
 
     Args:
-        scenario: the scenario the problems come from (name or Scenario); ``None``: the
-            preset whose initial prediction matches the first problem.
+        scenario: for the fallback only, the scenario the problems come from (name or
+            Scenario); ``None``: the preset whose initial prediction matches the first
+            problem.
         **settings: :class:`Lookahead`'s fields (horizon, discount, ...).
     """
+
+    #: Largest distance (m, relative to 1 + the coordinates' scale) between a copy's
+    #: sensors and its last plan's first step for the copy to continue that plan.
+    CONTINUE_TOL = 1e-9
 
     def __init__(self, scenario: object = "paper", **settings: object) -> None:
         self.search = Lookahead(**settings)
@@ -339,7 +364,7 @@ class LookaheadPlanner:
         self.last_result: LookaheadResult | None = None
 
     def reset(self) -> None:
-        """Forget the episodes: the next problems must be the first of theirs."""
+        """Forget the episodes: the next problems start new ones (no warm start)."""
         for tracker in self._trackers:
             tracker.reset()
         self._previous = None
@@ -347,6 +372,41 @@ class LookaheadPlanner:
     def plan(self, problem: PlanningProblem, rng: np.random.Generator | None = None) -> FloatArray:
         """Return the next absolute positions, ``batch_shape + (M, 2)`` (``rng`` unused)."""
         shape, M = problem.batch_shape, problem.n_sensors
+        B = math.prod(shape)
+        if problem.prediction is not None:
+            pred = problem.prediction
+            x_pred, P_pred, Phi, Q, new = pred.mean, pred.cov, pred.Phi, pred.Q, None
+        else:
+            x_pred, P_pred, Phi, Q, new = self._track(problem)
+        previous = self._previous
+        if previous is not None and previous.shape[:2] != (B, M):
+            previous = None
+        if previous is not None:
+            if new is None:
+                gap = np.abs(problem.sensors.reshape(B, M, 2) - previous[:, :, 0])
+                scale = 1.0 + np.abs(previous[:, :, 0]).max(axis=(1, 2))
+                new = gap.max(axis=(1, 2)) > self.CONTINUE_TOL * scale
+            if new.all():
+                previous = None
+            elif np.any(new):
+                # A copy that continues no plan has none: "stay" is its warm-start option.
+                start = problem.sensors.reshape(B, M, 1, 2)
+                previous = np.where(new[:, None, None, None], start, previous)
+        res = self.search.plan_prediction(
+            problem,
+            x_pred,
+            P_pred,
+            Phi,
+            Q,
+            None if previous is None else previous.reshape(shape + previous.shape[-3:]),
+        )
+        self._previous = res.plan.reshape(B, M, -1, 2)
+        self.last_result = res
+        return res.positions
+
+    def _track(self, problem: PlanningProblem) -> tuple:
+        """Return ``(x_pred, P_pred, Phi, Q, new (B,))`` recovered by the copies' trackers."""
+        shape = problem.batch_shape
         B = math.prod(shape)
         while len(self._trackers) < B:
             self._trackers.append(PredictionTracker(self.scenario))
@@ -356,24 +416,13 @@ class LookaheadPlanner:
         P_pred = np.stack([s[1] for s in states])
         new = np.array([s[2] for s in states])
         tracker = self._trackers[0]
-        previous = self._previous
-        if previous is not None and previous.shape[:2] != (B, M):
-            previous = None
-        if previous is not None and np.any(new):
-            # A copy that starts an episode has no plan: "stay" is its warm-start option.
-            start = problem.sensors.reshape(B, M, 1, 2)
-            previous = np.where(new[:, None, None, None], start, previous)
-        res = self.search.plan_prediction(
-            problem,
+        return (
             x_pred.reshape(shape + x_pred.shape[-1:]),
             P_pred.reshape(shape + P_pred.shape[-2:]),
             tracker.Phi,
             tracker.Q,
-            None if previous is None else previous.reshape(shape + previous.shape[-3:]),
+            new,
         )
-        self._previous = res.plan.reshape(B, M, -1, 2)
-        self.last_result = res
-        return res.positions
 
     def __repr__(self) -> str:
         return f"LookaheadPlanner({self.search!r})"

@@ -98,11 +98,13 @@ class RMPolicy(PlannerPolicy):
 
 class LookaheadPolicy(PlannerPolicy):
     """The receding-horizon planner as a policy (:class:`~activetrack.baselines.lookahead.
-    LookaheadPlanner`); ``scenario`` names the problems' scenario (``None``: the matching
-    preset), ``settings`` go to :class:`~activetrack.baselines.lookahead.Lookahead`.
+    LookaheadPlanner`); ``settings`` go to :class:`~activetrack.baselines.lookahead.Lookahead`.
 
-    It must see every planning problem of an episode in order (it recovers the full
-    prediction from them); :meth:`reset` starts a new episode.
+    It plans from the prediction the planning problem carries (``problem.prediction``, set
+    by the world), for any scenario and in any order of problems. ``scenario`` matters only
+    for problems without a prediction (built by hand): the planner then recovers it from
+    the episode's problems, seen in order, of that scenario (``None``: the matching
+    preset). :meth:`reset` starts a new episode (no warm start from the last plan).
     """
 
     def __init__(self, seed: int | None = None, scenario: Any = "paper", **settings: Any) -> None:

@@ -1,9 +1,11 @@
 """The filter's full prediction, recovered from the sequence of planning problems.
 
-A :class:`activetrack.PlanningProblem` carries the position part of the prediction
-``x_hat(k+1|k), P(k+1|k)`` (eq. 3) only; a planner that looks several steps ahead also
-needs the velocity and the full covariance. Both follow from the problems of one episode
-and the scenario (initial estimate, motion model, sensor noise):
+The world's planning problems carry the full prediction (``problem.prediction``, an
+:class:`activetrack.problem.Prediction`); this module is the fallback for problems built
+from the position part of the prediction ``x_hat(k+1|k), P(k+1|k)`` (eq. 3) only. A
+planner that looks several steps ahead also needs the velocity and the full covariance.
+Both follow from the problems of one episode and the scenario (initial estimate, motion
+model, sensor noise):
 
 - the covariance does not depend on the measurements (the EKF of eq. 11 is linearized at
   the predicted mean, the problem's ``target``): replaying the filter's update at the

@@ -9,6 +9,11 @@ to the reach (eq. 15) and the minimum distance (eq. 16).
 A :class:`PlanningProblem` holds one such problem or a batch of independent ones (an
 optional leading batch axis on every array, e.g. the copies of a batched environment);
 planners return next positions of shape ``batch_shape + (M, 2)``.
+
+A problem may also carry the filter's full :class:`Prediction` (eq. 3: ``x_hat(k+1|k)``
+with the velocity, the whole ``P(k+1|k)`` and the motion model ``Phi, Q`` of eq. 2), which
+planners that look several steps ahead need; ``prior_cov`` and ``target`` are then its
+position blocks (:meth:`PlanningProblem.from_prediction` derives them).
 """
 
 from __future__ import annotations
@@ -23,10 +28,98 @@ from numpy.typing import ArrayLike
 
 from activetrack.linalg2 import inv2
 from activetrack.objective import TRACE, TraceObjective, total_information
-from activetrack.validation import FloatArray, as_finite, positive, spd
+from activetrack.validation import FloatArray, as_finite, positive, psd, spd
 
 #: The per-sensor parameters and whether 0 is allowed.
 _PER_SENSOR = (("r", True), ("rho", True), ("sigma_d2", False), ("sigma_theta2", False))
+
+
+@dataclass(frozen=True, eq=False)
+class Prediction:
+    """The filter's prediction ``x_hat(k+1|k), P(k+1|k)`` and its motion model (eq. 2-3).
+
+    Arrays are float64, validated on creation and stored read-only; ``mean`` and ``cov``
+    may carry the same leading batch axes ``...`` (or axes that broadcast to them).
+
+    Attributes:
+        mean: the predicted state ``x_hat(k+1|k)``, (..., n), position first (n >= 2).
+        cov: its covariance ``P(k+1|k)``, (..., n, n), symmetric positive definite.
+        Phi: the transition matrix of eq. (2), (n, n), shared by the batch.
+        Q: the process noise covariance of eq. (3), (n, n), symmetric positive
+            semidefinite, shared by the batch.
+    """
+
+    mean: FloatArray
+    cov: FloatArray
+    Phi: FloatArray
+    Q: FloatArray
+
+    def __post_init__(self) -> None:
+        self._store_state(self.mean, self.cov)
+        n = self.dim
+        Phi = as_finite("prediction.Phi", self.Phi)
+        if Phi.shape != (n, n):
+            raise ValueError(f"prediction.Phi must have shape ({n}, {n}), got {Phi.shape}")
+        Q = psd("prediction.Q", self.Q)
+        if Q.shape != (n, n):
+            raise ValueError(f"prediction.Q must have shape ({n}, {n}), got {Q.shape}")
+        for name, value in (("Phi", Phi), ("Q", Q)):
+            value = np.array(value)  # a copy the caller cannot change
+            value.setflags(write=False)
+            object.__setattr__(self, name, value)
+
+    def _store_state(self, mean: ArrayLike, cov: ArrayLike) -> None:
+        """Validate ``mean`` and ``cov`` and store them broadcast to their batch, read-only."""
+        mean = as_finite("prediction.mean", mean)
+        if mean.ndim < 1 or mean.shape[-1] < 2:
+            raise ValueError(
+                f"prediction.mean must have shape (..., n) with n >= 2, got {mean.shape}"
+            )
+        n = mean.shape[-1]
+        cov = spd("prediction.cov", cov)
+        if cov.shape[-1] != n:
+            raise ValueError(f"prediction.cov must have shape (..., {n}, {n}), got {cov.shape}")
+        batch = _broadcast({"prediction.mean": mean.shape[:-1], "prediction.cov": cov.shape[:-2]})
+        for name, value, trailing in (("mean", mean, (n,)), ("cov", cov, (n, n))):
+            shape = batch + trailing
+            # A copy the caller cannot change.
+            value = np.array(np.broadcast_to(value, shape) if value.shape != shape else value)
+            value.setflags(write=False)
+            object.__setattr__(self, name, value)
+
+    def with_state(self, mean: ArrayLike, cov: ArrayLike) -> Prediction:
+        """Return the prediction ``mean``, ``cov`` (validated) of the same motion model.
+
+        ``Phi`` and ``Q`` were validated once, with this prediction, and are shared, not
+        checked again: the cheap way to make the prediction of every step of one model.
+        """
+        out = object.__new__(Prediction)
+        out._store_state(mean, cov)
+        if out.dim != self.dim:
+            raise ValueError(
+                f"prediction.mean must have shape (..., {self.dim}) (the model's state), "
+                f"got {out.mean.shape}"
+            )
+        object.__setattr__(out, "Phi", self.Phi)
+        object.__setattr__(out, "Q", self.Q)
+        return out
+
+    @property
+    def batch_shape(self) -> tuple[int, ...]:
+        """Return the batch axes, ``()`` for a single prediction."""
+        return self.mean.shape[:-1]
+
+    @property
+    def dim(self) -> int:
+        """Return the state dimension n."""
+        return int(self.mean.shape[-1])
+
+    def _trusted(self, mean: FloatArray, cov: FloatArray) -> Prediction:
+        """Return the prediction of this model at already validated read-only arrays."""
+        out = object.__new__(Prediction)
+        for name, value in (("mean", mean), ("cov", cov), ("Phi", self.Phi), ("Q", self.Q)):
+            object.__setattr__(out, name, value)
+        return out
 
 
 @dataclass(frozen=True, eq=False)
@@ -47,6 +140,10 @@ class PlanningProblem:
         sigma_theta2: bearing noise variances, (..., M).
         objective: the function of the total information that planners minimize
             (:data:`activetrack.objective.TRACE`, eq. 17).
+        prediction: the filter's full :class:`Prediction` (``None``: not known), stored
+            broadcast to the batch shape. With a prediction, ``prior_cov`` and ``target``
+            are its position blocks ``cov[..., :2, :2]`` and ``mean[..., :2]``: ``None``
+            derives them (:meth:`from_prediction`), given values must equal them exactly.
     """
 
     prior_cov: FloatArray
@@ -57,6 +154,7 @@ class PlanningProblem:
     sigma_d2: FloatArray
     sigma_theta2: FloatArray
     objective: TraceObjective = TRACE
+    prediction: Prediction | None = None
 
     def __post_init__(self) -> None:
         sensors = as_finite("sensors", self.sensors)
@@ -65,10 +163,21 @@ class PlanningProblem:
                 f"sensors must have shape (..., M, 2) with M >= 1, got {sensors.shape}"
             )
         m = sensors.shape[-2]
-        prior_cov = spd("prior_cov", self.prior_cov)
+        pred = self.prediction
+        if pred is not None and not isinstance(pred, Prediction):
+            raise ValueError(
+                f"prediction must be an activetrack.problem.Prediction or None, got {pred!r}"
+            )
+        # A prior taken from a prediction is a block of its validated SPD covariance.
+        derived = pred is not None and self.prior_cov is None
+        prior_cov = pred.cov[..., :2, :2] if derived else spd("prior_cov", self.prior_cov)
         if prior_cov.shape[-2:] != (2, 2):
             raise ValueError(f"prior_cov must have shape (..., 2, 2), got {prior_cov.shape}")
-        target = as_finite("target", self.target)
+        derived_target = pred is not None and self.target is None
+        if derived_target:
+            target = pred.mean[..., :2]
+        else:
+            target = as_finite("target", self.target)
         if target.ndim < 1 or target.shape[-1] != 2:
             raise ValueError(f"target must have shape (..., 2), got {target.shape}")
         values = {"prior_cov": prior_cov, "target": target, "sensors": sensors}
@@ -86,6 +195,8 @@ class PlanningProblem:
                 )
             values[name] = arr
             batch_of[name] = arr.shape[:-1]
+        if pred is not None:
+            batch_of["prediction"] = pred.batch_shape
         batch = _broadcast(batch_of)
         if not all(hasattr(self.objective, a) for a in ("name", "of_information")):
             raise ValueError(
@@ -101,6 +212,47 @@ class PlanningProblem:
                 value = np.array(np.broadcast_to(value, shape) if value.shape != shape else value)
             value.setflags(write=False)
             object.__setattr__(self, name, value)
+        if pred is not None:
+            self._attach(pred, batch, check_cov=not derived, check_target=not derived_target)
+
+    def _attach(
+        self, pred: Prediction, batch: tuple[int, ...], check_cov: bool, check_target: bool
+    ) -> None:
+        """Store ``pred`` broadcast to ``batch``, checking (where given rather than derived)
+        that its position blocks are ``prior_cov`` and ``target``."""
+        if pred.batch_shape != batch:
+            n = pred.dim
+            mean = np.array(np.broadcast_to(pred.mean, batch + (n,)))
+            cov = np.array(np.broadcast_to(pred.cov, batch + (n, n)))
+            mean.setflags(write=False)
+            cov.setflags(write=False)
+            pred = pred._trusted(mean, cov)
+        if check_cov and not np.array_equal(pred.cov[..., :2, :2], self.prior_cov):
+            raise ValueError(
+                "prior_cov must equal prediction.cov[..., :2, :2] (the predicted position "
+                "covariance); pass prior_cov=None, or use PlanningProblem.from_prediction"
+            )
+        if check_target and not np.array_equal(pred.mean[..., :2], self.target):
+            raise ValueError(
+                "target must equal prediction.mean[..., :2] (the predicted position); pass "
+                "target=None, or use PlanningProblem.from_prediction"
+            )
+        object.__setattr__(self, "prediction", pred)
+
+    @classmethod
+    def from_prediction(
+        cls,
+        prediction: Prediction,
+        sensors: ArrayLike,
+        r: ArrayLike,
+        rho: ArrayLike,
+        sigma_d2: ArrayLike,
+        sigma_theta2: ArrayLike,
+        objective: TraceObjective = TRACE,
+    ) -> PlanningProblem:
+        """Return the problem at ``prediction`` (``prior_cov`` and ``target`` its position
+        blocks); the other arguments are the fields of the same names."""
+        return cls(None, None, sensors, r, rho, sigma_d2, sigma_theta2, objective, prediction)
 
     @classmethod
     def _validated(cls, **values: Any) -> PlanningProblem:
@@ -112,7 +264,11 @@ class PlanningProblem:
 
     @classmethod
     def stack(cls, problems: Sequence[PlanningProblem]) -> PlanningProblem:
-        """Return the batch (B,) of single problems with the same M and objective."""
+        """Return the batch (B,) of single problems with the same M and objective.
+
+        Their predictions are stacked too: all problems carry one (of the same motion
+        model) or none does.
+        """
         if not problems:
             raise ValueError("problems must hold at least one problem")
         objective = problems[0].objective
@@ -121,9 +277,24 @@ class PlanningProblem:
         arrays = {
             f.name: np.stack([getattr(p, f.name) for p in problems])
             for f in fields(cls)
-            if f.name != "objective"
+            if f.name not in ("objective", "prediction")
         }
-        return cls(**arrays, objective=objective)
+        preds = [p.prediction for p in problems]
+        prediction = None
+        if any(q is not None for q in preds):
+            first = preds[0]
+            if any(q is None for q in preds):
+                raise ValueError("problems must all carry a prediction, or none")
+            if any(
+                q.Phi.shape != first.Phi.shape
+                or not (np.array_equal(q.Phi, first.Phi) and np.array_equal(q.Q, first.Q))
+                for q in preds
+            ):
+                raise ValueError("problems must all have the same prediction.Phi and prediction.Q")
+            prediction = first.with_state(
+                np.stack([q.mean for q in preds]), np.stack([q.cov for q in preds])
+            )
+        return cls(**arrays, objective=objective, prediction=prediction)
 
     def __getitem__(self, index: Any) -> PlanningProblem:
         """Return the problem(s) at ``index`` of the batch axes (``problem[i]``: copy ``i``)."""
@@ -133,7 +304,13 @@ class PlanningProblem:
         values = {}
         for f in fields(self):
             value = getattr(self, f.name)
-            if f.name != "objective":
+            if f.name == "prediction":
+                if value is not None:
+                    mean, cov = np.array(value.mean[index]), np.array(value.cov[index])
+                    mean.setflags(write=False)
+                    cov.setflags(write=False)
+                    value = value._trusted(mean, cov)
+            elif f.name != "objective":
                 value = np.array(value[index])
                 value.setflags(write=False)
             values[f.name] = value

@@ -43,7 +43,7 @@ from activetrack import observation, sensor_motion, tracking
 from activetrack.ekf import position_nees
 from activetrack.motion import predict
 from activetrack.objective import TRACE
-from activetrack.problem import PlanningProblem
+from activetrack.problem import PlanningProblem, Prediction
 from activetrack.scenarios import Scenario, make_scenario
 from activetrack.validation import FloatArray
 
@@ -421,11 +421,18 @@ class World:
         """Return the planning problem of eq. (15)-(17) from the current prediction.
 
         ``index`` None: every copy (leading batch axis N); an int: that copy, unbatched.
+        The problem carries the full prediction (:class:`~activetrack.problem.Prediction`:
+        ``x_pred``, ``P_pred`` and the motion model ``Phi``, ``Q``).
         """
         p = self.params
-        return PlanningProblem(
-            prior_cov=self.get("P_pred", index)[..., :2, :2],
-            target=self.get("x_pred", index)[..., :2],
+        x_pred, P_pred = self.get("x_pred", index), self.get("P_pred", index)
+        model = self.__dict__.get("_prediction_model")
+        if model is None:  # Phi and Q are validated once, with the first prediction
+            prediction = self._prediction_model = Prediction(x_pred, P_pred, p.Phi, p.Q)
+        else:
+            prediction = model.with_state(x_pred, P_pred)
+        return PlanningProblem.from_prediction(
+            prediction,
             sensors=self.get("sensors", index),
             r=p.r,
             rho=p.rho,

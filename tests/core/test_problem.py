@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from activetrack.objective import TRACE
-from activetrack.problem import PlanningProblem
+from activetrack.problem import PlanningProblem, Prediction
 from tests.core.helpers import random_spd
 
 FIELDS = ("prior_cov", "target", "sensors", "r", "rho", "sigma_d2", "sigma_theta2")
@@ -146,3 +146,155 @@ def _base():
 def test_bad_fields_raise_value_errors_naming_them(change, field):
     with pytest.raises(ValueError, match=field):
         PlanningProblem(**{**_base(), **change})
+
+
+# The prediction a problem may carry -------------------------------------------------
+def _prediction_kw(rng, shape, n=4):
+    """Return a random prediction's arrays: mean, SPD cov, Phi, a rank-deficient PSD Q."""
+    cov = np.stack([random_spd(rng, n) for _ in range(int(np.prod(shape)))]).reshape(shape + (n, n))
+    G = rng.normal(size=(n, 2))
+    return dict(
+        mean=rng.normal(0, 3, shape + (n,)), cov=cov, Phi=rng.normal(size=(n, n)), Q=G @ G.T
+    )
+
+
+def test_from_prediction_derives_the_position_blocks_and_indexing_stacking_keep_it():
+    rng = np.random.default_rng(3)
+    kw = _prediction_kw(rng, (5,))
+    pred = Prediction(**kw)
+    m = 3
+    rest = dict(sensors=rng.normal(0, 5, (5, m, 2)), r=1.0, rho=0.5, sigma_d2=1.0, sigma_theta2=0.3)
+    prob = PlanningProblem.from_prediction(pred, **rest)
+    # The position blocks, read from the caller's arrays (not the stored ones).
+    np.testing.assert_array_equal(prob.prior_cov, kw["cov"][:, :2, :2])
+    np.testing.assert_array_equal(prob.target, kw["mean"][:, :2])
+    # Given explicitly (equal to the blocks) they are accepted and give the same problem.
+    same = PlanningProblem(kw["cov"][:, :2, :2], kw["mean"][:, :2], **rest, prediction=pred)
+    for p in (prob, same):
+        np.testing.assert_array_equal(p.prediction.mean, kw["mean"])
+        np.testing.assert_array_equal(p.prediction.cov, kw["cov"])
+        np.testing.assert_array_equal(p.prediction.Phi, kw["Phi"])
+        np.testing.assert_array_equal(p.prediction.Q, kw["Q"])
+    for i in (0, 3):
+        sub = prob[i]
+        np.testing.assert_array_equal(sub.prediction.mean, kw["mean"][i])
+        np.testing.assert_array_equal(sub.prediction.cov, kw["cov"][i])
+        np.testing.assert_array_equal(sub.prediction.Phi, kw["Phi"])
+        assert sub.prediction.batch_shape == ()
+    np.testing.assert_array_equal(prob[1:4].prediction.cov, kw["cov"][1:4])
+    back = PlanningProblem.stack([prob[i] for i in range(5)])
+    for name in ("mean", "cov", "Phi", "Q"):
+        np.testing.assert_array_equal(getattr(back.prediction, name), kw[name])
+    np.testing.assert_array_equal(back.prior_cov, kw["cov"][:, :2, :2])
+    # Stored read-only.
+    for name in ("mean", "cov", "Phi", "Q"):
+        with pytest.raises(ValueError):
+            getattr(prob.prediction, name)[...] = 0.0
+    # A problem without a prediction has None, and keeps it through indexing and stacking.
+    plain = PlanningProblem(**_random_batch(rng, (4,), 2))
+    assert plain.prediction is None and plain[2].prediction is None
+    assert PlanningProblem.stack([plain[0], plain[1]]).prediction is None
+
+
+def test_a_single_prediction_broadcasts_over_the_batch():
+    rng = np.random.default_rng(4)
+    kw = _prediction_kw(rng, ())
+    prob = PlanningProblem.from_prediction(
+        Prediction(**kw), rng.normal(0, 5, (6, 2, 2)), 1.0, 0.5, 1.0, 0.3
+    )
+    assert prob.batch_shape == (6,) and prob.prediction.batch_shape == (6,)
+    np.testing.assert_array_equal(prob.prediction.cov[4], kw["cov"])
+    np.testing.assert_array_equal(prob.prior_cov[2], kw["cov"][:2, :2])
+
+
+def test_with_state_checks_the_state_and_shares_the_model():
+    rng = np.random.default_rng(5)
+    kw = _prediction_kw(rng, ())
+    pred = Prediction(**kw)
+    other = _prediction_kw(rng, (3,))
+    nxt = pred.with_state(other["mean"], other["cov"])
+    assert nxt.Phi is pred.Phi and nxt.Q is pred.Q
+    np.testing.assert_array_equal(nxt.cov, other["cov"])
+    with pytest.raises(ValueError, match="prediction.cov"):
+        pred.with_state(other["mean"], -other["cov"])
+    with pytest.raises(ValueError, match="prediction.mean"):
+        pred.with_state(np.zeros((3, 6)), np.broadcast_to(np.eye(6), (3, 6, 6)))
+
+
+def test_mixed_or_different_predictions_do_not_stack():
+    rng = np.random.default_rng(6)
+    rest = dict(sensors=np.ones((1, 2)), r=1.0, rho=0.5, sigma_d2=1.0, sigma_theta2=0.3)
+    a = PlanningProblem.from_prediction(Prediction(**_prediction_kw(rng, ())), **rest)
+    b = PlanningProblem.from_prediction(Prediction(**_prediction_kw(rng, ())), **rest)
+    plain = PlanningProblem(a.prior_cov, a.target, **rest)
+    with pytest.raises(ValueError, match="prediction"):
+        PlanningProblem.stack([a, plain])
+    with pytest.raises(ValueError, match="prediction.Phi"):
+        PlanningProblem.stack([a, b])
+
+
+def _pred_base():
+    n = 4
+    cov = np.broadcast_to(np.eye(n) + 0.1, (3, n, n)).copy()
+    return dict(mean=np.zeros((3, n)), cov=cov, Phi=np.eye(n), Q=np.diag([0.0, 0.0, 1.0, 1.0]))
+
+
+@pytest.mark.parametrize(
+    "change, field",
+    [
+        ({"mean": np.zeros((3, 1))}, "prediction.mean"),
+        ({"mean": np.array([[0.0, np.inf, 0.0, 0.0]] * 3)}, "prediction.mean"),
+        ({"cov": np.broadcast_to(np.eye(3), (3, 3, 3))}, "prediction.cov"),
+        ({"cov": np.broadcast_to(-np.eye(4), (3, 4, 4))}, "prediction.cov"),
+        ({"cov": np.broadcast_to(np.eye(4), (2, 4, 4))}, "prediction.mean.*prediction.cov"),
+        ({"Phi": np.eye(3)}, "prediction.Phi"),
+        ({"Phi": np.full((4, 4), np.nan)}, "prediction.Phi"),
+        ({"Q": -np.eye(4)}, "prediction.Q"),
+        ({"Q": np.triu(np.ones((4, 4)))}, "prediction.Q"),
+        ({"Q": np.eye(5)}, "prediction.Q"),
+    ],
+)
+def test_bad_predictions_raise_value_errors_naming_the_field(change, field):
+    with pytest.raises(ValueError, match=field):
+        Prediction(**{**_pred_base(), **change})
+
+
+def test_a_prediction_that_disagrees_with_the_problem_raises_naming_the_field():
+    pred = Prediction(**_pred_base())
+    base = _base()  # prior_cov eye(2), target 0: not the blocks (eye + 0.1) of the prediction
+    with pytest.raises(ValueError, match="prior_cov must equal prediction.cov"):
+        PlanningProblem(**base, prediction=pred)
+    base["prior_cov"] = pred.cov[:, :2, :2]
+    base["target"] = np.ones((3, 2))
+    with pytest.raises(ValueError, match="target must equal prediction.mean"):
+        PlanningProblem(**base, prediction=pred)
+    base["target"] = np.zeros((3, 2))
+    assert PlanningProblem(**base, prediction=pred).prediction.batch_shape == (3,)
+    with pytest.raises(ValueError, match="batch axes.*prediction"):
+        PlanningProblem.from_prediction(pred, np.ones((2, 2, 2)), 1.0, 0.5, 1.0, 1.0)
+    with pytest.raises(ValueError, match="prediction must be"):
+        PlanningProblem(**base, prediction=pred.mean)
+
+
+@pytest.mark.parametrize("copies", [1, 3])
+def test_the_world_problem_carries_exactly_the_world_prediction(copies):
+    from activetrack.world import World
+
+    world = World("homogeneous", copies, n_steps=4)
+    world.reset(seeds=list(range(copies)))
+    rng = np.random.default_rng(7)
+    while not world.truncated.all():
+        for index in [None, *range(copies)]:
+            pred = world.planning_problem(index).prediction
+            np.testing.assert_array_equal(pred.mean, world.get("x_pred", index))
+            np.testing.assert_array_equal(pred.cov, world.get("P_pred", index))
+            np.testing.assert_array_equal(pred.Phi, world.params.Phi)
+            np.testing.assert_array_equal(pred.Q, world.params.Q)
+        problem = world.planning_problem()
+        np.testing.assert_array_equal(problem.prior_cov, world.P_pred[:, :2, :2])
+        np.testing.assert_array_equal(problem.target, world.x_pred[:, :2])
+        world.step_actions(rng.uniform(-1, 1, (copies, world.n_sensors, 2)))
+    # The problem's arrays are copies: stepping the world leaves an earlier problem alone.
+    kept = problem.prediction.cov.copy()
+    world.reset(seeds=[9] * copies)
+    np.testing.assert_array_equal(problem.prediction.cov, kept)
