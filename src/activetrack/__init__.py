@@ -25,7 +25,7 @@ from activetrack.objective import (
     posterior_position_covariance,
     posterior_trace,
 )
-from activetrack.problem import Planner, PlanningProblem
+from activetrack.problem import Planner, PlanningProblem, Prediction
 from activetrack.scenarios import PRESETS, Scenario, make_scenario
 from activetrack.solver import (
     BatchSolution,
@@ -46,6 +46,7 @@ __all__ = [
     "ExtendedKalmanFilter",
     "LinearMotionModel",
     "PlanningProblem",
+    "Prediction",
     "Planner",
     "Scenario",
     "constant_acceleration",
