@@ -25,6 +25,7 @@ import numpy as np
 
 from activetrack.baselines import GSR, Lookahead
 from activetrack.baselines.evaluation import paired_ratio_ci
+from activetrack.baselines.lookahead import run_batched
 from activetrack.world import World
 
 #: The searches compared: label -> Lookahead settings (the horizon is varied separately).
@@ -40,25 +41,9 @@ HORIZONS = (1, 3, 5, 10, 15)
 
 
 def closed_loop(scenario: str, seeds: list[int], planner: Lookahead | None) -> dict:
-    """Return per-episode mean traces and deepest realized rho violations (batched)."""
-    world = World(scenario, len(seeds))
-    world.reset(seeds=seeds)
-    gsr, prev = GSR(), None
-    traces, deepest = [], np.zeros(len(seeds))
-    while not world.truncated.all():
-        problem = world.planning_problem()
-        if planner is None:
-            positions = gsr.plan(problem)
-        else:
-            res = planner.plan_prediction(
-                problem, world.x_pred, world.P_pred, world.params.Phi, world.params.Q, prev
-            )
-            positions, prev = res.positions, res.plan
-        world.step(positions)
-        traces.append(world.trace.copy())
-        d = np.linalg.norm(world.sensors - world.x_true[:, None, :2], axis=-1)
-        deepest = np.maximum(deepest, np.max(world.params.rho - d, axis=1))
-    return {"mean_trace": np.mean(traces, axis=0), "violation": deepest}
+    """Return each seed's mean trace and deepest realized rho violation (GSR if None)."""
+    mean_trace, deepest = run_batched(scenario, seeds, planner)
+    return {"mean_trace": mean_trace, "violation": deepest}
 
 
 def timing(scenario: str, seeds: list[int], planner: Lookahead) -> tuple[float, float]:

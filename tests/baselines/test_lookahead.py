@@ -16,6 +16,7 @@ import pytest
 from activetrack import ekf, measurement
 from activetrack.baselines import GSR, Lookahead, LookaheadPlanner, LookaheadPolicy
 from activetrack.baselines import horizon_model as hm
+from activetrack.baselines.lookahead import run_batched
 from activetrack.baselines.prediction_tracker import PredictionTracker
 from activetrack.motion import constant_velocity, predict
 from activetrack.problem import PlanningProblem
@@ -312,32 +313,11 @@ def test_settings_are_checked(field, value):
         Lookahead(**{field: value})
 
 
-def _realized_violations(scenario: str, seeds: list[int], planner: Lookahead | None):
-    """Return each episode's deepest realized rho violation of the true target (m, 0: none)."""
-    world = World(scenario, len(seeds))
-    world.reset(seeds=seeds)
-    gsr, prev = GSR(), None
-    deepest = np.zeros(len(seeds))
-    while not world.truncated.all():
-        problem = world.planning_problem()
-        if planner is None:
-            positions = gsr.plan(problem)
-        else:
-            res = planner.plan_prediction(
-                problem, world.x_pred, world.P_pred, world.params.Phi, world.params.Q, prev
-            )
-            positions, prev = res.positions, res.plan
-        world.step(positions)
-        d = np.linalg.norm(world.sensors - world.x_true[:, None, :2], axis=-1)
-        deepest = np.maximum(deepest, np.max(world.params.rho - d, axis=1))
-    return deepest
-
-
 @pytest.mark.slow
 def test_realized_violations_no_worse_than_gsr():
     seeds = list(range(1000, 1100))  # the README's held-out evaluation seeds
-    gsr = _realized_violations("paper", seeds, None)
-    la = _realized_violations("paper", seeds, Lookahead())
+    gsr = run_batched("paper", seeds)[1]
+    la = run_batched("paper", seeds, Lookahead())[1]
     assert np.count_nonzero(la > 0) <= np.count_nonzero(gsr > 0)
     assert la.max() <= gsr.max()
 
