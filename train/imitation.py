@@ -113,10 +113,7 @@ class ImitationConfig:
         self.batch_size = check_int("batch_size", self.batch_size, 1, 10**7)
         self.lr = check_float("lr", self.lr, 0, 1, low_open=True)
         self.weight_decay = check_float("weight_decay", self.weight_decay, 0, 1)
-        if isinstance(self.net, dict):
-            self.net = NetConfig.from_dict(self.net)
-        if not isinstance(self.net, NetConfig):
-            raise ValueError(f"net must be a NetConfig, got {self.net!r}")
+        self.net = NetConfig.coerce(self.net)
 
     def to_dict(self) -> dict[str, Any]:
         """Return JSON-friendly values."""

@@ -102,6 +102,16 @@ class NetConfig:
             raise ValueError(f"unknown network configuration fields {unknown}")
         return cls(**d)
 
+    @classmethod
+    def coerce(cls, value: Any) -> NetConfig:
+        """Return ``value`` as a NetConfig (a dict is read by :meth:`from_dict`), or raise
+        ValueError naming the field ``net``: the check every training config shares."""
+        if isinstance(value, dict):
+            value = cls.from_dict(value)
+        if not isinstance(value, cls):
+            raise ValueError(f"net must be a NetConfig, got {value!r}")
+        return value
+
     def expected_state_shapes(self, obs_dim: int, act_dim: int) -> dict[str, tuple[int, ...]]:
         """Return the shape of every entry of :func:`build_policy`'s state dict, by key.
 

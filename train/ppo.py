@@ -148,10 +148,7 @@ class PPOConfig:
         c.keep_best = check_bool("keep_best", c.keep_best)
         c.view = check_choice("view", c.view, VIEWS)
         c.backend = check_choice("backend", c.backend, BACKENDS)
-        if isinstance(c.net, dict):
-            c.net = NetConfig.from_dict(c.net)
-        if not isinstance(c.net, NetConfig):
-            raise ValueError(f"net must be a NetConfig, got {c.net!r}")
+        c.net = NetConfig.coerce(c.net)
 
     def to_dict(self) -> dict[str, Any]:
         """Return JSON-friendly values."""

@@ -224,10 +224,7 @@ class RLlibPPOConfig:
         c.num_cpus_per_env_runner = check_int(
             "num_cpus_per_env_runner", c.num_cpus_per_env_runner, 1, 1024
         )
-        if isinstance(c.net, dict):
-            c.net = NetConfig.from_dict(c.net)
-        if not isinstance(c.net, NetConfig):
-            raise ValueError(f"net must be a NetConfig, got {c.net!r}")
+        c.net = NetConfig.coerce(c.net)
 
     def to_dict(self) -> dict[str, Any]:
         """Return JSON-friendly values."""
