@@ -69,9 +69,11 @@ class LookaheadResult:
     gsr_score: FloatArray
 
 
-def _check_int(name: str, value: object, low: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
-        raise ValueError(f"{name} must be an integer >= {low}, got {value!r}")
+def _check_int(name: str, value: object, low: int, high: int) -> int:
+    # The upper bound: arrays of that length are allocated.
+    ok = not isinstance(value, bool) and isinstance(value, (int, np.integer))
+    if not ok or not low <= value <= high:
+        raise ValueError(f"{name} must be an integer in [{low}, {high}], got {value!r}")
     return int(value)
 
 
@@ -113,11 +115,11 @@ class Lookahead:
     def __post_init__(self) -> None:
         from activetrack.baselines.gsr import GSR
 
-        self.horizon = _check_int("horizon", self.horizon, 1)
+        self.horizon = _check_int("horizon", self.horizon, 1, 1000)
         self.discount = _check_real("discount", self.discount, 1e-6, 1.0)
-        self.headings = _check_int("headings", self.headings, 0)
-        self.bearings = _check_int("bearings", self.bearings, 0)
-        self.passes = _check_int("passes", self.passes, 0)
+        self.headings = _check_int("headings", self.headings, 0, 4096)
+        self.bearings = _check_int("bearings", self.bearings, 0, 4096)
+        self.passes = _check_int("passes", self.passes, 0, 100)
         self.margin = _check_real("margin", self.margin, 0.0, 100.0)
         self._gsr = GSR(tol=self.gsr_tol, max_sweeps=self.gsr_max_sweeps)
 

@@ -306,7 +306,16 @@ def test_batched_planner_equals_copy_by_copy():
 
 @pytest.mark.parametrize(
     ("field", "value"),
-    [("horizon", 0), ("discount", 0.0), ("discount", 1.5), ("headings", -1), ("margin", -1.0)],
+    [
+        ("horizon", 0),
+        ("horizon", 10**20),
+        ("discount", 0.0),
+        ("discount", 1.5),
+        ("headings", -1),
+        ("headings", 10**9),
+        ("passes", 101),
+        ("margin", -1.0),
+    ],
 )
 def test_settings_are_checked(field, value):
     with pytest.raises(ValueError, match=field):
