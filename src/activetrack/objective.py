@@ -70,6 +70,18 @@ class TraceObjective:
 
     name = "trace"
 
+    def combine(self, values: FloatArray, axis: int = -1) -> FloatArray:
+        """Return the per-target values (the ``axis`` over targets) combined: their sum."""
+        return np.sum(values, axis=axis)
+
+    def of_targets(self, a: FloatArray, b: FloatArray, c: FloatArray) -> FloatArray:
+        """Return the objective of K targets' information entries (..., K), combined: (...)."""
+        return self.combine(self.of_entries(a, b, c))
+
+    def of_covariances(self, P: FloatArray) -> FloatArray:
+        """Return the objective of K targets' position covariances (..., K, n, n): (...)."""
+        return self.combine(self.of_covariance(P))
+
     def of_entries(self, a: FloatArray, b: FloatArray, c: FloatArray) -> FloatArray:
         """Return ``tr([[a, b], [b, c]]^{-1}) = (a + c) / (ac - b^2)``."""
         return (a + c) / (a * c - b * b)
@@ -113,8 +125,62 @@ class TraceObjective:
         return "TRACE"
 
 
-#: The trace objective of eq. (17), the default of every planning problem.
+#: The trace objective of eq. (17), the default of every planning problem; with K targets
+#: the sum of their traces.
 TRACE = TraceObjective()
+
+
+class WorstTraceObjective(TraceObjective):
+    """The largest of the targets' posterior position traces (``max_k tr(Y_k^{-1})``).
+
+    Per target the same function as :class:`TraceObjective`; only :meth:`combine` differs.
+    For K = 1 it equals :data:`TRACE`.
+    """
+
+    name = "worst_trace"
+
+    def combine(self, values: FloatArray, axis: int = -1) -> FloatArray:
+        """Return the largest per-target value."""
+        return np.max(values, axis=axis)
+
+    def __repr__(self) -> str:
+        return "WORST_TRACE"
+
+
+class LogDetObjective(TraceObjective):
+    """The sum over targets of ``log det P_k = -log det Y_k`` (D-optimality).
+
+    Invariant to the length unit up to a constant, and the log-volume of each target's
+    uncertainty ellipse; convex in ``Y_k``.
+    """
+
+    name = "logdet"
+
+    def of_entries(self, a: FloatArray, b: FloatArray, c: FloatArray) -> FloatArray:
+        """Return ``-log det([[a, b], [b, c]]) = -log(ac - b^2)``."""
+        return -np.log(a * c - b * b)
+
+    def of_covariance(self, P: FloatArray) -> FloatArray:
+        """Return ``log det P11`` of position covariances (or whole state covariances)."""
+        return np.log(P[..., 0, 0] * P[..., 1, 1] - P[..., 0, 1] * P[..., 1, 0])
+
+    def tangent(
+        self, a: FloatArray, b: FloatArray, c: FloatArray
+    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        """Return ``(phi, ga, gb, gc)``; ``d(-log det Y) = -tr(Y^{-1} dY)``."""
+        det = a * c - b * b
+        return -np.log(det), -c / det, 2.0 * b / det, -a / det
+
+    def __repr__(self) -> str:
+        return "LOGDET"
+
+
+#: The largest target's trace.
+WORST_TRACE = WorstTraceObjective()
+#: The sum of the targets' log-determinants.
+LOGDET = LogDetObjective()
+#: The objectives by name (:attr:`activetrack.Scenario.objective`).
+OBJECTIVES: dict[str, TraceObjective] = {o.name: o for o in (TRACE, WORST_TRACE, LOGDET)}
 
 
 def _check(prior_cov: ArrayLike, rel: ArrayLike, sigma_d2: ArrayLike, sigma_theta2: ArrayLike):
