@@ -38,7 +38,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike
 
-from activetrack import measurement
+from activetrack import measurement, sensor_models
 from activetrack.linalg2 import as_complex, inv2
 from activetrack.measurement import ZERO_DISTANCE2
 from activetrack.motion import LinearMotionModel
@@ -60,8 +60,20 @@ def update(
     sigma_theta2: FloatArray,
     orientation: FloatArray | float = 0.0,
     mask: FloatArray | None = None,
+    *,
+    models: FloatArray | None = None,
+    weights: tuple[FloatArray, FloatArray] | None = None,
+    pose_cov: FloatArray | None = None,
 ) -> tuple[FloatArray, FloatArray]:
     """Return the EKF posterior ``(x(k+1|k+1), P(k+1|k+1))`` of eq. (11), batched, unchecked.
+
+    Other sensor models (:mod:`activetrack.sensor_models`): ``models`` (..., M) codes and
+    ``weights = (w_d, w_theta)`` (zero for a component a sensor does not measure; then the
+    variances are not read); ``pose_cov`` (..., M, 2, 2): the sensors' position fixes are
+    uncertain and the measurement noise becomes ``R + H_s Sigma H_s^T``
+    (:func:`activetrack.sensor_models.update_terms`). Without ``pose_cov`` the arithmetic
+    below applies, with the weights in place of ``1/sigma^2`` (a zero weight removes a
+    component exactly; its ``z`` entry must be finite).
 
     Shapes: ``x`` (..., n), ``P`` (..., n, n), ``z`` and ``sensor_pos`` (..., M, 2),
     variances and ``orientation`` broadcastable to (..., M), ``mask`` (..., M) bool or None.
@@ -71,11 +83,24 @@ def update(
     complex numbers, so one filter costs few NumPy calls) because the batched environment
     runs it on thousands of filters per call and the single environment once per step.
     """
+    if pose_cov is not None:
+        wd, wt = weights if weights is not None else (1.0 / sigma_d2, 1.0 / sigma_theta2)
+        if mask is not None:
+            wd, wt = wd * mask, wt * mask
+        codes = 0 if models is None else models
+        Yi, bi = sensor_models.update_terms(
+            z, x[..., :2], sensor_pos, codes, wd, wt, orientation, pose_cov
+        )
+        Y, b = Yi.sum(axis=-3), bi.sum(axis=-2)
+        return _posterior(x, P, Y[..., 0, 0], Y[..., 0, 1], Y[..., 1, 1], b[..., 0], b[..., 1])
     # Offsets d = p_T_hat - p_S = -p of eq. (10) as complex numbers dx + i dy, (..., M).
     d = as_complex(x[..., :2])[..., None] - as_complex(sensor_pos)
     dist = np.abs(d)
-    wd = 1.0 / sigma_d2
-    wt = 1.0 / sigma_theta2
+    if weights is None:
+        wd = 1.0 / sigma_d2
+        wt = 1.0 / sigma_theta2
+    else:
+        wd, wt = weights
     if mask is not None:
         wd = wd * mask
         wt = wt * mask
@@ -123,6 +148,23 @@ def update(
     yyy = half - 0.5 * gsum.real
     yxy = 0.5 * gsum.imag
     bx, by = bsum.real, bsum.imag
+    return _posterior(x, P, yxx, yxy, yyy, bx, by)
+
+
+def _posterior(
+    x: FloatArray,
+    P: FloatArray,
+    yxx: FloatArray,
+    yxy: FloatArray,
+    yyy: FloatArray,
+    bx: FloatArray,
+    by: FloatArray,
+) -> tuple[FloatArray, FloatArray]:
+    """Return eq. (11)'s posterior from the measurement information ``Y`` (its entries) and
+    the gradient term ``b = H^T R^{-1} nu`` (the square-root form of the module docstring)."""
+    single = P.ndim == 2
+    if single:  # Python numbers: the 2x2 algebra is several times cheaper on them
+        yxx, yxy, yyy, bx, by = float(yxx), float(yxy), float(yyy), float(bx), float(by)
     # Square-root form. P11 = L L^T (Cholesky, L lower); K = L^T Y L; I + K = M M^T.
     # Then (Woodbury) P11+ = L (I + K)^{-1} L^T and the posterior is
     #   P+ = Z Z^T + blockdiag(0, S22),  Z = Pc L^{-T} M^{-T},  S22 = P22 - F F^T,

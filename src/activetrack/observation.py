@@ -29,9 +29,43 @@ Agent i's observation is the target block, then the sensor blocks of sensors
 every agent sees the team from its own seat. Size ``5 + 6M``. The global state is the
 target block, the sensor blocks of sensors ``0..M-1`` and the elapsed fraction
 ``k / n_steps`` of the episode. Size ``6 + 6M``.
+
+**Extended layout** (any scenario that is not one target seen by range-and-bearing sensors
+at known positions: several targets, other sensor models, uncertain poses). The frame's
+origin is the centroid ``o`` of the K predicted target positions. Target block of target
+k (7 entries)::
+
+    0  (x_hat_k - o_x) / L      predicted position x_hat_k(k+1|k) relative to the centroid
+    1  (y_hat_k - o_y) / L
+    2  ln(sigma_x / L)          as entries 0-4 of the paper's target block
+    3  ln(sigma_y / L)
+    4  corr
+    5  v_x dt / L
+    6  v_y dt / L
+
+Sensor block of sensor j (12 entries)::
+
+    0  (x_j - o_x) / L          the sensor's position fix relative to the centroid
+    1  (y_j - o_y) / L
+    2  ln(sigma_d_j / L)        0 for a sensor that does not measure range
+    3  ln(sigma_theta_j)        0 for a sensor that does not measure bearing
+    4  r_j / L
+    5  rho_j / L
+    6  1 if range and bearing   one-hot sensor model
+    7  1 if range only
+    8  1 if bearing only
+    9  sqrt(Sigma_11) / L       the sensor's pose covariance (0, 0, 0 when known)
+    10 sqrt(Sigma_22) / L
+    11 corr(Sigma)              0 when a variance is 0
+
+Agent i's observation: the K target blocks (target order), then the sensor blocks in
+agent i's cyclic order; size ``7K + 12M``; the global state adds ``k / n_steps``.
+:class:`Layout` says which layout a scenario uses and its sizes and bounds.
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -40,6 +74,116 @@ from activetrack.validation import FloatArray
 
 TARGET_DIM = 5
 SENSOR_DIM = 6
+#: Block sizes of the extended layout.
+EXT_TARGET_DIM = 7
+EXT_SENSOR_DIM = 12
+
+
+@dataclass(frozen=True)
+class Layout:
+    """Which observation layout a scenario uses, and its sizes.
+
+    Attributes:
+        extended: False for the paper's layout (one target, range-and-bearing sensors at
+            known positions: ``5 + 6M``), True for the extended one (``7K + 12M``).
+        n_targets: K.
+        n_sensors: M.
+    """
+
+    extended: bool
+    n_targets: int
+    n_sensors: int
+
+    @property
+    def target_dim(self) -> int:
+        """Return the entries of all target blocks."""
+        return EXT_TARGET_DIM * self.n_targets if self.extended else TARGET_DIM
+
+    @property
+    def sensor_dim(self) -> int:
+        """Return the entries of one sensor block."""
+        return EXT_SENSOR_DIM if self.extended else SENSOR_DIM
+
+    @property
+    def obs_dim(self) -> int:
+        """Return the size of one agent's observation."""
+        return self.target_dim + self.sensor_dim * self.n_sensors
+
+    @property
+    def state_dim(self) -> int:
+        """Return the size of the global state."""
+        return self.obs_dim + 1
+
+    def sensor_constants(self, sc: Scenario, L: float) -> FloatArray:
+        """Return the constant entries of every sensor block: (M, 4) or (M, 10)."""
+        sd2, st2 = sc.per_sensor("sigma_d2"), sc.per_sensor("sigma_theta2")
+        base = sensor_constants(sd2, st2, sc.r, sc.per_sensor("rho"), L)
+        if not self.extended:
+            return base
+        codes = sc.sensor_models
+        uses = np.array([[True, True], [True, False], [False, True]])[codes]
+        base[:, :2] = np.where(uses, base[:, :2], 0.0)
+        onehot = np.eye(3)[codes]
+        cov = sc.pose_covariances
+        pose = np.zeros((sc.n_sensors, 3))
+        if cov is not None:
+            sx, sy = np.sqrt(cov[:, 0, 0]), np.sqrt(cov[:, 1, 1])
+            both = (sx > 0) & (sy > 0)
+            pose[:, 0], pose[:, 1] = sx / L, sy / L
+            pose[:, 2] = np.where(both, cov[:, 0, 1] / np.where(both, sx * sy, 1.0), 0.0)
+        return np.concatenate([base, onehot, pose], -1)
+
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """Return float32 ``(low, high)`` of one agent's observation (inf where unbounded)."""
+        if not self.extended:
+            return observation_bounds(self.n_sensors)
+        low = np.full(self.obs_dim, -np.inf, dtype=np.float32)
+        high = np.full(self.obs_dim, np.inf, dtype=np.float32)
+        for k in range(self.n_targets):
+            b = EXT_TARGET_DIM * k
+            low[b + 4], high[b + 4] = -1.0, 1.0
+        for j in range(self.n_sensors):
+            b = self.target_dim + EXT_SENSOR_DIM * j
+            low[b + 4 : b + 11] = 0.0  # r, rho, one-hot, pose standard deviations
+            high[b + 6 : b + 9] = 1.0
+            low[b + 11], high[b + 11] = -1.0, 1.0
+        return low, high
+
+    def state_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """Return float32 ``(low, high)`` of the global state."""
+        low, high = self.bounds()
+        return np.append(low, np.float32(0.0)), np.append(high, np.float32(1.0))
+
+
+def layout_of(sc: Scenario) -> Layout:
+    """Return the layout of scenario ``sc`` (the paper's unless it needs the extended one)."""
+    paper = sc.n_targets == 1 and sc.sensor_model == "range_bearing" and sc.pose_covariances is None
+    return Layout(not paper, sc.n_targets, sc.n_sensors)
+
+
+def extended_features(
+    x_preds: list[FloatArray],
+    P_preds: list[FloatArray],
+    fixes: FloatArray,
+    constants: FloatArray,
+    dt: float,
+    L: float,
+) -> tuple[FloatArray, FloatArray]:
+    """Return the extended layout's target blocks, flattened (..., 7K), and sensor blocks
+    (..., M, 12) from every target's prediction and the sensors' position fixes."""
+    pos = np.stack([x[..., :2] for x in x_preds], -2)  # (..., K, 2)
+    origin = pos.mean(axis=-2)
+    blocks = []
+    for x, P, q in zip(x_preds, P_preds, np.moveaxis(pos, -2, 0), strict=True):
+        out = np.empty(x.shape[:-1] + (EXT_TARGET_DIM,))
+        out[..., :2] = (q - origin) / L
+        out[..., 2:] = target_features(x, P, dt, L)
+        blocks.append(out)
+    target = np.concatenate(blocks, -1)
+    sensor = np.empty(fixes.shape[:-1] + (EXT_SENSOR_DIM,))
+    sensor[..., :2] = (fixes - origin[..., None, :]) / L
+    sensor[..., 2:] = constants
+    return target, sensor
 
 
 def obs_dim(n_sensors: int) -> int:
@@ -55,12 +199,16 @@ def state_dim(n_sensors: int) -> int:
 def length_scale(sc: Scenario) -> float:
     """Return ``L``: the farthest a sensor can start from the estimated target.
 
-    ``L = ||sensor_center - x0_hat[:2]|| + sensor_radius`` (23.1 m for ``paper``), at least
+    ``L = ||sensor_center - x0_hat[:2]|| + sensor_radius`` (23.1 m for ``paper``; with K
+    targets measured from their estimates' centroid, plus the farthest estimate from it), at least
     ``max(rho_i + r_i)`` and at least 1e-6 m so that it is never zero.
     """
-    d = float(np.hypot(*(np.asarray(sc.sensor_center) - np.asarray(sc.x0_hat[:2]))))
+    starts = np.array([x[:2] for x in sc.target_states("x0_hat")])
+    centroid = starts.mean(axis=0)
+    d = float(np.hypot(*(np.asarray(sc.sensor_center) - centroid)))
+    spread = float(np.max(np.hypot(*(starts - centroid).T)))  # 0 for one target
     floor = float(np.max(sc.per_sensor("rho") + sc.r))
-    return max(d + sc.sensor_radius, floor, 1e-6)
+    return max(d + sc.sensor_radius + spread, floor, 1e-6)
 
 
 def sensor_constants(
@@ -103,24 +251,24 @@ def cyclic_order(n_sensors: int) -> np.ndarray:
 
 def observations(target: FloatArray, sensor: FloatArray, order: np.ndarray) -> np.ndarray:
     """Return all agents' observations, float32 of shape (..., M, 5 + 6M)."""
-    m = sensor.shape[-2]
-    out = np.empty(sensor.shape[:-2] + (m, obs_dim(m)), dtype=np.float32)
-    out[..., :TARGET_DIM] = target[..., None, :]
+    m, td, sd = sensor.shape[-2], target.shape[-1], sensor.shape[-1]
+    out = np.empty(sensor.shape[:-2] + (m, td + sd * m), dtype=np.float32)
+    out[..., :td] = target[..., None, :]
     # Agent i sees sensors i, i+1, ... (mod M): a contiguous window of the doubled list.
     # Slicing windows is ~5x faster than fancy indexing with ``order`` on large batches.
     doubled = np.concatenate([sensor, sensor], axis=-2)
-    shape = sensor.shape[:-2] + (m * SENSOR_DIM,)
+    shape = sensor.shape[:-2] + (m * sd,)
     for i, start in enumerate(order[:, 0].tolist()):
-        out[..., i, TARGET_DIM:] = doubled[..., start : start + m, :].reshape(shape)
+        out[..., i, td:] = doubled[..., start : start + m, :].reshape(shape)
     return out
 
 
 def global_state(target: FloatArray, sensor: FloatArray, elapsed: FloatArray | float) -> np.ndarray:
     """Return the global state, float32 of shape (..., 6 + 6M)."""
-    m = sensor.shape[-2]
-    out = np.empty(sensor.shape[:-2] + (state_dim(m),), dtype=np.float32)
-    out[..., :TARGET_DIM] = target
-    out[..., TARGET_DIM:-1] = sensor.reshape(sensor.shape[:-2] + (m * SENSOR_DIM,))
+    m, td, sd = sensor.shape[-2], target.shape[-1], sensor.shape[-1]
+    out = np.empty(sensor.shape[:-2] + (td + sd * m + 1,), dtype=np.float32)
+    out[..., :td] = target
+    out[..., td:-1] = sensor.reshape(sensor.shape[:-2] + (m * sd,))
     out[..., -1] = elapsed
     return out
 

@@ -14,6 +14,14 @@ A problem may also carry the filter's full :class:`Prediction` (eq. 3: ``x_hat(k
 with the velocity, the whole ``P(k+1|k)`` and the motion model ``Phi, Q`` of eq. 2), which
 planners that look several steps ahead need; ``prior_cov`` and ``target`` are then its
 position blocks (:meth:`PlanningProblem.from_prediction` derives them).
+
+Beyond the paper a problem may have K targets (``multi_target``: ``prior_cov`` (..., K,
+2, 2), ``target`` (..., K, 2); every sensor keeps ``rho`` from every predicted target;
+the objective combines the targets' values), sensors of other measurement models
+(``models``, :mod:`activetrack.sensor_models`) and uncertain position fixes (``pose_cov``):
+:meth:`PlanningProblem.score` then sums the effective information ``J_eff`` of
+:func:`activetrack.sensor_models.team_entries` per target. :attr:`PlanningProblem.is_paper`
+says whether the paper's exact single-sensor solve (Section IV-A) applies.
 """
 
 from __future__ import annotations
@@ -26,6 +34,7 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 from numpy.typing import ArrayLike
 
+from activetrack import sensor_models
 from activetrack.linalg2 import inv2
 from activetrack.objective import TRACE, TraceObjective, total_information
 from activetrack.validation import FloatArray, as_finite, positive, psd, spd
@@ -144,6 +153,12 @@ class PlanningProblem:
             broadcast to the batch shape. With a prediction, ``prior_cov`` and ``target``
             are its position blocks ``cov[..., :2, :2]`` and ``mean[..., :2]``: ``None``
             derives them (:meth:`from_prediction`), given values must equal them exactly.
+        models: per-sensor model codes (..., M) int8 (0 range and bearing, 1 range only,
+            2 bearing only; names accepted), or None: all range and bearing.
+        pose_cov: per-sensor covariance of the position fix (..., M, 2, 2), PSD, or None:
+            positions known exactly.
+        multi_target: whether ``prior_cov`` and ``target`` carry a targets axis K (after
+            the batch axes). A prediction is only carried for one target.
     """
 
     prior_cov: FloatArray
@@ -155,6 +170,9 @@ class PlanningProblem:
     sigma_theta2: FloatArray
     objective: TraceObjective = TRACE
     prediction: Prediction | None = None
+    models: np.ndarray | None = None
+    pose_cov: FloatArray | None = None
+    multi_target: bool = False
 
     def __post_init__(self) -> None:
         sensors = as_finite("sensors", self.sensors)
@@ -180,10 +198,26 @@ class PlanningProblem:
             target = as_finite("target", self.target)
         if target.ndim < 1 or target.shape[-1] != 2:
             raise ValueError(f"target must have shape (..., 2), got {target.shape}")
+        multi = self.multi_target
+        if not isinstance(multi, (bool, np.bool_)):
+            raise ValueError(f"multi_target must be True or False, got {multi!r}")
+        multi = bool(multi)
+        object.__setattr__(self, "multi_target", multi)
+        kk = 0
+        if multi:
+            if pred is not None:
+                raise ValueError("prediction must be None for a multi_target problem")
+            if target.ndim < 2 or prior_cov.ndim < 3 or target.shape[-2] != prior_cov.shape[-3]:
+                raise ValueError(
+                    "a multi_target problem needs target (..., K, 2) and prior_cov "
+                    f"(..., K, 2, 2), got {target.shape} and {prior_cov.shape}"
+                )
+            kk = target.shape[-2]
         values = {"prior_cov": prior_cov, "target": target, "sensors": sensors}
+        tail = 1 if multi else 0
         batch_of = {
-            "prior_cov": prior_cov.shape[:-2],
-            "target": target.shape[:-1],
+            "prior_cov": prior_cov.shape[: prior_cov.ndim - 2 - tail],
+            "target": target.shape[: target.ndim - 1 - tail],
             "sensors": sensors.shape[:-2],
         }
         for name, allow_zero in _PER_SENSOR:
@@ -203,11 +237,32 @@ class PlanningProblem:
                 f"objective must be an objective such as activetrack.objective.TRACE, "
                 f"got {self.objective!r}"
             )
-        trailing = {"prior_cov": (2, 2), "target": (2,), "sensors": (m, 2)}
+        if self.models is not None:
+            codes = sensor_models.SensorTeam(self.models, 1.0, 1.0).models
+            if codes.shape[-1] != m:
+                raise ValueError(f"models must have shape (..., {m}), got {codes.shape}")
+            batch_of["models"] = codes.shape[:-1]
+            values["models"] = codes
+        if self.pose_cov is not None:
+            cov = sensor_models.SensorTeam(0, 1.0, 1.0, self.pose_cov).pose_cov
+            if cov.shape[-3] != m:
+                raise ValueError(f"pose_cov must have shape (..., {m}, 2, 2), got {cov.shape}")
+            batch_of["pose_cov"] = cov.shape[:-3]
+            values["pose_cov"] = cov
+        k_axis = (kk,) if multi else ()
+        trailing = {
+            "prior_cov": (*k_axis, 2, 2),
+            "target": (*k_axis, 2),
+            "sensors": (m, 2),
+            "models": (m,),
+            "pose_cov": (m, 2, 2),
+        }
         for name, value in values.items():
             shape = batch + trailing.get(name, (m,))
             if value.ndim == 0:
                 value = np.full(shape, float(value))
+            elif name == "models":
+                value = np.array(np.broadcast_to(value, shape))
             else:  # a copy the caller cannot change
                 value = np.array(np.broadcast_to(value, shape) if value.shape != shape else value)
             value.setflags(write=False)
@@ -249,10 +304,15 @@ class PlanningProblem:
         sigma_d2: ArrayLike,
         sigma_theta2: ArrayLike,
         objective: TraceObjective = TRACE,
+        models: ArrayLike | None = None,
+        pose_cov: ArrayLike | None = None,
     ) -> PlanningProblem:
         """Return the problem at ``prediction`` (``prior_cov`` and ``target`` its position
         blocks); the other arguments are the fields of the same names."""
-        return cls(None, None, sensors, r, rho, sigma_d2, sigma_theta2, objective, prediction)
+        return cls(
+            None, None, sensors, r, rho, sigma_d2, sigma_theta2, objective, prediction,
+            models, pose_cov,
+        )  # fmt: skip
 
     @classmethod
     def _validated(cls, **values: Any) -> PlanningProblem:
@@ -274,11 +334,25 @@ class PlanningProblem:
         objective = problems[0].objective
         if any(p.objective is not objective for p in problems):
             raise ValueError("problems must all have the same objective")
-        arrays = {
-            f.name: np.stack([getattr(p, f.name) for p in problems])
-            for f in fields(cls)
-            if f.name not in ("objective", "prediction")
-        }
+        multi = problems[0].multi_target
+        if any(p.multi_target != multi for p in problems):
+            raise ValueError("problems must all be multi_target, or none")
+        arrays: dict[str, Any] = {"multi_target": multi}
+        for f in fields(cls):
+            if f.name in ("objective", "prediction", "multi_target"):
+                continue
+            vals = [getattr(p, f.name) for p in problems]
+            if f.name in ("models", "pose_cov"):
+                if all(v is None for v in vals):
+                    arrays[f.name] = None
+                    continue
+                if f.name == "models":
+                    vals = [np.zeros(p.n_sensors, np.int8) if v is None else v
+                            for v, p in zip(vals, problems, strict=True)]  # fmt: skip
+                else:
+                    vals = [np.zeros((p.n_sensors, 2, 2)) if v is None else v
+                            for v, p in zip(vals, problems, strict=True)]  # fmt: skip
+            arrays[f.name] = np.stack(vals)
         preds = [p.prediction for p in problems]
         prediction = None
         if any(q is not None for q in preds):
@@ -310,7 +384,7 @@ class PlanningProblem:
                     mean.setflags(write=False)
                     cov.setflags(write=False)
                     value = value._trusted(mean, cov)
-            elif f.name != "objective":
+            elif f.name not in ("objective", "multi_target") and value is not None:
                 value = np.array(value[index])
                 value.setflags(write=False)
             values[f.name] = value
@@ -319,7 +393,40 @@ class PlanningProblem:
     @property
     def batch_shape(self) -> tuple[int, ...]:
         """Return the batch axes, ``()`` for a single problem."""
-        return self.target.shape[:-1]
+        return self.target.shape[: -2 if self.multi_target else -1]
+
+    @property
+    def n_targets(self) -> int:
+        """Return K (1 unless ``multi_target``)."""
+        return int(self.target.shape[-2]) if self.multi_target else 1
+
+    @property
+    def is_paper(self) -> bool:
+        """Return whether the paper's problem holds: one target, range-and-bearing sensors
+        at known positions, the trace objective (Section IV-A's exact solve applies)."""
+        return (
+            not self.multi_target
+            and (self.models is None or not np.any(self.models))
+            and self.pose_cov is None
+            and self.objective.name == "trace"
+        )
+
+    @property
+    def targets(self) -> FloatArray:
+        """Return the predicted target positions with a targets axis, (..., K, 2)."""
+        return self.target if self.multi_target else self.target[..., None, :]
+
+    @property
+    def prior_infos(self) -> FloatArray:
+        """Return every target's prior information with a targets axis, (..., K, 2, 2)."""
+        info = self.prior_info
+        return info if self.multi_target else info[..., None, :, :]
+
+    @cached_property
+    def weights(self) -> tuple[FloatArray, FloatArray]:
+        """Return the component weights ``(w_d, w_theta)`` (..., M), 0 for unused ones."""
+        models = 0 if self.models is None else self.models
+        return sensor_models.weights(models, self.sigma_d2, self.sigma_theta2)
 
     @property
     def n_sensors(self) -> int:
@@ -344,9 +451,19 @@ class PlanningProblem:
         The batch axes of ``next_positions`` (just before ``(M, 2)``) match the problem's;
         any further leading axes (candidates) broadcast. Shape: the leading axes.
         """
-        rel = np.asarray(next_positions, dtype=np.float64) - self.target[..., None, :]
-        info = total_information(self.prior_info, rel, self.sigma_d2, self.sigma_theta2)
-        return self.objective.of_information(info)
+        pos = np.asarray(next_positions, dtype=np.float64)
+        if self.is_paper:  # the paper's arithmetic, unchanged
+            rel = pos - self.target[..., None, :]
+            info = total_information(self.prior_info, rel, self.sigma_d2, self.sigma_theta2)
+            return self.objective.of_information(info)
+        # Every target k: Y_k = P11_k^{-1} + sum_i J_eff_i(p_i - t_k); objective over k.
+        rel = pos[..., None, :, :] - self.targets[..., :, None, :]  # (..., K, M, 2)
+        w_d, w_t = self.weights
+        cov = None if self.pose_cov is None else self.pose_cov[..., None, :, :, :]
+        a, b, c = sensor_models.team_entries(
+            self.prior_infos, rel, w_d[..., None, :], w_t[..., None, :], cov
+        )
+        return self.objective.of_targets(a, b, c)
 
     def trace(self, next_positions: ArrayLike) -> FloatArray:
         """Return :meth:`score` (the name from when the trace was the only objective)."""
@@ -356,7 +473,8 @@ class PlanningProblem:
         """Return each sensor's largest constraint violation (0 when feasible), shape (..., M)."""
         p = np.asarray(next_positions, dtype=np.float64)
         step = np.linalg.norm(p - self.sensors, axis=-1) - self.r
-        dist = self.rho - np.linalg.norm(p - self.target[..., None, :], axis=-1)
+        near = np.linalg.norm(p[..., None, :, :] - self.targets[..., :, None, :], axis=-1)
+        dist = self.rho - near.min(axis=-2)  # the nearest target
         return np.maximum(np.maximum(step, dist), 0.0)
 
 

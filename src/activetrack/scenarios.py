@@ -30,6 +30,8 @@ SIGMA_THETA2_RANGE = (1e-10, 1e2)
 P0_RANGE = (1e-8, 1e16)
 ORIENTATION_MAX = 1e3
 N_SENSORS_MAX = 10_000
+N_TARGETS_MAX = 100
+POSE_COV_MAX = 1e8
 N_STEPS_MAX = 10**9
 REWARD_SCALE_RANGE = (1e-12, 1e12)
 MAX_TRACE_RANGE = (1e-300, 1e300)
@@ -39,6 +41,10 @@ MAX_TRACE_RANGE = (1e-300, 1e300)
 INFORMATION_RATIO_MAX = 1e10
 
 _PER_SENSOR = ("sigma_d2", "sigma_theta2", "vmax", "rho", "orientation")
+#: Sensor model names (:class:`activetrack.sensor_models.SensorModel`, lower case).
+SENSOR_MODELS = ("range_bearing", "range", "bearing")
+#: Objective names (:data:`activetrack.objective.OBJECTIVES`).
+OBJECTIVE_NAMES = ("trace", "worst_trace", "logdet")
 
 
 def _count(name: str, value: object, hi: int) -> int:
@@ -127,6 +133,24 @@ class Scenario:
             [1e-300, 1e300], or None.
         reward_scale: the environments' reward is ``-reward_scale * trace`` (1 = the paper)
             [1e-12, 1e12].
+        n_targets: number of targets K [1, 100]. With K > 1, ``motion`` and ``q`` may be
+            per target (a tuple of K), ``x0`` and ``x0_hat`` are per target (K rows, each
+            of its model's state dimension), and ``P0`` is shared (a diagonal of n
+            entries) or per target (K diagonals or K matrices). Every target has its own
+            EKF; measurements are labelled by target (known data association).
+        sensor_model: per-sensor measurement model, ``"range_bearing"`` (eq. 4),
+            ``"range"`` or ``"bearing"`` (a name for every sensor or a tuple of M); the
+            variance of a component a sensor does not measure is kept but unused.
+        pose_cov: covariance of each sensor's position fix (m^2): 0 (known exactly, the
+            paper), a variance s >= 0 for every sensor (``s I``), M variances, one 2x2
+            matrix for every sensor, or M 2x2 matrices (symmetric positive semidefinite,
+            entries at most 1e8). Stored as a float or nested tuples.
+        account_pose: whether the filter accounts for the pose uncertainty in its
+            measurement noise (``R + H_s Sigma H_s^T``); False gives a filter that
+            ignores it (for studies of that error).
+        objective: ``"trace"`` (sum of the targets' posterior position traces, eq. 17),
+            ``"worst_trace"`` (the largest) or ``"logdet"`` (sum of log-determinants);
+            the reward is minus it at the posterior.
 
     One coupled limit: the first predicted position variance (from P0, the model and q)
     may be at most 1e10 times the smallest range variance, so that one update never
@@ -152,6 +176,11 @@ class Scenario:
     n_steps: int = 50
     max_trace: float | None = None
     reward_scale: float = 1.0
+    n_targets: int = 1
+    sensor_model: str | tuple[str, ...] = "range_bearing"
+    pose_cov: float | tuple = 0.0
+    account_pose: bool = True
+    objective: str = "trace"
     _cache: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -164,20 +193,28 @@ class Scenario:
         put("n_sensors", m)
         put("n_steps", _count("n_steps", self.n_steps, N_STEPS_MAX))
         put("dt", _real("dt", self.dt, *DT_RANGE))
-        put("q", _real("q", self.q, 0.0, Q_MAX, zero=True))
         put("sensor_radius", _real("sensor_radius", self.sensor_radius, 0.0, LENGTH_MAX))
         put("reward_scale", _real("reward_scale", self.reward_scale, *REWARD_SCALE_RANGE))
         if self.max_trace is not None:
             put("max_trace", _real("max_trace", self.max_trace, *MAX_TRACE_RANGE))
         if not isinstance(self.target_init, str) or self.target_init not in ("fixed", "gaussian"):
             raise ValueError(f"target_init must be 'fixed' or 'gaussian', got {self.target_init!r}")
-        if not isinstance(self.motion, LinearMotionModel) and (
-            not isinstance(self.motion, str) or self.motion not in MODELS
-        ):
+        kk = _count("n_targets", self.n_targets, N_TARGETS_MAX)
+        put("n_targets", kk)
+        put("motion", self._converted_motion(kk))
+        if kk > 1 and isinstance(self.q, (tuple, list, np.ndarray)):
+            put("q", _vector("q", self.q, kk, 0.0, Q_MAX, zero=True, why=" (one per target)"))
+        else:
+            put("q", _real("q", self.q, 0.0, Q_MAX, zero=True))
+        if not isinstance(self.objective, str) or self.objective not in OBJECTIVE_NAMES:
             raise ValueError(
-                f"motion must be one of {sorted(MODELS)} or a LinearMotionModel, "
-                f"got {self.motion!r}"
+                f"objective must be one of {list(OBJECTIVE_NAMES)}, got {self.objective!r}"
             )
+        if not isinstance(self.account_pose, (bool, np.bool_)):
+            raise ValueError(f"account_pose must be True or False, got {self.account_pose!r}")
+        put("account_pose", bool(self.account_pose))
+        put("sensor_model", self._converted_models(m))
+        put("pose_cov", self._converted_pose_cov(m))
         put(
             "sensor_center",
             _vector("sensor_center", self.sensor_center, 2, -LENGTH_MAX, LENGTH_MAX, zero=True),
@@ -197,13 +234,133 @@ class Scenario:
                 f"vmax * dt (the reach r of eq. 13) must be at most {LENGTH_MAX:g}, "
                 f"got vmax={self.vmax!r}, dt={self.dt!r}"
             )
-        n = self.model.dim
-        why = f" (the state of motion={getattr(self.motion, 'name', self.motion)!r})"
-        for key in ("x0", "x0_hat"):
-            value = getattr(self, key)
-            put(key, _vector(key, value, n, -STATE_MAX, STATE_MAX, zero=True, why=why))
-        put("P0", self._converted_p0(n))
+        if kk == 1:
+            n = self.model.dim
+            why = f" (the state of motion={getattr(self.motion, 'name', self.motion)!r})"
+            for key in ("x0", "x0_hat"):
+                value = getattr(self, key)
+                put(key, _vector(key, value, n, -STATE_MAX, STATE_MAX, zero=True, why=why))
+            put("P0", self._converted_p0(n))
+        else:
+            dims = [mdl.dim for mdl in self.target_models]
+            for key in ("x0", "x0_hat"):
+                put(key, self._per_target_states(key, getattr(self, key), dims))
+            put("P0", self._per_target_p0(dims))
         self._check_information_ratio()
+
+    def _converted_motion(self, kk: int) -> Any:
+        """Return ``motion`` checked: one model, or (K > 1) a tuple of K models."""
+
+        def one(v: object) -> str | LinearMotionModel:
+            if isinstance(v, LinearMotionModel) or (isinstance(v, str) and v in MODELS):
+                return v
+            raise ValueError(
+                f"motion must be one of {sorted(MODELS)} or a LinearMotionModel "
+                f"(or, with n_targets > 1, a tuple of one per target), got {self.motion!r}"
+            )
+
+        if kk > 1 and isinstance(self.motion, (tuple, list)):
+            if len(self.motion) != kk:
+                raise ValueError(
+                    f"motion must name one model per target ({kk}), got {len(self.motion)}"
+                )
+            return tuple(one(v) for v in self.motion)
+        return one(self.motion)
+
+    def _converted_models(self, m: int) -> str | tuple[str, ...]:
+        """Return ``sensor_model`` as a name, or a tuple of M names."""
+
+        def one(v: object) -> str:
+            if isinstance(v, str) and v in SENSOR_MODELS:
+                return v
+            raise ValueError(
+                f"sensor_model must be one of {list(SENSOR_MODELS)} or a tuple of {m} of "
+                f"them (one per sensor), got {self.sensor_model!r}"
+            )
+
+        v = self.sensor_model
+        if isinstance(v, (tuple, list, np.ndarray)):
+            if len(v) != m:
+                raise ValueError(f"sensor_model must name one model per sensor ({m}), got {len(v)}")
+            names = tuple(one(x) for x in v)
+            return names[0] if len(set(names)) == 1 else names
+        return one(v)
+
+    def _converted_pose_cov(self, m: int) -> float | tuple:
+        """Return ``pose_cov`` checked (PSD, in range) in the form it was given."""
+        arr = real_array("pose_cov", self.pose_cov)
+        if arr.shape not in ((), (m,), (2, 2), (m, 2, 2)):
+            raise ValueError(
+                f"pose_cov must be a variance, {m} variances (one per sensor), a 2x2 matrix "
+                f"or {m} 2x2 matrices, got shape {arr.shape}"
+            )
+        if arr.ndim <= 1:
+            _in_range("pose_cov", arr, 0.0, POSE_COV_MAX, zero=True)
+            return float(arr) if arr.ndim == 0 else tuple(float(v) for v in arr)
+        mats = arr.reshape(-1, 2, 2)
+        _in_range("pose_cov diagonal", mats[:, [0, 1], [0, 1]], 0.0, POSE_COV_MAX, zero=True)
+        det = mats[:, 0, 0] * mats[:, 1, 1] - mats[:, 0, 1] ** 2
+        if np.any(mats[:, 0, 1] != mats[:, 1, 0]) or np.any(det < 0.0):
+            raise ValueError(
+                f"pose_cov must be symmetric positive semidefinite, got {arr.tolist()!r}"
+            )
+        return (
+            tuple(tuple(tuple(float(v) for v in row) for row in mat) for mat in mats)
+            if arr.ndim == 3
+            else tuple(tuple(float(v) for v in row) for row in arr)
+        )
+
+    def _per_target_states(self, key: str, value: object, dims: list[int]) -> tuple:
+        """Return K state vectors (one per target, each of its model's dimension)."""
+        kk = len(dims)
+        rows = value if isinstance(value, (tuple, list, np.ndarray)) else None
+        if (
+            rows is None
+            or len(rows) != kk
+            or not all(isinstance(r, (tuple, list, np.ndarray)) for r in rows)
+        ):
+            raise ValueError(
+                f"{key} must hold one state per target ({kk} rows of {dims} entries) when "
+                f"n_targets > 1, got {value!r}"
+            )
+        return tuple(
+            _vector(f"{key}[{k}]", r, n, -STATE_MAX, STATE_MAX, zero=True)
+            for k, (r, n) in enumerate(zip(rows, dims, strict=True))
+        )
+
+    def _per_target_p0(self, dims: list[int]) -> tuple:
+        """Return P0 for K targets: a shared diagonal, or K diagonals or matrices."""
+        kk = len(dims)
+        P0 = self.P0
+        flat = np.asarray(P0, dtype=object)
+        shared = (
+            flat.ndim == 1
+            and len(P0) == dims[0]
+            and len(set(dims)) == 1
+            and not any(isinstance(v, (tuple, list, np.ndarray)) for v in P0)
+        )
+        if shared:
+            arr = real_array("P0", P0)
+            _in_range("P0 diagonal", arr, *P0_RANGE, zero=False)
+            return tuple(float(v) for v in arr)
+        if not isinstance(P0, (tuple, list)) or len(P0) != kk:
+            raise ValueError(
+                f"P0 must be a shared diagonal ({dims[0]} entries) or one diagonal or matrix "
+                f"per target ({kk}) when n_targets > 1, got {P0!r}"
+            )
+        out = []
+        for k, (pk, n) in enumerate(zip(P0, dims, strict=True)):
+            arr = real_array(f"P0[{k}]", pk)
+            if arr.shape not in ((n,), (n, n)):
+                raise ValueError(f"P0[{k}] must have shape ({n},) or ({n}, {n}), got {arr.shape}")
+            _in_range(f"P0[{k}] diagonal", np.diag(arr) if arr.ndim == 2 else arr, *P0_RANGE,
+                      zero=False)  # fmt: skip
+            if arr.ndim == 2:
+                spd(f"P0[{k}]", arr)
+                out.append(tuple(tuple(float(v) for v in row) for row in arr))
+            else:
+                out.append(tuple(float(v) for v in arr))
+        return tuple(out)
 
     def _converted_p0(self, n: int) -> tuple:
         """Return P0 converted (a tuple, or a tuple of tuples), checked SPD and in range."""
@@ -221,8 +378,10 @@ class Scenario:
 
     def _check_information_ratio(self) -> None:
         """Check the coupled limit of the class docstring (one update's variance reduction)."""
-        P1 = self.model.predict(np.zeros(self.model.dim), self.initial_cov)[1]
-        ratio = float(np.max(np.diag(P1)[:2])) / float(np.min(self.per_sensor("sigma_d2")))
+        ratio = max(
+            float(np.max(np.diag(mdl.predict(np.zeros(mdl.dim), P0)[1])[:2]))
+            for mdl, P0 in zip(self.target_models, self.initial_covs, strict=True)
+        ) / float(np.min(self.per_sensor("sigma_d2")))
         if not ratio <= INFORMATION_RATIO_MAX:
             raise ValueError(
                 "sigma_d2 is too small for the predicted position variance "
@@ -233,21 +392,78 @@ class Scenario:
     # Derived arrays -------------------------------------------------------------------
     @property
     def model(self) -> LinearMotionModel:
-        """Return the target motion model (built once)."""
-        if "model" not in self._cache:
-            if isinstance(self.motion, LinearMotionModel):
-                self._cache["model"] = self.motion
-            else:
-                self._cache["model"] = make_model(self.motion, self.q, self.dt)
-        return self._cache["model"]
+        """Return the target motion model (the first target's when K > 1; built once)."""
+        return self.target_models[0]
+
+    @property
+    def target_models(self) -> tuple[LinearMotionModel, ...]:
+        """Return every target's motion model (K of them; built once)."""
+        if "models" not in self._cache:
+            kk = self.n_targets
+            motions = self.motion if isinstance(self.motion, tuple) else (self.motion,) * kk
+            qs = self.q if isinstance(self.q, tuple) else (self.q,) * kk
+            self._cache["models"] = tuple(
+                mo if isinstance(mo, LinearMotionModel) else make_model(mo, q, self.dt)
+                for mo, q in zip(motions, qs, strict=True)
+            )
+        return self._cache["models"]
 
     @property
     def initial_cov(self) -> FloatArray:
-        """Return P0 as a full matrix (a fresh copy; validated once)."""
+        """Return P0 as a full matrix (the first target's when K > 1; a fresh copy)."""
+        return self.initial_covs[0].copy()
+
+    @property
+    def initial_covs(self) -> tuple[FloatArray, ...]:
+        """Return every target's P0 as a full matrix (validated once; do not modify)."""
         if "P0" not in self._cache:
-            P0 = np.asarray(self.P0, dtype=np.float64)
-            self._cache["P0"] = np.diag(P0) if P0.ndim == 1 else P0
-        return self._cache["P0"].copy()
+
+            def full(p: object) -> FloatArray:
+                arr = np.asarray(p, dtype=np.float64)
+                return np.diag(arr) if arr.ndim == 1 else arr
+
+            kk = self.n_targets
+            shared = kk == 1 or not isinstance(self.P0[0], tuple)
+            covs = (full(self.P0),) * kk if shared else tuple(full(p) for p in self.P0)
+            self._cache["P0"] = covs
+        return self._cache["P0"]
+
+    def target_states(self, key: str) -> tuple[FloatArray, ...]:
+        """Return ``x0`` or ``x0_hat`` as K float64 vectors (one per target)."""
+        if key not in ("x0", "x0_hat"):
+            raise ValueError(f"key must be 'x0' or 'x0_hat', got {key!r}")
+        v = getattr(self, key)
+        rows = (v,) if self.n_targets == 1 else v
+        return tuple(np.asarray(r, dtype=np.float64) for r in rows)
+
+    @property
+    def sensor_models(self) -> np.ndarray:
+        """Return the per-sensor model codes (M,) int8 (0 range-bearing, 1 range, 2 bearing)."""
+        names = self.sensor_model
+        names = (names,) * self.n_sensors if isinstance(names, str) else names
+        return np.array([SENSOR_MODELS.index(n) for n in names], dtype=np.int8)
+
+    @property
+    def pose_covariances(self) -> FloatArray | None:
+        """Return the per-sensor pose covariances (M, 2, 2), or None when all are zero."""
+        arr = np.asarray(self.pose_cov, dtype=np.float64)
+        if not np.any(arr):
+            return None
+        m = self.n_sensors
+        if arr.ndim <= 1:
+            return np.broadcast_to(arr, (m,))[:, None, None] * np.eye(2)
+        return np.array(np.broadcast_to(arr, (m, 2, 2)))
+
+    @property
+    def is_paper_model(self) -> bool:
+        """Return whether this is the paper's measurement setup: one target, every sensor
+        range-and-bearing, poses known, the trace objective (today's arithmetic applies)."""
+        return (
+            self.n_targets == 1
+            and self.sensor_model == "range_bearing"
+            and self.pose_covariances is None
+            and self.objective == "trace"
+        )
 
     def per_sensor(self, name: str) -> FloatArray:
         """Return the per-sensor parameter ``name`` as an (M,) array."""
@@ -266,15 +482,26 @@ class Scenario:
         return make_scenario(self, **overrides)
 
     def to_dict(self) -> dict[str, Any]:
-        """Return the fields as JSON-friendly values (a custom motion model by name)."""
+        """Return the fields as JSON-friendly values (a custom motion model by name).
+
+        The fields beyond the paper's (:data:`EXTENSIONS`) appear only when they differ
+        from their defaults, so a paper-like scenario's record is what it always was.
+        """
         out = {}
         for f in dataclasses.fields(self):
             if f.name.startswith("_"):
                 continue
             v = getattr(self, f.name)
+            if f.name in EXTENSIONS and _same(v, f.default):
+                continue
+            if isinstance(v, tuple) and any(isinstance(e, LinearMotionModel) for e in v):
+                v = tuple(e.name if isinstance(e, LinearMotionModel) else e for e in v)
             out[f.name] = v.name if isinstance(v, LinearMotionModel) else v
         return out
 
+
+#: The fields added beyond the paper's setup (several targets, sensor models, poses).
+EXTENSIONS = ("n_targets", "sensor_model", "pose_cov", "account_pose", "objective")
 
 PRESETS: dict[str, dict[str, Any]] = {
     # Section V: heterogeneous team of three, CV target, 50 steps of 0.1 s.

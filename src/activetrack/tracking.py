@@ -4,7 +4,9 @@
 process noise (eq. 2), every sensor draws its distance and bearing (eq. 4) and the EKF
 updates (eq. 11). :class:`LoopParams` holds the scenario's arrays it uses. The stateful
 loop around it (initial conditions, random streams, scoring, episode ends, prediction)
-is :class:`activetrack.world.World`.
+is :class:`activetrack.world.World`. :func:`advance_target` is the same step for one of
+several targets, with the sensors' measurement models and uncertain position fixes
+(:mod:`activetrack.sensor_models`).
 """
 
 from __future__ import annotations
@@ -13,14 +15,36 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from activetrack import ekf, measurement
+from activetrack import ekf, measurement, sensor_models
 from activetrack.scenarios import Scenario
 from activetrack.validation import FloatArray
 
 
 @dataclass(frozen=True, eq=False)
+class TargetParams:
+    """One target's motion model arrays (eq. 2): ``Phi``, ``Q`` and a square root of ``Q``."""
+
+    Phi: FloatArray
+    Q: FloatArray
+    noise_factor: FloatArray
+
+    @property
+    def dim(self) -> int:
+        """Return the state dimension n of this target."""
+        return int(self.Phi.shape[0])
+
+
+@dataclass(frozen=True, eq=False)
 class LoopParams:
-    """The scenario's arrays used at every step (built once from a :class:`Scenario`)."""
+    """The scenario's arrays used at every step (built once from a :class:`Scenario`).
+
+    ``Phi``, ``Q`` and ``noise_factor`` are the first target's (the only one in the
+    paper); ``targets`` holds every target's. ``models`` (M,) int8 and ``weights``
+    ``(w_d, w_theta)`` describe the sensors' measurement models (None: all range and
+    bearing, today's arithmetic); ``pose_cov`` (M, 2, 2) is the covariance of the
+    sensors' position fixes the world draws, ``filter_pose_cov`` the one the filter
+    accounts for (None when it ignores it or there is none).
+    """
 
     Phi: FloatArray
     Q: FloatArray
@@ -30,13 +54,27 @@ class LoopParams:
     orientation: FloatArray
     r: FloatArray
     rho: FloatArray
+    targets: tuple[TargetParams, ...] = ()
+    models: np.ndarray | None = None
+    weights: tuple[FloatArray, FloatArray] | None = None
+    pose_cov: FloatArray | None = None
+    filter_pose_cov: FloatArray | None = None
+
+    def __post_init__(self) -> None:
+        if not self.targets:
+            object.__setattr__(
+                self, "targets", (TargetParams(self.Phi, self.Q, self.noise_factor),)
+            )
 
     @property
     def noise_std(self) -> FloatArray:
-        """Return the (M, 2) measurement noise standard deviations ``[sigma_d, sigma_theta]``."""
+        """Return the (M, 2) measurement noise standard deviations ``[sigma_d, sigma_theta]``
+        (0 for a component a sensor does not measure)."""
         std = self.__dict__.get("_std")
         if std is None:
             std = np.stack([np.sqrt(self.sigma_d2), np.sqrt(self.sigma_theta2)], -1)
+            if self.models is not None:
+                std = std * sensor_models.USES[self.models]
             object.__setattr__(self, "_std", std)
         return std
 
@@ -44,21 +82,40 @@ class LoopParams:
     def from_scenario(cls, sc: Scenario) -> LoopParams:
         """Return the loop arrays of ``sc``."""
         m = sc.model
+        codes = sc.sensor_models
+        models = None if not np.any(codes) else codes
+        sd2, st2 = sc.per_sensor("sigma_d2"), sc.per_sensor("sigma_theta2")
+        weights = None if models is None else sensor_models.weights(models, sd2, st2)
+        pose = sc.pose_covariances
         return cls(
             m.Phi,
             m.Q,
             m.noise_factor,
-            sc.per_sensor("sigma_d2"),
-            sc.per_sensor("sigma_theta2"),
+            sd2,
+            st2,
             sc.per_sensor("orientation"),
             sc.r,
             sc.per_sensor("rho"),
+            tuple(TargetParams(t.Phi, t.Q, t.noise_factor) for t in sc.target_models),
+            models,
+            weights,
+            pose,
+            pose if sc.account_pose else None,
         )
 
     @property
+    def n_sensors(self) -> int:
+        """Return M."""
+        return int(self.sigma_d2.shape[0])
+
+    @property
     def n_noise(self) -> int:
-        """Return the number of standard normals one step consumes: n + 2M."""
-        return self.Phi.shape[0] + 2 * self.sigma_d2.shape[0]
+        """Return the standard normals one step consumes: ``sum_k n_k + 2MK`` (process noise
+        of every target, then every target's measurements, sensor-major), ``+ 2M`` for the
+        sensors' position fixes when they are uncertain. The paper: ``n + 2M``."""
+        m, kk = self.n_sensors, len(self.targets)
+        pose = 2 * m if self.pose_cov is not None else 0
+        return sum(t.dim for t in self.targets) + 2 * m * kk + pose
 
 
 def advance(
@@ -71,15 +128,49 @@ def advance(
 ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
     """Return ``(x_true(k+1), z(k+1), x_hat(k+1|k+1), P(k+1|k+1))``, batched over leading axes.
 
-    ``sensors`` are the sensors' new positions ``p_S(k+1)`` and ``noise`` holds the step's
-    ``n + 2M`` standard normals (shape (..., n + 2M)).
+    One target (the first), sensors at known positions: ``sensors`` are the sensors' new
+    positions ``p_S(k+1)`` and ``noise`` holds the step's ``n + 2M`` standard normals
+    (shape (..., n + 2M)). :func:`advance_target` is the general step of one target.
     """
     n = x_true.shape[-1]
-    x_next = x_true @ params.Phi.T + noise[..., :n] @ params.noise_factor.T
+    return advance_target(
+        params, params.targets[0], x_true, x_pred, P_pred, sensors, sensors,
+        noise[..., :n], noise[..., n:],
+    )  # fmt: skip
+
+
+def advance_target(
+    params: LoopParams,
+    target: TargetParams,
+    x_true: FloatArray,
+    x_pred: FloatArray,
+    P_pred: FloatArray,
+    sensors: FloatArray,
+    fixes: FloatArray,
+    process_noise: FloatArray,
+    measurement_noise: FloatArray,
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """Return one target's ``(x_true(k+1), z(k+1), x_hat(k+1|k+1), P(k+1|k+1))``, batched.
+
+    The true target moves (eq. 2) with ``process_noise`` (..., n) standard normals; every
+    sensor measures it from its true position ``sensors`` (..., M, 2) (eq. 4, its model's
+    components; ``measurement_noise`` (..., 2M) standard normals, sensor-major); the EKF
+    (eq. 11) updates at the position fixes ``fixes`` the team believes (the same array
+    when poses are known), with ``params.filter_pose_cov`` in its noise.
+    """
+    x_next = x_true @ target.Phi.T + process_noise @ target.noise_factor.T
     z = measurement.range_bearing(x_next[..., :2], sensors, params.orientation, wrap=False)
-    z += noise[..., n:].reshape(*noise.shape[:-1], -1, 2) * params.noise_std
+    z += measurement_noise.reshape(*measurement_noise.shape[:-1], -1, 2) * params.noise_std
     measurement.wrap_angle(z[..., 1], inplace=True)  # wrapped once, after the noise
+    if params.models is None and params.filter_pose_cov is None:
+        x_post, P_post = ekf.update(
+            x_pred, P_pred, z, fixes, params.sigma_d2, params.sigma_theta2, params.orientation
+        )
+        return x_next, z, x_post, P_post
+    if params.models is not None:  # an unmeasured component is exactly 0
+        z = np.where(sensor_models.USES[params.models], z, 0.0)
     x_post, P_post = ekf.update(
-        x_pred, P_pred, z, sensors, params.sigma_d2, params.sigma_theta2, params.orientation
-    )
+        x_pred, P_pred, z, fixes, params.sigma_d2, params.sigma_theta2, params.orientation,
+        models=params.models, weights=params.weights, pose_cov=params.filter_pose_cov,
+    )  # fmt: skip
     return x_next, z, x_post, P_post

@@ -42,7 +42,7 @@ import numpy as np
 from activetrack import observation, sensor_motion, tracking
 from activetrack.ekf import position_nees
 from activetrack.motion import predict
-from activetrack.objective import TRACE
+from activetrack.objective import OBJECTIVES, TRACE
 from activetrack.problem import PlanningProblem, Prediction
 from activetrack.scenarios import Scenario, make_scenario
 from activetrack.validation import FloatArray
@@ -51,6 +51,8 @@ from activetrack.validation import FloatArray
 DEFAULT_NOISE_BLOCK = 64
 
 _Selection = int | slice | np.ndarray
+#: The state fields every target has its own of.
+_TARGET_FIELDS = ("x_true", "x_hat", "P", "x_pred", "P_pred")
 
 
 class StepResult(NamedTuple):
@@ -110,23 +112,39 @@ class World:
         self.num_copies = N = int(num_copies)
         self.noise_block = int(noise_block)
         self.n_sensors = m = sc.n_sensors
+        #: K, the number of targets.
+        self.n_targets = K = sc.n_targets
         self._n_noise = p.n_noise
         self._n_steps = int(sc.n_steps)
         self._max_trace = np.inf if sc.max_trace is None else float(sc.max_trace)
         self._scale = float(sc.reward_scale)
         #: The score of a configuration (eq. 12, 17); the reward is minus it at the posterior.
-        self.objective = TRACE
+        self.objective = OBJECTIVES[sc.objective]
+        # The paper's loop (one target, the trace): the score is the trace itself.
+        self._plain = K == 1 and self.objective is TRACE
+        self._pose = p.pose_cov is not None
+        if self._pose:  # a square root of each sensor's (PSD) fix covariance
+            w, v = np.linalg.eigh(p.pose_cov)
+            self._pose_factor = v * np.sqrt(np.clip(w, 0.0, None))[..., None, :]
         self._dt = float(sc.dt)
-        self._x0 = np.asarray(sc.x0, dtype=np.float64)
-        self._x0_hat = np.asarray(sc.x0_hat, dtype=np.float64)
-        self._P0 = sc.initial_cov
-        self._chol0 = np.linalg.cholesky(self._P0)
+        self._x0s = sc.target_states("x0")
+        self._x0_hats = sc.target_states("x0_hat")
+        self._P0s = sc.initial_covs
+        self._chol0s = [np.linalg.cholesky(P0) for P0 in self._P0s]
+        # Offsets of each target's process and measurement noise in a step's normals.
+        dims = [t.dim for t in p.targets]
+        proc = np.cumsum([0, *dims])
+        self._noise_slices = [
+            (slice(int(proc[k]), int(proc[k + 1])),
+             slice(int(proc[-1]) + 2 * m * k, int(proc[-1]) + 2 * m * (k + 1)))
+            for k in range(K)
+        ]  # fmt: skip
+        self._pose_slice = slice(int(proc[-1]) + 2 * m * K, None)
         self._center = np.asarray(sc.sensor_center, dtype=np.float64)
         # Observation constants (activetrack.observation).
         self.length_scale = observation.length_scale(sc)
-        self._constants = observation.sensor_constants(
-            p.sigma_d2, p.sigma_theta2, p.r, p.rho, self.length_scale
-        )
+        self.layout = observation.layout_of(sc)
+        self._constants = self.layout.sensor_constants(sc, self.length_scale)
         self._order = observation.cyclic_order(m)
 
         self._rngs: list[np.random.Generator | None] = [None] * N
@@ -139,18 +157,26 @@ class World:
         # One copy keeps its state unbatched (Python numbers for the counters): a step then
         # stores by rebinding, with no NumPy indexing, which costs microseconds per call.
         self._one = N == 1
-        P_pred = predict(self._x0_hat, self._P0, p.Phi, p.Q)[1]
+        targets = []
+        for tp, x0_hat, P0 in zip(p.targets, self._x0_hats, self._P0s, strict=True):
+            targets.append(
+                {
+                    "x_true": x0_hat.copy(),
+                    "x_hat": x0_hat.copy(),
+                    "P": P0.copy(),
+                    "x_pred": tp.Phi @ x0_hat,
+                    "P_pred": predict(x0_hat, P0, tp.Phi, tp.Q)[1],
+                }
+            )
+        sensors = np.broadcast_to(
+            self._x0_hats[0][:2] + np.array([self.length_scale, 0.0]), (m, 2)
+        ).copy()
         state = {
-            "x_true": self._x0_hat.copy(),
-            "x_hat": self._x0_hat.copy(),
-            "P": self._P0.copy(),
-            "x_pred": p.Phi @ self._x0_hat,
-            "P_pred": P_pred,
-            "sensors": np.broadcast_to(
-                self._x0_hat[:2] + np.array([self.length_scale, 0.0]), (m, 2)
-            ).copy(),
+            "sensors": sensors,
+            "fixes": sensors.copy(),
             "k": 0,
             "trace": 0.0,
+            "score": 0.0,
             "projected": np.zeros(m, dtype=bool),
             "n_projected": np.zeros(m, dtype=np.int64),
             "terminated": False,
@@ -159,21 +185,50 @@ class World:
         }
         if not self._one:
             state = {k: np.broadcast_to(v, (N, *np.shape(v))).copy() for k, v in state.items()}
+            targets = [
+                {k: np.broadcast_to(v, (N, *np.shape(v))).copy() for k, v in t.items()}
+                for t in targets
+            ]
         self._s: dict[str, Any] = state
+        #: Per-target state: x_true, x_hat, P, x_pred, P_pred of each target.
+        self._t: list[dict[str, Any]] = targets
 
-    def get(self, name: str, index: int | None = None) -> Any:
+    def get(self, name: str, index: int | None = None, target: int | None = None) -> Any:
         """Return state field ``name`` of copy ``index`` (unbatched), or of all copies (N, ...).
 
-        Fields: ``x_true``, ``x_hat``, ``P``, ``x_pred``, ``P_pred``, ``sensors``, ``k``,
-        ``trace``, ``projected``, ``n_projected``, ``terminated``, ``truncated``. The
-        attributes of the same names are ``get(name)``: read-only views, refreshed by every
-        step (keep a copy, not a reference).
+        Fields: ``x_true``, ``x_hat``, ``P``, ``x_pred``, ``P_pred`` (per target),
+        ``sensors`` (true positions), ``fixes`` (the position fixes the team believes and
+        plans from; the true positions when poses are known), ``k``, ``trace`` (the sum of
+        the targets' posterior position traces), ``score`` (the objective, minus the
+        reward; the trace for one target), ``projected``, ``n_projected``, ``terminated``,
+        ``truncated``. A per-target field is target ``target``'s; ``target=None`` gives
+        the only target's (K = 1, shapes as in the paper) or all targets stacked on an
+        axis after the copies' (K > 1, e.g. ``x_pred`` (N, K, n); their state dimensions
+        must then agree). The attributes of the same names are ``get(name)``: read-only
+        views, refreshed by every step (keep a copy, not a reference).
         """
-        try:
-            v = self._s[name]
-        except KeyError:
-            fields = sorted(k for k in self._s if k != "ended")
-            raise ValueError(f"name must be one of {fields}, got {name!r}") from None
+        if name in _TARGET_FIELDS:
+            if target is None and self.n_targets > 1:
+                parts = [self.get(name, index, k) for k in range(self.n_targets)]
+                if len({np.shape(v) for v in parts}) != 1:
+                    raise ValueError(
+                        f"the targets' states differ in dimension: give target= (0 to "
+                        f"{self.n_targets - 1}) to read {name!r}"
+                    )
+                axis = 0 if (index is not None) else 1
+                return np.stack(parts, axis=axis)
+            k = 0 if target is None else target
+            if not isinstance(k, (int, np.integer)) or not 0 <= k < self.n_targets:
+                raise ValueError(
+                    f"target must be an integer in [0, {self.n_targets - 1}], got {target!r}"
+                )
+            v = self._t[k][name]
+        else:
+            try:
+                v = self._s[name]
+            except KeyError:
+                fields = sorted([*(k for k in self._s if k != "ended"), *_TARGET_FIELDS])
+                raise ValueError(f"name must be one of {fields}, got {name!r}") from None
         if self._one:
             return v if index is not None else np.asarray(v)[None]
         return v if index is None else v[index]
@@ -184,8 +239,10 @@ class World:
     x_pred = property(lambda self: self.get("x_pred"), doc="Predictions x_hat(k+1|k) (N, n).")
     P_pred = property(lambda self: self.get("P_pred"), doc="Predicted P(k+1|k) (N, n, n).")
     sensors = property(lambda self: self.get("sensors"), doc="Sensor positions (N, M, 2).")
+    fixes = property(lambda self: self.get("fixes"), doc="Believed sensor positions (N, M, 2).")
     k = property(lambda self: self.get("k"), doc="Steps taken in each episode (N,).")
     trace = property(lambda self: self.get("trace"), doc="Posterior traces tr P_11 (N,).")
+    score = property(lambda self: self.get("score"), doc="The objective at the posterior (N,).")
     projected = property(lambda self: self.get("projected"), doc="Moves pushed out of rho (N, M).")
     n_projected = property(lambda self: self.get("n_projected"), doc="Their count (N, M).")
     terminated = property(lambda self: self.get("terminated"), doc="Trace above max_trace (N,).")
@@ -270,32 +327,55 @@ class World:
             for i, s in zip(rows.tolist(), seeds, strict=True):
                 if s is not None:
                     self._rngs[i] = np.random.default_rng(s)
-        m, n = self.n_sensors, self._x0.shape[0]
+        m, p = self.n_sensors, self.params
         gaussian = self.scenario.target_init == "gaussian"
         u = np.empty((rows.size, m, 2))
-        g = np.empty((rows.size, n)) if gaussian else None
+        g = [np.empty((rows.size, t.dim)) for t in p.targets] if gaussian else None
+        e = np.empty((rows.size, m, 2)) if self._pose else None
         for j, i in enumerate(rows.tolist()):
             rng = self.rng(i)
             u[j] = rng.random((m, 2))
             if gaussian:
-                g[j] = rng.standard_normal(n)
-        if isinstance(sel, int):  # one copy: unbatched arrays, as in the step
-            u, g = u[0], None if g is None else g[0]
+                for gk in g:
+                    gk[j] = rng.standard_normal(gk.shape[1])
+            if self._pose:
+                e[j] = rng.standard_normal((m, 2))
+        one = isinstance(sel, int)
+        if one:  # one copy: unbatched arrays, as in the step
+            u = u[0]
+            g = None if g is None else [gk[0] for gk in g]
+            e = None if e is None else e[0]
         radius = self.scenario.sensor_radius * np.sqrt(u[..., 0])  # uniform by area
         angle = 2.0 * np.pi * u[..., 1]
-        x_hat = np.broadcast_to(self._x0_hat, (*u.shape[:-2], self._x0.shape[0])).copy()
-        P = np.broadcast_to(self._P0, (*u.shape[:-2], *self._P0.shape)).copy()
-        x_pred, P_pred = predict(x_hat, P, self.params.Phi, self.params.Q)
+        sensors = self._center + radius[..., None] * np.stack([np.cos(angle), np.sin(angle)], -1)
+        batch = u.shape[:-2]
+        trace = 0.0
+        score = []
+        for k, tp in enumerate(p.targets):
+            x0_hat, P0 = self._x0_hats[k], self._P0s[k]
+            x_hat = np.broadcast_to(x0_hat, (*batch, tp.dim)).copy()
+            P = np.broadcast_to(P0, (*batch, *P0.shape)).copy()
+            x_pred, P_pred = predict(x_hat, P, tp.Phi, tp.Q)
+            new_t = {
+                "x_true": x0_hat + g[k] @ self._chol0s[k].T if gaussian else self._x0s[k].copy(),
+                "x_hat": x_hat,
+                "P": P,
+                "x_pred": x_pred,
+                "P_pred": P_pred,
+            }
+            if self._one:
+                self._t[k].update(new_t)
+            else:
+                for key, value in new_t.items():
+                    self._t[k][key][sel] = value
+            trace += float(TRACE.of_covariance(P0))
+            score.append(float(self.objective.of_covariance(P0)))
         new = {
-            "sensors": self._center
-            + radius[..., None] * np.stack([np.cos(angle), np.sin(angle)], -1),
-            "x_true": self._x0_hat + g @ self._chol0.T if gaussian else self._x0.copy(),
-            "x_hat": x_hat,
-            "P": P,
-            "x_pred": x_pred,
-            "P_pred": P_pred,
+            "sensors": sensors,
+            "fixes": self._fix(sensors, e) if self._pose else sensors,
             "k": 0,
-            "trace": float(self.objective.of_covariance(self._P0[:2, :2])),
+            "trace": trace,
+            "score": trace if self._plain else float(self.objective.combine(np.array(score))),
             "projected": False,
             "n_projected": 0,
             "terminated": False,
@@ -312,6 +392,10 @@ class World:
         self._noise_left[sel] = 0
         if self._noise is not None:
             self._draw_noise(rows)
+
+    def _fix(self, sensors: FloatArray, normals: FloatArray) -> FloatArray:
+        """Return the position fixes ``p_S + e``, ``e ~ N(0, Sigma_i)`` from standard normals."""
+        return sensors + np.einsum("...ij,...j->...i", self._pose_factor, normals)
 
     # Step -------------------------------------------------------------------------------
     def step(self, positions: FloatArray, live: Any = None) -> StepResult | None:
@@ -351,19 +435,20 @@ class World:
         partial = isinstance(sel, np.ndarray)
         calc = slice(None) if partial else sel
         p = self.params
+        K = self.n_targets
+        tgt = self._t
         if self._one:
-            x_true, x_pred, P_pred, sensors = (
-                st["x_true"],
-                st["x_pred"],
-                st["P_pred"],
-                st["sensors"],
-            )
+            sensors = st["sensors"]
+            fixes = st["fixes"] if self._pose else sensors
+            x_preds = [t["x_pred"] for t in tgt]
         else:
-            x_true, x_pred, P_pred, sensors = (
-                st[key][calc] for key in ("x_true", "x_pred", "P_pred", "sensors")
-            )
+            sensors = st["sensors"][calc]
+            fixes = st["fixes"][calc] if self._pose else sensors
+            x_preds = [t["x_pred"][calc] for t in tgt]
+        # Sensors move from where they believe they are, out of every target's rho disk.
+        where = x_preds[0][..., :2] if K == 1 else np.stack([x[..., :2] for x in x_preds], -2)
         mv = moves if self._one and moves.ndim == 2 else moves[calc]
-        sensors, projected = move(mv, sensors, x_pred[..., :2], p.r, p.rho)
+        moved, projected = move(mv, fixes, where, p.r, p.rho)
         if self._one and self._noise is None:  # the single env's draw, without a call
             noise = (self._rngs[0] or self.rng(0)).standard_normal(self._n_noise)
         else:
@@ -372,24 +457,57 @@ class World:
             full = np.zeros((self.num_copies, self._n_noise))
             full[sel] = noise
             noise = full
-        x_true, _, x_post, P_post = tracking.advance(p, x_true, x_pred, P_pred, sensors, noise)
-        x_next, P_next = predict(x_post, P_post, p.Phi, p.Q)
-        if partial:
-            x_true, x_post, P_post, x_next, P_next = (
-                a[sel] for a in (x_true, x_post, P_post, x_next, P_next)
+        if self._pose:  # the true sensor makes the believed displacement; a new fix
+            sensors = sensors + (moved - fixes)
+            fixes = self._fix(
+                sensors, noise[..., self._pose_slice].reshape(*noise.shape[:-1], -1, 2)
             )
-            sensors, projected = sensors[sel], projected[sel]
-        trace = self.objective.of_covariance(P_post)  # its position block
+        else:
+            sensors = fixes = moved
+        trace = None
+        scores = []
+        for k, tp in enumerate(p.targets):
+            t = tgt[k]
+            x_true, P_pred = (t["x_true"], t["P_pred"]) if self._one else (
+                t["x_true"][calc], t["P_pred"][calc])  # fmt: skip
+            proc, meas = self._noise_slices[k]
+            x_true, _, x_post, P_post = tracking.advance_target(
+                p,
+                tp,
+                x_true,
+                x_preds[k],
+                P_pred,
+                sensors,
+                fixes,
+                noise[..., proc],
+                noise[..., meas],
+            )
+            x_next, P_next = predict(x_post, P_post, tp.Phi, tp.Q)
+            if partial:
+                x_true, x_post, P_post, x_next, P_next = (
+                    a[sel] for a in (x_true, x_post, P_post, x_next, P_next)
+                )
+            tr = TRACE.of_covariance(P_post)  # its position block
+            trace = tr if trace is None else trace + tr
+            if not self._plain:
+                scores.append(self.objective.of_covariance(P_post))
+            new_t = {"x_true": x_true, "x_hat": x_post, "P": P_post, "x_pred": x_next,
+                     "P_pred": P_next}  # fmt: skip
+            if self._one or not partial:
+                t.update(new_t)
+            else:
+                for key, value in new_t.items():
+                    t[key][sel] = value
+        if partial:
+            sensors, fixes, projected = sensors[sel], fixes[sel], projected[sel]
+        score = trace if self._plain else self.objective.combine(np.stack(scores, -1))
         terminated = trace > self._max_trace  # never when max_trace is None (inf)
         new = {
-            "x_true": x_true,
-            "x_hat": x_post,
-            "P": P_post,
-            "x_pred": x_next,
-            "P_pred": P_next,
             "sensors": sensors,
+            "fixes": fixes,
             "projected": projected,
             "trace": trace,
+            "score": score,
             "terminated": terminated,
         }
         if self._one:
@@ -410,7 +528,7 @@ class World:
                 st.update(new)
             st["k"][sel], st["truncated"][sel] = k, truncated
             st["ended"][sel] = terminated | truncated
-        return StepResult(-self._scale * trace, terminated, truncated)
+        return StepResult(-self._scale * score, terminated, truncated)
 
     def _started(self, i: int) -> bool:
         """Return whether copy ``i`` was ever reset."""
@@ -421,10 +539,26 @@ class World:
         """Return the planning problem of eq. (15)-(17) from the current prediction.
 
         ``index`` None: every copy (leading batch axis N); an int: that copy, unbatched.
-        The problem carries the full prediction (:class:`~activetrack.problem.Prediction`:
-        ``x_pred``, ``P_pred`` and the motion model ``Phi``, ``Q``).
+        With one target the problem carries the full prediction
+        (:class:`~activetrack.problem.Prediction`: ``x_pred``, ``P_pred`` and the motion
+        model ``Phi``, ``Q``); with K > 1 it holds every target's predicted position and
+        covariance (``multi_target``). The sensors are the position fixes; the sensors'
+        models and the pose covariance the filter accounts for come along.
         """
         p = self.params
+        extra = {
+            "models": p.models,
+            "pose_cov": p.filter_pose_cov,
+            "objective": self.objective,
+        }
+        sensors = self.get("fixes" if self._pose else "sensors", index)
+        if self.n_targets > 1:
+            P_preds = [self.get("P_pred", index, k)[..., :2, :2] for k in range(self.n_targets)]
+            x_preds = [self.get("x_pred", index, k)[..., :2] for k in range(self.n_targets)]
+            return PlanningProblem(
+                np.stack(P_preds, -3), np.stack(x_preds, -2), sensors, p.r, p.rho,
+                p.sigma_d2, p.sigma_theta2, multi_target=True, **extra,
+            )  # fmt: skip
         x_pred, P_pred = self.get("x_pred", index), self.get("P_pred", index)
         model = self.__dict__.get("_prediction_model")
         if model is None:  # Phi and Q are validated once, with the first prediction
@@ -433,48 +567,71 @@ class World:
             prediction = model.with_state(x_pred, P_pred)
         return PlanningProblem.from_prediction(
             prediction,
-            sensors=self.get("sensors", index),
+            sensors=sensors,
             r=p.r,
             rho=p.rho,
             sigma_d2=p.sigma_d2,
             sigma_theta2=p.sigma_theta2,
-            objective=self.objective,
+            **extra,
         )
 
     def observe(self, index: int | None = None) -> np.ndarray:
-        """Return every agent's observation, float32 (N, M, 5 + 6M), or (M, 5 + 6M) for a copy.
+        """Return every agent's observation, float32 (N, M, D), or (M, D) for one copy.
 
-        The layout is :mod:`activetrack.observation`'s: the prediction and the team as seen
-        from each agent's seat.
+        The layout is :mod:`activetrack.observation`'s (``self.layout``; ``D = 5 + 6M`` in
+        the paper): the prediction and the team as seen from each agent's seat.
         """
         target, sensor = self._features(index)
         return observation.observations(target, sensor, self._order)
 
     def state(self, index: int | None = None) -> np.ndarray:
-        """Return the global state, float32 (N, 6 + 6M) or (6 + 6M,) for one copy."""
+        """Return the global state, float32 (N, D + 1) or (D + 1,) for one copy."""
         target, sensor = self._features(index)
         return observation.global_state(target, sensor, self.get("k", index) / self._n_steps)
 
     def _features(self, index: int | None) -> tuple[FloatArray, FloatArray]:
+        L = self.length_scale
+        if self.layout.extended:
+            K = self.n_targets
+            x_preds = [self.get("x_pred", index, k) for k in range(K)]
+            P_preds = [self.get("P_pred", index, k) for k in range(K)]
+            fixes = self.get("fixes", index)
+            return observation.extended_features(x_preds, P_preds, fixes, self._constants,
+                                                 self._dt, L)  # fmt: skip
         if self._one and index is not None:  # the common single-env call: no get() calls
-            st = self._s
-            x_pred, P_pred, sensors = st["x_pred"], st["P_pred"], st["sensors"]
+            t = self._t[0]
+            x_pred, P_pred, sensors = t["x_pred"], t["P_pred"], self._s["sensors"]
         else:
             x_pred, P_pred, sensors = (self.get(k, index) for k in ("x_pred", "P_pred", "sensors"))
-        L = self.length_scale
         target = observation.target_features(x_pred, P_pred, self._dt, L)
         sensor = observation.sensor_features(sensors, x_pred[..., :2], self._constants, L)
         return target, sensor
 
-    def position_error(self, index: int | None = None) -> FloatArray:
-        """Return ``||p_T(k) - p_hat_T(k|k)||`` (m) per copy, or of copy ``index``."""
+    def position_error(self, index: int | None = None, per_target: bool = False) -> FloatArray:
+        """Return ``||p_T(k) - p_hat_T(k|k)||`` (m) per copy, or of copy ``index``.
+
+        With K > 1 targets: the root mean square over the targets (``per_target``: each
+        target's, on a last axis of K).
+        """
+        if self.n_targets > 1:
+            err = np.stack(
+                [self._error(self.get("x_true", index, k), self.get("x_hat", index, k))
+                 for k in range(self.n_targets)], -1,
+            )  # fmt: skip
+            return err if per_target else np.sqrt(np.mean(err * err, axis=-1))
         if self._one and index is not None:
-            x, h = self._s["x_true"], self._s["x_hat"]
+            x, h = self._t[0]["x_true"], self._t[0]["x_hat"]
         else:
             x, h = self.get("x_true", index), self.get("x_hat", index)
         if index is not None:  # one copy: Python numbers (NumPy calls cost microseconds)
             (x0, x1, *_), (h0, h1, *_) = x.tolist(), h.tolist()
-            return np.float64(math.hypot(x0 - h0, x1 - h1))
+            err = np.float64(math.hypot(x0 - h0, x1 - h1))
+            return err[None] if per_target else err
+        err = self._error(x, h)
+        return err[..., None] if per_target else err
+
+    @staticmethod
+    def _error(x: FloatArray, h: FloatArray) -> FloatArray:
         d = x[..., :2] - h[..., :2]
         return np.hypot(d[..., 0], d[..., 1])
 
@@ -482,17 +639,31 @@ class World:
         """Return copy ``index``'s ``(k, trace, position_error, projected, n_projected)`` as
         Python values (lists per sensor): what an environment's infos report."""
         get = self._s.__getitem__ if self._one else (lambda key: self._s[key][index])
-        (x0, x1, *_), (h0, h1, *_) = get("x_true").tolist(), get("x_hat").tolist()
+        if self.n_targets == 1:
+            t = self._t[0]
+            x, h = (
+                (t["x_true"], t["x_hat"]) if self._one else (t["x_true"][index], t["x_hat"][index])
+            )
+            (x0, x1, *_), (h0, h1, *_) = x.tolist(), h.tolist()
+            err = math.hypot(x0 - h0, x1 - h1)  # position_error(index), without a call
+        else:
+            err = float(self.position_error(index))
         return (
             int(get("k")),
             float(get("trace")),
-            math.hypot(x0 - h0, x1 - h1),  # position_error(index), without a call
+            err,
             get("projected").tolist(),
             get("n_projected").tolist(),
         )
 
-    def position_nees(self, index: int | None = None) -> FloatArray:
-        """Return the position NEES ``e^T P_11^{-1} e`` per copy, or of copy ``index``."""
-        return position_nees(
-            self.get("x_true", index), self.get("x_hat", index), self.get("P", index)
-        )
+    def position_nees(self, index: int | None = None, per_target: bool = False) -> FloatArray:
+        """Return the position NEES ``e^T P_11^{-1} e`` per copy, or of copy ``index``.
+
+        With K > 1 targets: the mean over the targets (``per_target``: each target's, on a
+        last axis of K); each is chi-square with 2 degrees of freedom for a consistent filter.
+        """
+        nees = np.stack(
+            [position_nees(self.get("x_true", index, k), self.get("x_hat", index, k),
+                           self.get("P", index, k)) for k in range(self.n_targets)], -1,
+        )  # fmt: skip
+        return nees if per_target else np.mean(nees, axis=-1)
