@@ -59,13 +59,35 @@ def keep_distance(
 
     ``new`` (..., M, 2) must lie within reach of ``sensors``; ``projected`` (..., M) marks
     the moves that ended inside their disk and were moved to the nearest feasible point.
+    ``target_pred`` is one predicted target (..., 2), or K of them (..., K, 2): then a sensor
+    keeps ``rho`` from every one (:func:`activetrack.feasible_set.project`).
     """
+    if target_pred.ndim == new.ndim:
+        return _keep_distances(new, sensors, target_pred, r, rho)
     q = new - target_pred[..., None, :]
     inside = np.abs(as_complex(q)) < np.asarray(rho, dtype=np.float64) * _INSIDE
     if np.count_nonzero(inside):
         inside &= np.asarray(r) > 0.0  # a sensor that cannot move (r = 0) stays, even inside
         c = sensors - target_pred[..., None, :]
         fixed = project_feasible(q, c, r, rho) + target_pred[..., None, :]
+        new = np.where(inside[..., None], fixed, new)
+    return new, inside
+
+
+def _keep_distances(
+    new: FloatArray, sensors: FloatArray, targets: FloatArray, r: FloatArray, rho: FloatArray
+) -> tuple[FloatArray, np.ndarray]:
+    """:func:`keep_distance` for K predicted targets ``targets`` (..., K, 2)."""
+    from activetrack import feasible_set  # noqa: PLC0415 (only several-target scenarios)
+
+    rho = np.broadcast_to(np.asarray(rho, dtype=np.float64), new.shape[:-1])
+    dist = np.abs(as_complex(new[..., None, :, :] - targets[..., :, None, :]))  # (..., K, M)
+    inside = np.any(dist < rho[..., None, :] * _INSIDE, axis=-2)
+    if np.count_nonzero(inside):
+        r = np.broadcast_to(np.asarray(r, dtype=np.float64), inside.shape)
+        inside &= r > 0.0  # a sensor that cannot move (r = 0) stays, even inside
+        each = np.broadcast_to(targets[..., None, :, :], (*new.shape[:-1], *targets.shape[-2:]))
+        fixed = feasible_set.project(new, sensors, r, each, rho)
         new = np.where(inside[..., None], fixed, new)
     return new, inside
 
