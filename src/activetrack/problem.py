@@ -244,7 +244,7 @@ class PlanningProblem:
             batch_of["models"] = codes.shape[:-1]
             values["models"] = codes
         if self.pose_cov is not None:
-            cov = sensor_models.SensorTeam(0, 1.0, 1.0, self.pose_cov).pose_cov
+            cov = sensor_models.SensorTeam([0], 1.0, 1.0, self.pose_cov).pose_cov
             if cov.shape[-3] != m:
                 raise ValueError(f"pose_cov must have shape (..., {m}, 2, 2), got {cov.shape}")
             batch_of["pose_cov"] = cov.shape[:-3]
