@@ -159,6 +159,10 @@ class GSR:
     def plan_with_info(self, problem: PlanningProblem) -> GSRResult | GSRBatchResult:
         """Return GSR's solution with its statistics: a :class:`GSRResult` for a single
         problem, a :class:`GSRBatchResult` for a batched one."""
+        if not problem.is_paper:
+            result = self._plan_numeric(problem)
+            self.last_result = result
+            return result
         _check_objective(problem)
         if problem.batch_shape:
             result = self._plan_batch(problem)
@@ -187,6 +191,31 @@ class GSR:
             converged=bool(conv),
             warm_value=float(warm_value),
             warm_feasible=warm_feasible,
+        )
+
+    def _plan_numeric(self, problem: PlanningProblem) -> GSRResult | GSRBatchResult:
+        """GSR beyond the paper's problem: numerical single-sensor steps
+        (:mod:`activetrack.baselines.gsr_numeric`)."""
+        if self.restarts:
+            raise ValueError(
+                "restarts=True runs the paper's exact solver from several starts; this problem "
+                "(several targets, other sensor models, uncertain poses or another objective) "
+                "is planned with numerical single-sensor steps, without restarts"
+            )
+        from activetrack.baselines import gsr_numeric  # noqa: PLC0415 (beyond the paper)
+
+        positions, value, sweeps, warm = gsr_numeric.relax(problem, self.tol, self.max_sweeps)
+        if problem.batch_shape:
+            return GSRBatchResult(positions, value, sweeps)
+        return GSRResult(
+            positions=positions,
+            value=float(value),
+            sweeps=int(sweeps),
+            n_solves=int(sweeps) * problem.n_sensors,
+            start="warm",
+            converged=bool(sweeps < self.max_sweeps),
+            warm_value=float(warm),
+            warm_feasible=True,
         )
 
     def _plan_batch(self, problem: PlanningProblem) -> GSRBatchResult:

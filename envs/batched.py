@@ -35,7 +35,6 @@ from gymnasium import spaces
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from activetrack import observation
 from activetrack.problem import PlanningProblem
 from activetrack.scenarios import Scenario, make_scenario
 from activetrack.validation import FloatArray, real_array
@@ -94,7 +93,7 @@ class BatchedActiveTracking(VectorEnv):
         m = self.n_sensors = sc.n_sensors
         self.length_scale = self.world.length_scale
 
-        low, high = observation.observation_bounds(m)
+        low, high = self.world.layout.bounds()
         self.single_observation_space = spaces.Box(
             np.tile(low, m), np.tile(high, m), dtype=np.float32
         )

@@ -56,7 +56,6 @@ from pettingzoo import ParallelEnv
 from pettingzoo.utils.conversions import parallel_to_aec_wrapper
 from pettingzoo.utils.wrappers import OrderEnforcingWrapper
 
-from activetrack import observation
 from activetrack.problem import PlanningProblem
 from activetrack.scenarios import Scenario, make_scenario
 from activetrack.validation import FloatArray, real_array
@@ -125,7 +124,7 @@ class TrackingParallelEnv(ParallelEnv):
         self.agents: list[str] = []
         self.length_scale = self.world.length_scale
 
-        low, high = observation.observation_bounds(m)
+        low, high = self.world.layout.bounds()
         # One space object per agent, returned as is (PettingZoo seeds them separately);
         # the dicts are also exposed as attributes for libraries that still read them.
         self.observation_spaces = {
@@ -134,7 +133,7 @@ class TrackingParallelEnv(ParallelEnv):
         self.action_spaces = {
             a: spaces.Box(-1.0, 1.0, (2,), dtype=np.float32) for a in self.possible_agents
         }
-        slow, shigh = observation.state_bounds(m)
+        slow, shigh = self.world.layout.state_bounds()
         self.state_space = spaces.Box(slow, shigh, dtype=np.float32)
 
         self._history = EpisodeHistory() if render_mode is not None else None

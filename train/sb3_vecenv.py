@@ -167,12 +167,11 @@ class BatchedCopies:
 
     def __init__(self, n_copies: int, scenario: Any = "paper", **overrides: Any) -> None:
         from activetrack.envs import BatchedActiveTracking
-        from activetrack.observation import observation_bounds
 
         self.env = BatchedActiveTracking(n_copies, scenario, autoreset_mode="Disabled", **overrides)
         m = self.env.n_sensors
         self.agents = [f"sensor_{i}" for i in range(m)]
-        low, high = observation_bounds(m)
+        low, high = self.env.world.layout.bounds()
         self.observation_space = gym.spaces.Box(low, high, dtype=np.float32)
         self.action_space = gym.spaces.Box(-1.0, 1.0, (2,), dtype=np.float32)
         self.n_copies = int(n_copies)
