@@ -15,6 +15,16 @@ registers it is imported. From a fresh interpreter, name the module in the id, a
 from __future__ import annotations
 
 ENV_ID = "activetrack/ActiveTracking-v0"
+#: The tasks beyond the paper: registered id -> preset (:data:`activetrack.scenarios.TASKS`).
+TASK_IDS = {
+    "activetrack/TwoTargets-v0": "two_targets",
+    "activetrack/RangeOnly-v0": "range_only",
+    "activetrack/BearingOnly-v0": "bearing_only",
+    "activetrack/MixedTeam-v0": "mixed",
+    "activetrack/UncertainPoses-v0": "uncertain_poses",
+}
+#: Every registered id and its preset (``ActiveTracking-v0`` is the paper).
+ALL_IDS = {ENV_ID: "paper", **TASK_IDS}
 GYM_ENTRY_POINT = "activetrack.envs.centralized:CentralizedTrackingEnv"
 VECTOR_ENTRY_POINT = "activetrack.envs.batched:BatchedActiveTracking"
 PARALLEL_ENTRY_POINT = "activetrack.envs.tracking_env:parallel_env"
@@ -22,7 +32,8 @@ AEC_ENTRY_POINT = "activetrack.envs.tracking_env:env"
 
 
 def register_envs() -> None:
-    """Register ``activetrack/ActiveTracking-v0`` with Gymnasium and PettingZoo.
+    """Register ``activetrack/ActiveTracking-v0`` and the tasks of :data:`TASK_IDS` with
+    Gymnasium and PettingZoo.
 
     Gymnasium: the centralized single-agent view for ``gymnasium.make`` and
     :class:`~activetrack.envs.batched.BatchedActiveTracking` as the ``vector_entry_point``,
@@ -36,11 +47,17 @@ def register_envs() -> None:
     import gymnasium
     import pettingzoo
 
-    if ENV_ID not in gymnasium.registry:
-        gymnasium.register(
-            id=ENV_ID, entry_point=GYM_ENTRY_POINT, vector_entry_point=VECTOR_ENTRY_POINT
-        )
-    if ENV_ID not in pettingzoo.parallel_registry:
-        pettingzoo.register("parallel", ENV_ID, entry_point=PARALLEL_ENTRY_POINT)
-    if ENV_ID not in pettingzoo.aec_registry:
-        pettingzoo.register("aec", ENV_ID, entry_point=AEC_ENTRY_POINT)
+    for env_id, preset in ALL_IDS.items():
+        # The paper's id passes no keyword (its defaults are the paper); a task names its preset.
+        kwargs = {} if env_id == ENV_ID else {"scenario": preset}
+        if env_id not in gymnasium.registry:
+            gymnasium.register(
+                id=env_id,
+                entry_point=GYM_ENTRY_POINT,
+                vector_entry_point=VECTOR_ENTRY_POINT,
+                kwargs=kwargs,
+            )
+        if env_id not in pettingzoo.parallel_registry:
+            pettingzoo.register("parallel", env_id, entry_point=PARALLEL_ENTRY_POINT, kwargs=kwargs)
+        if env_id not in pettingzoo.aec_registry:
+            pettingzoo.register("aec", env_id, entry_point=AEC_ENTRY_POINT, kwargs=kwargs)

@@ -14,6 +14,7 @@ from gymnasium.utils.env_checker import check_env
 from pettingzoo.test import api_test, parallel_api_test, parallel_seed_test, seed_test
 
 from activetrack.envs import ENV_ID, env, parallel_env
+from activetrack.envs.registration import ALL_IDS
 
 ALLOWED = re.compile(
     r"observation space (maximum|minimum) value is -?infinity"
@@ -70,3 +71,29 @@ def test_aec_env_is_the_converted_parallel_env():
     assert isinstance(aec.env, parallel_to_aec_wrapper)
     aec.reset(seed=0)
     assert aec.state().shape == aec.state_space.shape == (24,)
+
+
+# Every registered id (the paper and the tasks beyond it), made through the registries.
+IDS = sorted(ALL_IDS)
+
+
+@pytest.mark.parametrize("env_id", IDS)
+def test_registered_ids_pass_the_pettingzoo_checkers(env_id):
+    import pettingzoo
+
+    _run_checked(parallel_api_test, pettingzoo.make("parallel", env_id), num_cycles=60)
+    _run_checked(api_test, pettingzoo.make("aec", env_id), num_cycles=30)
+    _run_checked(parallel_seed_test, lambda: pettingzoo.make("parallel", env_id))
+    _run_checked(seed_test, lambda: pettingzoo.make("aec", env_id))
+
+
+@pytest.mark.parametrize("env_id", IDS)
+def test_registered_ids_pass_gymnasium_check_env(env_id):
+    made = gym.make(env_id)
+    assert made.unwrapped.scenario.name == ALL_IDS[env_id]
+    _run_checked(check_env, made.unwrapped)
+    made.close()
+    vec = gym.make_vec(env_id, num_envs=3, vectorization_mode="vector_entry_point")
+    obs, _ = vec.reset(seed=0)
+    assert obs.shape == (3, *made.observation_space.shape)
+    vec.close()
