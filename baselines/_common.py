@@ -67,20 +67,34 @@ def sensor_modes_multi(
     Raises:
         ValueError: as :func:`sensor_modes`.
     """
+    free, fixed, _ = modes_and_arcs(sensors, targets, r, rho)
+    return free, fixed
+
+
+def modes_and_arcs(
+    sensors: FloatArray, targets: FloatArray, r: FloatArray, rho: FloatArray
+) -> tuple[np.ndarray, FloatArray, dict[tuple[int, ...], list[geometry.Arc]]]:
+    """Return :func:`sensor_modes_multi` and the free sensors' :func:`feasible_arcs`.
+
+    The arcs are keyed by the sensor's index ``batch index + (i,)``.
+    """
     sensors = np.asarray(sensors, dtype=np.float64)
     r = np.broadcast_to(r, sensors.shape[:-1])
     rho = np.broadcast_to(rho, sensors.shape[:-1])
     free = np.zeros(sensors.shape[:-1], dtype=bool)
     fixed = sensors.copy()
     reach = np.zeros(sensors.shape[:-1], dtype=bool)  # some target within reach
+    arcs_of = {}
     for idx in np.ndindex(sensors.shape[:-1]):
         s, ri, rhoi = sensors[idx], float(r[idx]), float(rho[idx])
         t = targets[idx[:-1]]
         if ri <= 0.0:
             continue
         reach[idx] = bool(np.any(np.hypot(*(t - s).T) <= ri))
-        if sum(a.length for a in feasible_arcs(s, ri, t, rhoi)) > 0.0:
+        arcs = feasible_arcs(s, ri, t, rhoi)
+        if sum(a.length for a in arcs) > 0.0:
             free[idx] = True
+            arcs_of[idx] = arcs
         else:
             fixed[idx] = multi_target_fallback(s, ri, t, rhoi)
     degenerate = free & (rho <= 0.0) & reach
@@ -96,7 +110,7 @@ def sensor_modes_multi(
             f"sensors {_where(on_target)} cannot move (r = 0) and sit exactly "
             "on a predicted target, where the bearing is undefined"
         )
-    return free, fixed
+    return free, fixed, arcs_of
 
 
 #: Reach-circle points :func:`multi_target_fallback` compares (a fixed set: deterministic).

@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from activetrack import geometry
-from activetrack.baselines._common import feasible_arcs, sensor_modes
+from activetrack.baselines._common import modes_and_arcs, sensor_modes
 from activetrack.problem import PlanningProblem
 from activetrack.validation import FloatArray
 
@@ -37,22 +37,22 @@ class RandomMotion:
         Draws exactly one uniform per free sensor from ``rng``, in copy order (row-major
         over the batch axes), then sensor order.
         """
+        targets = problem.targets
+        if targets.shape[-2] > 1:
+            free, out, arcs_of = modes_and_arcs(problem.sensors, targets, problem.r, problem.rho)
+            for k in arcs_of:  # free sensors, row-major over the batch, then the sensors
+                out[k] = geometry.sample_uniform(arcs_of[k], rng)
+            return out
         free, rel = sensor_modes(problem)
         rel = rel.copy()
-        origin = problem.targets[..., 0, None, :]  # what sensor_modes is relative to
-        targets = problem.targets
-        multi = targets.shape[-2] > 1
+        origin = targets[..., 0, None, :]  # what sensor_modes is relative to
         c = problem.sensors - origin
         r, rho = problem.r, problem.rho
         for b in np.ndindex(problem.batch_shape):
             for i in np.flatnonzero(free[b]):
                 k = b + (i,)
-                if multi:
-                    arcs = feasible_arcs(problem.sensors[k], float(r[k]), targets[b], float(rho[k]))
-                    rel[k] = geometry.sample_uniform(arcs, rng) - targets[b][0]
-                else:
-                    arcs = geometry.facing_boundary(c[k], float(r[k]), float(rho[k]))
-                    rel[k] = geometry.sample_uniform(arcs, rng)
+                arcs = geometry.facing_boundary(c[k], float(r[k]), float(rho[k]))
+                rel[k] = geometry.sample_uniform(arcs, rng)
         return rel + origin
 
     def __repr__(self) -> str:
