@@ -87,6 +87,8 @@ class GBESResult:
 class GBES:
     """Grid-based exhaustive search over the curves ADB of all sensors (Section V).
 
+    With K > 1 targets: over the boundaries of their feasible sets (module docstring).
+
     Attributes:
         spacing: largest distance between neighbouring grid points on a curve ADB (m);
             the paper uses ``pi / 200``.
@@ -144,11 +146,13 @@ class GBES:
         """Return each sensor's grid size, counted from the arc lengths (no grid is built).
 
         The same count as ``len`` of :meth:`candidates`: ``ceil(length / spacing) + 1``
-        points per arc, less the shared end points of adjacent arcs. ``problem`` is single.
+        points per arc, less the shared end points of adjacent arcs (K > 1 targets:
+        :meth:`_arc_plan`). ``problem`` is single.
 
         Raises:
-            ValueError: ``spacing`` is below ``_DISTINCT_STEP`` (1e-11 m), near the 1e-12 m
-                at which the grid drops repeated points, so its size cannot be counted.
+            ValueError: (one target) ``spacing`` is below ``_DISTINCT_STEP`` (1e-11 m), near
+                the 1e-12 m at which the grid drops repeated points, so its size cannot be
+                counted.
         """
         free, _ = sensor_modes(problem)
         if problem.n_targets > 1:
