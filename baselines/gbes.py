@@ -23,6 +23,23 @@ evaluated. Both paths work in memory-bounded batches.
 The grid size is counted from the arc lengths before any grid is built
 (:meth:`GBES.n_combinations`), so a grid over ``max_combinations`` is refused without
 allocating it. A batched problem is searched copy by copy.
+
+**Every planning problem.** With one target, Lemma 3 holds for every sensor model and
+pose covariance (docs/sensor-models-design.md), so the grid stays on the curves ADB; the
+candidates' entries are :func:`activetrack.sensor_models.information_entries` (the paper's
+case keeps :func:`activetrack.objective.sensor_information`, bit-identical). With K > 1
+targets the grid covers the whole boundary of each sensor's feasible set ``F_i`` (reach
+disk minus the K ``rho`` disks, :func:`activetrack.baselines._common.feasible_arcs`):
+each arc (reach-circle pieces outside the ``rho`` disks, ``rho``-circle pieces inside the
+reach disk) is discretized as above, its end points (the feasible circle-circle
+intersections) included once. A candidate's features are the K targets' entries (3K
+numbers) and a configuration's value is ``objective.of_targets(prior + sum)``. The bound
+stays exact: the objective is convex in each target's ``Y_k``, so each target has its
+tangent plane ``phi_k(Y_k) >= phi_k(Y0_k) + <G_k, Y_k - Y0_k>``. For a sum over targets
+(``combine`` a sum: TRACE, LOGDET) the sum of the K planes is again linear and separates
+over the sensors; for the largest target (WORST_TRACE, ``combine`` a max)
+``max_k phi_k >= phi_j >= tangent_j`` for every ``j``, so the bound is the largest over
+``j`` of target ``j``'s separable bound (``_TargetsSearch._bounds``).
 """
 
 from __future__ import annotations
@@ -32,8 +49,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from activetrack import geometry
-from activetrack.baselines._common import sensor_modes
+from activetrack import geometry, sensor_models
+from activetrack.baselines._common import feasible_arcs, sensor_modes
 from activetrack.objective import TRACE, TraceObjective, sensor_information
 from activetrack.problem import PlanningProblem
 from activetrack.validation import FloatArray
@@ -70,6 +87,8 @@ class GBESResult:
 class GBES:
     """Grid-based exhaustive search over the curves ADB of all sensors (Section V).
 
+    With K > 1 targets: over the boundaries of their feasible sets (module docstring).
+
     Attributes:
         spacing: largest distance between neighbouring grid points on a curve ADB (m);
             the paper uses ``pi / 200``.
@@ -101,9 +120,15 @@ class GBES:
 
     # Grid ---------------------------------------------------------------------------------
     def candidates(self, problem: PlanningProblem) -> list[FloatArray]:
-        """Return each sensor's grid of next positions relative to the target, (K_i, 2)."""
+        """Return each sensor's grid of next positions relative to the target, (K_i, 2).
+
+        With K > 1 targets: relative to the first, ``problem.targets[0]``. ``problem`` is
+        single.
+        """
         free, fixed_rel = sensor_modes(problem)
-        c = problem.rel_sensors
+        if problem.n_targets > 1:
+            return self._boundary_grids(problem, free, fixed_rel)
+        c = problem.sensors - problem.targets[0]
         out = []
         for i in range(problem.n_sensors):
             if not free[i]:
@@ -121,14 +146,22 @@ class GBES:
         """Return each sensor's grid size, counted from the arc lengths (no grid is built).
 
         The same count as ``len`` of :meth:`candidates`: ``ceil(length / spacing) + 1``
-        points per arc, less the shared end points of adjacent arcs. ``problem`` is single.
+        points per arc, less the shared end points of adjacent arcs (K > 1 targets:
+        :meth:`_arc_plan`). ``problem`` is single.
 
         Raises:
-            ValueError: ``spacing`` is below ``_DISTINCT_STEP`` (1e-11 m), near the 1e-12 m
-                at which the grid drops repeated points, so its size cannot be counted.
+            ValueError: (one target) ``spacing`` is below ``_DISTINCT_STEP`` (1e-11 m), near
+                the 1e-12 m at which the grid drops repeated points, so its size cannot be
+                counted.
         """
         free, _ = sensor_modes(problem)
-        c = problem.rel_sensors
+        if problem.n_targets > 1:
+            plans = [self._arc_plan(problem, i) if free[i] else None for i in range(len(free))]
+            return [
+                1 if plan is None else sum(n - 1 + k0 + k1 for _, n, k0, k1 in plan)
+                for plan in plans
+            ]
+        c = problem.sensors - problem.targets[0]
         sizes = []
         for i in range(problem.n_sensors):
             if not free[i]:
@@ -137,6 +170,48 @@ class GBES:
             arcs = geometry.facing_boundary(c[i], float(problem.r[i]), float(problem.rho[i]))
             sizes.append(self._count(arcs))
         return sizes
+
+    def _arc_plan(
+        self, problem: PlanningProblem, i: int
+    ) -> list[tuple[geometry.Arc, int, bool, bool]]:
+        """Return sensor ``i``'s boundary arcs (K > 1) as ``(arc, n, keep_start, keep_end)``.
+
+        Each arc gets ``n = max(1, ceil(length / spacing))`` steps: ``n - 1`` interior
+        points, and its end points unless one lies within 1e-12 m (both coordinates) of an
+        end point of an earlier arc or of its own start (a full circle). Counted from the
+        end points alone, so the grid size is known before the grid is built.
+        """
+        arcs = feasible_arcs(
+            problem.sensors[i], float(problem.r[i]), problem.targets, float(problem.rho[i])
+        )
+        seen: list[FloatArray] = []
+        plan = []
+        for arc in arcs:
+            n = max(1, math.ceil(arc.length / self.spacing))
+            start, end = arc.points(np.array([arc.t0, arc.t1]))
+            keep0 = all(_distinct(start, q) for q in seen)
+            seen.append(start)
+            keep1 = all(_distinct(end, q) for q in seen)
+            seen.append(end)
+            plan.append((arc, n, keep0, keep1))
+        return plan
+
+    def _boundary_grids(
+        self, problem: PlanningProblem, free: np.ndarray, fixed_rel: FloatArray
+    ) -> list[FloatArray]:
+        """Return :meth:`candidates` for K > 1 targets (see :meth:`_arc_plan`)."""
+        origin = problem.targets[0]
+        out = []
+        for i in range(problem.n_sensors):
+            if not free[i]:
+                out.append(fixed_rel[i : i + 1].copy())
+                continue
+            pieces = []
+            for arc, n, keep0, keep1 in self._arc_plan(problem, i):
+                pts = arc.points(np.linspace(arc.t0, arc.t1, n + 1))
+                pieces.append(pts[(0 if keep0 else 1) : (n + 1 if keep1 else n)])
+            out.append(np.concatenate(pieces) - origin)
+        return out
 
     def _count(self, arcs: list[geometry.Arc]) -> int:
         """Return the number of distinct points :meth:`candidates` keeps on ``arcs``."""
@@ -198,7 +273,7 @@ class GBES:
             )
         cands = self.candidates(problem)
         rel, n_eval = grid_optimum(problem, cands, self.block, self.batch_elements, self.prune)
-        positions = rel + problem.target
+        positions = rel + problem.targets[0]
         result = GBESResult(positions, float(problem.score(positions)), total, n_eval)
         self.last_result = result
         return result
@@ -214,17 +289,44 @@ def grid_optimum(
     """Return the best combination of per-sensor candidates and the evaluation count.
 
     ``candidates[i]`` (K_i, 2) are sensor ``i``'s candidate positions relative to the
-    predicted target; the result (M, 2) is relative too. Exact over the candidates.
+    predicted target (with K targets: the first, ``problem.targets[0]``); the result
+    (M, 2) is relative too. Exact over the candidates. ``problem`` is single.
     """
-    feats = [
-        _entries(sensor_information(p, problem.sigma_d2[i], problem.sigma_theta2[i]))
-        for i, p in enumerate(candidates)
-    ]
-    search = _BlockSearch(
-        feats, _entries(problem.prior_info), block, batch_elements, problem.objective
-    )
+    if problem.is_paper:  # the paper's arithmetic, unchanged
+        feats = [
+            _entries(sensor_information(p, problem.sigma_d2[i], problem.sigma_theta2[i]))
+            for i, p in enumerate(candidates)
+        ]
+        search = _BlockSearch(
+            feats, _entries(problem.prior_info), block, batch_elements, problem.objective
+        )
+    else:
+        feats = _target_features(problem, candidates)  # per sensor (K_i, K, 3)
+        prior = _entries(problem.prior_infos)  # (K, 3)
+        if problem.n_targets == 1:
+            feats = [f[:, 0] for f in feats]
+            search = _BlockSearch(feats, prior[0], block, batch_elements, problem.objective)
+        else:
+            search = _TargetsSearch(feats, prior, block, batch_elements, problem.objective)
     idx, n_eval = search.run(prune)
     return np.stack([candidates[i][k] for i, k in enumerate(idx)]), n_eval
+
+
+def _target_features(problem: PlanningProblem, candidates: list[FloatArray]) -> list[FloatArray]:
+    """Return every candidate's information entries about every target, (K_i, K, 3) each.
+
+    :func:`activetrack.sensor_models.information_entries` at ``candidate - t_k`` with the
+    sensor's weights and pose covariance (candidates relative to ``problem.targets[0]``).
+    """
+    targets = problem.targets
+    shift = targets[0] - targets  # (K, 2): candidate + shift_k = position - t_k
+    w_d, w_t = problem.weights
+    out = []
+    for i, p in enumerate(candidates):
+        cov = None if problem.pose_cov is None else problem.pose_cov[i]
+        rel = p[:, None, :] + shift[None, :, :]  # (K_i, K, 2)
+        out.append(np.stack(sensor_models.information_entries(rel, w_d[i], w_t[i], cov), -1))
+    return out
 
 
 def _entries(info: FloatArray) -> FloatArray:
@@ -257,14 +359,15 @@ class _BlockSearch:
         self.means = []  # per sensor (n_blocks, 3): the blocks' mean information
         self.devs = []  # per sensor 3 x (n_blocks, block): entries minus their block's mean
         for f, b, nb in zip(feats, self.bsize, self.nblocks, strict=True):
+            n_e = f.shape[-1]  # 3 entries per target
             pad = np.concatenate([f, np.repeat(f[-1:], nb * b - len(f), axis=0)])
-            blk = pad.reshape(nb, b, 3)
+            blk = pad.reshape(nb, b, n_e)
             mean = blk.mean(axis=1)
-            # Entry-major copies (3 contiguous (n_blocks, block) arrays) vectorize best.
-            self.blocks.append([np.ascontiguousarray(blk[..., e]) for e in range(3)])
+            # Entry-major copies (contiguous (n_blocks, block) arrays) vectorize best.
+            self.blocks.append([np.ascontiguousarray(blk[..., e]) for e in range(n_e)])
             self.means.append(mean)
             self.devs.append(
-                [np.ascontiguousarray(blk[..., e] - mean[:, e : e + 1]) for e in range(3)]
+                [np.ascontiguousarray(blk[..., e] - mean[:, e : e + 1]) for e in range(n_e)]
             )
         self.per_combo = math.prod(self.bsize)
         self.batch = max(1, batch // self.per_combo)
@@ -328,14 +431,15 @@ class _BlockSearch:
             return
         idx = np.unravel_index(flat, self.nblocks)
         m = len(self.blocks)
-        tot = [None, None, None]
+        n_e = len(self.prior)
+        tot = [None] * n_e
         for i in range(m):
             shape = [len(flat)] + [1] * m
             shape[1 + i] = self.bsize[i]
-            for e in range(3):
+            for e in range(n_e):
                 term = self.blocks[i][e][idx[i]].reshape(shape)
                 tot[e] = term + self.prior[e] if tot[e] is None else tot[e] + term
-        val = self.objective.of_entries(*tot)
+        val = self._value(tot)
         self.n_eval += val.size
         k = int(np.argmin(val))
         v = float(val.flat[k])
@@ -346,3 +450,77 @@ class _BlockSearch:
                 min(int(idx[i][pos[0]]) * self.bsize[i] + int(pos[1 + i]), self.sizes[i] - 1)
                 for i in range(m)
             )
+
+    def _value(self, tot: list[FloatArray]) -> FloatArray:
+        """Return the objective of summed entries ``tot`` (a, b, c)."""
+        return self.objective.of_entries(*tot)
+
+
+class _TargetsSearch(_BlockSearch):
+    """:class:`_BlockSearch` over K > 1 targets: features (K_i, K, 3), prior (K, 3)."""
+
+    def __init__(
+        self,
+        feats: list[FloatArray],
+        prior: FloatArray,
+        block: int,
+        batch: int,
+        objective: TraceObjective = TRACE,
+    ):
+        self.n_targets = prior.shape[0]
+        self.kind = _combine_kind(objective)
+        flat = [f.reshape(len(f), -1) for f in feats]  # target-major: a_0 b_0 c_0 a_1 ...
+        super().__init__(flat, prior.reshape(-1), block, batch, objective)
+
+    def _bounds(self, lo: int) -> tuple[np.ndarray, FloatArray]:
+        """Return block combinations ``lo ...`` (flat indices) and their lower bounds.
+
+        Per target ``k`` the tangent plane at the blocks' mean information ``Y0_k``.
+        A sum over targets: the sum of the planes, minimized sensor by sensor. A max:
+        the largest over ``k`` of target ``k``'s plane minimized sensor by sensor.
+        """
+        flat = np.arange(lo, min(lo + self.chunk, self.n_block_combos))
+        idx = np.unravel_index(flat, self.nblocks)
+        y0 = self.prior + sum(mu[i] for mu, i in zip(self.means, idx, strict=True))
+        planes = [
+            self.objective.tangent(*y0[:, 3 * k : 3 * k + 3].T) for k in range(self.n_targets)
+        ]
+        if self.kind == "sum":
+            lb = sum(p[0] for p in planes)
+            for dev, i in zip(self.devs, idx, strict=True):
+                lin = 0.0
+                for k, (_, ga, gb, gc) in enumerate(planes):
+                    da, db, dc = (dev[3 * k + e][i] for e in range(3))
+                    lin = lin + (ga[:, None] * da + gb[:, None] * db + gc[:, None] * dc)
+                lb = lb + lin.min(axis=1)
+            return flat, lb
+        bounds = []
+        for k, (lb, ga, gb, gc) in enumerate(planes):
+            for dev, i in zip(self.devs, idx, strict=True):
+                da, db, dc = (dev[3 * k + e][i] for e in range(3))
+                lb = lb + (ga[:, None] * da + gb[:, None] * db + gc[:, None] * dc).min(axis=1)
+            bounds.append(lb)
+        return flat, np.max(bounds, axis=0)
+
+    def _value(self, tot: list[FloatArray]) -> FloatArray:
+        """Return ``objective.combine`` of the K targets' values of summed entries ``tot``."""
+        vals = [self.objective.of_entries(*tot[3 * k : 3 * k + 3]) for k in range(self.n_targets)]
+        return self.objective.combine(np.stack(np.broadcast_arrays(*vals)), axis=0)
+
+
+def _combine_kind(objective: TraceObjective) -> str:
+    """Return "sum" or "max": how ``objective.combine`` reduces the targets' values.
+
+    The bound of :class:`_TargetsSearch` is exact for these two only.
+
+    Raises:
+        ValueError: ``combine`` is neither (probed on the values 1, 2, 4).
+    """
+    got = float(objective.combine(np.array([1.0, 2.0, 4.0])))
+    if got == 7.0:
+        return "sum"
+    if got == 4.0:
+        return "max"
+    raise ValueError(
+        f"GBES needs an objective whose combine over targets is a sum or a max, got {objective!r}"
+    )

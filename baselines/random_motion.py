@@ -5,6 +5,14 @@ Every sensor moves to a point drawn uniformly, by arc length, from its curve ADB
 speed limit (eq. 15) and the minimum distance (eq. 16). Sensors that cannot move
 (``r = 0``) stay; sensors that cannot keep the minimum distance go to
 :func:`activetrack.geometry.unreachable_fallback`.
+
+With K > 1 predicted targets there is no single direction "towards the target": every
+free sensor moves to a point drawn uniformly by arc length from the whole boundary of its
+feasible set (the reach disk minus the K ``rho`` disks,
+:func:`activetrack.baselines._common.feasible_arcs`: reach-circle pieces outside the
+``rho`` disks and ``rho``-circle pieces inside the reach disk); sensors whose feasible set
+is empty go to :func:`activetrack.baselines._common.multi_target_fallback`. With one target
+(any sensor model or pose covariance) the curve ADB as above.
 """
 
 from __future__ import annotations
@@ -12,13 +20,16 @@ from __future__ import annotations
 import numpy as np
 
 from activetrack import geometry
-from activetrack.baselines._common import sensor_modes
+from activetrack.baselines._common import modes_and_arcs, sensor_modes
 from activetrack.problem import PlanningProblem
 from activetrack.validation import FloatArray
 
 
 class RandomMotion:
-    """Each sensor to a uniformly random point of its curve ADB (Section V, "RM")."""
+    """Each sensor to a uniformly random point of its curve ADB (Section V, "RM").
+
+    With K > 1 targets: of the boundary of its feasible set (see the module docstring).
+    """
 
     def plan(self, problem: PlanningProblem, rng: np.random.Generator) -> FloatArray:
         """Return random feasible next absolute positions, ``batch_shape + (M, 2)``.
@@ -26,16 +37,23 @@ class RandomMotion:
         Draws exactly one uniform per free sensor from ``rng``, in copy order (row-major
         over the batch axes), then sensor order.
         """
+        targets = problem.targets
+        if targets.shape[-2] > 1:
+            free, out, arcs_of = modes_and_arcs(problem.sensors, targets, problem.r, problem.rho)
+            for k in arcs_of:  # free sensors, row-major over the batch, then the sensors
+                out[k] = geometry.sample_uniform(arcs_of[k], rng)
+            return out
         free, rel = sensor_modes(problem)
         rel = rel.copy()
-        c = problem.rel_sensors
+        origin = targets[..., 0, None, :]  # what sensor_modes is relative to
+        c = problem.sensors - origin
         r, rho = problem.r, problem.rho
         for b in np.ndindex(problem.batch_shape):
             for i in np.flatnonzero(free[b]):
                 k = b + (i,)
                 arcs = geometry.facing_boundary(c[k], float(r[k]), float(rho[k]))
                 rel[k] = geometry.sample_uniform(arcs, rng)
-        return rel + problem.target[..., None, :]
+        return rel + origin
 
     def __repr__(self) -> str:
         return "RandomMotion()"

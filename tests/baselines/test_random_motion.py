@@ -1,4 +1,5 @@
-"""Random motion: feasible, and uniform by arc length on the curve ADB (closed forms)."""
+"""Random motion: feasible, and uniform by arc length on the curve ADB (closed forms) or,
+with K targets, on the feasible set's boundary (a dense tabulation)."""
 
 from __future__ import annotations
 
@@ -6,7 +7,10 @@ import numpy as np
 from scipy import stats
 
 from activetrack.baselines import RandomMotion
+from activetrack.baselines._common import sensor_modes
+from activetrack.objective import LOGDET
 from activetrack.problem import PlanningProblem
+from tests.baselines._multi import dense_boundary, multi_problem
 
 
 def _problem(c, r=1.0, rho=2.0):
@@ -78,3 +82,79 @@ def test_rm_on_a_batch_draws_copy_by_copy_then_sensor_by_sensor():
     g = np.random.default_rng(9)
     for b, p in enumerate(singles):
         np.testing.assert_array_equal(out[b], RandomMotion().plan(p, g))
+
+
+# K targets, mixed models, uncertain poses ---------------------------------------------------
+
+
+def test_rm_on_random_multi_target_problems_is_feasible():
+
+    rng = np.random.default_rng(10)
+    n_free = 0
+    for _ in range(300):
+        p = multi_problem(rng, 3, int(rng.integers(1, 4)), distance=(0.0, 3.5))
+        free, _ = sensor_modes(p)
+        out = RandomMotion().plan(p, rng)
+        assert np.all(p.violation(out)[free] <= 1e-9)
+        n_free += int(free.sum())
+    assert n_free > 700
+
+
+def _arc_coordinate(points, sensor, r, targets, rho, n=400_000):
+    """Return each point's arc-length coordinate along the feasible boundary, as a
+    fraction of its length, from a dense tabulation of the circles (independent of RM)."""
+
+    tables = dense_boundary(sensor, r, targets, rho, n)
+    lengths = [ok.mean() * 2 * np.pi * rad for _, rad, _, ok in tables]
+    offsets = np.concatenate([[0.0], np.cumsum(lengths)])
+    out = np.full(len(points), np.nan)
+    for j, (centre, rad, _, ok) in enumerate(tables):
+        on = np.isclose(np.linalg.norm(points - centre, axis=-1), rad, atol=1e-9) & np.isnan(out)
+        ang = np.mod(np.arctan2(*(points[on] - centre).T[::-1]), 2 * np.pi)
+        before = np.concatenate([[0], np.cumsum(ok)])[np.ceil(ang / (2 * np.pi) * n).astype(int)]
+        out[on] = offsets[j] + before * 2 * np.pi * rad / n
+    return out / offsets[-1]
+
+
+def test_rm_with_k_targets_is_uniform_by_arc_length_on_the_feasible_boundary():
+    # A sensor among three targets: its boundary has reach-circle and rho-circle pieces.
+    targets = np.array([[0.0, 1.6], [1.5, -0.9], [-1.4, -1.0]])
+    sensor = np.array([[0.3, 0.1]])
+    p = PlanningProblem(
+        np.stack([np.eye(2)] * 3), targets, sensor, 1.0, 1.2, 1.0, 0.5, multi_target=True
+    )
+    batch = PlanningProblem.stack([p] * 4000)
+    pts = RandomMotion().plan(batch, np.random.default_rng(11))[:, 0]
+    assert np.max(batch.violation(pts[:, None])) <= 1e-9
+    u = _arc_coordinate(pts, sensor[0], 1.0, targets, 1.2)
+    assert not np.any(np.isnan(u))
+    on_reach = np.isclose(np.linalg.norm(pts - sensor, axis=-1), 1.0, atol=1e-9)
+    assert 0.1 < on_reach.mean() < 0.9  # both kinds of piece are drawn
+    assert stats.kstest(u, stats.uniform(0, 1).cdf).pvalue > 1e-3
+
+
+def test_rm_with_k_targets_draws_one_uniform_per_free_sensor_in_order():
+
+    rng = np.random.default_rng(12)
+    singles = [multi_problem(rng, 3, 2, distance=(0.0, 3.5)) for _ in range(6)]
+    batch = PlanningProblem.stack(singles)
+    g = np.random.default_rng(13)
+    out = RandomMotion().plan(batch, g)
+    n_free = int(sensor_modes(batch)[0].sum())
+    ref = np.random.default_rng(13)
+    ref.random(n_free)
+    assert g.random() == ref.random()  # exactly n_free uniforms were drawn
+    g = np.random.default_rng(13)
+    for b, p in enumerate(singles):
+        np.testing.assert_array_equal(out[b], RandomMotion().plan(p, g))
+
+
+def test_rm_with_one_target_and_other_models_keeps_the_curve_adb_draws():
+    # Models, poses and objectives do not change RM with one target: the same draws.
+
+    p = multi_problem(np.random.default_rng(14), 3, 1, LOGDET, multi_target=False)
+    plain = PlanningProblem(p.prior_cov, p.target, p.sensors, p.r, p.rho, p.sigma_d2,
+                            p.sigma_theta2)  # fmt: skip
+    a = RandomMotion().plan(p, np.random.default_rng(15))
+    b = RandomMotion().plan(plain, np.random.default_rng(15))
+    np.testing.assert_array_equal(a, b)
