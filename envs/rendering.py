@@ -148,7 +148,7 @@ def predicted_positions(world: Any) -> FloatArray:
 
 
 def ellipse(center: FloatArray, cov: FloatArray, n_sigma: float = 3.0) -> FloatArray:
-    """Return the closed polyline of the ``n_sigma`` ellipse of ``cov`` at ``center``, (K, 2)."""
+    """Return the closed polyline of the ``n_sigma`` ellipse of ``cov`` at ``center``, (65, 2)."""
     return center + n_sigma * (np.linalg.cholesky(cov) @ _UNIT).T
 
 
