@@ -1,10 +1,25 @@
 """Rendering of a tracking episode in the style of the paper's Fig. 4 (no physics here).
 
-The environment appends one :class:`Snapshot` per time step to an :class:`EpisodeHistory`
-(only when a render mode is set); :class:`TrackingRenderer` draws the history: the
-target's true and estimated tracks, the 3-sigma ellipses of the position estimate along
-the track (as in Fig. 4), the sensors' trails, and each sensor's ``rho`` circle (eq. 14)
-around the predicted target position its last move was constrained by.
+The environment records one :class:`Snapshot` per time step in an :class:`EpisodeHistory`
+(only when a render mode is set; :meth:`EpisodeHistory.record` reads a world's copy 0);
+:class:`TrackingRenderer` draws the history. A frame shows
+
+* every target in its own colour (target 0 as in Fig. 4: true track black, estimate red;
+  further targets in :data:`TARGET_COLORS`): its true track (solid, a star at the current
+  position), its estimated track (dashed, a cross at the current estimate), the 3-sigma
+  ellipses of the position covariance ``P(k|k)_11`` along the track (as in Fig. 4) and
+  around the current estimate;
+* every sensor in its own colour (matplotlib's ``C0, C1, ...``): its trail of true
+  positions and its current position marked by its measurement model
+  (:data:`MODEL_MARKERS`: circle range and bearing, square range only, triangle bearing
+  only; a legend entry per model present once a team is not all range and bearing,
+  so the paper's frames are unchanged);
+* each sensor's ``rho`` circle (eq. 14) around every predicted target position
+  ``p_T(k|k-1)`` its last move was constrained by;
+* with uncertain sensor poses, each sensor's position fix (the position the team
+  believes and plans from: a small cross) and the 2-sigma ellipse of its pose
+  covariance around the fix;
+* the step and the posterior trace ``tr P(k|k)_11`` (summed over the targets) above.
 
 ``rgb_array`` draws on a matplotlib Agg canvas (no window, works headless). ``human``
 draws on a pyplot window; without an interactive backend (no display) it warns once and
@@ -26,20 +41,50 @@ _N_CIRCLE = 65
 _UNIT = np.stack(
     [np.cos(np.linspace(0, 2 * np.pi, _N_CIRCLE)), np.sin(np.linspace(0, 2 * np.pi, _N_CIRCLE))]
 )
-#: At most this many 3-sigma ellipses are drawn along the track (evenly spaced).
+#: At most this many 3-sigma ellipses per target are drawn along the track (evenly spaced).
 MAX_ELLIPSES = 25
+#: Per target: (true track, estimate, 3-sigma ellipses) colours; cycled for K > 5.
+TARGET_COLORS: tuple[tuple[str, str, str], ...] = (
+    ("k", "r", "tab:red"),  # Fig. 4's colours
+    ("#5c005c", "m", "m"),
+    ("#004040", "#008b8b", "#008b8b"),
+    ("#4d3800", "#b8860b", "#b8860b"),
+    ("#262626", "#7f7f7f", "#7f7f7f"),
+)
+#: Marker and legend label of each sensor model code (0 range and bearing, 1 range only,
+#: 2 bearing only; :data:`activetrack.scenarios.SENSOR_MODELS`).
+MODEL_MARKERS: tuple[tuple[str, str], ...] = (
+    ("o", "range & bearing"),
+    ("s", "range only"),
+    ("^", "bearing only"),
+)
+#: The pose ellipses are drawn at this many standard deviations.
+POSE_SIGMAS = 2.0
 
 
 @dataclass(frozen=True)
 class Snapshot:
-    """What is drawn of time step k (all float64 copies)."""
+    """What is drawn of time step k (float64 copies; K targets, M sensors)."""
 
     k: int
-    target: FloatArray  # true position p_T(k), (2,)
-    estimate: FloatArray  # x_hat(k|k)[:2], (2,)
-    cov: FloatArray  # P(k|k)[:2, :2], (2, 2)
-    sensors: FloatArray  # p_S(k), (M, 2)
-    center: FloatArray  # prediction p_T(k|k-1) the rho circles surround, (2,)
+    targets: FloatArray  # true positions p_T(k), (K, 2)
+    estimates: FloatArray  # x_hat(k|k)[:2] per target, (K, 2)
+    covs: FloatArray  # P(k|k)[:2, :2] per target, (K, 2, 2)
+    sensors: FloatArray  # true sensor positions p_S(k), (M, 2)
+    centers: FloatArray  # predictions p_T(k|k-1) the rho circles surround, (K, 2)
+    fixes: FloatArray | None = None  # believed sensor positions (uncertain poses), (M, 2)
+
+    @property
+    def n_targets(self) -> int:
+        """Return K."""
+        return self.targets.shape[0]
+
+
+def _per_target(value: Any, ndim: int) -> list[np.ndarray]:
+    """Return one target's array (``ndim`` dims) or a sequence of them as a list."""
+    if isinstance(value, np.ndarray) and value.ndim == ndim:
+        return [value]
+    return [np.asarray(v) for v in value]
 
 
 @dataclass
@@ -52,23 +97,65 @@ class EpisodeHistory:
         """Forget the episode."""
         self.frames.clear()
 
-    def append(self, k, x_true, x_est, P, sensors, center) -> None:
-        """Record time step ``k`` (arrays are copied)."""
-        self.frames.append(
-            Snapshot(
-                int(k),
-                np.array(x_true[:2], dtype=np.float64),
-                np.array(x_est[:2], dtype=np.float64),
-                np.array(P[:2, :2], dtype=np.float64),
-                np.array(sensors, dtype=np.float64),
-                np.array(center[:2], dtype=np.float64),
+    def append(self, k, x_true, x_est, P, sensors, center, fixes=None) -> None:
+        """Record time step ``k`` (the position parts are copied).
+
+        ``x_true``, ``x_est``, ``center`` are one target's state (n,) or K of them (a
+        (K, n) array or a sequence; the states may differ in dimension), ``P`` one (n, n)
+        covariance or K of them; ``sensors`` (M, 2) the true positions, ``fixes`` (M, 2)
+        the believed ones (None: poses are known).
+        """
+        targets = np.array([v[:2] for v in _per_target(x_true, 1)], dtype=np.float64)
+        estimates = np.array([v[:2] for v in _per_target(x_est, 1)], dtype=np.float64)
+        covs = np.array([c[:2, :2] for c in _per_target(P, 2)], dtype=np.float64)
+        centers = np.array([v[:2] for v in _per_target(center, 1)], dtype=np.float64)
+        if not len(targets) == len(estimates) == len(covs) == len(centers):
+            raise ValueError(
+                f"x_true, x_est, P and center must describe the same number of targets, got "
+                f"{len(targets)}, {len(estimates)}, {len(covs)}, {len(centers)}"
             )
+        sensors = np.array(sensors, dtype=np.float64)
+        if fixes is not None:
+            fixes = np.array(fixes, dtype=np.float64)
+            if fixes.shape != sensors.shape:
+                raise ValueError(f"fixes must have shape {sensors.shape}, got {fixes.shape}")
+        self.frames.append(Snapshot(int(k), targets, estimates, covs, sensors, centers, fixes))
+
+    def record(self, world: Any, centers: FloatArray | None = None) -> None:
+        """Record the current step of copy 0 of ``world`` (an :class:`activetrack.World`).
+
+        ``centers`` (K, 2): the predictions the step's moves kept ``rho`` from
+        (:func:`predicted_positions` before the step); None: the posterior estimates (at
+        reset, before any move). The fixes are recorded when the poses are uncertain.
+        """
+        g = world.get
+        K = world.n_targets
+        x_hat = [g("x_hat", 0, j) for j in range(K)]
+        self.append(
+            g("k", 0),
+            [g("x_true", 0, j) for j in range(K)],
+            x_hat,
+            [g("P", 0, j) for j in range(K)],
+            g("sensors", 0),
+            x_hat if centers is None else centers,
+            g("fixes", 0) if world.params.pose_cov is not None else None,
         )
 
 
+def predicted_positions(world: Any) -> FloatArray:
+    """Return the predicted target positions ``p_T(k+1|k)`` of copy 0 of ``world``, (K, 2)."""
+    return np.array([world.get("x_pred", 0, j)[:2] for j in range(world.n_targets)])
+
+
 def ellipse(center: FloatArray, cov: FloatArray, n_sigma: float = 3.0) -> FloatArray:
-    """Return the closed polyline of the ``n_sigma`` ellipse of ``cov`` at ``center``, (K, 2)."""
+    """Return the closed polyline of the ``n_sigma`` ellipse of ``cov`` at ``center``, (65, 2)."""
     return center + n_sigma * (np.linalg.cholesky(cov) @ _UNIT).T
+
+
+def _psd_root(cov: FloatArray) -> FloatArray:
+    """Return ``S`` with ``S S^T = cov`` for symmetric PSD (possibly singular) ``cov``."""
+    w, v = np.linalg.eigh(cov)
+    return v * np.sqrt(np.clip(w, 0.0, None))[..., None, :]
 
 
 def _interactive_backend() -> bool:
@@ -87,21 +174,70 @@ def _interactive_backend() -> bool:
 
 
 class TrackingRenderer:
-    """Draws an :class:`EpisodeHistory` with matplotlib, reusing one figure."""
+    """Draws an :class:`EpisodeHistory` with matplotlib, reusing one figure.
 
-    def __init__(self, rho: FloatArray, size: tuple[int, int] = (480, 480), dpi: int = 96) -> None:
+    Args:
+        rho: per-sensor minimum distance (M,) (eq. 14).
+        size: frame (width, height) in pixels.
+        dpi: dots per inch of the figure.
+        models: per-sensor model codes (M,) (0 range and bearing, 1 range only, 2 bearing
+            only; ``Scenario.sensor_models``); None: all range and bearing.
+        pose_cov: per-sensor pose covariances (M, 2, 2) (``Scenario.pose_covariances``),
+            drawn as 2-sigma ellipses around the recorded fixes; None: poses are known.
+    """
+
+    def __init__(
+        self,
+        rho: FloatArray,
+        size: tuple[int, int] = (480, 480),
+        dpi: int = 96,
+        *,
+        models: Any = None,
+        pose_cov: Any = None,
+    ) -> None:
         self.rho = np.asarray(rho, dtype=np.float64)
-        self.size = size
-        self.dpi = dpi
+        if self.rho.ndim != 1:
+            raise ValueError(f"rho must have shape (M,), got {self.rho.shape}")
+        m = self.rho.shape[0]
+        if (
+            len(size) != 2
+            or not all(isinstance(s, (int, np.integer)) and s > 0 for s in size)
+            or isinstance(dpi, bool)
+            or not isinstance(dpi, (int, np.integer))
+            or dpi <= 0
+        ):
+            raise ValueError(f"size must be two positive integers and dpi one, got {size}, {dpi}")
+        self.size = (int(size[0]), int(size[1]))
+        self.dpi = int(dpi)
+        codes = np.zeros(m, dtype=np.int8) if models is None else np.asarray(models)
+        if (
+            codes.shape != (m,)
+            or codes.dtype.kind not in "iu"
+            or not np.all((codes >= 0) & (codes < len(MODEL_MARKERS)))
+        ):
+            raise ValueError(
+                f"models must be {m} integer codes in [0, {len(MODEL_MARKERS) - 1}], got {models!r}"
+            )
+        self.models = codes.astype(np.int8)
+        self.pose_cov = None
+        if pose_cov is not None:
+            cov = np.asarray(pose_cov, dtype=np.float64)
+            if cov.shape != (m, 2, 2) or not np.all(np.isfinite(cov)):
+                raise ValueError(f"pose_cov must be finite with shape ({m}, 2, 2), got {cov.shape}")
+            self.pose_cov = cov
+            self._pose_rings = POSE_SIGMAS * np.einsum("mij,jk->mki", _psd_root(cov), _UNIT)
         self._fig: Any = None
         self._canvas: Any = None
         self._art: dict[str, Any] = {}
         self._human = False
         self._warned = False
-        self._ellipses: list[tuple[Snapshot, FloatArray]] = []
+        self._layout: tuple[int, bool] = (1, False)
+        # Per frame: (snapshot, its K 3-sigma ellipses).
+        self._ellipses: list[tuple[Snapshot, list[FloatArray]]] = []
 
     # Figure set-up ------------------------------------------------------------------
-    def _build(self, human: bool) -> None:
+    def _build(self, human: bool, n_targets: int = 1, fixes: bool = False) -> None:
+        """Make the figure and its artists for ``n_targets`` targets (and the fixes)."""
         from matplotlib.collections import LineCollection
 
         figsize = (self.size[0] / self.dpi, self.size[1] / self.dpi)
@@ -127,32 +263,59 @@ class TrackingRenderer:
         ax.yaxis.set_major_locator(MaxNLocator(5))
         ax.grid(True, lw=0.3, alpha=0.5)
         colors = [f"C{i % 10}" for i in range(self.rho.shape[0])]
-        art: dict[str, Any] = {
-            "ellipses": LineCollection([], colors="tab:red", linewidths=0.6, alpha=0.45),
-            "true": ax.plot([], [], "k-", lw=1.2, label="target (true)")[0],
-            "est": ax.plot([], [], "r--", lw=1.0, label="target (estimate)")[0],
-            "true_now": ax.plot([], [], "k*", ms=9)[0],
-            "est_now": ax.plot([], [], "rx", ms=7)[0],
-            "now_ellipse": ax.plot([], [], "r-", lw=1.2)[0],
-            "trails": [],
-            "heads": [],
-            "rho": [],
-        }
-        ax.add_collection(art["ellipses"])
-        for c in colors:
+        targets = []
+        for j in range(n_targets):
+            true_c, est_c, ell_c = TARGET_COLORS[j % len(TARGET_COLORS)]
+            name = "target" if n_targets == 1 else f"target {j}"
+            targets.append(
+                {
+                    "ellipses": LineCollection([], colors=ell_c, linewidths=0.6, alpha=0.45),
+                    "true": ax.plot([], [], "-", color=true_c, lw=1.2, label=f"{name} (true)")[0],
+                    "est": ax.plot([], [], "--", color=est_c, lw=1.0, label=f"{name} (estimate)")[
+                        0
+                    ],
+                }
+            )
+        for j, t in enumerate(targets):
+            true_c, est_c, _ = TARGET_COLORS[j % len(TARGET_COLORS)]
+            t["true_now"] = ax.plot([], [], "*", color=true_c, ms=9)[0]
+            t["est_now"] = ax.plot([], [], "x", color=est_c, ms=7)[0]
+            t["now_ellipse"] = ax.plot([], [], "-", color=est_c, lw=1.2)[0]
+        for t in targets:
+            ax.add_collection(t["ellipses"])
+        targets[0]["ellipses"].set_label("3-sigma bounds")
+        art: dict[str, Any] = {"targets": targets, "trails": [], "heads": [], "rho": []}
+        for c, code in zip(colors, self.models.tolist(), strict=True):
             art["trails"].append(ax.plot([], [], "-", color=c, lw=1.0)[0])
-            art["heads"].append(ax.plot([], [], "o", color=c, ms=5)[0])
+            art["heads"].append(ax.plot([], [], MODEL_MARKERS[code][0], color=c, ms=5)[0])
             art["rho"].append(ax.plot([], [], ":", color=c, lw=0.8)[0])
         art["trails"][0].set_label("sensor trails")
         art["rho"][0].set_label("rho circles")
-        art["ellipses"].set_label("3-sigma bounds")
+        if np.any(self.models):  # a legend entry per model present (not for the paper's team)
+            for code in sorted(set(self.models.tolist())):
+                marker, label = MODEL_MARKERS[code]
+                ax.plot([], [], marker, ls="none", color="0.35", ms=5, label=label)
+        art["fixes"], art["pose"] = [], None
+        if fixes:
+            for c in colors:
+                art["fixes"].append(ax.plot([], [], "+", color=c, ms=6, mew=1.0)[0])
+            label = "position fixes"
+            if self.pose_cov is not None:
+                art["pose"] = LineCollection([], colors=colors, linewidths=0.6, alpha=0.7)
+                label += f" ({POSE_SIGMAS:g}-sigma)"
+            art["fixes"][0].set_label(label)
+        if art["pose"] is not None:
+            ax.add_collection(art["pose"])
         art["title"] = ax.text(
             0.5, 1.015, "", transform=ax.transAxes, ha="center", va="bottom", fontsize=9
         )
         ax.legend(loc="upper left", fontsize=6, framealpha=0.6)
         self._dynamic = [
-            art["ellipses"], art["true"], art["est"], *art["trails"], *art["rho"],
-            art["now_ellipse"], art["true_now"], art["est_now"], *art["heads"], art["title"],
+            *(t["ellipses"] for t in targets), *(t["true"] for t in targets),
+            *(t["est"] for t in targets), *art["trails"], *art["rho"],
+            *([art["pose"]] if art["pose"] is not None else []),
+            *(a for t in targets for a in (t["now_ellipse"], t["true_now"], t["est_now"])),
+            *art["heads"], *art["fixes"], art["title"],
         ]  # fmt: skip
         if not human:
             # Blitting: the axes, ticks and legend (text is slow) are drawn into a cached
@@ -160,6 +323,7 @@ class TrackingRenderer:
             for a in self._dynamic:
                 a.set_animated(True)
         self._fig, self._canvas, self._art, self._human = fig, canvas, art, human
+        self._layout = (n_targets, fixes)
         self._ax = ax
         self._view: tuple[FloatArray, float] | None = None
         self._background = None
@@ -168,27 +332,51 @@ class TrackingRenderer:
         frames = history.frames
         art = self._art
         last = frames[-1]
-        true = np.array([f.target for f in frames])
-        est = np.array([f.estimate for f in frames])
+        true = np.array([f.targets for f in frames])  # (T, K, 2)
+        est = np.array([f.estimates for f in frames])
         trails = np.array([f.sensors for f in frames])  # (T, M, 2)
-        art["true"].set_data(true[:, 0], true[:, 1])
-        art["est"].set_data(est[:, 0], est[:, 1])
-        art["true_now"].set_data([last.target[0]], [last.target[1]])
-        art["est_now"].set_data([last.estimate[0]], [last.estimate[1]])
-        now = ellipse(last.estimate, last.cov)
-        art["now_ellipse"].set_data(now[:, 0], now[:, 1])
+        polys = self._ellipses_of(frames)
         stride = max(1, int(np.ceil(len(frames) / MAX_ELLIPSES)))
-        art["ellipses"].set_segments(self._ellipses_of(frames)[::stride])
+        nows = []
+        trace = 0.0
+        for j, t in enumerate(art["targets"]):
+            t["true"].set_data(true[:, j, 0], true[:, j, 1])
+            t["est"].set_data(est[:, j, 0], est[:, j, 1])
+            t["true_now"].set_data([last.targets[j, 0]], [last.targets[j, 1]])
+            t["est_now"].set_data([last.estimates[j, 0]], [last.estimates[j, 1]])
+            now = ellipse(last.estimates[j], last.covs[j])
+            t["now_ellipse"].set_data(now[:, 0], now[:, 1])
+            t["ellipses"].set_segments([p[j] for p in polys[::stride]])
+            nows.append(now)
+            trace += float(last.covs[j, 0, 0] + last.covs[j, 1, 1])
+        K = last.n_targets
         for i, (trail, head, circle) in enumerate(
             zip(art["trails"], art["heads"], art["rho"], strict=True)
         ):
             trail.set_data(trails[:, i, 0], trails[:, i, 1])
             head.set_data([last.sensors[i, 0]], [last.sensors[i, 1]])
-            ring = last.center + self.rho[i] * _UNIT.T
-            circle.set_data(ring[:, 0], ring[:, 1])
-        trace = float(last.cov[0, 0] + last.cov[1, 1])
-        art["title"].set_text(f"step {last.k}   tr P(k|k)_11 = {trace:.3g} m²")
-        pts = np.concatenate([true, est, trails.reshape(-1, 2), now])
+            ring = self.rho[i] * _UNIT.T
+            if K == 1:
+                rings = last.centers[0] + ring
+            else:  # one line through every target's ring, broken by NaN rows
+                rings = np.concatenate(
+                    [np.vstack([c + ring, [np.nan, np.nan]]) for c in last.centers]
+                )
+            circle.set_data(rings[:, 0], rings[:, 1])
+        extra = []
+        if art["fixes"]:
+            fixes = last.sensors if last.fixes is None else last.fixes
+            for i, mark in enumerate(art["fixes"]):
+                mark.set_data([fixes[i, 0]], [fixes[i, 1]])
+            extra.append(fixes)
+            if art["pose"] is not None:
+                pose = fixes[:, None, :] + self._pose_rings  # (M, N_CIRCLE, 2)
+                art["pose"].set_segments(list(pose))
+                extra.append(pose.reshape(-1, 2))
+        title = "tr P(k|k)_11" if K == 1 else "Σ tr P(k|k)_11"
+        art["title"].set_text(f"step {last.k}   {title} = {trace:.3g} m²")
+        pts = np.concatenate([true.reshape(-1, 2), est.reshape(-1, 2), trails.reshape(-1, 2),
+                              *nows, *extra])  # fmt: skip
         self._fit_view(pts.min(0), pts.max(0))
 
     def _fit_view(self, lo: FloatArray, hi: FloatArray) -> None:
@@ -207,8 +395,8 @@ class TrackingRenderer:
         self._ax.set_ylim(mid[1] - chalf, mid[1] + chalf)
         self._background = None
 
-    def _ellipses_of(self, frames: list[Snapshot]) -> list[FloatArray]:
-        # Each frame's ellipse is computed once; the cache follows the history by identity.
+    def _ellipses_of(self, frames: list[Snapshot]) -> list[list[FloatArray]]:
+        # Each frame's ellipses are computed once; the cache follows the history by identity.
         cache = self._ellipses
         n = len(cache)
         if n and (
@@ -216,15 +404,29 @@ class TrackingRenderer:
         ):
             cache.clear()
             n = 0
-        cache.extend((f, ellipse(f.estimate, f.cov)) for f in frames[n:])
-        return [poly for _, poly in cache]
+        cache.extend(
+            (f, [ellipse(e, c) for e, c in zip(f.estimates, f.covs, strict=True)])
+            for f in frames[n:]
+        )
+        return [polys for _, polys in cache]
+
+    def _layout_of(self, history: EpisodeHistory) -> tuple[int, bool]:
+        """Return the (targets, fixes drawn) the history needs."""
+        last = history.frames[-1]
+        if last.sensors.shape[0] != self.rho.shape[0]:
+            raise ValueError(
+                f"the history has {last.sensors.shape[0]} sensors, the renderer "
+                f"{self.rho.shape[0]} (rho)"
+            )
+        return last.n_targets, last.fixes is not None or self.pose_cov is not None
 
     # Public ------------------------------------------------------------------------
     def rgb_array(self, history: EpisodeHistory) -> np.ndarray:
         """Return the current frame as a uint8 array of shape (height, width, 3)."""
-        if self._fig is None or self._human:
+        layout = self._layout_of(history)
+        if self._fig is None or self._human or layout != self._layout:
             self.close()
-            self._build(human=False)
+            self._build(False, *layout)
         self._update(history)
         canvas = self._canvas
         if self._background is None:
@@ -249,9 +451,15 @@ class TrackingRenderer:
             return
         import matplotlib.pyplot as plt
 
-        if self._fig is None or not self._human or not plt.fignum_exists(self._fig.number):
+        layout = self._layout_of(history)
+        if (
+            self._fig is None
+            or not self._human
+            or layout != self._layout
+            or not plt.fignum_exists(self._fig.number)
+        ):
             self.close()
-            self._build(human=True)
+            self._build(True, *layout)
             plt.show(block=False)
         self._update(history)
         self._fig.canvas.draw_idle()

@@ -61,7 +61,7 @@ from activetrack.scenarios import Scenario, make_scenario
 from activetrack.validation import FloatArray, real_array
 from activetrack.world import World
 
-from .rendering import EpisodeHistory, TrackingRenderer
+from .rendering import EpisodeHistory, TrackingRenderer, predicted_positions
 
 RENDER_MODES = ("human", "rgb_array")
 
@@ -210,12 +210,8 @@ class TrackingParallelEnv(ParallelEnv):
         self._started = True
         self.agents = self.possible_agents[:]
         if self._history is not None:
-            w = self.world
             self._history.clear()
-            x_hat = w.get("x_hat", 0)
-            self._history.append(
-                0, w.get("x_true", 0), x_hat, w.get("P", 0), w.get("sensors", 0), x_hat
-            )
+            self._history.record(self.world)  # the rho circles around the estimates
             if self._renderer is not None:
                 self._renderer.reset()
         self._obs = self.world.observe(0)
@@ -253,14 +249,11 @@ class TrackingParallelEnv(ParallelEnv):
     def _advance(self, step: Any, moves: FloatArray) -> tuple[np.ndarray, float, bool, bool]:
         """Run the world's ``step`` (positions or actions) and return the array results."""
         w = self.world
-        planned_from = w.get("x_pred", 0).copy() if self._history is not None else None
+        planned_from = predicted_positions(w) if self._history is not None else None
         res = step(moves)  # (M, 2): a world of one copy takes it unbatched
         terminated, truncated = bool(res.terminated), bool(res.truncated)
         if self._history is not None:
-            g = w.get
-            self._history.append(
-                g("k", 0), g("x_true", 0), g("x_hat", 0), g("P", 0), g("sensors", 0), planned_from
-            )
+            self._history.record(w, planned_from)
         if terminated or truncated:
             self.agents = []  # PettingZoo: finished agents leave the list
         self._obs = w.observe(0)
@@ -323,7 +316,8 @@ class TrackingParallelEnv(ParallelEnv):
         return self.world.planning_problem(0)
 
     def render(self) -> np.ndarray | None:
-        """Draw the episode so far (Fig. 4 style); an RGB array in ``rgb_array`` mode."""
+        """Draw the episode so far (Fig. 4 style, every target, the sensors' models and
+        fixes: :mod:`activetrack.envs.rendering`); an RGB array in ``rgb_array`` mode."""
         if self.render_mode is None:
             gymnasium.logger.warn(
                 "render() called without a render_mode; pass render_mode='rgb_array' or 'human'."
@@ -332,7 +326,10 @@ class TrackingParallelEnv(ParallelEnv):
         if not self._history.frames:
             raise RuntimeError("call reset() before render()")
         if self._renderer is None:
-            self._renderer = TrackingRenderer(self.params.rho)
+            sc = self.scenario
+            self._renderer = TrackingRenderer(
+                self.params.rho, models=sc.sensor_models, pose_cov=sc.pose_covariances
+            )
         if self.render_mode == "rgb_array":
             return self._renderer.rgb_array(self._history)
         self._renderer.show(self._history, self.metadata["render_fps"])

@@ -1,5 +1,11 @@
-"""Rendering (Fig. 4 style), headless human mode, and record_video."""
+"""Rendering (Fig. 4 style), several targets, sensor models, uncertain poses, headless
+human mode, and record_video."""
 
+import importlib.util
+import pathlib
+import subprocess
+import sys
+import types
 import warnings
 
 import imageio.v3 as iio
@@ -7,7 +13,32 @@ import numpy as np
 import pytest
 
 from activetrack.envs import parallel_env, record_video
-from activetrack.envs.rendering import TrackingRenderer, ellipse
+from activetrack.envs.rendering import (
+    MODEL_MARKERS,
+    EpisodeHistory,
+    TrackingRenderer,
+    ellipse,
+)
+from activetrack.scenarios import TASKS
+
+#: The commit whose renderer drew the paper's frames before several targets existed.
+PAPER_RENDERER_COMMIT = "1a245c2942c68c7c6ede434c7756f5ba8ed60a79"
+REPO = pathlib.Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture
+def feasible_set_guard(monkeypatch):
+    """Several-target worlds import ``activetrack.feasible_set`` on every step; until that
+    module exists, stand in a stub that fails if a projection is ever needed (the tests
+    keep the sensors out of every rho disk)."""
+    if importlib.util.find_spec("activetrack.feasible_set") is None:
+        stub = types.ModuleType("activetrack.feasible_set")
+
+        def project(*args, **kwargs):
+            raise AssertionError("a sensor entered a rho disk: the test needs feasible_set")
+
+        stub.project = project
+        monkeypatch.setitem(sys.modules, "activetrack.feasible_set", stub)
 
 
 def test_rgb_array_frames_show_the_episode():
@@ -126,3 +157,306 @@ def test_record_video_mp4_without_backend_says_so(tmp_path):
     else:
         with pytest.raises(RuntimeError, match="gif"):
             record_video(tmp_path / "ep.mp4", seed=0, scenario="paper", n_steps=3)
+
+
+# Several targets, sensor models, uncertain poses ---------------------------------------
+
+
+@pytest.mark.parametrize("scenario", ["paper", "homogeneous", *TASKS])
+def test_every_preset_renders_a_few_steps(scenario, feasible_set_guard):
+    env = parallel_env(scenario=scenario, render_mode="rgb_array")
+    env.reset(seed=0)
+    frames = [env.render()]
+    for _ in range(3):  # small moves: far from every rho disk in every preset
+        env.step({a: np.array([0.3, -0.2]) for a in env.agents})
+        frames.append(env.render())
+    for f in frames:
+        assert f.dtype == np.uint8 and f.shape == (480, 480, 3)
+    assert not np.array_equal(frames[0], frames[-1])
+    assert len(env._history.frames) == 4
+    assert env._history.frames[-1].n_targets == env.world.n_targets
+    env.close()
+
+
+def test_frames_have_the_configured_size():
+    env = parallel_env(scenario="mixed", render_mode="rgb_array", n_steps=3)
+    env.reset(seed=0)
+    env.step({a: np.zeros(2) for a in env.agents})
+    sc = env.scenario
+    r = TrackingRenderer(env.params.rho, (400, 300), 100, models=sc.sensor_models)
+    frame = r.rgb_array(env._history)
+    assert frame.dtype == np.uint8 and frame.shape == (300, 400, 3)
+
+
+def test_history_records_every_target_and_the_fixes(feasible_set_guard):
+    for scenario in ("two_targets", "uncertain_poses"):
+        env = parallel_env(scenario=scenario, render_mode="rgb_array")
+        env.reset(seed=2)
+        w = env.world
+        K = w.n_targets
+        before = [w.get("x_pred", 0, j)[:2].copy() for j in range(K)]
+        env.step({a: np.array([0.0, 0.5]) for a in env.agents})
+        snap = env._history.frames[-1]
+        assert snap.k == 1 and snap.n_targets == K
+        for j in range(K):
+            np.testing.assert_array_equal(snap.targets[j], w.get("x_true", 0, j)[:2])
+            np.testing.assert_array_equal(snap.estimates[j], w.get("x_hat", 0, j)[:2])
+            np.testing.assert_array_equal(snap.covs[j], w.get("P", 0, j)[:2, :2])
+            np.testing.assert_array_equal(snap.centers[j], before[j])  # what the move kept rho from
+        np.testing.assert_array_equal(snap.sensors, w.get("sensors", 0))
+        if scenario == "uncertain_poses":
+            np.testing.assert_array_equal(snap.fixes, w.get("fixes", 0))
+            assert not np.allclose(snap.fixes, snap.sensors)  # the fix is not the truth
+        else:
+            assert snap.fixes is None
+
+
+def _two_target_history(n_steps=6):
+    """A history of two targets far apart (target 1 up and to the right), three sensors."""
+    h = EpisodeHistory()
+    P = np.diag([0.5, 0.3, 1.0, 1.0])
+    for k in range(n_steps):
+        x0 = np.array([-10.0 + k, -10.0 + 0.5 * k, 1.0, 0.5])
+        x1 = np.array([12.0 - 0.5 * k, 14.0 - 0.2 * k, -0.5, -0.2])
+        sensors = np.array([[0.0, -5.0 + 0.2 * k], [3.0, 0.0], [-2.0, 4.0]])
+        h.append(k, [x0, x1], [x0 + 0.3, x1 - 0.3], [P, 2.0 * P], sensors, [x0, x1])
+    return h
+
+
+def _without_target_1(history):
+    h = EpisodeHistory()
+    for f in history.frames:
+        h.append(f.k, f.targets[0], f.estimates[0], f.covs[0], f.sensors, f.centers[0])
+    return h
+
+
+def _fixed_view_frame(history, lim):
+    """Render ``history`` with the axes limits ``lim`` held fixed."""
+    r = TrackingRenderer(np.full(3, 1.5))
+    r._build(False, history.frames[-1].n_targets)
+    r._fit_view = lambda lo, hi: None
+    r._ax.set_xlim(*lim)
+    r._ax.set_ylim(*lim)
+    return r, r.rgb_array(history)
+
+
+def _pixel(renderer, xy):
+    """Return the (row, column) of data point ``xy`` in the frame."""
+    x, y = renderer._ax.transData.transform(xy)
+    return int(round(renderer.size[1] - y)), int(round(x))
+
+
+def _near(frame, rc, rgb, half=12, tol=40):
+    """Return how many pixels within ``half`` of ``rc`` have the colour ``rgb``."""
+    r, c = rc
+    patch = frame[max(r - half, 0) : r + half + 1, max(c - half, 0) : c + half + 1].astype(int)
+    return int(np.sum(np.all(np.abs(patch - rgb) < tol, axis=-1)))
+
+
+def test_second_target_is_drawn_in_its_own_colour_where_it_is():
+    two = _two_target_history()
+    one = _without_target_1(two)
+    lim = (-25.0, 25.0)
+    r2, f2 = _fixed_view_frame(two, lim)
+    r1, f1 = _fixed_view_frame(one, lim)
+    last = two.frames[-1]
+    magenta = (191, 0, 191)  # matplotlib's "m": target 1's estimate, ellipses
+    est1 = _pixel(r2, last.estimates[1])
+    assert _pixel(r1, last.estimates[1]) == est1  # the same view
+    assert _near(f2, est1, magenta) > 15
+    assert _near(f1, est1, magenta) == 0
+    dark = (92, 0, 92)  # target 1's true track and star
+    assert _near(f2, _pixel(r2, last.targets[1]), dark, half=6, tol=30) > 10
+    assert _near(f1, _pixel(r1, last.targets[1]), dark, half=6, tol=30) == 0
+    # Target 0 is drawn alike in both frames: the frames agree around it.
+    r, c = _pixel(r2, last.targets[0])
+    box = (slice(r - 8, r + 9), slice(c - 8, c + 9))
+    np.testing.assert_array_equal(f2[box], f1[box])
+    # The frames differ where target 1 is (its track, ellipses and rho circles).
+    diff = np.any(f2 != f1, axis=-1)
+    r, c = est1
+    assert diff[r - 12 : r + 13, c - 12 : c + 13].sum() > 30
+
+
+def test_rho_circles_surround_every_predicted_target():
+    two = _two_target_history()
+    r = TrackingRenderer(np.array([1.0, 1.5, 2.5]))
+    r.rgb_array(two)
+    centers = two.frames[-1].centers
+    for rho, line in zip(r.rho, r._art["rho"], strict=True):
+        pts = np.column_stack([line.get_xdata(), line.get_ydata()])
+        pts = pts[np.isfinite(pts[:, 0])]
+        dist = np.linalg.norm(pts[:, None, :] - centers[None], axis=-1)  # (points, K)
+        np.testing.assert_allclose(dist.min(1), rho, rtol=1e-12)
+        # every target has its full ring
+        assert np.all(np.sum(np.isclose(dist, rho, rtol=1e-12), axis=0) >= 64)
+
+
+def _legend_markers(renderer):
+    legend = renderer._ax.get_legend()
+    return {
+        t.get_text(): getattr(h, "get_marker", lambda: None)()
+        for t, h in zip(legend.get_texts(), legend.legend_handles, strict=True)
+    }
+
+
+def test_model_markers_and_their_legend_entries():
+    env = parallel_env(scenario="mixed", render_mode="rgb_array", n_steps=3)
+    env.reset(seed=0)
+    env.render()
+    r = env._renderer
+    entries = _legend_markers(r)
+    codes = env.scenario.sensor_models.tolist()
+    assert sorted(set(codes)) == [0, 1, 2]
+    for marker, label in MODEL_MARKERS:
+        assert entries[label] == marker
+    assert [marker for marker, _ in MODEL_MARKERS] == ["o", "s", "^"]  # circle, square, triangle
+    for code, head in zip(codes, r._art["heads"], strict=True):
+        assert head.get_marker() == MODEL_MARKERS[code][0]
+    # Only the models present: a bearing-only team has that entry alone.
+    r = TrackingRenderer(np.ones(3), models=np.full(3, 2, dtype=np.int8))
+    r.rgb_array(_two_target_history())
+    labels = set(_legend_markers(r))
+    assert "bearing only" in labels
+    assert not labels & {"range & bearing", "range only"}
+    assert {"target 0 (true)", "target 1 (estimate)"} <= labels
+
+
+def test_paper_legend_is_unchanged():
+    env = parallel_env(scenario="paper", render_mode="rgb_array")
+    env.reset(seed=0)
+    env.render()
+    assert list(_legend_markers(env._renderer)) == [
+        "target (true)",
+        "target (estimate)",
+        "3-sigma bounds",
+        "sensor trails",
+        "rho circles",
+    ]
+
+
+def test_uncertain_poses_show_fixes_and_two_sigma_pose_ellipses():
+    env = parallel_env(scenario="uncertain_poses", render_mode="rgb_array", n_steps=5)
+    env.reset(seed=4)
+    env.step({a: np.array([0.5, 0.0]) for a in env.agents})
+    env.render()
+    art = env._renderer._art
+    fixes = env._history.frames[-1].fixes
+    cov = env.scenario.pose_covariances
+    for i, mark in enumerate(art["fixes"]):
+        assert mark.get_marker() == "+"
+        np.testing.assert_array_equal(np.column_stack(mark.get_data()), fixes[i : i + 1])
+    segments = art["pose"].get_segments()
+    assert len(segments) == env.n_sensors
+    for i, seg in enumerate(segments):
+        d = seg - fixes[i]
+        mahal = np.einsum("ki,ij,kj->k", d, np.linalg.inv(cov[i]), d)
+        np.testing.assert_allclose(mahal, 4.0, rtol=1e-10)  # the 2-sigma contour
+    assert "position fixes (2-sigma)" in _legend_markers(env._renderer)
+
+
+def test_singular_pose_covariance_draws_a_segment():
+    cov = np.array([np.diag([4.0, 0.0]), np.eye(2), np.zeros((2, 2))])
+    r = TrackingRenderer(np.ones(3), pose_cov=cov)
+    h = EpisodeHistory()
+    x = np.array([0.0, 0.0, 1.0, 0.0])
+    sensors = np.array([[5.0, 0.0], [0.0, 5.0], [-5.0, 0.0]])
+    h.append(0, x, x, np.eye(4), sensors, x, fixes=sensors + 0.5)
+    frame = r.rgb_array(h)
+    assert frame.shape == (480, 480, 3)
+    seg = r._art["pose"].get_segments()
+    assert np.all(np.isfinite(np.concatenate(seg)))
+    np.testing.assert_allclose(seg[0][:, 1], 0.5, atol=1e-12)  # along x only, +-2 sigma = 4
+    np.testing.assert_allclose(np.ptp(seg[0][:, 0]), 8.0, rtol=1e-3)
+    np.testing.assert_allclose(seg[2], np.broadcast_to(sensors[2] + 0.5, seg[2].shape))
+
+
+def test_renderer_and_history_validate_their_inputs():
+    with pytest.raises(ValueError, match="models"):
+        TrackingRenderer(np.ones(3), models=[0, 1, 3])
+    with pytest.raises(ValueError, match="models"):
+        TrackingRenderer(np.ones(3), models=[0, 1])
+    with pytest.raises(ValueError, match="pose_cov"):
+        TrackingRenderer(np.ones(3), pose_cov=np.zeros((2, 2, 2)))
+    with pytest.raises(ValueError, match="size"):
+        TrackingRenderer(np.ones(3), size=(0, 480))
+    h = EpisodeHistory()
+    x = np.zeros(4)
+    with pytest.raises(ValueError, match="same number of targets"):
+        h.append(0, [x, x], [x, x], np.eye(4), np.zeros((3, 2)), [x, x])
+    with pytest.raises(ValueError, match="fixes"):
+        h.append(0, x, x, np.eye(4), np.zeros((3, 2)), x, fixes=np.zeros((2, 2)))
+    h.append(0, x, x, np.eye(4), np.zeros((3, 2)), x)
+    with pytest.raises(ValueError, match="sensors"):
+        TrackingRenderer(np.ones(4)).rgb_array(h)
+
+
+@pytest.mark.parametrize("scenario", ["two_targets", "uncertain_poses"])
+def test_human_mode_draws_every_target(scenario, monkeypatch, feasible_set_guard):
+    import matplotlib.pyplot as plt
+
+    from activetrack.envs import rendering
+
+    monkeypatch.setattr(rendering, "_interactive_backend", lambda: True)
+    env = parallel_env(scenario=scenario, render_mode="human", n_steps=2)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # Agg: "cannot show the figure"
+        env.reset(seed=0)
+        env.step({a: np.zeros(2) for a in env.agents})
+        fig = env._renderer._fig
+        targets = env._renderer._art["targets"]
+        assert len(targets) == env.world.n_targets
+        for t in targets:
+            assert len(t["true"].get_xdata()) == 2
+        env.close()
+    assert not plt.fignum_exists(fig.number)
+
+
+@pytest.mark.parametrize("scenario", ["two_targets", "mixed"])
+def test_record_video_of_a_task(scenario, tmp_path, feasible_set_guard):
+    env = parallel_env(scenario=scenario, n_steps=50, render_mode="rgb_array")
+    path = record_video(tmp_path / "t.gif", lambda obs: {a: np.zeros(2) for a in obs}, env=env,
+                        seed=0, max_steps=3)  # fmt: skip
+    frames = iio.imread(path, index=None)
+    assert frames.shape[:3] == (4, 480, 480)
+
+
+def _paper_renderer_module(monkeypatch):
+    """Return envs/rendering.py as it was before several targets (from git), or skip."""
+    try:
+        source = subprocess.run(
+            ["git", "show", f"{PAPER_RENDERER_COMMIT}:envs/rendering.py"],
+            cwd=REPO, capture_output=True, text=True, check=True, timeout=60,
+        ).stdout  # fmt: skip
+    except (OSError, subprocess.SubprocessError):
+        pytest.skip("the paper's renderer needs git and the repository's history")
+    module = types.ModuleType("_paper_rendering")
+    monkeypatch.setitem(sys.modules, module.__name__, module)  # for its dataclasses
+    exec(compile(source, "paper_rendering.py", "exec"), module.__dict__)
+    return module
+
+
+def test_paper_frames_are_pixel_identical_to_the_single_target_renderer(monkeypatch):
+    old = _paper_renderer_module(monkeypatch)
+    env = parallel_env(scenario="paper", render_mode="rgb_array")
+    env.reset(seed=3)
+    w = env.world
+    # The old recording: the world's state of the one target, as the env recorded it.
+    history = old.EpisodeHistory()
+    x_hat = w.get("x_hat", 0)
+    history.append(0, w.get("x_true", 0), x_hat, w.get("P", 0), w.get("sensors", 0), x_hat)
+    renderer = old.TrackingRenderer(env.params.rho)
+    rng = np.random.default_rng(0)
+    n = 0
+    while True:
+        new_frame, old_frame = env.render(), renderer.rgb_array(history)
+        np.testing.assert_array_equal(new_frame, old_frame, err_msg=f"step {n}")
+        if not env.agents:
+            break
+        planned_from = w.get("x_pred", 0).copy()
+        env.step({a: rng.uniform(-1.0, 1.0, 2) for a in env.agents})
+        g = w.get
+        history.append(g("k", 0), g("x_true", 0), g("x_hat", 0), g("P", 0), g("sensors", 0),
+                       planned_from)  # fmt: skip
+        n += 1
+    assert n == env.scenario.n_steps
