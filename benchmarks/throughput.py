@@ -79,6 +79,11 @@ def batched_env(n: int, steps: int) -> float:
 
 def vmas_env(n: int, steps: int) -> float:
     """Return env-steps/s of VMAS simple_spread (3 agents, CPU) at ``n`` copies."""
+    return vmas_env_agents(n, steps, 3)
+
+
+def vmas_env_agents(n: int, steps: int, agents: int) -> float:
+    """Return env-steps/s of VMAS simple_spread with ``agents`` agents (CPU) at ``n`` copies."""
     import torch
     import vmas
 
@@ -87,12 +92,12 @@ def vmas_env(n: int, steps: int) -> float:
         num_envs=n,
         device="cpu",
         continuous_actions=True,
-        n_agents=3,
+        n_agents=agents,
         seed=0,
     )
     env.reset()
     g = torch.Generator().manual_seed(0)
-    pool = [[torch.rand(n, 2, generator=g) * 2 - 1 for _ in range(3)] for _ in range(8)]
+    pool = [[torch.rand(n, 2, generator=g) * 2 - 1 for _ in range(agents)] for _ in range(8)]
 
     def step(k: int) -> None:  # no episode ends: VMAS's step alone, a generous comparison
         env.step(pool[k % 8])

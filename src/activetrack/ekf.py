@@ -92,7 +92,10 @@ def update(
             z, x[..., :2], sensor_pos, codes, wd, wt, orientation, pose_cov
         )
         Y, b = Yi.sum(axis=-3), bi.sum(axis=-2)
-        return _posterior(x, P, Y[..., 0, 0], Y[..., 0, 1], Y[..., 1, 1], b[..., 0], b[..., 1])
+        terms = (Y[..., 0, 0], Y[..., 0, 1], Y[..., 1, 1], b[..., 0], b[..., 1])
+        if P.ndim == 2:  # Python numbers, as the single filter's path below uses
+            terms = tuple(float(t) for t in terms)
+        return _posterior(x, P, *terms)
     # Offsets d = p_T_hat - p_S = -p of eq. (10) as complex numbers dx + i dy, (..., M).
     d = as_complex(x[..., :2])[..., None] - as_complex(sensor_pos)
     dist = np.abs(d)
@@ -162,9 +165,7 @@ def _posterior(
 ) -> tuple[FloatArray, FloatArray]:
     """Return eq. (11)'s posterior from the measurement information ``Y`` (its entries) and
     the gradient term ``b = H^T R^{-1} nu`` (the square-root form of the module docstring)."""
-    single = P.ndim == 2
-    if single:  # Python numbers: the 2x2 algebra is several times cheaper on them
-        yxx, yxy, yyy, bx, by = float(yxx), float(yxy), float(yyy), float(bx), float(by)
+    single = P.ndim == 2  # then the entries are Python numbers (cheaper 2x2 algebra)
     # Square-root form. P11 = L L^T (Cholesky, L lower); K = L^T Y L; I + K = M M^T.
     # Then (Woodbury) P11+ = L (I + K)^{-1} L^T and the posterior is
     #   P+ = Z Z^T + blockdiag(0, S22),  Z = Pc L^{-T} M^{-T},  S22 = P22 - F F^T,

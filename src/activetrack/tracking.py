@@ -40,8 +40,9 @@ class LoopParams:
 
     ``Phi``, ``Q`` and ``noise_factor`` are the first target's (the only one in the
     paper); ``targets`` holds every target's. ``models`` (M,) int8 and ``weights``
-    ``(w_d, w_theta)`` describe the sensors' measurement models (None: all range and
-    bearing, today's arithmetic); ``pose_cov`` (M, 2, 2) is the covariance of the
+    ``(w_d, w_theta)`` describe the sensors' measurement models (``models`` None: all range
+    and bearing, today's arithmetic; the weights are then ``1/sigma^2``); ``pose_cov``
+    (M, 2, 2) is the covariance of the
     sensors' position fixes the world draws, ``filter_pose_cov`` the one the filter
     accounts for (None when it ignores it or there is none).
     """
@@ -85,7 +86,10 @@ class LoopParams:
         codes = sc.sensor_models
         models = None if not np.any(codes) else codes
         sd2, st2 = sc.per_sensor("sigma_d2"), sc.per_sensor("sigma_theta2")
-        weights = None if models is None else sensor_models.weights(models, sd2, st2)
+        # Computed once (for range-and-bearing sensors by the division the filter did per step).
+        weights = (
+            (1.0 / sd2, 1.0 / st2) if models is None else sensor_models.weights(models, sd2, st2)
+        )
         pose = sc.pose_covariances
         return cls(
             m.Phi,
@@ -164,8 +168,9 @@ def advance_target(
     measurement.wrap_angle(z[..., 1], inplace=True)  # wrapped once, after the noise
     if params.models is None and params.filter_pose_cov is None:
         x_post, P_post = ekf.update(
-            x_pred, P_pred, z, fixes, params.sigma_d2, params.sigma_theta2, params.orientation
-        )
+            x_pred, P_pred, z, fixes, params.sigma_d2, params.sigma_theta2, params.orientation,
+            weights=params.weights,
+        )  # fmt: skip
         return x_next, z, x_post, P_post
     if params.models is not None:  # an unmeasured component is exactly 0
         z = np.where(sensor_models.USES[params.models], z, 0.0)

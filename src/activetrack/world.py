@@ -140,10 +140,15 @@ class World:
             for k in range(K)
         ]  # fmt: skip
         self._pose_slice = slice(int(proc[-1]) + 2 * m * K, None)
+        if N > 1:  # the step's normals are (copies, n_noise) then; one copy's are (n_noise,)
+            self._noise_slices = [
+                ((slice(None), a), (slice(None), b)) for a, b in self._noise_slices
+            ]
         self._center = np.asarray(sc.sensor_center, dtype=np.float64)
         # Observation constants (activetrack.observation).
         self.length_scale = observation.length_scale(sc)
         self.layout = observation.layout_of(sc)
+        self._extended = self.layout.extended
         self._constants = self.layout.sensor_constants(sc, self.length_scale)
         self._order = observation.cyclic_order(m)
 
@@ -466,38 +471,30 @@ class World:
             sensors = fixes = moved
         trace = None
         scores = []
-        for k, tp in enumerate(p.targets):
-            t = tgt[k]
+        for t, tp, x_pred, (proc, meas) in zip(
+            tgt, p.targets, x_preds, self._noise_slices, strict=True
+        ):
             x_true, P_pred = (t["x_true"], t["P_pred"]) if self._one else (
                 t["x_true"][calc], t["P_pred"][calc])  # fmt: skip
-            proc, meas = self._noise_slices[k]
             x_true, _, x_post, P_post = tracking.advance_target(
-                p,
-                tp,
-                x_true,
-                x_preds[k],
-                P_pred,
-                sensors,
-                fixes,
-                noise[..., proc],
-                noise[..., meas],
+                p, tp, x_true, x_pred, P_pred, sensors, fixes, noise[proc], noise[meas]
             )
             x_next, P_next = predict(x_post, P_post, tp.Phi, tp.Q)
             if partial:
                 x_true, x_post, P_post, x_next, P_next = (
                     a[sel] for a in (x_true, x_post, P_post, x_next, P_next)
                 )
+                for key, value in zip(
+                    _TARGET_FIELDS, (x_true, x_post, P_post, x_next, P_next), strict=True
+                ):
+                    t[key][sel] = value
+            else:  # the fresh arrays become the state (no copies)
+                t["x_true"], t["x_hat"], t["P"], t["x_pred"], t["P_pred"] = (
+                    x_true, x_post, P_post, x_next, P_next)  # fmt: skip
             tr = TRACE.of_covariance(P_post)  # its position block
             trace = tr if trace is None else trace + tr
             if not self._plain:
                 scores.append(self.objective.of_covariance(P_post))
-            new_t = {"x_true": x_true, "x_hat": x_post, "P": P_post, "x_pred": x_next,
-                     "P_pred": P_next}  # fmt: skip
-            if self._one or not partial:
-                t.update(new_t)
-            else:
-                for key, value in new_t.items():
-                    t[key][sel] = value
         if partial:
             sensors, fixes, projected = sensors[sel], fixes[sel], projected[sel]
         score = trace if self._plain else self.objective.combine(np.stack(scores, -1))
@@ -591,7 +588,7 @@ class World:
 
     def _features(self, index: int | None) -> tuple[FloatArray, FloatArray]:
         L = self.length_scale
-        if self.layout.extended:
+        if self._extended:
             K = self.n_targets
             x_preds = [self.get("x_pred", index, k) for k in range(K)]
             P_preds = [self.get("P_pred", index, k) for k in range(K)]
