@@ -442,7 +442,10 @@ class PlanningProblem:
 
     @property
     def rel_sensors(self) -> FloatArray:
-        """Return the current sensor positions relative to the predicted target (the ``c_i``)."""
+        """Return the current sensor positions relative to the predicted target (the ``c_i``),
+        (..., M, 2); with K targets relative to each of them, (..., K, M, 2)."""
+        if self.multi_target:
+            return self.sensors[..., None, :, :] - self.target[..., :, None, :]
         return self.sensors - self.target[..., None, :]
 
     def score(self, next_positions: ArrayLike) -> FloatArray:

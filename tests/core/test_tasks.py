@@ -1,0 +1,172 @@
+"""The tasks beyond the paper through the one world: K targets, sensor models, uncertain poses.
+
+Each check compares with an independent computation: the paper's own arithmetic on a
+one-target problem, per-target sums, the observation decoded by hand, the chi-square
+distribution of a consistent filter's NEES over Monte Carlo runs.
+"""
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from activetrack import PlanningProblem
+from activetrack.objective import LOGDET, TRACE, WORST_TRACE
+from activetrack.scenarios import TASKS, make_scenario
+from activetrack.world import World
+
+RUNS = 200
+
+
+def test_every_task_is_a_valid_scenario_with_its_layout():
+    for name in TASKS:
+        sc = make_scenario(name)
+        w = World(sc)
+        w.reset(seeds=[0])
+        obs = w.observe(0)
+        K, M = sc.n_targets, sc.n_sensors
+        assert obs.shape == (M, 7 * K + 12 * M), name
+        assert w.state(0).shape == (7 * K + 12 * M + 1,)
+        low, high = w.layout.bounds()
+        assert np.all(obs >= low) and np.all(obs <= high)
+    from activetrack.scenarios import EXTENSIONS
+
+    # The paper's record names no field beyond the paper; a task's names what it uses.
+    assert not set(EXTENSIONS) & set(make_scenario("paper").to_dict())
+    assert make_scenario("two_targets").to_dict()["n_targets"] == 2
+
+
+def test_extended_observation_decodes_to_the_world():
+    w = World("mixed")
+    w.reset(seeds=[3])
+    w.step_actions(np.full((4, 2), 0.3))
+    obs, L = w.observe(0), w.length_scale
+    x, P = w.get("x_pred", 0), w.get("P_pred", 0)
+    origin = x[:2]  # one target: the centroid is the prediction itself
+    sc = w.scenario
+    np.testing.assert_allclose(obs[0, :2], 0.0, atol=1e-7)
+    np.testing.assert_allclose(np.exp(obs[0, 2:4]) * L, np.sqrt(np.diag(P)[:2]), rtol=1e-6)
+    np.testing.assert_allclose(obs[0, 5:7], x[2:4] * sc.dt / L, rtol=1e-5)
+    for agent in range(4):
+        for slot in range(4):
+            j = (agent + slot) % 4
+            blk = obs[agent, 7 + 12 * slot : 7 + 12 * (slot + 1)]
+            np.testing.assert_allclose(blk[:2] * L, w.get("fixes", 0)[j] - origin, rtol=1e-5)
+            code = sc.sensor_models[j]
+            assert blk[6 + code] == 1.0 and blk[6:9].sum() == 1.0
+            sd2, st2 = sc.per_sensor("sigma_d2")[j], sc.per_sensor("sigma_theta2")[j]
+            want_d = 0.5 * np.log(sd2 / L**2) if code != 2 else 0.0
+            want_t = 0.5 * np.log(st2) if code != 1 else 0.0
+            np.testing.assert_allclose(blk[2:4], [want_d, want_t], rtol=1e-6, atol=1e-7)
+
+
+def test_two_target_problem_scores_are_per_target_sums_of_the_paper_objective():
+    w = World("two_targets")
+    w.reset(seeds=[1])
+    w.step_actions(np.zeros((4, 2)))
+    problem = w.planning_problem(0)
+    assert problem.multi_target and problem.n_targets == 2
+    rng = np.random.default_rng(0)
+    cand = problem.sensors + rng.normal(size=(50, 4, 2))
+    singles = [
+        PlanningProblem(
+            w.get("P_pred", 0, k)[:2, :2],
+            w.get("x_pred", 0, k)[:2],
+            problem.sensors,
+            problem.r,
+            problem.rho,
+            problem.sigma_d2,
+            problem.sigma_theta2,
+        )  # fmt: skip
+        for k in range(2)
+    ]
+    per = np.stack([s.score(cand) for s in singles], -1)  # the paper's arithmetic
+    np.testing.assert_allclose(problem.score(cand), per.sum(-1), rtol=1e-12)
+    for obj, combine in ((WORST_TRACE, np.max), (TRACE, np.sum)):
+        p2 = PlanningProblem(
+            problem.prior_cov, problem.target, problem.sensors, problem.r, problem.rho,
+            problem.sigma_d2, problem.sigma_theta2, objective=obj, multi_target=True,
+        )  # fmt: skip
+        np.testing.assert_allclose(p2.score(cand), combine(per, -1), rtol=1e-12)
+    p3 = PlanningProblem(
+        problem.prior_cov, problem.target, problem.sensors, problem.r, problem.rho,
+        problem.sigma_d2, problem.sigma_theta2, objective=LOGDET, multi_target=True,
+    )  # fmt: skip
+    # log det of each posterior covariance: eq. (17)'s information written with unit
+    # vectors u (along the line of sight) and v (across it), inverted by numpy.
+    want = 0.0
+    for s in singles:
+        rel = cand - s.target
+        n2 = rel[..., 0] ** 2 + rel[..., 1] ** 2
+        Y = np.linalg.inv(s.prior_cov)[None].repeat(len(cand), 0)
+        for i in range(4):
+            u = rel[:, i] / np.sqrt(n2[:, i])[:, None]
+            v = np.stack([u[:, 1], -u[:, 0]], -1)
+            Y = Y + np.einsum("bi,bj->bij", u, u) / s.sigma_d2[i]
+            Y = Y + np.einsum("bi,bj->bij", v, v) / (s.sigma_theta2[i] * n2[:, i, None, None])
+        want = want + np.log(np.linalg.det(np.linalg.inv(Y)))
+    np.testing.assert_allclose(p3.score(cand), want, rtol=1e-10)
+
+
+def test_every_sensor_keeps_rho_from_every_target():
+    w = World("two_targets", 64)
+    w.reset(seeds=list(range(64)))
+    rng = np.random.default_rng(2)
+    for _ in range(30):
+        targets = np.stack([w.get("x_pred", None, k)[:, :2] for k in range(2)], 1)
+        before = np.linalg.norm(w.sensors[:, None] - targets[:, :, None], axis=-1)
+        w.step_actions(rng.uniform(-1, 1, (64, 4, 2)))
+        d = np.linalg.norm(w.sensors[:, None] - targets[:, :, None], axis=-1)
+        # Outside every rho disk, unless a disk could not be left in one step (reach 1 m).
+        unreachable = (before + 1.0 < 2.0).any(axis=1, keepdims=True)
+        assert np.all((d >= 2.0 * (1 - 1e-9)) | unreachable)
+
+
+def test_world_get_targets_axis_and_per_target_fields():
+    w = World("two_targets", 3)
+    w.reset(seeds=[0, 1, 2])
+    assert w.get("x_hat").shape == (3, 2, 4)
+    assert w.get("P_pred", 1).shape == (2, 4, 4)
+    np.testing.assert_array_equal(w.get("x_hat", None, 1), w.get("x_hat")[:, 1])
+    with pytest.raises(ValueError, match="target must be an integer"):
+        w.get("x_hat", 0, 2)
+    one = World("two_targets")
+    one.reset(seeds=[0])
+    np.testing.assert_array_equal(one.get("x_true", 0, 1), w.get("x_true", 0, 1))
+
+
+def _nees_runs(name: str, **overrides) -> np.ndarray:
+    """Return the position NEES (steps, runs, K) of RUNS GSR-driven episodes of a task."""
+    from activetrack.baselines import GSR
+
+    w = World(name, RUNS, **overrides)
+    w.reset(seeds=list(range(20_000, 20_000 + RUNS)))
+    planner, out = GSR(), []
+    while not w.truncated.all():
+        w.step(planner.plan(w.planning_problem()))
+        out.append(w.position_nees(per_target=True))
+    return np.array(out)
+
+
+def _band(runs: int) -> tuple[float, float]:
+    """Return the 95% band of the mean of ``runs`` chi-square(2) values."""
+    lo, hi = stats.chi2.ppf([0.025, 0.975], 2 * runs) / runs
+    return float(lo), float(hi)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", TASKS)
+def test_filter_is_consistent_on_every_task(name):
+    # Mean over 200 runs of each run's time-averaged position NEES (per target): a
+    # consistent filter's is a mean of chi-square(2) variables, inside the band.
+    nees = _nees_runs(name)
+    lo, hi = _band(RUNS)
+    for k in range(nees.shape[-1]):
+        mean = float(nees[..., k].mean())
+        assert lo <= mean <= hi, (name, k, mean, (lo, hi))
+
+
+@pytest.mark.slow
+def test_a_filter_ignoring_pose_uncertainty_is_not_consistent():
+    _, hi = _band(RUNS)
+    mean = float(_nees_runs("uncertain_poses", account_pose=False).mean())
+    assert mean > 2 * hi, mean
