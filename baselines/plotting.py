@@ -61,6 +61,15 @@ def ellipse_points(center: FloatArray, cov: FloatArray, n_sigma: float = 3.0, n:
     return np.asarray(center)[:2] + unit @ v.T
 
 
+#: (true track, estimate) colours of targets 1, 2, ... (the first is the paper figure's).
+_TARGET_COLORS = (
+    ("k", "tab:red"),
+    ("darkmagenta", "magenta"),
+    ("teal", "c"),
+    ("saddlebrown", "orange"),
+)
+
+
 def plot_trajectories(
     records: Mapping[str, RunRecord],
     path: str | Path,
@@ -94,18 +103,19 @@ def plot_trajectories(
             ax.plot(xy[:, 0], xy[:, 1], "-", color=col, lw=1.2, label=f"sensor {i + 1}")
             ax.plot(*xy[0], "o", color=col, ms=5)
             ax.plot(*xy[-1], "s", color=col, ms=5)
-        ax.plot(rec.true_states[:, 0], rec.true_states[:, 1], "k-", lw=1.5, label="target (true)")
-        ax.plot(
-            rec.estimates[:, 0],
-            rec.estimates[:, 1],
-            "--",
-            color="tab:red",
-            lw=1.2,
-            label="target (estimate)",
-        )
-        for k in range(0, len(rec.estimates), ellipse_every):
-            e = ellipse_points(rec.estimates[k], rec.position_covs[k])
-            ax.plot(e[:, 0], e[:, 1], "-", color="tab:red", lw=0.6, alpha=0.7)
+        # One target: (T, n) tracks; K targets: (T, K, n), one colour pair per target.
+        multi = rec.true_states.ndim == 3
+        truths = np.moveaxis(rec.true_states, 1, 0) if multi else rec.true_states[None]
+        ests = np.moveaxis(rec.estimates, 1, 0) if multi else rec.estimates[None]
+        covs = np.moveaxis(rec.position_covs, 1, 0) if multi else rec.position_covs[None]
+        for j, (truth, est, cov) in enumerate(zip(truths, ests, covs, strict=True)):
+            tag = f"target {j + 1}" if multi else "target"
+            true_col, est_col = _TARGET_COLORS[j % len(_TARGET_COLORS)]
+            ax.plot(truth[:, 0], truth[:, 1], "-", color=true_col, lw=1.5, label=f"{tag} (true)")
+            ax.plot(est[:, 0], est[:, 1], "--", color=est_col, lw=1.2, label=f"{tag} (estimate)")
+            for k in range(0, len(est), ellipse_every):
+                e = ellipse_points(est[k], cov[k])
+                ax.plot(e[:, 0], e[:, 1], "-", color=est_col, lw=0.6, alpha=0.7)
         ax.set_title(f"{name}: mean trace {rec.mean_trace:.3g} m$^2$, RMSE {rec.rmse:.3g} m")
         ax.set_aspect("equal", adjustable="datalim")
         ax.set_xlabel("x (m)")

@@ -86,7 +86,7 @@ def simulate(scenario: Scenario, planner: Planner, seed: int) -> RunRecord:
     m = world.n_sensors
     g = world.get
     true_states, estimates = [g("x_true", 0).copy()], [g("x_hat", 0).copy()]
-    sensor_hist, covs = [g("sensors", 0).copy()], [g("P", 0)[:2, :2].copy()]
+    sensor_hist, covs = [g("sensors", 0).copy()], [g("P", 0)[..., :2, :2].copy()]
     trace, error, nees, plan_time, violation = [], [], [], [], []
     terminated = truncated = False
     while not (terminated or truncated):
@@ -107,7 +107,7 @@ def simulate(scenario: Scenario, planner: Planner, seed: int) -> RunRecord:
         true_states.append(g("x_true", 0).copy())
         estimates.append(g("x_hat", 0).copy())
         sensor_hist.append(g("sensors", 0).copy())
-        covs.append(g("P", 0)[:2, :2].copy())
+        covs.append(g("P", 0)[..., :2, :2].copy())
     return RunRecord(
         seed=int(seed),
         trace=np.array(trace),
