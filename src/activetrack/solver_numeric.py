@@ -62,7 +62,14 @@ N_LOCAL_ARC = 2
 N_LOCAL_PLANE = 3
 #: Finite-difference step in units of the local length scale.
 FD_STEP = 1e-4
+#: A refinement step shorter than this fraction of the local length scale ends it.
+CONVERGED = 1e-7
 _TINY = 1e-300
+
+
+def _finite(x: FloatArray) -> FloatArray:
+    """Return ``x`` with non-finite entries (a difference quotient at a target) set to 0."""
+    return np.where(np.isfinite(x), x, 0.0)
 
 
 class _Problem:
@@ -97,7 +104,15 @@ class _Problem:
         self.wt = flat(w_theta)[:, None, None]
         self.pc = None if pose_cov is None else flat(pose_cov, (2, 2))[:, None, None]
         self.objective = objective
+        self.minimax = k > 1 and _is_max(objective)
         self.zero = np.zeros((n, 2))
+
+    def take(self, rows: np.ndarray) -> _Problem:
+        """Return the sub-batch of the given rows."""
+        sub = object.__new__(_Problem)
+        for key, value in vars(self).items():
+            sub.__dict__[key] = value[rows] if isinstance(value, np.ndarray) else value
+        return sub
 
     def f(self, pts: FloatArray) -> FloatArray:
         """Return the objective at points (B, C, 2) relative to the sensor, (B, C)."""
@@ -105,6 +120,23 @@ class _Problem:
         a, b, c = information_entries(rel, self.wd, self.wt, self.pc)
         a0, b0, c0 = self.a0[:, None], self.b0[:, None], self.c0[:, None]
         return self.objective.of_targets(a0 + a, b0 + b, c0 + c)
+
+    def pieces(self, pts: FloatArray) -> FloatArray:
+        """Return the smooth pieces of ``f`` at points (B, C, 2): (B, C, P).
+
+        For a maximum over targets (``WORST_TRACE``) the per-target values (P = K), whose
+        maximum is ``f``; otherwise ``f`` itself (P = 1), smooth.
+        """
+        if not self.minimax:
+            return self.f(pts)[..., None]
+        rel = pts[:, :, None, :] - self.t[:, None, :, :]
+        a, b, c = information_entries(rel, self.wd, self.wt, self.pc)
+        a0, b0, c0 = self.a0[:, None], self.b0[:, None], self.c0[:, None]
+        return self.objective.of_entries(a0 + a, b0 + b, c0 + c)
+
+    def combine(self, pieces: FloatArray) -> FloatArray:
+        """Return ``f`` from its pieces (..., P)."""
+        return np.max(pieces, axis=-1) if self.minimax else pieces[..., 0]
 
     def feasible(self, pts: FloatArray) -> np.ndarray:
         """Return whether points (B, C, 2) lie in F (with the tolerance), (B, C)."""
@@ -122,33 +154,42 @@ class _Problem:
         return np.min(np.hypot(e[..., 0], e[..., 1]), axis=-1)
 
 
+def _is_max(objective: TraceObjective) -> bool:
+    """Return whether the objective combines its targets by their maximum (``WORST_TRACE``)."""
+    probe = np.array([1.0, 3.0, 2.0])
+    return bool(objective.combine(probe) == 3.0 and objective.combine(-probe) == -1.0)
+
+
 def _circle_points(o: FloatArray, rad: FloatArray, th: FloatArray) -> FloatArray:
     """Return ``o + rad (cos th, sin th)`` for matching leading shapes, (..., 2)."""
     return o + rad[..., None] * np.stack([np.cos(th), np.sin(th)], -1)
 
 
 def _arc_candidates(p: _Problem, n_boundary: int) -> tuple[FloatArray, ...]:
-    """Return ``(origins, radii, angles, values)``: (B, n, 2), (B, n), (B, n, M), (B, n, M).
+    """Return ``(origins, radii, angles, points, values)`` (B, n, 2), (B, n), (B, n, M), ...
 
-    Angles are sorted along the last axis; ``values`` are ``+inf`` where infeasible.
+    The reach circle gets ``n_boundary`` uniform angles plus the well angles around each
+    target's direction; each ``rho`` circle ``M`` uniform angles (its own target is at
+    constant distance, so it has no well). Angles are sorted along the last axis; ``values``
+    are ``+inf`` where infeasible.
     """
     origins, radii = feasible_set.circles(p.zero, p.r, p.t, p.rho)
     b, n = radii.shape
-    uniform = np.broadcast_to(
-        np.linspace(-np.pi, np.pi, n_boundary, endpoint=False), (b, n, n_boundary)
-    )
-    v = p.t[:, None, :, :] - origins[:, :, None, :]  # circle -> target, (B, n, K, 2)
-    dist = np.hypot(v[..., 0], v[..., 1])
-    phi = np.arctan2(v[..., 1], v[..., 0])
-    width = np.maximum(np.abs(dist - radii[..., None]), p.rho[:, None, None])
+    dist = np.hypot(p.t[..., 0], p.t[..., 1])  # reach circle's centre -> targets (B, K)
+    phi = np.arctan2(p.t[..., 1], p.t[..., 0])
+    width = np.maximum(np.abs(dist - p.r[:, None]), p.rho[:, None])
     # Wider wells are resolved by the uniform grid (spacing 2 pi / n_boundary).
-    sigma = np.minimum(width / np.maximum(radii[..., None], _TINY), 0.25)
-    well = phi[..., None] + sigma[..., None] * WELL_OFFSETS  # (B, n, K, W)
-    th = np.concatenate([uniform, well.reshape(b, n, -1)], axis=-1)
-    th = np.sort(np.mod(th + np.pi, 2.0 * np.pi) - np.pi, axis=-1)
+    sigma = np.minimum(width / np.maximum(p.r[:, None], _TINY), 0.25)
+    well = (phi[..., None] + sigma[..., None] * WELL_OFFSETS).reshape(b, -1)
+    m = n_boundary + well.shape[-1]
+    uniform = np.linspace(-np.pi, np.pi, n_boundary, endpoint=False)
+    th0 = np.concatenate([np.broadcast_to(uniform, (b, n_boundary)), well], axis=-1)
+    th0 = np.sort(np.mod(th0 + np.pi, 2.0 * np.pi) - np.pi, axis=-1)
+    th_rho = np.broadcast_to(np.linspace(-np.pi, np.pi, m, endpoint=False), (b, n - 1, m))
+    th = np.concatenate([th0[:, None], th_rho], axis=1)
     pts = _circle_points(origins[:, :, None, :], np.broadcast_to(radii[..., None], th.shape), th)
     vals = p.masked(pts.reshape(b, -1, 2)).reshape(th.shape)
-    return origins, radii, th, vals
+    return origins, radii, th, pts, vals
 
 
 def _vertex_candidates(p: _Problem) -> tuple[FloatArray, FloatArray]:
@@ -159,13 +200,20 @@ def _vertex_candidates(p: _Problem) -> tuple[FloatArray, FloatArray]:
 
 
 def _interior_candidates(p: _Problem, n_interior: int) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Return the square grid over the reach disk (B, n, n, 2), values (B, n, n), spacing (B,)."""
+    """Return the square grid over the reach disk (B, n, n, 2), values (B, n, n), spacing (B,).
+
+    Only the grid points inside the reach disk are evaluated; the others are ``+inf``.
+    """
     u = np.linspace(-1.0, 1.0, n_interior)
-    grid = np.stack(np.meshgrid(u, u, indexing="ij"), -1)  # (n, n, 2)
-    pts = p.r[:, None, None, None] * grid
-    vals = p.masked(pts.reshape(len(p.r), -1, 2)).reshape(pts.shape[:-1])
+    grid = np.stack(np.meshgrid(u, u, indexing="ij"), -1).reshape(-1, 2)  # (n n, 2)
+    inside = np.flatnonzero(np.hypot(grid[:, 0], grid[:, 1]) <= 1.0)
+    b = len(p.r)
+    pts = p.r[:, None, None] * grid
+    vals = np.full((b, len(grid)), np.inf)
+    vals[:, inside] = p.masked(pts[:, inside])
     spacing = p.r * (2.0 / max(n_interior - 1, 1))
-    return pts, vals, spacing
+    shape = (b, n_interior, n_interior)
+    return pts.reshape(shape + (2,)), vals.reshape(shape), spacing
 
 
 def _best_local(vals: FloatArray, local: np.ndarray, m: int) -> tuple[np.ndarray, FloatArray]:
@@ -176,33 +224,219 @@ def _best_local(vals: FloatArray, local: np.ndarray, m: int) -> tuple[np.ndarray
     return idx, np.take_along_axis(masked, idx, axis=-1)
 
 
-def _newton_1d(g: FloatArray, h: FloatArray, delta: FloatArray) -> FloatArray:
-    """Return the trust-region-limited Newton step (gradient step where ``h <= 0``)."""
-    newton = -g / np.where(h > 0, h, 1.0)
-    step = np.where(h > 0, newton, -np.sign(g) * delta)
-    return np.clip(step, -delta, delta)
+def _model_max(f: FloatArray, g: FloatArray, H: FloatArray, d: FloatArray) -> FloatArray:
+    """Return ``max_k q_k(d)`` for 1-D piece models ``q_k = f_k + g_k d + H_k d^2 / 2``.
+
+    ``f, g, H`` (..., P); steps ``d`` (..., S); returns (..., S).
+    """
+    dd = d[..., :, None]
+    return np.max(f[..., None, :] + dd * (g[..., None, :] + 0.5 * H[..., None, :] * dd), axis=-1)
+
+
+def _step_1d(f: FloatArray, g: FloatArray, H: FloatArray, delta: FloatArray) -> FloatArray:
+    """Return the step in ``[-delta, delta]`` minimizing the model ``max_k q_k`` (..., ).
+
+    Candidates: both ends, each piece's vertex, every root of ``q_i - q_j`` (the kinks);
+    for one piece this is the trust-region Newton step.
+    """
+    n = f.shape[-1]
+    cands = [-delta[..., None], delta[..., None]]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        cands.append(np.where(H > 0, -g / np.where(H > 0, H, 1.0), 0.0))
+        if n > 1:
+            i, j = np.triu_indices(n, k=1)
+            a = 0.5 * (H[..., i] - H[..., j])
+            b = g[..., i] - g[..., j]
+            c = f[..., i] - f[..., j]
+            disc = b * b - 4.0 * a * c
+            sq = np.sqrt(np.maximum(disc, 0.0))
+            q = -0.5 * (b + np.where(b >= 0, sq, -sq))
+            r1 = np.where(a != 0, q / np.where(a != 0, a, 1.0), np.inf)
+            r2 = np.where(q != 0, c / np.where(q != 0, q, 1.0), np.inf)
+            lin = np.where(b != 0, -c / np.where(b != 0, b, 1.0), np.inf)
+            tiny = np.abs(a) * np.maximum(delta[..., None], _TINY) <= 1e-12 * np.abs(b)
+            r1 = np.where(tiny, lin, np.where(disc >= 0, r1, np.inf))
+            r2 = np.where(tiny, lin, np.where(disc >= 0, r2, np.inf))
+            cands += [r1, r2]
+    d = np.concatenate(cands, axis=-1)
+    d = np.where(np.isfinite(d), np.clip(d, -delta[..., None], delta[..., None]), delta[..., None])
+    model = _model_max(f, g, H, d)
+    best = np.argmin(model, axis=-1)
+    return np.take_along_axis(d, best[..., None], axis=-1)[..., 0]
+
+
+def _quad(f: FloatArray, g: FloatArray, H: FloatArray, d: FloatArray) -> FloatArray:
+    """Return 2-D piece models at steps: f (..., P), g (..., P, 2), H (..., P, 3), d (..., S, 2)."""
+    x, y = d[..., :, None, 0], d[..., :, None, 1]
+    h11, h12, h22 = H[..., None, :, 0], H[..., None, :, 1], H[..., None, :, 2]
+    lin = g[..., None, :, 0] * x + g[..., None, :, 1] * y
+    return f[..., None, :] + lin + 0.5 * (h11 * x * x + 2.0 * h12 * x * y + h22 * y * y)
+
+
+def _clip_norm(d: FloatArray, delta: FloatArray) -> FloatArray:
+    """Return steps ``d`` (..., S, 2) scaled into the disk of radius ``delta`` (...)."""
+    norm = np.hypot(d[..., 0], d[..., 1])
+    lim = delta[..., None]
+    scale = np.where(norm > lim, lim / np.maximum(norm, _TINY), 1.0)
+    return np.where(np.isfinite(d), d * scale[..., None], 0.0)
 
 
 def _newton_2d(g: FloatArray, H: FloatArray, delta: FloatArray) -> FloatArray:
-    """Return the 2-D trust-region-limited Newton step (gradient step if ``H`` not PD)."""
+    """Return each piece's trust-region Newton step (gradient step if ``H`` not PD), (..., P, 2)."""
     h11, h12, h22 = H[..., 0], H[..., 1], H[..., 2]
     det = h11 * h22 - h12 * h12
     pd = (h11 > 0) & (det > 0)
     sdet = np.where(pd, det, 1.0)
     nx = -(h22 * g[..., 0] - h12 * g[..., 1]) / sdet
     ny = -(-h12 * g[..., 0] + h11 * g[..., 1]) / sdet
-    gn = np.hypot(g[..., 0], g[..., 1])
-    sx = np.where(pd, nx, -g[..., 0] * delta / np.maximum(gn, _TINY))
-    sy = np.where(pd, ny, -g[..., 1] * delta / np.maximum(gn, _TINY))
-    norm = np.hypot(sx, sy)
-    shrink = np.where(norm > delta, delta / np.maximum(norm, _TINY), 1.0)
-    return np.stack([sx * shrink, sy * shrink], -1)
+    gn = np.maximum(np.hypot(g[..., 0], g[..., 1]), _TINY)
+    lim = delta[..., None]
+    sx = np.where(pd, nx, -g[..., 0] * lim / gn)
+    sy = np.where(pd, ny, -g[..., 1] * lim / gn)
+    return _clip_norm(np.stack([sx, sy], -1), delta)
+
+
+def _step_2d(f: FloatArray, g: FloatArray, H: FloatArray, delta: FloatArray) -> FloatArray:
+    """Return the step in the disk ``|d| <= delta`` minimizing the model ``max_k q_k``, (..., 2).
+
+    Candidates: each piece's Newton step; for each pair, the minimum of their model
+    along the line where their linear models agree (a kink curve), weighted by the SQP
+    multipliers (the least-norm convex combination of their gradients); for each triple, the
+    point where the three linear models agree. One piece: the trust-region Newton step.
+    """
+    n = f.shape[-1]
+    cands = [_newton_2d(g, H, delta)]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        if n > 1:
+            i, j = np.triu_indices(n, k=1)
+            nv = g[..., i, :] - g[..., j, :]
+            n2 = np.maximum(nv[..., 0] ** 2 + nv[..., 1] ** 2, _TINY)
+            d0 = nv * ((f[..., j] - f[..., i]) / n2)[..., None]
+            e = np.stack([-nv[..., 1], nv[..., 0]], -1) / np.sqrt(n2)[..., None]
+            # Lagrangian weights: the convex combination of the two gradients of least norm
+            # (zero at a kink minimum), as in SQP for minimax.
+            lam = np.clip(-np.sum(g[..., j, :] * nv, -1) / n2, 0.0, 1.0)[..., None]
+            Hm = lam * H[..., i, :] + (1.0 - lam) * H[..., j, :]
+            gm = lam * g[..., i, :] + (1.0 - lam) * g[..., j, :]
+            hd = np.stack(
+                [
+                    Hm[..., 0] * d0[..., 0] + Hm[..., 1] * d0[..., 1],
+                    Hm[..., 1] * d0[..., 0] + Hm[..., 2] * d0[..., 1],
+                ],
+                -1,
+            )
+            slope = np.sum((gm + hd) * e, -1)
+            curv = Hm[..., 0] * e[..., 0] ** 2 + 2 * Hm[..., 1] * e[..., 0] * e[..., 1]
+            curv = curv + Hm[..., 2] * e[..., 1] ** 2
+            t = np.where(
+                curv > 0, -slope / np.where(curv > 0, curv, 1.0), -np.sign(slope) * delta[..., None]
+            )
+            cands.append(_clip_norm(d0 + t[..., None] * e, delta))
+        if n > 2:
+            i, j, k = (np.array(x) for x in zip(*_triples(n), strict=True))
+            u, v = g[..., i, :] - g[..., j, :], g[..., i, :] - g[..., k, :]
+            ru, rv = f[..., j] - f[..., i], f[..., k] - f[..., i]
+            det = u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
+            sdet = np.where(det != 0, det, 1.0)
+            x = (ru * v[..., 1] - rv * u[..., 1]) / sdet
+            y = (u[..., 0] * rv - v[..., 0] * ru) / sdet
+            cands.append(
+                _clip_norm(
+                    np.stack([np.where(det != 0, x, 0.0), np.where(det != 0, y, 0.0)], -1), delta
+                )
+            )
+    d = np.concatenate(cands, axis=-2)
+    model = np.max(_quad(f, g, H, d), axis=-1)
+    best = np.argmin(np.where(np.isfinite(model), model, np.inf), axis=-1)
+    return np.take_along_axis(d, best[..., None, None], axis=-2)[..., 0, :]
+
+
+def _triples(n: int) -> list[tuple[int, int, int]]:
+    """Return the index triples ``i < j < k < n``."""
+    return [(i, j, k) for i in range(n) for j in range(i + 1, n) for k in range(j + 1, n)]
 
 
 _ARC_STENCIL = np.array([0.0, 1.0, -1.0])
 _PLANE_STENCIL = np.array(
     [[0.0, 0.0], [1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0], [1.0, 1.0]]
 )
+
+
+def _stencils(p: _Problem, o: FloatArray, rad: FloatArray, th: FloatArray, x: FloatArray) -> dict:
+    """Return values, pieces and difference-quotient derivatives at arc angles and points.
+
+    ``o, rad, th`` (B, ma, ...) arc starts (circle origin, radius, angle), ``x`` (B, mp, 2)
+    plane points; all stencils are evaluated in one call of the objective.
+    """
+    b, ma = th.shape
+    mp = x.shape[1]
+    pa = _circle_points(o, rad, th)
+    ha = FD_STEP * np.minimum(p.scale(pa) / np.maximum(rad, _TINY), 1.0)
+    tha = th[..., None] + ha[..., None] * _ARC_STENCIL
+    pts_a = _circle_points(o[:, :, None], np.broadcast_to(rad[..., None], tha.shape), tha)
+    hp = FD_STEP * np.minimum(p.scale(x), p.r[:, None])
+    pts_p = x[:, :, None, :] + hp[..., None, None] * _PLANE_STENCIL
+    vals = p.pieces(np.concatenate([pts_a.reshape(b, -1, 2), pts_p.reshape(b, -1, 2)], axis=1))
+    npc = vals.shape[-1]
+    va = vals[:, : 3 * ma].reshape(b, ma, 3, npc)
+    vp = vals[:, 3 * ma :].reshape(b, mp, 6, npc)
+    h1, h2 = ha[..., None], hp[..., None]
+    ga = (va[..., 1, :] - va[..., 2, :]) / (2.0 * h1)
+    Ha = (va[..., 1, :] - 2.0 * va[..., 0, :] + va[..., 2, :]) / (h1 * h1)
+    gp = np.stack([vp[..., 1, :] - vp[..., 2, :], vp[..., 3, :] - vp[..., 4, :]], -1)
+    gp = gp / (2.0 * h2[..., None])
+    Hp = (
+        np.stack(
+            [
+                vp[..., 1, :] - 2.0 * vp[..., 0, :] + vp[..., 2, :],
+                vp[..., 5, :] - vp[..., 1, :] - vp[..., 3, :] + vp[..., 0, :],
+                vp[..., 3, :] - 2.0 * vp[..., 0, :] + vp[..., 4, :],
+            ],
+            -1,
+        )
+        / (h2 * h2)[..., None]
+    )
+    feas = p.feasible(np.concatenate([pa, x], axis=1))
+    return {
+        "fa": np.where(feas[:, :ma], p.combine(va[..., 0, :]), np.inf),
+        "pa": va[..., 0, :],
+        "ga": _finite(ga),
+        "Ha": _finite(Ha),
+        "ha": ha,
+        "fp": np.where(feas[:, ma:], p.combine(vp[..., 0, :]), np.inf),
+        "pp": vp[..., 0, :],
+        "gp": _finite(gp),
+        "Hp": _finite(Hp),
+        "hp": hp,
+    }
+
+
+_ARC_KEYS = ("th", "fa", "pa", "ga", "Ha", "ha", "da", "active_a", "o", "rad")
+_PLANE_KEYS = ("x", "fp", "pp", "gp", "Hp", "hp", "dp", "active_p")
+
+
+def _iterate(p: _Problem, st: dict) -> None:
+    """Take one trust-region step for every active start of ``st`` (updated in place)."""
+    sa = np.where(st["active_a"], _step_1d(st["pa"], st["ga"], st["Ha"], st["da"]), 0.0)
+    sp = _step_2d(st["pp"], st["gp"], st["Hp"], st["dp"])
+    sp = np.where(st["active_p"][..., None], sp, 0.0)
+    norm = np.hypot(sp[..., 0], sp[..., 1])
+    # Converged: a step below CONVERGED of the local scale changes f by its square.
+    st["active_a"] &= np.abs(sa) > (CONVERGED / FD_STEP) * st["ha"]
+    st["active_p"] &= norm > (CONVERGED / FD_STEP) * st["hp"]
+    new = _stencils(p, st["o"], st["rad"], st["th"] + sa, st["x"] + sp)
+    new["th"], new["x"] = st["th"] + sa, st["x"] + sp
+    acc_a = st["active_a"] & (new["fa"] < st["fa"])
+    acc_p = st["active_p"] & (new["fp"] < st["fp"])
+    # A plane step leaving F: the optimum nearby lies on the boundary, which the arc
+    # refinement covers; stop this start.
+    st["active_p"] &= np.isfinite(new["fp"])
+    for keys, acc in ((("th", "fa", "pa", "ga", "Ha", "ha"), acc_a), (_PLANE_KEYS[:6], acc_p)):
+        for key in keys:
+            mask = acc.reshape(acc.shape + (1,) * (new[key].ndim - acc.ndim))
+            st[key] = np.where(mask, new[key], st[key])
+    st["da"] = np.where(acc_a, np.maximum(st["da"], 2.0 * np.abs(sa)), 0.25 * np.abs(sa))
+    st["dp"] = np.where(acc_p, np.maximum(st["dp"], 2.0 * norm), 0.25 * norm)
 
 
 def _refine(
@@ -215,70 +449,32 @@ def _refine(
 
     ``arcs = (origin (B, ma, 2), radius (B, ma), theta (B, ma), value (B, ma), delta)``,
     ``plane = (x (B, mp, 2), value (B, mp), delta (B, mp))``; one evaluation of all stencils
-    per iteration.
+    per iteration. Models are per piece (:meth:`_Problem.pieces`). Rows whose starts have
+    all converged drop out of the batch (when they are at least half of it).
     """
     o, rad, th, fa, da = arcs
     x, fp, dp = plane
-    b, ma = th.shape
-    mp = x.shape[1]
-    active_a, active_p = np.isfinite(fa), np.isfinite(fp)
-    rs = np.maximum(rad, _TINY)
-
-    def stencils(th_c: FloatArray, x_c: FloatArray) -> tuple[FloatArray, ...]:
-        pa = _circle_points(o, rad, th_c)
-        ha = FD_STEP * np.minimum(p.scale(pa) / rs, 1.0)
-        tha = th_c[..., None] + ha[..., None] * _ARC_STENCIL
-        pts_a = _circle_points(o[:, :, None], np.broadcast_to(rad[..., None], tha.shape), tha)
-        hp = FD_STEP * np.minimum(p.scale(x_c), p.r[:, None])
-        pts_p = x_c[:, :, None, :] + hp[..., None, None] * _PLANE_STENCIL
-        pts = np.concatenate([pts_a.reshape(b, -1, 2), pts_p.reshape(b, -1, 2)], axis=1)
-        vals = p.f(pts)
-        va = vals[:, : 3 * ma].reshape(b, ma, 3)
-        vp = vals[:, 3 * ma :].reshape(b, mp, 6)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            ga = (va[..., 1] - va[..., 2]) / (2.0 * ha)
-            Ha = (va[..., 1] - 2.0 * va[..., 0] + va[..., 2]) / (ha * ha)
-            gp = np.stack([vp[..., 1] - vp[..., 2], vp[..., 3] - vp[..., 4]], -1) / (
-                2.0 * hp[..., None]
-            )
-            h2 = hp * hp
-            Hp = np.stack(
-                [
-                    (vp[..., 1] - 2.0 * vp[..., 0] + vp[..., 2]) / h2,
-                    (vp[..., 5] - vp[..., 1] - vp[..., 3] + vp[..., 0]) / h2,
-                    (vp[..., 3] - 2.0 * vp[..., 0] + vp[..., 4]) / h2,
-                ],
-                -1,
-            )
-        ok_a = np.isfinite(ga) & np.isfinite(Ha)
-        ok_p = np.all(np.isfinite(gp), -1) & np.all(np.isfinite(Hp), -1)
-        ga, Ha = np.where(ok_a, ga, 0.0), np.where(ok_a, Ha, 0.0)
-        gp, Hp = np.where(ok_p[..., None], gp, 0.0), np.where(ok_p[..., None], Hp, 0.0)
-        feas = p.feasible(np.concatenate([pa, x_c], axis=1))
-        fa_c = np.where(feas[:, :ma], va[..., 0], np.inf)
-        fp_c = np.where(feas[:, ma:], vp[..., 0], np.inf)
-        return fa_c, ga, Ha, fp_c, gp, Hp
-
-    _, ga, Ha, _, gp, Hp = stencils(th, x)
+    st = _stencils(p, o, rad, th, x)
+    st.update(th=th, x=x, o=o, rad=rad, da=da, dp=dp, fa=fa, fp=fp)
+    st["active_a"], st["active_p"] = np.isfinite(fa), np.isfinite(fp)
+    full = {key: st[key].copy() for key in _ARC_KEYS + _PLANE_KEYS}
+    rows = np.arange(len(p.r))
+    sub = p
     for _ in range(n_iter):
-        sa = np.where(active_a, _newton_1d(ga, Ha, da), 0.0)
-        sp = np.where(active_p[..., None], _newton_2d(gp, Hp, dp), 0.0)
-        th_n, x_n = th + sa, x + sp
-        fa_n, ga_n, Ha_n, fp_n, gp_n, Hp_n = stencils(th_n, x_n)
-        acc_a = active_a & (fa_n < fa)
-        acc_p = active_p & (fp_n < fp)
-        th, fa = np.where(acc_a, th_n, th), np.where(acc_a, fa_n, fa)
-        ga, Ha = np.where(acc_a, ga_n, ga), np.where(acc_a, Ha_n, Ha)
-        da = np.where(acc_a, np.maximum(da, 2.0 * np.abs(sa)), 0.25 * np.abs(sa))
-        x, fp = np.where(acc_p[..., None], x_n, x), np.where(acc_p, fp_n, fp)
-        gp, Hp = np.where(acc_p[..., None], gp_n, gp), np.where(acc_p[..., None], Hp_n, Hp)
-        dp = np.where(
-            acc_p,
-            np.maximum(dp, 2.0 * np.hypot(sp[..., 0], sp[..., 1])),
-            0.25 * np.hypot(sp[..., 0], sp[..., 1]),
-        )
-    pts = np.concatenate([_circle_points(o, rad, th), x], axis=1)
-    return pts, np.concatenate([fa, fp], axis=1)
+        _iterate(sub, st)
+        busy = st["active_a"].any(axis=1) | st["active_p"].any(axis=1)
+        if not busy.all() and 2 * np.count_nonzero(busy) <= len(busy):
+            for key in full:
+                full[key][rows] = st[key]
+            rows = rows[busy]
+            if len(rows) == 0:
+                break
+            sub = p.take(rows)
+            st = {key: full[key][rows] for key in full}
+    for key in full:
+        full[key][rows] = st[key]
+    pts = np.concatenate([_circle_points(o, rad, full["th"]), full["x"]], axis=1)
+    return pts, np.concatenate([full["fa"], full["fp"]], axis=1)
 
 
 def solve_sensor(
@@ -294,7 +490,7 @@ def solve_sensor(
     *,
     n_boundary: int = 64,
     n_interior: int = 16,
-    n_iter: int = 8,
+    n_iter: int = 30,
 ) -> tuple[FloatArray, FloatArray]:
     """Return ``(positions (..., 2), values (...))``: the best next position of one sensor.
 
@@ -318,17 +514,26 @@ def solve_sensor(
     :func:`activetrack.feasible_set.contains`) unless ``F`` is empty (then the fallback).
     """
     p = _Problem(base, center, r, targets, rho, w_d, w_theta, pose_cov, objective)
-    b = len(p.r)
-    origins, radii, th, va = _arc_candidates(p, n_boundary)
-    n, m = th.shape[1], th.shape[2]
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        pts, vals = _solve(p, n_boundary, n_interior, n_iter)
+    positions = (pts + p.center).reshape(p.shape + (2,))
+    return positions, vals.reshape(p.shape)
+
+
+def _arc_starts(
+    p: _Problem, n_boundary: int
+) -> tuple[tuple[FloatArray, ...], FloatArray, FloatArray]:
+    """Return the arc refinement starts ``(origin, radius, theta, value, delta)``, points, values.
+
+    The starts are the ``N_LOCAL_ARC`` best local minima along each circle; the trust radius
+    is the larger gap to a neighbouring angle, at least the uniform spacing in units of the
+    local scale (repeated angles have gap 0).
+    """
+    origins, radii, th, pts, va = _arc_candidates(p, n_boundary)
+    b, n, m = th.shape
     local = (va <= np.roll(va, 1, axis=-1)) & (va <= np.roll(va, -1, axis=-1))
     gap = np.diff(th, axis=-1, append=th[..., :1] + 2.0 * np.pi)  # to the next angle
-    # Trust radius: the larger gap to a neighbouring angle, at least the uniform spacing in
-    # units of the local scale (repeated angles have gap 0).
-    pts_arc = _circle_points(
-        origins[:, :, None, :], np.broadcast_to(radii[..., None], th.shape), th
-    )
-    local_scale = p.scale(pts_arc.reshape(b, -1, 2)).reshape(th.shape) / np.maximum(
+    local_scale = p.scale(pts.reshape(b, -1, 2)).reshape(th.shape) / np.maximum(
         radii[..., None], _TINY
     )
     floor = (2.0 * np.pi / n_boundary) * np.minimum(local_scale, 1.0)
@@ -337,34 +542,60 @@ def solve_sensor(
     th0 = np.take_along_axis(th.reshape(b * n, m), idx, -1).reshape(b, -1)
     da0 = np.take_along_axis(reach.reshape(b * n, m), idx, -1).reshape(b, -1)
     ka = idx.shape[-1]
-    o_a = np.repeat(origins, ka, axis=1)
-    r_a = np.repeat(radii, ka, axis=1)
-    fa = fa.reshape(b, -1)
+    starts = (
+        np.repeat(origins, ka, axis=1),
+        np.repeat(radii, ka, axis=1),
+        th0,
+        fa.reshape(b, -1),
+        da0,
+    )
+    return starts, pts.reshape(b, -1, 2), va.reshape(b, -1)
 
+
+def _plane_starts(
+    p: _Problem, n_interior: int
+) -> tuple[tuple[FloatArray, ...], FloatArray, FloatArray]:
+    """Return the interior refinement starts ``(x, value, delta)``, grid points, values.
+
+    The starts are the ``N_LOCAL_PLANE`` best local minima of the grid (4 neighbours). With
+    one target there are none: the optimum lies on the boundary (Lemma 3 holds for every
+    measurement model and pose covariance, ``docs/sensor-models-design.md`` section 5).
+    """
+    b = len(p.r)
+    if p.k == 1 or n_interior < 1:
+        x0 = np.zeros((b, 0, 2))
+        return (x0, np.zeros((b, 0)), np.zeros((b, 0))), x0, np.zeros((b, 0))
     grid, vg, spacing = _interior_candidates(p, n_interior)
     pad = np.pad(vg, ((0, 0), (1, 1), (1, 1)), constant_values=np.inf)
-    local_g = (
+    local = (
         (vg <= pad[:, :-2, 1:-1])
         & (vg <= pad[:, 2:, 1:-1])
         & (vg <= pad[:, 1:-1, :-2])
         & (vg <= pad[:, 1:-1, 2:])
     )
-    flat_g = grid.reshape(b, -1, 2)
-    ip, fp = _best_local(vg.reshape(b, -1), local_g.reshape(b, -1), N_LOCAL_PLANE)
-    x0 = np.take_along_axis(flat_g, ip[..., None], axis=1)
+    flat = grid.reshape(b, -1, 2)
+    ip, fp = _best_local(vg.reshape(b, -1), local.reshape(b, -1), N_LOCAL_PLANE)
+    x0 = np.take_along_axis(flat, ip[..., None], axis=1)
     dp0 = np.broadcast_to(spacing[:, None], fp.shape).copy()
+    return (x0, fp, dp0), flat, vg.reshape(b, -1)
 
-    pts_r, vals_r = _refine(p, (o_a, r_a, th0, fa, da0), (x0, fp, dp0), n_iter)
+
+def _solve(
+    p: _Problem, n_boundary: int, n_interior: int, n_iter: int
+) -> tuple[FloatArray, FloatArray]:
+    """Return the best points (B, 2) relative to the sensors and their values (B,)."""
+    arcs, pts_a, vals_a = _arc_starts(p, n_boundary)
+    plane, pts_g, vals_g = _plane_starts(p, n_interior)
+    pts_r, vals_r = _refine(p, arcs, plane, n_iter)
     pts_v, vals_v = _vertex_candidates(p)
-    all_pts = np.concatenate([pts_r, pts_v, pts_arc.reshape(b, -1, 2), flat_g], axis=1)
-    all_vals = np.concatenate([vals_r, vals_v, va.reshape(b, -1), vg.reshape(b, -1)], axis=1)
+    all_pts = np.concatenate([pts_r, pts_v, pts_a, pts_g], axis=1)
+    all_vals = np.concatenate([vals_r, vals_v, vals_a, vals_g], axis=1)
     best = np.argmin(all_vals, axis=1)
     s = np.take_along_axis(all_pts, best[:, None, None], axis=1)[:, 0]
     value = np.take_along_axis(all_vals, best[:, None], axis=1)[:, 0]
     empty = ~np.isfinite(value)
-    if np.any(empty):
+    if np.any(empty):  # F empty: no candidate is feasible
         fb = feasible_set.fallback(p.zero, p.r, p.t, p.rho)
         s = np.where(empty[:, None], fb, s)
         value = np.where(empty, p.f(s[:, None])[:, 0], value)
-    positions = (s + p.center).reshape(p.shape + (2,))
-    return positions, value.reshape(p.shape)
+    return s, value
