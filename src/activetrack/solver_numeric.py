@@ -98,14 +98,22 @@ class _Problem:
 
         self.center = flat(center, (2,))
         self.a0, self.b0, self.c0 = flat(a0, (k,)), flat(b0, (k,)), flat(c0, (k,))
-        self.t = flat(targets, (k, 2)) - self.center[:, None, :]
+        self.t_abs = flat(targets, (k, 2))
+        self.t = self.t_abs - self.center[:, None, :]
         self.r, self.rho = flat(r), flat(rho)
         self.wd = flat(w_d)[:, None, None]
         self.wt = flat(w_theta)[:, None, None]
         self.pc = None if pose_cov is None else flat(pose_cov, (2, 2))[:, None, None]
+        self.pc_abs = None if pose_cov is None else self.pc[:, 0]
         self.objective = objective
         self.minimax = k > 1 and _is_max(objective)
         self.zero = np.zeros((n, 2))
+
+    def at_absolute(self, positions: FloatArray) -> FloatArray:
+        """Return ``f`` at absolute positions (B, 2), (B,)."""
+        rel = positions[:, None, :] - self.t_abs
+        a, b, c = information_entries(rel, self.wd[:, 0], self.wt[:, 0], self.pc_abs)
+        return self.objective.of_targets(self.a0 + a, self.b0 + b, self.c0 + c)
 
     def take(self, rows: np.ndarray) -> _Problem:
         """Return the sub-batch of the given rows."""
@@ -467,10 +475,10 @@ def _refine(
             for key in full:
                 full[key][rows] = st[key]
             rows = rows[busy]
-            if len(rows) == 0:
-                break
             sub = p.take(rows)
             st = {key: full[key][rows] for key in full}
+            if len(rows) == 0:
+                break
     for key in full:
         full[key][rows] = st[key]
     pts = np.concatenate([_circle_points(o, rad, full["th"]), full["x"]], axis=1)
@@ -515,9 +523,12 @@ def solve_sensor(
     """
     p = _Problem(base, center, r, targets, rho, w_d, w_theta, pose_cov, objective)
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        pts, vals = _solve(p, n_boundary, n_interior, n_iter)
-    positions = (pts + p.center).reshape(p.shape + (2,))
-    return positions, vals.reshape(p.shape)
+        pts, _ = _solve(p, n_boundary, n_interior, n_iter)
+    positions = pts + p.center
+    # The value at the returned (absolute) positions, as a caller computes it: it differs
+    # from the value found in relative coordinates by the rounding of the addition.
+    values = p.at_absolute(positions)
+    return positions.reshape(p.shape + (2,)), values.reshape(p.shape)
 
 
 def _arc_starts(
