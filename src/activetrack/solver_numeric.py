@@ -64,6 +64,8 @@ N_LOCAL_PLANE = 3
 FD_STEP = 1e-4
 #: A refinement step shorter than this fraction of the local length scale ends it.
 CONVERGED = 1e-7
+#: Batches of at least this many rows drop their converged rows during refinement.
+COMPACT_ROWS = 64
 _TINY = 1e-300
 
 
@@ -94,7 +96,9 @@ class _Problem:
         self.k = k
 
         def flat(x, tail=()):
-            return np.broadcast_to(x, self.shape + tail).reshape((n,) + tail)
+            if x.shape != self.shape + tail:
+                x = np.broadcast_to(x, self.shape + tail)
+            return x.reshape((n,) + tail)
 
         self.center = flat(center, (2,))
         self.a0, self.b0, self.c0 = flat(a0, (k,)), flat(b0, (k,)), flat(c0, (k,))
@@ -108,6 +112,7 @@ class _Problem:
         self.objective = objective
         self.minimax = k > 1 and _is_max(objective)
         self.zero = np.zeros((n, 2))
+        self.origins, self.radii = feasible_set.circles(self.zero, self.r, self.t, self.rho)
 
     def at_absolute(self, positions: FloatArray) -> FloatArray:
         """Return ``f`` at absolute positions (B, 2), (B,)."""
@@ -170,18 +175,22 @@ def _is_max(objective: TraceObjective) -> bool:
 
 def _circle_points(o: FloatArray, rad: FloatArray, th: FloatArray) -> FloatArray:
     """Return ``o + rad (cos th, sin th)`` for matching leading shapes, (..., 2)."""
-    return o + rad[..., None] * np.stack([np.cos(th), np.sin(th)], -1)
+    out = np.empty(th.shape + (2,))
+    out[..., 0] = np.cos(th)
+    out[..., 1] = np.sin(th)
+    out *= rad[..., None]
+    out += o
+    return out
 
 
 def _arc_candidates(p: _Problem, n_boundary: int) -> tuple[FloatArray, ...]:
-    """Return ``(origins, radii, angles, points, values)`` (B, n, 2), (B, n), (B, n, M), ...
+    """Return ``(origins, radii, angles, points)``: (B, n, 2), (B, n), (B, n, M), (B, n, M, 2).
 
     The reach circle gets ``n_boundary`` uniform angles plus the well angles around each
     target's direction; each ``rho`` circle ``M`` uniform angles (its own target is at
-    constant distance, so it has no well). Angles are sorted along the last axis; ``values``
-    are ``+inf`` where infeasible.
+    constant distance, so it has no well). Angles are sorted along the last axis.
     """
-    origins, radii = feasible_set.circles(p.zero, p.r, p.t, p.rho)
+    origins, radii = p.origins, p.radii
     b, n = radii.shape
     dist = np.hypot(p.t[..., 0], p.t[..., 1])  # reach circle's centre -> targets (B, K)
     phi = np.arctan2(p.t[..., 1], p.t[..., 0])
@@ -196,32 +205,17 @@ def _arc_candidates(p: _Problem, n_boundary: int) -> tuple[FloatArray, ...]:
     th_rho = np.broadcast_to(np.linspace(-np.pi, np.pi, m, endpoint=False), (b, n - 1, m))
     th = np.concatenate([th0[:, None], th_rho], axis=1)
     pts = _circle_points(origins[:, :, None, :], np.broadcast_to(radii[..., None], th.shape), th)
-    vals = p.masked(pts.reshape(b, -1, 2)).reshape(th.shape)
-    return origins, radii, th, pts, vals
+    return origins, radii, th, pts
 
 
-def _vertex_candidates(p: _Problem) -> tuple[FloatArray, FloatArray]:
-    """Return the pairwise circle intersections (B, V, 2) and their values (``+inf`` if none)."""
-    origins, radii = feasible_set.circles(p.zero, p.r, p.t, p.rho)
-    pts, ok = feasible_set._pair_points(origins, radii)
-    return pts, np.where(ok, p.masked(pts), np.inf)
-
-
-def _interior_candidates(p: _Problem, n_interior: int) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Return the square grid over the reach disk (B, n, n, 2), values (B, n, n), spacing (B,).
-
-    Only the grid points inside the reach disk are evaluated; the others are ``+inf``.
-    """
+def _interior_candidates(p: _Problem, n_interior: int) -> tuple[FloatArray, np.ndarray, FloatArray]:
+    """Return the square grid over the reach disk (B, n n, 2), the indices inside the disk,
+    and the spacing (B,)."""
     u = np.linspace(-1.0, 1.0, n_interior)
     grid = np.stack(np.meshgrid(u, u, indexing="ij"), -1).reshape(-1, 2)  # (n n, 2)
     inside = np.flatnonzero(np.hypot(grid[:, 0], grid[:, 1]) <= 1.0)
-    b = len(p.r)
     pts = p.r[:, None, None] * grid
-    vals = np.full((b, len(grid)), np.inf)
-    vals[:, inside] = p.masked(pts[:, inside])
-    spacing = p.r * (2.0 / max(n_interior - 1, 1))
-    shape = (b, n_interior, n_interior)
-    return pts.reshape(shape + (2,)), vals.reshape(shape), spacing
+    return pts, inside, p.r * (2.0 / max(n_interior - 1, 1))
 
 
 def _best_local(vals: FloatArray, local: np.ndarray, m: int) -> tuple[np.ndarray, FloatArray]:
@@ -248,6 +242,10 @@ def _step_1d(f: FloatArray, g: FloatArray, H: FloatArray, delta: FloatArray) -> 
     for one piece this is the trust-region Newton step.
     """
     n = f.shape[-1]
+    if n == 1:  # a smooth objective: the trust-region Newton step
+        g, H = g[..., 0], H[..., 0]
+        step = np.where(H > 0, -g / np.where(H > 0, H, 1.0), -np.sign(g) * delta)
+        return np.clip(step, -delta, delta)
     cands = [-delta[..., None], delta[..., None]]
     with np.errstate(divide="ignore", invalid="ignore"):
         cands.append(np.where(H > 0, -g / np.where(H > 0, H, 1.0), 0.0))
@@ -313,6 +311,8 @@ def _step_2d(f: FloatArray, g: FloatArray, H: FloatArray, delta: FloatArray) -> 
     point where the three linear models agree. One piece: the trust-region Newton step.
     """
     n = f.shape[-1]
+    if n == 1:  # a smooth objective: the trust-region Newton step
+        return _newton_2d(g, H, delta)[..., 0, :]
     cands = [_newton_2d(g, H, delta)]
     with np.errstate(divide="ignore", invalid="ignore"):
         if n > 1:
@@ -382,6 +382,19 @@ def _stencils(p: _Problem, o: FloatArray, rad: FloatArray, th: FloatArray, x: Fl
     ha = FD_STEP * np.minimum(p.scale(pa) / np.maximum(rad, _TINY), 1.0)
     tha = th[..., None] + ha[..., None] * _ARC_STENCIL
     pts_a = _circle_points(o[:, :, None], np.broadcast_to(rad[..., None], tha.shape), tha)
+    if mp == 0:  # one target: no interior starts (Lemma 3)
+        vals = p.pieces(pts_a.reshape(b, -1, 2))
+        va = vals.reshape(b, ma, 3, vals.shape[-1])
+        feas = p.feasible(pa)
+        return {
+            "fa": np.where(feas, p.combine(va[..., 0, :]), np.inf),
+            "pa": va[..., 0, :],
+            "ga": _finite((va[..., 1, :] - va[..., 2, :]) / (2.0 * ha[..., None])),
+            "Ha": _finite(
+                (va[..., 1, :] - 2.0 * va[..., 0, :] + va[..., 2, :]) / (ha * ha)[..., None]
+            ),
+            "ha": ha,
+        }
     hp = FD_STEP * np.minimum(p.scale(x), p.r[:, None])
     pts_p = x[:, :, None, :] + hp[..., None, None] * _PLANE_STENCIL
     vals = p.pieces(np.concatenate([pts_a.reshape(b, -1, 2), pts_p.reshape(b, -1, 2)], axis=1))
@@ -426,24 +439,33 @@ _PLANE_KEYS = ("x", "fp", "pp", "gp", "Hp", "hp", "dp", "active_p")
 def _iterate(p: _Problem, st: dict) -> None:
     """Take one trust-region step for every active start of ``st`` (updated in place)."""
     sa = np.where(st["active_a"], _step_1d(st["pa"], st["ga"], st["Ha"], st["da"]), 0.0)
-    sp = _step_2d(st["pp"], st["gp"], st["Hp"], st["dp"])
-    sp = np.where(st["active_p"][..., None], sp, 0.0)
-    norm = np.hypot(sp[..., 0], sp[..., 1])
     # Converged: a step below CONVERGED of the local scale changes f by its square.
     st["active_a"] &= np.abs(sa) > (CONVERGED / FD_STEP) * st["ha"]
-    st["active_p"] &= norm > (CONVERGED / FD_STEP) * st["hp"]
-    new = _stencils(p, st["o"], st["rad"], st["th"] + sa, st["x"] + sp)
-    new["th"], new["x"] = st["th"] + sa, st["x"] + sp
+    plane = st["x"].shape[1] > 0
+    if plane:
+        sp = _step_2d(st["pp"], st["gp"], st["Hp"], st["dp"])
+        sp = np.where(st["active_p"][..., None], sp, 0.0)
+        norm = np.hypot(sp[..., 0], sp[..., 1])
+        st["active_p"] &= norm > (CONVERGED / FD_STEP) * st["hp"]
+        new = _stencils(p, st["o"], st["rad"], st["th"] + sa, st["x"] + sp)
+        new["x"] = st["x"] + sp
+    else:
+        new = _stencils(p, st["o"], st["rad"], st["th"] + sa, st["x"])
+    new["th"] = st["th"] + sa
     acc_a = st["active_a"] & (new["fa"] < st["fa"])
+    for key in ("th", "fa", "pa", "ga", "Ha", "ha"):
+        mask = acc_a.reshape(acc_a.shape + (1,) * (new[key].ndim - acc_a.ndim))
+        st[key] = np.where(mask, new[key], st[key])
+    st["da"] = np.where(acc_a, np.maximum(st["da"], 2.0 * np.abs(sa)), 0.25 * np.abs(sa))
+    if not plane:
+        return
     acc_p = st["active_p"] & (new["fp"] < st["fp"])
     # A plane step leaving F: the optimum nearby lies on the boundary, which the arc
     # refinement covers; stop this start.
     st["active_p"] &= np.isfinite(new["fp"])
-    for keys, acc in ((("th", "fa", "pa", "ga", "Ha", "ha"), acc_a), (_PLANE_KEYS[:6], acc_p)):
-        for key in keys:
-            mask = acc.reshape(acc.shape + (1,) * (new[key].ndim - acc.ndim))
-            st[key] = np.where(mask, new[key], st[key])
-    st["da"] = np.where(acc_a, np.maximum(st["da"], 2.0 * np.abs(sa)), 0.25 * np.abs(sa))
+    for key in _PLANE_KEYS[:6]:
+        mask = acc_p.reshape(acc_p.shape + (1,) * (new[key].ndim - acc_p.ndim))
+        st[key] = np.where(mask, new[key], st[key])
     st["dp"] = np.where(acc_p, np.maximum(st["dp"], 2.0 * norm), 0.25 * norm)
 
 
@@ -462,9 +484,18 @@ def _refine(
     """
     o, rad, th, fa, da = arcs
     x, fp, dp = plane
-    st = _stencils(p, o, rad, th, x)
+    st = {"pp": fp[..., None], "gp": x[..., None, :], "Hp": np.zeros(fp.shape + (1, 3))}
+    st["hp"] = fp
+    st.update(_stencils(p, o, rad, th, x))
     st.update(th=th, x=x, o=o, rad=rad, da=da, dp=dp, fa=fa, fp=fp)
     st["active_a"], st["active_p"] = np.isfinite(fa), np.isfinite(fp)
+    if len(p.r) < COMPACT_ROWS:  # small batches: no compaction, stop when all converged
+        for _ in range(n_iter):
+            _iterate(p, st)
+            if not (st["active_a"].any() or st["active_p"].any()):
+                break
+        pts = np.concatenate([_circle_points(o, rad, st["th"]), st["x"]], axis=1)
+        return pts, np.concatenate([st["fa"], st["fp"]], axis=1)
     full = {key: st[key].copy() for key in _ARC_KEYS + _PLANE_KEYS}
     rows = np.arange(len(p.r))
     sub = p
@@ -475,10 +506,10 @@ def _refine(
             for key in full:
                 full[key][rows] = st[key]
             rows = rows[busy]
-            sub = p.take(rows)
             st = {key: full[key][rows] for key in full}
             if len(rows) == 0:
                 break
+            sub = p.take(rows)
     for key in full:
         full[key][rows] = st[key]
     pts = np.concatenate([_circle_points(o, rad, full["th"]), full["x"]], axis=1)
@@ -532,15 +563,16 @@ def solve_sensor(
 
 
 def _arc_starts(
-    p: _Problem, n_boundary: int
-) -> tuple[tuple[FloatArray, ...], FloatArray, FloatArray]:
-    """Return the arc refinement starts ``(origin, radius, theta, value, delta)``, points, values.
+    p: _Problem, cand: tuple[FloatArray, ...], va: FloatArray, n_boundary: int
+) -> tuple[FloatArray, ...]:
+    """Return the arc refinement starts ``(origin, radius, theta, value, delta)``.
 
+    ``cand`` from :func:`_arc_candidates`, ``va`` its values (B, n, M).
     The starts are the ``N_LOCAL_ARC`` best local minima along each circle; the trust radius
     is the larger gap to a neighbouring angle, at least the uniform spacing in units of the
     local scale (repeated angles have gap 0).
     """
-    origins, radii, th, pts, va = _arc_candidates(p, n_boundary)
+    origins, radii, th, pts = cand
     b, n, m = th.shape
     local = (va <= np.roll(va, 1, axis=-1)) & (va <= np.roll(va, -1, axis=-1))
     gap = np.diff(th, axis=-1, append=th[..., :1] + 2.0 * np.pi)  # to the next angle
@@ -553,30 +585,25 @@ def _arc_starts(
     th0 = np.take_along_axis(th.reshape(b * n, m), idx, -1).reshape(b, -1)
     da0 = np.take_along_axis(reach.reshape(b * n, m), idx, -1).reshape(b, -1)
     ka = idx.shape[-1]
-    starts = (
+    return (
         np.repeat(origins, ka, axis=1),
         np.repeat(radii, ka, axis=1),
         th0,
         fa.reshape(b, -1),
         da0,
     )
-    return starts, pts.reshape(b, -1, 2), va.reshape(b, -1)
 
 
 def _plane_starts(
-    p: _Problem, n_interior: int
-) -> tuple[tuple[FloatArray, ...], FloatArray, FloatArray]:
-    """Return the interior refinement starts ``(x, value, delta)``, grid points, values.
+    grid: FloatArray, vg: FloatArray, spacing: FloatArray, n_interior: int
+) -> tuple[FloatArray, ...]:
+    """Return the interior refinement starts ``(x, value, delta)``.
 
-    The starts are the ``N_LOCAL_PLANE`` best local minima of the grid (4 neighbours). With
-    one target there are none: the optimum lies on the boundary (Lemma 3 holds for every
-    measurement model and pose covariance, ``docs/sensor-models-design.md`` section 5).
+    ``grid`` (B, n n, 2) and its values ``vg`` (B, n n) from :func:`_interior_candidates`;
+    the starts are the ``N_LOCAL_PLANE`` best local minima of the grid (4 neighbours).
     """
-    b = len(p.r)
-    if p.k == 1 or n_interior < 1:
-        x0 = np.zeros((b, 0, 2))
-        return (x0, np.zeros((b, 0)), np.zeros((b, 0))), x0, np.zeros((b, 0))
-    grid, vg, spacing = _interior_candidates(p, n_interior)
+    b = len(grid)
+    vg = vg.reshape(b, n_interior, n_interior)
     pad = np.pad(vg, ((0, 0), (1, 1), (1, 1)), constant_values=np.inf)
     local = (
         (vg <= pad[:, :-2, 1:-1])
@@ -584,22 +611,43 @@ def _plane_starts(
         & (vg <= pad[:, 1:-1, :-2])
         & (vg <= pad[:, 1:-1, 2:])
     )
-    flat = grid.reshape(b, -1, 2)
     ip, fp = _best_local(vg.reshape(b, -1), local.reshape(b, -1), N_LOCAL_PLANE)
-    x0 = np.take_along_axis(flat, ip[..., None], axis=1)
-    dp0 = np.broadcast_to(spacing[:, None], fp.shape).copy()
-    return (x0, fp, dp0), flat, vg.reshape(b, -1)
+    x0 = np.take_along_axis(grid, ip[..., None], axis=1)
+    return x0, fp, np.broadcast_to(spacing[:, None], fp.shape).copy()
 
 
 def _solve(
     p: _Problem, n_boundary: int, n_interior: int, n_iter: int
 ) -> tuple[FloatArray, FloatArray]:
-    """Return the best points (B, 2) relative to the sensors and their values (B,)."""
-    arcs, pts_a, vals_a = _arc_starts(p, n_boundary)
-    plane, pts_g, vals_g = _plane_starts(p, n_interior)
+    """Return the best points (B, 2) relative to the sensors and their values (B,).
+
+    All candidates (arcs, circle intersections, interior grid) are evaluated in one call.
+    With one target there is no interior grid: the optimum lies on the boundary (Lemma 3
+    holds for every measurement model and pose covariance, ``docs/sensor-models-design.md``
+    section 5).
+    """
+    b = len(p.r)
+    arc = _arc_candidates(p, n_boundary)
+    pts_a = arc[3].reshape(b, -1, 2)
+    pts_v, ok_v = feasible_set._pair_points(p.origins, p.radii)
+    interior = p.k > 1 and n_interior > 0
+    parts = [pts_a, pts_v]
+    if interior:
+        grid, inside, spacing = _interior_candidates(p, n_interior)
+        parts.append(grid[:, inside])
+    vals = p.masked(np.concatenate(parts, axis=1))
+    na, nv = pts_a.shape[1], pts_v.shape[1]
+    vals_a, vals_v = vals[:, :na], np.where(ok_v, vals[:, na : na + nv], np.inf)
+    arcs = _arc_starts(p, arc, vals_a.reshape(arc[2].shape), n_boundary)
+    if interior:
+        vals_g = np.full(grid.shape[:2], np.inf)
+        vals_g[:, inside] = vals[:, na + nv :]
+        plane = _plane_starts(grid, vals_g, spacing, n_interior)
+    else:
+        grid, vals_g = np.zeros((b, 0, 2)), np.zeros((b, 0))
+        plane = (grid, vals_g, vals_g)
     pts_r, vals_r = _refine(p, arcs, plane, n_iter)
-    pts_v, vals_v = _vertex_candidates(p)
-    all_pts = np.concatenate([pts_r, pts_v, pts_a, pts_g], axis=1)
+    all_pts = np.concatenate([pts_r, pts_v, pts_a, grid], axis=1)
     all_vals = np.concatenate([vals_r, vals_v, vals_a, vals_g], axis=1)
     best = np.argmin(all_vals, axis=1)
     s = np.take_along_axis(all_pts, best[:, None, None], axis=1)[:, 0]
