@@ -183,29 +183,31 @@ def _circle_points(o: FloatArray, rad: FloatArray, th: FloatArray) -> FloatArray
     return out
 
 
-def _arc_candidates(p: _Problem, n_boundary: int) -> tuple[FloatArray, ...]:
-    """Return ``(origins, radii, angles, points)``: (B, n, 2), (B, n), (B, n, M), (B, n, M, 2).
+def _arc_candidates(p: _Problem, n_boundary: int) -> list[tuple[FloatArray, ...]]:
+    """Return two groups of circle candidates ``(origins, radii, angles, points)``.
 
-    The reach circle gets ``n_boundary`` uniform angles plus the well angles around each
-    target's direction; each ``rho`` circle ``M`` uniform angles (its own target is at
-    constant distance, so it has no well). Angles are sorted along the last axis.
+    Shapes (B, n, 2), (B, n), (B, n, M), (B, n, M, 2): the reach circle (n = 1) with
+    ``n_boundary`` uniform angles plus the well angles around each target's direction,
+    sorted; the ``rho`` circles (n = K) with ``n_boundary`` uniform angles (a circle's own
+    target is at constant distance, so it has no well).
     """
-    origins, radii = p.origins, p.radii
-    b, n = radii.shape
+    b = len(p.r)
     dist = np.hypot(p.t[..., 0], p.t[..., 1])  # reach circle's centre -> targets (B, K)
     phi = np.arctan2(p.t[..., 1], p.t[..., 0])
     width = np.maximum(np.abs(dist - p.r[:, None]), p.rho[:, None])
     # Wider wells are resolved by the uniform grid (spacing 2 pi / n_boundary).
     sigma = np.minimum(width / np.maximum(p.r[:, None], _TINY), 0.25)
     well = (phi[..., None] + sigma[..., None] * WELL_OFFSETS).reshape(b, -1)
-    m = n_boundary + well.shape[-1]
     uniform = np.linspace(-np.pi, np.pi, n_boundary, endpoint=False)
     th0 = np.concatenate([np.broadcast_to(uniform, (b, n_boundary)), well], axis=-1)
-    th0 = np.sort(np.mod(th0 + np.pi, 2.0 * np.pi) - np.pi, axis=-1)
-    th_rho = np.broadcast_to(np.linspace(-np.pi, np.pi, m, endpoint=False), (b, n - 1, m))
-    th = np.concatenate([th0[:, None], th_rho], axis=1)
-    pts = _circle_points(origins[:, :, None, :], np.broadcast_to(radii[..., None], th.shape), th)
-    return origins, radii, th, pts
+    th0 = np.sort(np.mod(th0 + np.pi, 2.0 * np.pi) - np.pi, axis=-1)[:, None]
+    th1 = np.broadcast_to(uniform, (b, p.k, n_boundary))
+    groups = []
+    for sl, th in ((slice(0, 1), th0), (slice(1, None), th1)):
+        o, rad = p.origins[:, sl], p.radii[:, sl]
+        pts = _circle_points(o[:, :, None, :], np.broadcast_to(rad[..., None], th.shape), th)
+        groups.append((o, rad, th, pts))
+    return groups
 
 
 def _interior_candidates(p: _Problem, n_interior: int) -> tuple[FloatArray, np.ndarray, FloatArray]:
@@ -572,26 +574,19 @@ def _arc_starts(
     is the larger gap to a neighbouring angle, at least the uniform spacing in units of the
     local scale (repeated angles have gap 0).
     """
-    origins, radii, th, pts = cand
+    origins, radii, th, _ = cand
     b, n, m = th.shape
     local = (va <= np.roll(va, 1, axis=-1)) & (va <= np.roll(va, -1, axis=-1))
     gap = np.diff(th, axis=-1, append=th[..., :1] + 2.0 * np.pi)  # to the next angle
-    local_scale = p.scale(pts.reshape(b, -1, 2)).reshape(th.shape) / np.maximum(
-        radii[..., None], _TINY
-    )
-    floor = (2.0 * np.pi / n_boundary) * np.minimum(local_scale, 1.0)
-    reach = np.maximum(np.maximum(gap, np.roll(gap, 1, axis=-1)), floor)
+    reach = np.maximum(gap, np.roll(gap, 1, axis=-1))
     idx, fa = _best_local(va.reshape(b * n, m), local.reshape(b * n, m), N_LOCAL_ARC)
     th0 = np.take_along_axis(th.reshape(b * n, m), idx, -1).reshape(b, -1)
     da0 = np.take_along_axis(reach.reshape(b * n, m), idx, -1).reshape(b, -1)
     ka = idx.shape[-1]
-    return (
-        np.repeat(origins, ka, axis=1),
-        np.repeat(radii, ka, axis=1),
-        th0,
-        fa.reshape(b, -1),
-        da0,
-    )
+    o0, r0 = np.repeat(origins, ka, axis=1), np.repeat(radii, ka, axis=1)
+    local_scale = p.scale(_circle_points(o0, r0, th0)) / np.maximum(r0, _TINY)
+    da0 = np.maximum(da0, (2.0 * np.pi / n_boundary) * np.minimum(local_scale, 1.0))
+    return o0, r0, th0, fa.reshape(b, -1), da0
 
 
 def _plane_starts(
@@ -627,8 +622,9 @@ def _solve(
     section 5).
     """
     b = len(p.r)
-    arc = _arc_candidates(p, n_boundary)
-    pts_a = arc[3].reshape(b, -1, 2)
+    groups = _arc_candidates(p, n_boundary)
+    sizes = [g[2].size // b for g in groups]
+    pts_a = np.concatenate([g[3].reshape(b, -1, 2) for g in groups], axis=1)
     pts_v, ok_v = feasible_set._pair_points(p.origins, p.radii)
     interior = p.k > 1 and n_interior > 0
     parts = [pts_a, pts_v]
@@ -638,7 +634,12 @@ def _solve(
     vals = p.masked(np.concatenate(parts, axis=1))
     na, nv = pts_a.shape[1], pts_v.shape[1]
     vals_a, vals_v = vals[:, :na], np.where(ok_v, vals[:, na : na + nv], np.inf)
-    arcs = _arc_starts(p, arc, vals_a.reshape(arc[2].shape), n_boundary)
+    split = np.split(vals_a, np.cumsum(sizes)[:-1], axis=1)
+    starts = [
+        _arc_starts(p, g, v.reshape(g[2].shape), n_boundary)
+        for g, v in zip(groups, split, strict=True)
+    ]
+    arcs = tuple(np.concatenate(parts, axis=1) for parts in zip(*starts, strict=True))
     if interior:
         vals_g = np.full(grid.shape[:2], np.inf)
         vals_g[:, inside] = vals[:, na + nv :]
