@@ -13,26 +13,35 @@ is the feasible set of :mod:`activetrack.feasible_set` (eq. 15-16 with K targets
 
 Method (deterministic, batched over leading axes without Python loops over the batch):
 
-1. Candidates. On each of the K + 1 boundary circles (reach circle, ``rho`` circles) a
-   uniform grid of ``n_boundary`` angles plus, around the direction from the circle's
-   centre to each target, angles at offsets ``+-sigma {1/8, ..., 4}`` and 0, where
-   ``sigma`` is the angular width of the target's well on that circle
-   (``max(| |t - o| - R |, rho) / R``: the bearing information grows as the inverse
-   squared distance, so on the reach circle passing near a target ``f`` varies on that
-   scale). Every pairwise circle intersection (the arcs' ends, where constrained optima
-   sit). A square grid of ``n_interior x n_interior`` points over the reach disk: with
-   K >= 2 the optimum need not lie on the boundary (Lemma 3 holds per target only).
-   Infeasible candidates get the value ``+inf`` (ragged arc sets become masks).
+1. Candidates. On the reach circle a uniform grid of ``n_boundary`` angles plus, around
+   the direction to each target, angles at offsets ``+-sigma {1/8, ..., 4}`` and 0, where
+   ``sigma = max(| |t - p| - r |, rho) / r`` is the angular width of the target's well
+   (the bearing information grows as the inverse squared distance, so where the reach
+   circle passes near a target ``f`` varies on that scale); on each ``rho`` circle
+   ``n_boundary`` uniform angles (its own target is at constant distance). Every pairwise
+   circle intersection (the arcs' ends, where constrained optima sit). With K >= 2 a
+   square grid of ``n_interior x n_interior`` points over the reach disk: the optimum
+   need not lie on the boundary (Lemma 3 holds per target only); with K = 1 it does
+   (Lemma 3 holds for every measurement model and pose covariance), so no interior grid.
+   Infeasible candidates get the value ``+inf`` (ragged arc sets become masks). All
+   candidates are evaluated in one call.
 2. Refinement. From the best ``N_LOCAL_ARC`` local minima (along the sorted angles) of each
-   circle, Newton on the angle; from the best ``N_LOCAL_PLANE`` local minima of the
-   interior grid, Newton in the plane. Derivatives are central differences with a step
-   ``1e-4`` of the local length scale (the distance to the nearest target, capped by the
-   radius), steps are limited by a trust radius that starts at the grid spacing and
-   shrinks by 4 after a rejected step. A step is accepted only when its point is
-   feasible and strictly better.
+   circle, steps on the angle; from the best ``N_LOCAL_PLANE`` local minima of the
+   interior grid, steps in the plane. Derivatives are central differences with a step
+   ``FD_STEP`` of the local length scale (the distance to the nearest target, capped by
+   the radius). Steps minimize a local model within a trust radius that starts at the
+   grid spacing and shrinks by 4 after a rejected step: Newton's quadratic model for a
+   smooth objective (TRACE, LOGDET); for an objective that takes the maximum over
+   targets (WORST_TRACE, nonsmooth where two targets tie), the maximum of the per-target
+   quadratic models, minimized over its kinks as in SQP for minimax problems. A step is
+   accepted only when its point is feasible and strictly better; a start stops when its
+   step falls below ``CONVERGED`` of the local scale (or, in the plane, when a step
+   leaves F: the boundary starts cover that optimum). In large batches the converged
+   rows drop out.
 3. The answer is the best point evaluated (grid, intersections, accepted steps), so it is
    never worse than any candidate. When no candidate is feasible (``F`` empty), the
-   answer is :func:`activetrack.feasible_set.fallback` and its value.
+   answer is :func:`activetrack.feasible_set.fallback` and its value. The returned value
+   is ``f`` at the returned absolute position.
 
 Special cases: ``r = 0`` returns the sensor's position (its only reachable point, feasible
 or the fallback); a point at zero distance from a target gets no information about it
