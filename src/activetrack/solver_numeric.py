@@ -35,9 +35,9 @@ Method (deterministic, batched over leading axes without Python loops over the b
    targets (WORST_TRACE, nonsmooth where two targets tie), the maximum of the per-target
    quadratic models, minimized over its kinks as in SQP for minimax problems. A step is
    accepted only when its point is feasible and strictly better; a start stops when its
-   step falls below ``CONVERGED`` of the local scale (or, in the plane, when a step
-   leaves F: the boundary starts cover that optimum). In large batches the converged
-   rows drop out.
+   step falls below ``CONVERGED`` of the local scale (or, in the plane, after
+   ``MAX_MISSES`` consecutive steps leaving F: the boundary starts cover that optimum).
+   In large batches the converged rows drop out.
 3. The answer is the best point evaluated (grid, intersections, accepted steps), so it is
    never worse than any candidate. When no candidate is feasible (``F`` empty), the
    answer is :func:`activetrack.feasible_set.fallback` and its value. The returned value
@@ -69,10 +69,15 @@ WELL_OFFSETS = np.array(
 #: Local minima refined per circle and in the interior.
 N_LOCAL_ARC = 2
 N_LOCAL_PLANE = 3
+#: Rings and angles of the log-polar grid around each target (interior, K >= 2).
+POLAR_RINGS = 8
+POLAR_ANGLES = 12
 #: Finite-difference step in units of the local length scale.
 FD_STEP = 1e-4
 #: A refinement step shorter than this fraction of the local length scale ends it.
 CONVERGED = 1e-7
+#: Consecutive infeasible plane steps after which an interior start stops.
+MAX_MISSES = 3
 #: Batches of at least this many rows drop their converged rows during refinement.
 COMPACT_ROWS = 64
 _TINY = 1e-300
@@ -227,6 +232,42 @@ def _interior_candidates(p: _Problem, n_interior: int) -> tuple[FloatArray, np.n
     inside = np.flatnonzero(np.hypot(grid[:, 0], grid[:, 1]) <= 1.0)
     pts = p.r[:, None, None] * grid
     return pts, inside, p.r * (2.0 / max(n_interior - 1, 1))
+
+
+def _polar_candidates(p: _Problem) -> tuple[FloatArray, FloatArray]:
+    """Return log-polar grids around each target (B, K, R, A, 2) and their ring steps (B, K, R).
+
+    Near a target ``f`` varies on the scale of the distance to it (the bearing information
+    grows as its inverse square), so an interior optimum there (possible with K >= 2: the
+    other targets pull elsewhere) needs a grid that is finer closer in: ``POLAR_RINGS``
+    rings from ``1.3 rho`` (at least ``1e-3 r``) out to ``r`` in geometric progression,
+    ``POLAR_ANGLES`` angles each.
+    """
+    inner = 1.3 * np.maximum(p.rho, 1e-3 * p.r)
+    outer = np.maximum(p.r, 2.0 * inner)
+    frac = np.arange(POLAR_RINGS) / (POLAR_RINGS - 1)
+    radii = inner[:, None] * (outer / inner)[:, None] ** frac  # (B, R)
+    ang = np.linspace(-np.pi, np.pi, POLAR_ANGLES, endpoint=False)
+    unit = np.stack([np.cos(ang), np.sin(ang)], -1)  # (A, 2)
+    pts = p.t[:, :, None, None, :] + radii[:, None, :, None, None] * unit
+    step = np.broadcast_to(radii[:, None, :] * (2.0 * np.pi / POLAR_ANGLES), pts.shape[:3])
+    return pts, step
+
+
+def _polar_starts(pts: FloatArray, vals: FloatArray, step: FloatArray) -> tuple[FloatArray, ...]:
+    """Return the ``N_LOCAL_PLANE`` best local minima of the polar grids as plane starts."""
+    b = len(pts)
+    pad = np.pad(vals, ((0, 0), (0, 0), (1, 1), (0, 0)), constant_values=np.inf)
+    local = (
+        (vals <= np.roll(vals, 1, axis=-1))
+        & (vals <= np.roll(vals, -1, axis=-1))
+        & (vals <= pad[:, :, :-2])
+        & (vals <= pad[:, :, 2:])
+    )
+    idx, fp = _best_local(vals.reshape(b, -1), local.reshape(b, -1), N_LOCAL_PLANE)
+    x0 = np.take_along_axis(pts.reshape(b, -1, 2), idx[..., None], axis=1)
+    steps = np.broadcast_to(step[..., None], vals.shape).reshape(b, -1)
+    return x0, fp, np.take_along_axis(steps, idx, axis=1)
 
 
 def _best_local(vals: FloatArray, local: np.ndarray, m: int) -> tuple[np.ndarray, FloatArray]:
@@ -444,7 +485,7 @@ def _stencils(p: _Problem, o: FloatArray, rad: FloatArray, th: FloatArray, x: Fl
 
 
 _ARC_KEYS = ("th", "fa", "pa", "ga", "Ha", "ha", "da", "active_a", "o", "rad")
-_PLANE_KEYS = ("x", "fp", "pp", "gp", "Hp", "hp", "dp", "active_p")
+_PLANE_KEYS = ("x", "fp", "pp", "gp", "Hp", "hp", "dp", "active_p", "miss")
 
 
 def _iterate(p: _Problem, st: dict) -> None:
@@ -471,9 +512,10 @@ def _iterate(p: _Problem, st: dict) -> None:
     if not plane:
         return
     acc_p = st["active_p"] & (new["fp"] < st["fp"])
-    # A plane step leaving F: the optimum nearby lies on the boundary, which the arc
-    # refinement covers; stop this start.
-    st["active_p"] &= np.isfinite(new["fp"])
+    # Plane steps leaving F MAX_MISSES times in a row (each shrinking the trust radius):
+    # the optimum nearby lies on the boundary, which the arc refinement covers; stop.
+    st["miss"] = np.where(np.isfinite(new["fp"]), 0, st["miss"] + 1)
+    st["active_p"] &= st["miss"] < MAX_MISSES
     for key in _PLANE_KEYS[:6]:
         mask = acc_p.reshape(acc_p.shape + (1,) * (new[key].ndim - acc_p.ndim))
         st[key] = np.where(mask, new[key], st[key])
@@ -500,6 +542,7 @@ def _refine(
     st.update(_stencils(p, o, rad, th, x))
     st.update(th=th, x=x, o=o, rad=rad, da=da, dp=dp, fa=fa, fp=fp)
     st["active_a"], st["active_p"] = np.isfinite(fa), np.isfinite(fp)
+    st["miss"] = np.zeros(fp.shape, dtype=np.int64)
     if len(p.r) < COMPACT_ROWS:  # small batches: no compaction, stop when all converged
         for _ in range(n_iter):
             _iterate(p, st)
@@ -639,7 +682,8 @@ def _solve(
     parts = [pts_a, pts_v]
     if interior:
         grid, inside, spacing = _interior_candidates(p, n_interior)
-        parts.append(grid[:, inside])
+        polar, polar_step = _polar_candidates(p)
+        parts += [grid[:, inside], polar.reshape(b, -1, 2)]
     vals = p.masked(np.concatenate(parts, axis=1))
     na, nv = pts_a.shape[1], pts_v.shape[1]
     vals_a, vals_v = vals[:, :na], np.where(ok_v, vals[:, na : na + nv], np.inf)
@@ -650,9 +694,20 @@ def _solve(
     ]
     arcs = tuple(np.concatenate(parts, axis=1) for parts in zip(*starts, strict=True))
     if interior:
+        ng = len(inside)
         vals_g = np.full(grid.shape[:2], np.inf)
-        vals_g[:, inside] = vals[:, na + nv :]
-        plane = _plane_starts(grid, vals_g, spacing, n_interior)
+        vals_g[:, inside] = vals[:, na + nv : na + nv + ng]
+        vals_p = vals[:, na + nv + ng :].reshape(polar.shape[:-1])
+        plane = tuple(
+            np.concatenate(x, axis=1)
+            for x in zip(
+                _plane_starts(grid, vals_g, spacing, n_interior),
+                _polar_starts(polar, vals_p, polar_step),
+                strict=True,
+            )
+        )
+        grid = np.concatenate([grid, polar.reshape(b, -1, 2)], axis=1)
+        vals_g = np.concatenate([vals_g, vals_p.reshape(b, -1)], axis=1)
     else:
         grid, vals_g = np.zeros((b, 0, 2)), np.zeros((b, 0))
         plane = (grid, vals_g, vals_g)
