@@ -245,7 +245,9 @@ def boundary_arcs(center: FloatArray, r: float, targets: FloatArray, rho: float)
         for t0, t1 in bounds:
             if t1 - t0 <= 0.0:
                 continue
-            arc = Arc((float(origins[a][0]), float(origins[a][1])), float(radii[a]), t0, t1)
+            arc = Arc(
+                (float(origins[a][0]), float(origins[a][1])), float(radii[a]), float(t0), float(t1)
+            )
             mid = arc.points(np.array([0.5 * (t0 + t1)]))[0]
             if _on_boundary_piece(mid, a, center, r, targets, rho):
                 arcs.append(arc)

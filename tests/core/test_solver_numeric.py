@@ -219,6 +219,11 @@ def test_special_cases_are_finite():
     base2 = (pr2[:, 0, 0], pr2[:, 0, 1], pr2[:, 1, 1])
     pos, val = solver_numeric.solve_sensor(base2, [0.0, 0.0], 1.0, two, 0.0, 1.0, 1.0)
     assert np.all(np.isfinite(pos)) and np.isfinite(val)
+    # r = 0 with two targets (the interior grids collapse onto the sensor): it stays.
+    pos, val = solver_numeric.solve_sensor(base2, [0.5, 0.5], 0.0, two, 0.2, 1.0, 1.0)
+    np.testing.assert_array_equal(pos, [0.5, 0.5])
+    want = longhand_objective(np.array([0.5, 0.5]), two, pr2, 1.0, 1.0, None, TRACE)
+    np.testing.assert_allclose(val, want, rtol=1e-12)
     # Bearing only with a pose covariance, range only: finite.
     for w_d, w_t in ((0.0, 3.0), (3.0, 0.0)):
         pos, val = solver_numeric.solve_sensor(
