@@ -36,7 +36,7 @@ Method (deterministic, batched over leading axes without Python loops over the b
    quadratic models, minimized over its kinks as in SQP for minimax problems. A step is
    accepted only when its point is feasible and strictly better; a start stops when its
    step falls below ``CONVERGED`` of the local scale (or, in the plane, after
-   ``MAX_MISSES`` consecutive steps leaving F: the boundary starts cover that optimum).
+   ``MAX_MISSES`` steps leaving F: the boundary starts cover that optimum).
    In large batches the converged rows drop out.
 3. The answer is the best point evaluated (grid, intersections, accepted steps), so it is
    never worse than any candidate. When no candidate is feasible (``F`` empty), the
@@ -76,7 +76,7 @@ POLAR_ANGLES = 12
 FD_STEP = 1e-4
 #: A refinement step shorter than this fraction of the local length scale ends it.
 CONVERGED = 1e-7
-#: Consecutive infeasible plane steps after which an interior start stops.
+#: Infeasible plane steps after which an interior start stops.
 MAX_MISSES = 3
 #: Batches of at least this many rows drop their converged rows during refinement.
 COMPACT_ROWS = 64
@@ -512,9 +512,9 @@ def _iterate(p: _Problem, st: dict) -> None:
     if not plane:
         return
     acc_p = st["active_p"] & (new["fp"] < st["fp"])
-    # Plane steps leaving F MAX_MISSES times in a row (each shrinking the trust radius):
-    # the optimum nearby lies on the boundary, which the arc refinement covers; stop.
-    st["miss"] = np.where(np.isfinite(new["fp"]), 0, st["miss"] + 1)
+    # Plane steps leaving F MAX_MISSES times (each shrinking the trust radius): the
+    # optimum nearby lies on the boundary, which the arc refinement covers; stop.
+    st["miss"] = st["miss"] + ~np.isfinite(new["fp"])
     st["active_p"] &= st["miss"] < MAX_MISSES
     for key in _PLANE_KEYS[:6]:
         mask = acc_p.reshape(acc_p.shape + (1,) * (new[key].ndim - acc_p.ndim))
