@@ -130,7 +130,7 @@ def intersections(
     return base + off, base - off, meet
 
 
-def _pair_points(origins: FloatArray, radii: FloatArray) -> tuple[FloatArray, np.ndarray]:
+def pair_points(origins: FloatArray, radii: FloatArray) -> tuple[FloatArray, np.ndarray]:
     """Return all pairwise intersection points (..., 2 P, 2) and whether they exist (..., 2 P)."""
     i, j = pairs(radii.shape[-1])
     P, Q, meet = intersections(origins[..., i, :], radii[..., i], origins[..., j, :], radii[..., j])
@@ -181,7 +181,7 @@ def project(
     q = np.broadcast_to(q, shape + (2,))
     toward = _unit(center[..., None, :] - origins)  # the default direction at a centre
     radial = origins + radii[..., None] * _unit(q[..., None, :] - origins, toward)
-    inter, inter_ok = _pair_points(origins, radii)
+    inter, inter_ok = pair_points(origins, radii)
     cand = np.concatenate(
         [q[..., None, :], radial, np.broadcast_to(inter, shape + inter.shape[-2:])], -2
     )

@@ -677,7 +677,7 @@ def _solve(
     groups = _arc_candidates(p, n_boundary)
     sizes = [g[2].size // b for g in groups]
     pts_a = np.concatenate([g[3].reshape(b, -1, 2) for g in groups], axis=1)
-    pts_v, ok_v = feasible_set._pair_points(p.origins, p.radii)
+    pts_v, ok_v = feasible_set.pair_points(p.origins, p.radii)
     interior = p.k > 1 and n_interior > 0
     parts = [pts_a, pts_v]
     if interior:
