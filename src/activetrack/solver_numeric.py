@@ -1,0 +1,725 @@
+"""A global numerical single-sensor solver: any measurement model, pose uncertainty, K targets.
+
+The subproblem of Gauss-Seidel relaxation for sensor ``i`` with the other sensors folded
+in (``docs/sensor-models-design.md``, section 4; the paper's eq. 22-24 generalized):
+
+    minimize over s in F:  f(s) = objective.of_targets(a0 + ai(s), b0 + bi(s), c0 + ci(s))
+
+where ``(a0, b0, c0)`` (..., K) are the entries of each target's information without
+sensor ``i`` (prior plus the other sensors, eq. 12), ``(ai, bi, ci)(s)`` is sensor ``i``'s
+information about each target (:func:`activetrack.sensor_models.information_entries`,
+eq. 17 with the model's weights and the effective noise of an uncertain pose) and ``F``
+is the feasible set of :mod:`activetrack.feasible_set` (eq. 15-16 with K targets).
+
+Method (deterministic, batched over leading axes without Python loops over the batch):
+
+1. Candidates. On the reach circle a uniform grid of ``n_boundary`` angles plus, around
+   the direction to each target, angles at offsets ``+-sigma {1/8, ..., 4}`` and 0, where
+   ``sigma = max(| |t - p| - r |, rho) / r`` is the angular width of the target's well
+   (the bearing information grows as the inverse squared distance, so where the reach
+   circle passes near a target ``f`` varies on that scale); on each ``rho`` circle
+   ``n_boundary`` uniform angles (its own target is at constant distance). Every pairwise
+   circle intersection (the arcs' ends, where constrained optima sit). With K >= 2 a
+   square grid of ``n_interior x n_interior`` points over the reach disk: the optimum
+   need not lie on the boundary (Lemma 3 holds per target only); with K = 1 it does
+   (Lemma 3 holds for every measurement model and pose covariance), so no interior grid.
+   Infeasible candidates get the value ``+inf`` (ragged arc sets become masks). All
+   candidates are evaluated in one call.
+2. Refinement. From the best ``N_LOCAL_ARC`` local minima (along the sorted angles) of each
+   circle, steps on the angle; from the best ``N_LOCAL_PLANE`` local minima of the
+   interior grid, steps in the plane. Derivatives are central differences with a step
+   ``FD_STEP`` of the local length scale (the distance to the nearest target, capped by
+   the radius). Steps minimize a local model within a trust radius that starts at the
+   grid spacing and shrinks by 4 after a rejected step: Newton's quadratic model for a
+   smooth objective (TRACE, LOGDET); for an objective that takes the maximum over
+   targets (WORST_TRACE, nonsmooth where two targets tie), the maximum of the per-target
+   quadratic models, minimized over its kinks as in SQP for minimax problems. A step is
+   accepted only when its point is feasible and strictly better; a start stops when its
+   step falls below ``CONVERGED`` of the local scale (or, in the plane, after
+   ``MAX_MISSES`` steps leaving F: the boundary starts cover that optimum).
+   In large batches the converged rows drop out.
+3. The answer is the best point evaluated (grid, intersections, accepted steps), so it is
+   never worse than any candidate. When no candidate is feasible (``F`` empty), the
+   answer is :func:`activetrack.feasible_set.fallback` and its value. The returned value
+   is ``f`` at the returned absolute position.
+
+Special cases: ``r = 0`` returns the sensor's position (its only reachable point, feasible
+or the fallback); a point at zero distance from a target gets no information about it
+(the rule of :mod:`activetrack.sensor_models`); with ``rho = 0`` and a target within reach
+an infimum that is not attained (the bearing information unbounded) is approached only
+to the resolution of the candidates.
+
+Computation is relative to the sensor's position (rounding scales with the reach, not
+with the absolute coordinates); the returned positions are absolute.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from activetrack import feasible_set
+from activetrack.objective import TRACE, TraceObjective
+from activetrack.sensor_models import information_entries
+from activetrack.validation import FloatArray
+
+#: Multipliers of a target's angular well width at which extra angles are placed.
+WELL_OFFSETS = np.array(
+    [0.0, 0.125, -0.125, 0.25, -0.25, 0.5, -0.5, 1.0, -1.0, 2.0, -2.0, 4.0, -4.0]
+)
+#: Local minima refined per circle and in the interior.
+N_LOCAL_ARC = 2
+N_LOCAL_PLANE = 3
+#: Rings and angles of the log-polar grid around each target (interior, K >= 2).
+POLAR_RINGS = 8
+POLAR_ANGLES = 12
+#: Finite-difference step in units of the local length scale.
+FD_STEP = 1e-4
+#: A refinement step shorter than this fraction of the local length scale ends it.
+CONVERGED = 1e-7
+#: Infeasible plane steps after which an interior start stops.
+MAX_MISSES = 3
+#: Batches of at least this many rows drop their converged rows during refinement.
+COMPACT_ROWS = 64
+_TINY = 1e-300
+
+
+def _finite(x: FloatArray) -> FloatArray:
+    """Return ``x`` with non-finite entries (a difference quotient at a target) set to 0."""
+    return np.where(np.isfinite(x), x, 0.0)
+
+
+class _Problem:
+    """The flattened batch (B rows), relative to each sensor's position, and ``f``."""
+
+    def __init__(self, base, center, r, targets, rho, w_d, w_theta, pose_cov, objective):
+        a0, b0, c0 = (np.asarray(x, dtype=np.float64) for x in base)
+        center = np.asarray(center, dtype=np.float64)
+        targets = np.asarray(targets, dtype=np.float64)
+        r, rho = np.asarray(r, dtype=np.float64), np.asarray(rho, dtype=np.float64)
+        w_d, w_theta = np.asarray(w_d, dtype=np.float64), np.asarray(w_theta, dtype=np.float64)
+        k = targets.shape[-2]
+        shapes = [
+            a0.shape[:-1], b0.shape[:-1], c0.shape[:-1], center.shape[:-1],
+            targets.shape[:-2], r.shape, rho.shape, w_d.shape, w_theta.shape,
+        ]  # fmt: skip
+        if pose_cov is not None:
+            pose_cov = np.asarray(pose_cov, dtype=np.float64)
+            shapes.append(pose_cov.shape[:-2])
+        self.shape = np.broadcast_shapes(*shapes)
+        n = int(np.prod(self.shape))
+        self.k = k
+
+        def flat(x, tail=()):
+            if x.shape != self.shape + tail:
+                x = np.broadcast_to(x, self.shape + tail)
+            return x.reshape((n,) + tail)
+
+        self.center = flat(center, (2,))
+        self.a0, self.b0, self.c0 = flat(a0, (k,)), flat(b0, (k,)), flat(c0, (k,))
+        self.t_abs = flat(targets, (k, 2))
+        self.t = self.t_abs - self.center[:, None, :]
+        self.r, self.rho = flat(r), flat(rho)
+        self.wd = flat(w_d)[:, None, None]
+        self.wt = flat(w_theta)[:, None, None]
+        self.pc = None if pose_cov is None else flat(pose_cov, (2, 2))[:, None, None]
+        self.pc_abs = None if pose_cov is None else self.pc[:, 0]
+        self.objective = objective
+        self.minimax = k > 1 and _is_max(objective)
+        self.zero = np.zeros((n, 2))
+        self.origins, self.radii = feasible_set.circles(self.zero, self.r, self.t, self.rho)
+
+    def at_absolute(self, positions: FloatArray) -> FloatArray:
+        """Return ``f`` at absolute positions (B, 2), (B,)."""
+        rel = positions[:, None, :] - self.t_abs
+        a, b, c = information_entries(rel, self.wd[:, 0], self.wt[:, 0], self.pc_abs)
+        return self.objective.of_targets(self.a0 + a, self.b0 + b, self.c0 + c)
+
+    def take(self, rows: np.ndarray) -> _Problem:
+        """Return the sub-batch of the given rows."""
+        sub = object.__new__(_Problem)
+        for key, value in vars(self).items():
+            sub.__dict__[key] = value[rows] if isinstance(value, np.ndarray) else value
+        return sub
+
+    def f(self, pts: FloatArray) -> FloatArray:
+        """Return the objective at points (B, C, 2) relative to the sensor, (B, C)."""
+        rel = pts[:, :, None, :] - self.t[:, None, :, :]
+        a, b, c = information_entries(rel, self.wd, self.wt, self.pc)
+        a0, b0, c0 = self.a0[:, None], self.b0[:, None], self.c0[:, None]
+        return self.objective.of_targets(a0 + a, b0 + b, c0 + c)
+
+    def pieces(self, pts: FloatArray) -> FloatArray:
+        """Return the smooth pieces of ``f`` at points (B, C, 2): (B, C, P).
+
+        For a maximum over targets (``WORST_TRACE``) the per-target values (P = K), whose
+        maximum is ``f``; otherwise ``f`` itself (P = 1), smooth.
+        """
+        if not self.minimax:
+            return self.f(pts)[..., None]
+        rel = pts[:, :, None, :] - self.t[:, None, :, :]
+        a, b, c = information_entries(rel, self.wd, self.wt, self.pc)
+        a0, b0, c0 = self.a0[:, None], self.b0[:, None], self.c0[:, None]
+        return self.objective.of_entries(a0 + a, b0 + b, c0 + c)
+
+    def combine(self, pieces: FloatArray) -> FloatArray:
+        """Return ``f`` from its pieces (..., P)."""
+        return np.max(pieces, axis=-1) if self.minimax else pieces[..., 0]
+
+    def feasible(self, pts: FloatArray) -> np.ndarray:
+        """Return whether points (B, C, 2) lie in F (with the tolerance), (B, C)."""
+        return feasible_set.contains(
+            pts, self.zero[:, None], self.r[:, None], self.t[:, None], self.rho[:, None]
+        )
+
+    def masked(self, pts: FloatArray) -> FloatArray:
+        """Return ``f`` at points (B, C, 2), ``+inf`` where infeasible."""
+        return np.where(self.feasible(pts), self.f(pts), np.inf)
+
+    def scale(self, pts: FloatArray) -> FloatArray:
+        """Return the distance from points (B, C, 2) to the nearest target, (B, C)."""
+        e = pts[:, :, None, :] - self.t[:, None, :, :]
+        return np.min(np.hypot(e[..., 0], e[..., 1]), axis=-1)
+
+
+def _is_max(objective: TraceObjective) -> bool:
+    """Return whether the objective combines its targets by their maximum (``WORST_TRACE``)."""
+    probe = np.array([1.0, 3.0, 2.0])
+    return bool(objective.combine(probe) == 3.0 and objective.combine(-probe) == -1.0)
+
+
+def _circle_points(o: FloatArray, rad: FloatArray, th: FloatArray) -> FloatArray:
+    """Return ``o + rad (cos th, sin th)`` for matching leading shapes, (..., 2)."""
+    out = np.empty(th.shape + (2,))
+    out[..., 0] = np.cos(th)
+    out[..., 1] = np.sin(th)
+    out *= rad[..., None]
+    out += o
+    return out
+
+
+def _arc_candidates(p: _Problem, n_boundary: int) -> list[tuple[FloatArray, ...]]:
+    """Return two groups of circle candidates ``(origins, radii, angles, points)``.
+
+    Shapes (B, n, 2), (B, n), (B, n, M), (B, n, M, 2): the reach circle (n = 1) with
+    ``n_boundary`` uniform angles plus the well angles around each target's direction,
+    sorted; the ``rho`` circles (n = K) with ``n_boundary`` uniform angles (a circle's own
+    target is at constant distance, so it has no well).
+    """
+    b = len(p.r)
+    dist = np.hypot(p.t[..., 0], p.t[..., 1])  # reach circle's centre -> targets (B, K)
+    phi = np.arctan2(p.t[..., 1], p.t[..., 0])
+    width = np.maximum(np.abs(dist - p.r[:, None]), p.rho[:, None])
+    # Wider wells are resolved by the uniform grid (spacing 2 pi / n_boundary).
+    sigma = np.minimum(width / np.maximum(p.r[:, None], _TINY), 0.25)
+    well = (phi[..., None] + sigma[..., None] * WELL_OFFSETS).reshape(b, -1)
+    uniform = np.linspace(-np.pi, np.pi, n_boundary, endpoint=False)
+    th0 = np.concatenate([np.broadcast_to(uniform, (b, n_boundary)), well], axis=-1)
+    th0 = np.sort(np.mod(th0 + np.pi, 2.0 * np.pi) - np.pi, axis=-1)[:, None]
+    th1 = np.broadcast_to(uniform, (b, p.k, n_boundary))
+    groups = []
+    for sl, th in ((slice(0, 1), th0), (slice(1, None), th1)):
+        o, rad = p.origins[:, sl], p.radii[:, sl]
+        pts = _circle_points(o[:, :, None, :], np.broadcast_to(rad[..., None], th.shape), th)
+        groups.append((o, rad, th, pts))
+    return groups
+
+
+def _interior_candidates(p: _Problem, n_interior: int) -> tuple[FloatArray, np.ndarray, FloatArray]:
+    """Return the square grid over the reach disk (B, n n, 2), the indices inside the disk,
+    and the spacing (B,)."""
+    u = np.linspace(-1.0, 1.0, n_interior)
+    grid = np.stack(np.meshgrid(u, u, indexing="ij"), -1).reshape(-1, 2)  # (n n, 2)
+    inside = np.flatnonzero(np.hypot(grid[:, 0], grid[:, 1]) <= 1.0)
+    pts = p.r[:, None, None] * grid
+    return pts, inside, p.r * (2.0 / max(n_interior - 1, 1))
+
+
+def _polar_candidates(p: _Problem) -> tuple[FloatArray, FloatArray]:
+    """Return log-polar grids around each target (B, K, R, A, 2) and their ring steps (B, K, R).
+
+    Near a target ``f`` varies on the scale of the distance to it (the bearing information
+    grows as its inverse square), so an interior optimum there (possible with K >= 2: the
+    other targets pull elsewhere) needs a grid that is finer closer in: ``POLAR_RINGS``
+    rings from ``1.3 rho`` (at least ``1e-3 r``) out to ``r`` in geometric progression,
+    ``POLAR_ANGLES`` angles each.
+    """
+    inner = 1.3 * np.maximum(p.rho, 1e-3 * p.r)
+    outer = np.maximum(p.r, 2.0 * inner)
+    frac = np.arange(POLAR_RINGS) / (POLAR_RINGS - 1)
+    radii = inner[:, None] * (outer / inner)[:, None] ** frac  # (B, R)
+    ang = np.linspace(-np.pi, np.pi, POLAR_ANGLES, endpoint=False)
+    unit = np.stack([np.cos(ang), np.sin(ang)], -1)  # (A, 2)
+    pts = p.t[:, :, None, None, :] + radii[:, None, :, None, None] * unit
+    step = np.broadcast_to(radii[:, None, :] * (2.0 * np.pi / POLAR_ANGLES), pts.shape[:3])
+    return pts, step
+
+
+def _polar_starts(pts: FloatArray, vals: FloatArray, step: FloatArray) -> tuple[FloatArray, ...]:
+    """Return the ``N_LOCAL_PLANE`` best local minima of the polar grids as plane starts."""
+    b = len(pts)
+    pad = np.pad(vals, ((0, 0), (0, 0), (1, 1), (0, 0)), constant_values=np.inf)
+    local = (
+        (vals <= np.roll(vals, 1, axis=-1))
+        & (vals <= np.roll(vals, -1, axis=-1))
+        & (vals <= pad[:, :, :-2])
+        & (vals <= pad[:, :, 2:])
+    )
+    idx, fp = _best_local(vals.reshape(b, -1), local.reshape(b, -1), N_LOCAL_PLANE)
+    x0 = np.take_along_axis(pts.reshape(b, -1, 2), idx[..., None], axis=1)
+    steps = np.broadcast_to(step[..., None], vals.shape).reshape(b, -1)
+    return x0, fp, np.take_along_axis(steps, idx, axis=1)
+
+
+def _best_local(vals: FloatArray, local: np.ndarray, m: int) -> tuple[np.ndarray, FloatArray]:
+    """Return the indices (B, m) of the ``m`` smallest local minima of ``vals`` (B, C), values."""
+    masked = np.where(local & np.isfinite(vals), vals, np.inf)
+    m = min(m, masked.shape[-1])
+    idx = np.argsort(masked, axis=-1, kind="stable")[:, :m]
+    return idx, np.take_along_axis(masked, idx, axis=-1)
+
+
+def _model_max(f: FloatArray, g: FloatArray, H: FloatArray, d: FloatArray) -> FloatArray:
+    """Return ``max_k q_k(d)`` for 1-D piece models ``q_k = f_k + g_k d + H_k d^2 / 2``.
+
+    ``f, g, H`` (..., P); steps ``d`` (..., S); returns (..., S).
+    """
+    dd = d[..., :, None]
+    return np.max(f[..., None, :] + dd * (g[..., None, :] + 0.5 * H[..., None, :] * dd), axis=-1)
+
+
+def _step_1d(f: FloatArray, g: FloatArray, H: FloatArray, delta: FloatArray) -> FloatArray:
+    """Return the step in ``[-delta, delta]`` minimizing the model ``max_k q_k`` (..., ).
+
+    Candidates: both ends, each piece's vertex, every root of ``q_i - q_j`` (the kinks);
+    for one piece this is the trust-region Newton step.
+    """
+    n = f.shape[-1]
+    if n == 1:  # a smooth objective: the trust-region Newton step
+        g, H = g[..., 0], H[..., 0]
+        step = np.where(H > 0, -g / np.where(H > 0, H, 1.0), -np.sign(g) * delta)
+        return np.clip(step, -delta, delta)
+    cands = [-delta[..., None], delta[..., None]]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        cands.append(np.where(H > 0, -g / np.where(H > 0, H, 1.0), 0.0))
+        if n > 1:
+            i, j = np.triu_indices(n, k=1)
+            a = 0.5 * (H[..., i] - H[..., j])
+            b = g[..., i] - g[..., j]
+            c = f[..., i] - f[..., j]
+            disc = b * b - 4.0 * a * c
+            sq = np.sqrt(np.maximum(disc, 0.0))
+            q = -0.5 * (b + np.where(b >= 0, sq, -sq))
+            r1 = np.where(a != 0, q / np.where(a != 0, a, 1.0), np.inf)
+            r2 = np.where(q != 0, c / np.where(q != 0, q, 1.0), np.inf)
+            lin = np.where(b != 0, -c / np.where(b != 0, b, 1.0), np.inf)
+            tiny = np.abs(a) * np.maximum(delta[..., None], _TINY) <= 1e-12 * np.abs(b)
+            r1 = np.where(tiny, lin, np.where(disc >= 0, r1, np.inf))
+            r2 = np.where(tiny, lin, np.where(disc >= 0, r2, np.inf))
+            cands += [r1, r2]
+    d = np.concatenate(cands, axis=-1)
+    d = np.where(np.isfinite(d), np.clip(d, -delta[..., None], delta[..., None]), delta[..., None])
+    model = _model_max(f, g, H, d)
+    best = np.argmin(model, axis=-1)
+    return np.take_along_axis(d, best[..., None], axis=-1)[..., 0]
+
+
+def _quad(f: FloatArray, g: FloatArray, H: FloatArray, d: FloatArray) -> FloatArray:
+    """Return 2-D piece models at steps: f (..., P), g (..., P, 2), H (..., P, 3), d (..., S, 2)."""
+    x, y = d[..., :, None, 0], d[..., :, None, 1]
+    h11, h12, h22 = H[..., None, :, 0], H[..., None, :, 1], H[..., None, :, 2]
+    lin = g[..., None, :, 0] * x + g[..., None, :, 1] * y
+    return f[..., None, :] + lin + 0.5 * (h11 * x * x + 2.0 * h12 * x * y + h22 * y * y)
+
+
+def _clip_norm(d: FloatArray, delta: FloatArray) -> FloatArray:
+    """Return steps ``d`` (..., S, 2) scaled into the disk of radius ``delta`` (...)."""
+    norm = np.hypot(d[..., 0], d[..., 1])
+    lim = delta[..., None]
+    scale = np.where(norm > lim, lim / np.maximum(norm, _TINY), 1.0)
+    return np.where(np.isfinite(d), d * scale[..., None], 0.0)
+
+
+def _newton_2d(g: FloatArray, H: FloatArray, delta: FloatArray) -> FloatArray:
+    """Return each piece's trust-region Newton step (gradient step if ``H`` not PD), (..., P, 2)."""
+    h11, h12, h22 = H[..., 0], H[..., 1], H[..., 2]
+    det = h11 * h22 - h12 * h12
+    pd = (h11 > 0) & (det > 0)
+    sdet = np.where(pd, det, 1.0)
+    nx = -(h22 * g[..., 0] - h12 * g[..., 1]) / sdet
+    ny = -(-h12 * g[..., 0] + h11 * g[..., 1]) / sdet
+    gn = np.maximum(np.hypot(g[..., 0], g[..., 1]), _TINY)
+    lim = delta[..., None]
+    sx = np.where(pd, nx, -g[..., 0] * lim / gn)
+    sy = np.where(pd, ny, -g[..., 1] * lim / gn)
+    return _clip_norm(np.stack([sx, sy], -1), delta)
+
+
+def _step_2d(f: FloatArray, g: FloatArray, H: FloatArray, delta: FloatArray) -> FloatArray:
+    """Return the step in the disk ``|d| <= delta`` minimizing the model ``max_k q_k``, (..., 2).
+
+    Candidates: each piece's Newton step; for each pair, the minimum of their model
+    along the line where their linear models agree (a kink curve), weighted by the SQP
+    multipliers (the least-norm convex combination of their gradients); for each triple, the
+    point where the three linear models agree. One piece: the trust-region Newton step.
+    """
+    n = f.shape[-1]
+    if n == 1:  # a smooth objective: the trust-region Newton step
+        return _newton_2d(g, H, delta)[..., 0, :]
+    cands = [_newton_2d(g, H, delta)]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        if n > 1:
+            i, j = np.triu_indices(n, k=1)
+            nv = g[..., i, :] - g[..., j, :]
+            n2 = np.maximum(nv[..., 0] ** 2 + nv[..., 1] ** 2, _TINY)
+            d0 = nv * ((f[..., j] - f[..., i]) / n2)[..., None]
+            e = np.stack([-nv[..., 1], nv[..., 0]], -1) / np.sqrt(n2)[..., None]
+            # Lagrangian weights: the convex combination of the two gradients of least norm
+            # (zero at a kink minimum), as in SQP for minimax.
+            lam = np.clip(-np.sum(g[..., j, :] * nv, -1) / n2, 0.0, 1.0)[..., None]
+            Hm = lam * H[..., i, :] + (1.0 - lam) * H[..., j, :]
+            gm = lam * g[..., i, :] + (1.0 - lam) * g[..., j, :]
+            hd = np.stack(
+                [
+                    Hm[..., 0] * d0[..., 0] + Hm[..., 1] * d0[..., 1],
+                    Hm[..., 1] * d0[..., 0] + Hm[..., 2] * d0[..., 1],
+                ],
+                -1,
+            )
+            slope = np.sum((gm + hd) * e, -1)
+            curv = Hm[..., 0] * e[..., 0] ** 2 + 2 * Hm[..., 1] * e[..., 0] * e[..., 1]
+            curv = curv + Hm[..., 2] * e[..., 1] ** 2
+            t = np.where(
+                curv > 0, -slope / np.where(curv > 0, curv, 1.0), -np.sign(slope) * delta[..., None]
+            )
+            cands.append(_clip_norm(d0 + t[..., None] * e, delta))
+        if n > 2:
+            i, j, k = (np.array(x) for x in zip(*_triples(n), strict=True))
+            u, v = g[..., i, :] - g[..., j, :], g[..., i, :] - g[..., k, :]
+            ru, rv = f[..., j] - f[..., i], f[..., k] - f[..., i]
+            det = u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
+            sdet = np.where(det != 0, det, 1.0)
+            x = (ru * v[..., 1] - rv * u[..., 1]) / sdet
+            y = (u[..., 0] * rv - v[..., 0] * ru) / sdet
+            cands.append(
+                _clip_norm(
+                    np.stack([np.where(det != 0, x, 0.0), np.where(det != 0, y, 0.0)], -1), delta
+                )
+            )
+    d = np.concatenate(cands, axis=-2)
+    model = np.max(_quad(f, g, H, d), axis=-1)
+    best = np.argmin(np.where(np.isfinite(model), model, np.inf), axis=-1)
+    return np.take_along_axis(d, best[..., None, None], axis=-2)[..., 0, :]
+
+
+def _triples(n: int) -> list[tuple[int, int, int]]:
+    """Return the index triples ``i < j < k < n``."""
+    return [(i, j, k) for i in range(n) for j in range(i + 1, n) for k in range(j + 1, n)]
+
+
+_ARC_STENCIL = np.array([0.0, 1.0, -1.0])
+_PLANE_STENCIL = np.array(
+    [[0.0, 0.0], [1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0], [1.0, 1.0]]
+)
+
+
+def _stencils(p: _Problem, o: FloatArray, rad: FloatArray, th: FloatArray, x: FloatArray) -> dict:
+    """Return values, pieces and difference-quotient derivatives at arc angles and points.
+
+    ``o, rad, th`` (B, ma, ...) arc starts (circle origin, radius, angle), ``x`` (B, mp, 2)
+    plane points; all stencils are evaluated in one call of the objective.
+    """
+    b, ma = th.shape
+    mp = x.shape[1]
+    pa = _circle_points(o, rad, th)
+    ha = FD_STEP * np.minimum(p.scale(pa) / np.maximum(rad, _TINY), 1.0)
+    tha = th[..., None] + ha[..., None] * _ARC_STENCIL
+    pts_a = _circle_points(o[:, :, None], np.broadcast_to(rad[..., None], tha.shape), tha)
+    if mp == 0:  # one target: no interior starts (Lemma 3)
+        vals = p.pieces(pts_a.reshape(b, -1, 2))
+        va = vals.reshape(b, ma, 3, vals.shape[-1])
+        feas = p.feasible(pa)
+        return {
+            "fa": np.where(feas, p.combine(va[..., 0, :]), np.inf),
+            "pa": va[..., 0, :],
+            "ga": _finite((va[..., 1, :] - va[..., 2, :]) / (2.0 * ha[..., None])),
+            "Ha": _finite(
+                (va[..., 1, :] - 2.0 * va[..., 0, :] + va[..., 2, :]) / (ha * ha)[..., None]
+            ),
+            "ha": ha,
+        }
+    hp = FD_STEP * np.minimum(p.scale(x), p.r[:, None])
+    pts_p = x[:, :, None, :] + hp[..., None, None] * _PLANE_STENCIL
+    vals = p.pieces(np.concatenate([pts_a.reshape(b, -1, 2), pts_p.reshape(b, -1, 2)], axis=1))
+    npc = vals.shape[-1]
+    va = vals[:, : 3 * ma].reshape(b, ma, 3, npc)
+    vp = vals[:, 3 * ma :].reshape(b, mp, 6, npc)
+    h1, h2 = ha[..., None], hp[..., None]
+    ga = (va[..., 1, :] - va[..., 2, :]) / (2.0 * h1)
+    Ha = (va[..., 1, :] - 2.0 * va[..., 0, :] + va[..., 2, :]) / (h1 * h1)
+    gp = np.stack([vp[..., 1, :] - vp[..., 2, :], vp[..., 3, :] - vp[..., 4, :]], -1)
+    gp = gp / (2.0 * h2[..., None])
+    Hp = (
+        np.stack(
+            [
+                vp[..., 1, :] - 2.0 * vp[..., 0, :] + vp[..., 2, :],
+                vp[..., 5, :] - vp[..., 1, :] - vp[..., 3, :] + vp[..., 0, :],
+                vp[..., 3, :] - 2.0 * vp[..., 0, :] + vp[..., 4, :],
+            ],
+            -1,
+        )
+        / (h2 * h2)[..., None]
+    )
+    feas = p.feasible(np.concatenate([pa, x], axis=1))
+    return {
+        "fa": np.where(feas[:, :ma], p.combine(va[..., 0, :]), np.inf),
+        "pa": va[..., 0, :],
+        "ga": _finite(ga),
+        "Ha": _finite(Ha),
+        "ha": ha,
+        "fp": np.where(feas[:, ma:], p.combine(vp[..., 0, :]), np.inf),
+        "pp": vp[..., 0, :],
+        "gp": _finite(gp),
+        "Hp": _finite(Hp),
+        "hp": hp,
+    }
+
+
+_ARC_KEYS = ("th", "fa", "pa", "ga", "Ha", "ha", "da", "active_a", "o", "rad")
+_PLANE_KEYS = ("x", "fp", "pp", "gp", "Hp", "hp", "dp", "active_p", "miss")
+
+
+def _iterate(p: _Problem, st: dict) -> None:
+    """Take one trust-region step for every active start of ``st`` (updated in place)."""
+    sa = np.where(st["active_a"], _step_1d(st["pa"], st["ga"], st["Ha"], st["da"]), 0.0)
+    # Converged: a step below CONVERGED of the local scale changes f by its square.
+    st["active_a"] &= np.abs(sa) > (CONVERGED / FD_STEP) * st["ha"]
+    plane = st["x"].shape[1] > 0
+    if plane:
+        sp = _step_2d(st["pp"], st["gp"], st["Hp"], st["dp"])
+        sp = np.where(st["active_p"][..., None], sp, 0.0)
+        norm = np.hypot(sp[..., 0], sp[..., 1])
+        st["active_p"] &= norm > (CONVERGED / FD_STEP) * st["hp"]
+        new = _stencils(p, st["o"], st["rad"], st["th"] + sa, st["x"] + sp)
+        new["x"] = st["x"] + sp
+    else:
+        new = _stencils(p, st["o"], st["rad"], st["th"] + sa, st["x"])
+    new["th"] = st["th"] + sa
+    acc_a = st["active_a"] & (new["fa"] < st["fa"])
+    for key in ("th", "fa", "pa", "ga", "Ha", "ha"):
+        mask = acc_a.reshape(acc_a.shape + (1,) * (new[key].ndim - acc_a.ndim))
+        st[key] = np.where(mask, new[key], st[key])
+    st["da"] = np.where(acc_a, np.maximum(st["da"], 2.0 * np.abs(sa)), 0.25 * np.abs(sa))
+    if not plane:
+        return
+    acc_p = st["active_p"] & (new["fp"] < st["fp"])
+    # Plane steps leaving F MAX_MISSES times (each shrinking the trust radius): the
+    # optimum nearby lies on the boundary, which the arc refinement covers; stop.
+    st["miss"] = st["miss"] + ~np.isfinite(new["fp"])
+    st["active_p"] &= st["miss"] < MAX_MISSES
+    for key in _PLANE_KEYS[:6]:
+        mask = acc_p.reshape(acc_p.shape + (1,) * (new[key].ndim - acc_p.ndim))
+        st[key] = np.where(mask, new[key], st[key])
+    st["dp"] = np.where(acc_p, np.maximum(st["dp"], 2.0 * norm), 0.25 * norm)
+
+
+def _refine(
+    p: _Problem,
+    arcs: tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray],
+    plane: tuple[FloatArray, FloatArray, FloatArray],
+    n_iter: int,
+) -> tuple[FloatArray, FloatArray]:
+    """Return the refined points (B, m, 2) and values (B, m) (``+inf`` where none started).
+
+    ``arcs = (origin (B, ma, 2), radius (B, ma), theta (B, ma), value (B, ma), delta)``,
+    ``plane = (x (B, mp, 2), value (B, mp), delta (B, mp))``; one evaluation of all stencils
+    per iteration. Models are per piece (:meth:`_Problem.pieces`). Rows whose starts have
+    all converged drop out of the batch (when they are at least half of it).
+    """
+    o, rad, th, fa, da = arcs
+    x, fp, dp = plane
+    st = {"pp": fp[..., None], "gp": x[..., None, :], "Hp": np.zeros(fp.shape + (1, 3))}
+    st["hp"] = fp
+    st.update(_stencils(p, o, rad, th, x))
+    st.update(th=th, x=x, o=o, rad=rad, da=da, dp=dp, fa=fa, fp=fp)
+    st["active_a"], st["active_p"] = np.isfinite(fa), np.isfinite(fp)
+    st["miss"] = np.zeros(fp.shape, dtype=np.int64)
+    if len(p.r) < COMPACT_ROWS:  # small batches: no compaction, stop when all converged
+        for _ in range(n_iter):
+            _iterate(p, st)
+            if not (st["active_a"].any() or st["active_p"].any()):
+                break
+        pts = np.concatenate([_circle_points(o, rad, st["th"]), st["x"]], axis=1)
+        return pts, np.concatenate([st["fa"], st["fp"]], axis=1)
+    full = {key: st[key].copy() for key in _ARC_KEYS + _PLANE_KEYS}
+    rows = np.arange(len(p.r))
+    sub = p
+    for _ in range(n_iter):
+        _iterate(sub, st)
+        busy = st["active_a"].any(axis=1) | st["active_p"].any(axis=1)
+        if not busy.all() and 2 * np.count_nonzero(busy) <= len(busy):
+            for key in full:
+                full[key][rows] = st[key]
+            rows = rows[busy]
+            st = {key: full[key][rows] for key in full}
+            if len(rows) == 0:
+                break
+            sub = p.take(rows)
+    for key in full:
+        full[key][rows] = st[key]
+    pts = np.concatenate([_circle_points(o, rad, full["th"]), full["x"]], axis=1)
+    return pts, np.concatenate([full["fa"], full["fp"]], axis=1)
+
+
+def solve_sensor(
+    base: tuple[FloatArray, FloatArray, FloatArray],
+    center: FloatArray,
+    r: FloatArray | float,
+    targets: FloatArray,
+    rho: FloatArray | float,
+    w_d: FloatArray | float,
+    w_theta: FloatArray | float,
+    pose_cov: FloatArray | None = None,
+    objective: TraceObjective = TRACE,
+    *,
+    n_boundary: int = 64,
+    n_interior: int = 16,
+    n_iter: int = 30,
+) -> tuple[FloatArray, FloatArray]:
+    """Return ``(positions (..., 2), values (...))``: the best next position of one sensor.
+
+    Unchecked kernel (callers pass validated arrays), batched over leading axes ``...``.
+
+    Args:
+        base: ``(a0, b0, c0)``, each (..., K): every target's information entries without
+            this sensor (SPD: prior plus the other sensors).
+        center: the sensor's current position (..., 2).
+        r: its reach (...), >= 0.
+        targets: the K predicted target positions (..., K, 2).
+        rho: its minimum distance to every target (...), >= 0.
+        w_d, w_theta: its measurement weights (...) (:func:`activetrack.sensor_models.weights`).
+        pose_cov: its pose covariance (..., 2, 2) PSD, or None.
+        objective: a K-target objective of :mod:`activetrack.objective`.
+        n_boundary: uniform angles per boundary circle.
+        n_interior: points per side of the square interior grid.
+        n_iter: refinement iterations (one batched evaluation each).
+
+    Returns ``values = f(positions)``; positions lie in ``F`` (to the tolerance of
+    :func:`activetrack.feasible_set.contains`) unless ``F`` is empty (then the fallback).
+    """
+    p = _Problem(base, center, r, targets, rho, w_d, w_theta, pose_cov, objective)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        pts, _ = _solve(p, n_boundary, n_interior, n_iter)
+    positions = pts + p.center
+    # The value at the returned (absolute) positions, as a caller computes it: it differs
+    # from the value found in relative coordinates by the rounding of the addition.
+    values = p.at_absolute(positions)
+    return positions.reshape(p.shape + (2,)), values.reshape(p.shape)
+
+
+def _arc_starts(
+    p: _Problem, cand: tuple[FloatArray, ...], va: FloatArray, n_boundary: int
+) -> tuple[FloatArray, ...]:
+    """Return the arc refinement starts ``(origin, radius, theta, value, delta)``.
+
+    ``cand`` from :func:`_arc_candidates`, ``va`` its values (B, n, M).
+    The starts are the ``N_LOCAL_ARC`` best local minima along each circle; the trust radius
+    is the larger gap to a neighbouring angle, at least the uniform spacing in units of the
+    local scale (repeated angles have gap 0).
+    """
+    origins, radii, th, _ = cand
+    b, n, m = th.shape
+    local = (va <= np.roll(va, 1, axis=-1)) & (va <= np.roll(va, -1, axis=-1))
+    gap = np.diff(th, axis=-1, append=th[..., :1] + 2.0 * np.pi)  # to the next angle
+    reach = np.maximum(gap, np.roll(gap, 1, axis=-1))
+    idx, fa = _best_local(va.reshape(b * n, m), local.reshape(b * n, m), N_LOCAL_ARC)
+    th0 = np.take_along_axis(th.reshape(b * n, m), idx, -1).reshape(b, -1)
+    da0 = np.take_along_axis(reach.reshape(b * n, m), idx, -1).reshape(b, -1)
+    ka = idx.shape[-1]
+    o0, r0 = np.repeat(origins, ka, axis=1), np.repeat(radii, ka, axis=1)
+    local_scale = p.scale(_circle_points(o0, r0, th0)) / np.maximum(r0, _TINY)
+    da0 = np.maximum(da0, (2.0 * np.pi / n_boundary) * np.minimum(local_scale, 1.0))
+    return o0, r0, th0, fa.reshape(b, -1), da0
+
+
+def _plane_starts(
+    grid: FloatArray, vg: FloatArray, spacing: FloatArray, n_interior: int
+) -> tuple[FloatArray, ...]:
+    """Return the interior refinement starts ``(x, value, delta)``.
+
+    ``grid`` (B, n n, 2) and its values ``vg`` (B, n n) from :func:`_interior_candidates`;
+    the starts are the ``N_LOCAL_PLANE`` best local minima of the grid (4 neighbours).
+    """
+    b = len(grid)
+    vg = vg.reshape(b, n_interior, n_interior)
+    pad = np.pad(vg, ((0, 0), (1, 1), (1, 1)), constant_values=np.inf)
+    local = (
+        (vg <= pad[:, :-2, 1:-1])
+        & (vg <= pad[:, 2:, 1:-1])
+        & (vg <= pad[:, 1:-1, :-2])
+        & (vg <= pad[:, 1:-1, 2:])
+    )
+    ip, fp = _best_local(vg.reshape(b, -1), local.reshape(b, -1), N_LOCAL_PLANE)
+    x0 = np.take_along_axis(grid, ip[..., None], axis=1)
+    return x0, fp, np.broadcast_to(spacing[:, None], fp.shape).copy()
+
+
+def _solve(
+    p: _Problem, n_boundary: int, n_interior: int, n_iter: int
+) -> tuple[FloatArray, FloatArray]:
+    """Return the best points (B, 2) relative to the sensors and their values (B,).
+
+    All candidates (arcs, circle intersections, interior grid) are evaluated in one call.
+    With one target there is no interior grid: the optimum lies on the boundary (Lemma 3
+    holds for every measurement model and pose covariance, ``docs/sensor-models-design.md``
+    section 5).
+    """
+    b = len(p.r)
+    groups = _arc_candidates(p, n_boundary)
+    sizes = [g[2].size // b for g in groups]
+    pts_a = np.concatenate([g[3].reshape(b, -1, 2) for g in groups], axis=1)
+    pts_v, ok_v = feasible_set.pair_points(p.origins, p.radii)
+    interior = p.k > 1 and n_interior > 0
+    parts = [pts_a, pts_v]
+    if interior:
+        grid, inside, spacing = _interior_candidates(p, n_interior)
+        polar, polar_step = _polar_candidates(p)
+        parts += [grid[:, inside], polar.reshape(b, -1, 2)]
+    vals = p.masked(np.concatenate(parts, axis=1))
+    na, nv = pts_a.shape[1], pts_v.shape[1]
+    vals_a, vals_v = vals[:, :na], np.where(ok_v, vals[:, na : na + nv], np.inf)
+    split = np.split(vals_a, np.cumsum(sizes)[:-1], axis=1)
+    starts = [
+        _arc_starts(p, g, v.reshape(g[2].shape), n_boundary)
+        for g, v in zip(groups, split, strict=True)
+    ]
+    arcs = tuple(np.concatenate(parts, axis=1) for parts in zip(*starts, strict=True))
+    if interior:
+        ng = len(inside)
+        vals_g = np.full(grid.shape[:2], np.inf)
+        vals_g[:, inside] = vals[:, na + nv : na + nv + ng]
+        vals_p = vals[:, na + nv + ng :].reshape(polar.shape[:-1])
+        plane = tuple(
+            np.concatenate(x, axis=1)
+            for x in zip(
+                _plane_starts(grid, vals_g, spacing, n_interior),
+                _polar_starts(polar, vals_p, polar_step),
+                strict=True,
+            )
+        )
+        grid = np.concatenate([grid, polar.reshape(b, -1, 2)], axis=1)
+        vals_g = np.concatenate([vals_g, vals_p.reshape(b, -1)], axis=1)
+    else:
+        grid, vals_g = np.zeros((b, 0, 2)), np.zeros((b, 0))
+        plane = (grid, vals_g, vals_g)
+    pts_r, vals_r = _refine(p, arcs, plane, n_iter)
+    all_pts = np.concatenate([pts_r, pts_v, pts_a, grid], axis=1)
+    all_vals = np.concatenate([vals_r, vals_v, vals_a, vals_g], axis=1)
+    best = np.argmin(all_vals, axis=1)
+    s = np.take_along_axis(all_pts, best[:, None, None], axis=1)[:, 0]
+    value = np.take_along_axis(all_vals, best[:, None], axis=1)[:, 0]
+    empty = ~np.isfinite(value)
+    if np.any(empty):  # F empty: no candidate is feasible
+        fb = feasible_set.fallback(p.zero, p.r, p.t, p.rho)
+        s = np.where(empty[:, None], fb, s)
+        value = np.where(empty, p.f(s[:, None])[:, 0], value)
+    return s, value
