@@ -196,6 +196,14 @@ class GSR:
     def _plan_numeric(self, problem: PlanningProblem) -> GSRResult | GSRBatchResult:
         """GSR beyond the paper's problem: numerical single-sensor steps
         (:mod:`activetrack.baselines.gsr_numeric`)."""
+        missing = [a for a in ("of_entries", "combine", "of_targets", "tangent")
+                   if not hasattr(problem.objective, a)]  # fmt: skip
+        if missing:
+            raise ValueError(
+                f"GSR's numerical steps need an objective of activetrack.objective's form "
+                f"(per-target entries, combined over targets); {problem.objective!r} has no "
+                f"{', '.join(missing)}"
+            )
         if self.restarts:
             raise ValueError(
                 "restarts=True runs the paper's exact solver from several starts; this problem "

@@ -255,3 +255,23 @@ def test_gsr_refuses_an_objective_it_cannot_solve_exactly():
     )
     with pytest.raises(ValueError, match="objective"):
         GSR().plan(q)
+
+
+def test_gsr_plans_other_objectives_numerically_never_worse_than_its_start():
+    from activetrack.objective import LOGDET, WORST_TRACE
+
+    rng = np.random.default_rng(3)
+    for obj in (LOGDET, WORST_TRACE):
+        for _ in range(5):
+            p = random_problem(rng, 3)
+            q = PlanningProblem(
+                p.prior_cov, p.target, p.sensors, p.r, p.rho, p.sigma_d2, p.sigma_theta2,
+                objective=obj,
+            )  # fmt: skip
+            res = GSR().plan_with_info(q)
+            assert np.max(q.violation(res.positions)) <= 1e-9
+            # The value is the problem's own score of the positions, at most the warm start's.
+            assert res.value == pytest.approx(float(q.score(res.positions)), rel=1e-12)
+            assert res.value <= float(q.score(p.sensors)) + 1e-12 or np.any(
+                p.violation(p.sensors) > 0
+            )
