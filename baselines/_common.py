@@ -13,23 +13,20 @@ batched over the copies of a batched problem, for every planner.
 
 With K > 1 predicted targets (``problem.multi_target``) sensor ``i`` must keep ``rho_i``
 from every one: its feasible set is ``F_i = D(p_S_i, r_i) minus the union of the K open
-disks D(t_k, rho_i)``. Its boundary is a union of circular arcs (:func:`feasible_arcs`):
-pieces of the reach circle outside every ``rho`` disk, and pieces of each ``rho`` circle
-inside the reach disk and outside the other ``rho`` disks; each piece is a circle minus a
-union of open angular intervals, computed in closed form (law of cosines). A sensor is
-fixed when ``r_i = 0`` (it stays) or when ``F_i`` is empty (its boundary has zero length);
-it then goes to :func:`multi_target_fallback`, the point of a fine fixed set of reachable
-points maximizing ``min_k (||x - t_k|| - rho_i)`` (the least violation of eq. 16 by the
-nearest target). For K = 1 every function is today's (bit-identical).
+disks D(t_k, rho_i)``. Its boundary is a union of circular arcs
+(:func:`activetrack.feasible_set.boundary_arcs`): pieces of the reach circle outside every
+``rho`` disk, and pieces of each ``rho`` circle inside the reach disk and outside the other
+``rho`` disks. A sensor is fixed when ``r_i = 0`` (it stays) or when ``F_i`` is empty (its
+boundary has zero length); it then goes to :func:`activetrack.feasible_set.fallback`, the
+reachable point maximizing ``min_k (||x - t_k|| - rho_i)`` (the least violation of eq. 16
+by the nearest target). For K = 1 every function is today's (bit-identical).
 """
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
-from activetrack import geometry
+from activetrack import feasible_set, geometry
 from activetrack.problem import PlanningProblem
 from activetrack.validation import FloatArray
 
@@ -62,7 +59,7 @@ def sensor_modes_multi(
     ``sensors`` (..., M, 2), ``targets`` (..., K, 2), ``r`` and ``rho`` (..., M). ``free``
     (..., M): ``r > 0`` and the feasible set is not empty; ``fixed`` (..., M, 2): the
     current position of free sensors and of those with ``r = 0``, and
-    :func:`multi_target_fallback` for the sensors whose feasible set is empty.
+    :func:`activetrack.feasible_set.fallback` for the sensors whose feasible set is empty.
 
     Raises:
         ValueError: as :func:`sensor_modes`.
@@ -74,7 +71,7 @@ def sensor_modes_multi(
 def modes_and_arcs(
     sensors: FloatArray, targets: FloatArray, r: FloatArray, rho: FloatArray
 ) -> tuple[np.ndarray, FloatArray, dict[tuple[int, ...], list[geometry.Arc]]]:
-    """Return :func:`sensor_modes_multi` and the free sensors' :func:`feasible_arcs`.
+    """Return :func:`sensor_modes_multi` and the free sensors' boundary arcs.
 
     The arcs are keyed by the sensor's index ``batch index + (i,)``.
     """
@@ -91,12 +88,12 @@ def modes_and_arcs(
         if ri <= 0.0:
             continue
         reach[idx] = bool(np.any(np.hypot(*(t - s).T) <= ri))
-        arcs = feasible_arcs(s, ri, t, rhoi)
+        arcs = feasible_set.boundary_arcs(s, ri, t, rhoi)
         if sum(a.length for a in arcs) > 0.0:
             free[idx] = True
             arcs_of[idx] = arcs
         else:
-            fixed[idx] = multi_target_fallback(s, ri, t, rhoi)
+            fixed[idx] = feasible_set.fallback(s, np.float64(ri), t, np.float64(rhoi))
     degenerate = free & (rho <= 0.0) & reach
     if np.any(degenerate):
         raise ValueError(
@@ -111,133 +108,6 @@ def modes_and_arcs(
             "on a predicted target, where the bearing is undefined"
         )
     return free, fixed, arcs_of
-
-
-#: Reach-circle points :func:`multi_target_fallback` compares (a fixed set: deterministic).
-FALLBACK_POINTS = 4096
-
-
-def multi_target_fallback(
-    sensor: FloatArray, r: float, targets: FloatArray, rho: float
-) -> FloatArray:
-    """Return the reachable point maximizing ``min_k (||x - t_k|| - rho)``, approximately.
-
-    For a sensor whose feasible set is empty (every reachable point violates eq. 16 for
-    some target). Compared points: :data:`FALLBACK_POINTS` equally spaced points of the
-    reach circle (angle 0 first) and, per target, the reachable point farthest from it
-    (:func:`activetrack.geometry.unreachable_fallback`); the first maximum wins. ``sensor``
-    (2,), ``targets`` (K, 2); absolute coordinates, shape (2,).
-    """
-    sensor = np.asarray(sensor, dtype=np.float64)
-    t = np.linspace(0.0, 2.0 * np.pi, FALLBACK_POINTS, endpoint=False)
-    ring = sensor + r * np.stack([np.cos(t), np.sin(t)], -1)
-    far = targets + geometry.unreachable_fallback(sensor - targets, np.full(len(targets), r))
-    pts = np.concatenate([ring, far])
-    gap = np.hypot(*np.moveaxis(pts[:, None, :] - targets[None, :, :], -1, 0)).min(axis=1)
-    return pts[int(np.argmax(gap - rho))]
-
-
-def feasible_arcs(
-    sensor: FloatArray, r: float, targets: FloatArray, rho: float
-) -> list[geometry.Arc]:
-    """Return the arcs of the boundary of ``F = D(sensor, r) minus the open D(t_k, rho)``.
-
-    Absolute coordinates; ``sensor`` (2,), ``targets`` (K, 2). The reach circle's pieces
-    outside every ``rho`` disk come first (counter-clockwise), then each ``rho`` circle's
-    pieces inside the reach disk and outside the other ``rho`` disks (targets in order; a
-    target equal to an earlier one adds nothing). Arcs of zero length are dropped, so the
-    list is empty when ``F`` is empty (or a single point) or ``r = 0``. Every arc is a
-    closed piece: its end points are circle-circle intersections.
-    """
-    sensor = np.asarray(sensor, dtype=np.float64)
-    targets = np.asarray(targets, dtype=np.float64)
-    if r <= 0.0:
-        return []
-    arcs: list[geometry.Arc] = []
-    centre = (float(sensor[0]), float(sensor[1]))
-    cut = [_inside(sensor, r, t, rho) for t in targets] if rho > 0.0 else []
-    phi0 = math.atan2(*(targets[0] - sensor)[::-1]) if len(targets) else 0.0
-    for lo, hi in _allowed(cut, phi0):
-        arcs.append(geometry.Arc(centre, r, lo, hi))
-    if rho <= 0.0:
-        return arcs
-    for k, tk in enumerate(targets):
-        if any(np.array_equal(tk, targets[j]) for j in range(k)):
-            continue  # the same circle as an earlier target's
-        cut = [_outside(tk, rho, sensor, r)]
-        cut += [_inside(tk, rho, tj, rho) for j, tj in enumerate(targets) if j != k]
-        phi0 = math.atan2(*(sensor - tk)[::-1])
-        centre = (float(tk[0]), float(tk[1]))
-        for lo, hi in _allowed(cut, phi0 + math.pi):
-            arcs.append(geometry.Arc(centre, rho, lo, hi))
-    return arcs
-
-
-#: An angular cut: None (nothing), "all" (the whole circle), or an open interval (lo, hi).
-_Cut = tuple[float, float] | str | None
-
-
-def _inside(o: FloatArray, radius: float, q: FloatArray, rad_q: float) -> _Cut:
-    """Return the angles of circle ``(o, radius)`` strictly inside the disk ``(q, rad_q)``.
-
-    ``||o + R e(t) - q||^2 < rad_q^2`` iff ``cos(t - phi) > kappa`` with ``d = ||q - o||``,
-    ``phi`` the angle of ``q - o`` and ``kappa = (R^2 + d^2 - rad_q^2) / (2 R d)``.
-    """
-    d = math.hypot(q[0] - o[0], q[1] - o[1])
-    if d == 0.0:
-        return "all" if radius < rad_q else None
-    kappa = (radius * radius + d * d - rad_q * rad_q) / (2.0 * radius * d)
-    if kappa >= 1.0:
-        return None
-    if kappa < -1.0:
-        return "all"
-    phi = math.atan2(q[1] - o[1], q[0] - o[0])
-    half = math.acos(kappa)
-    return (phi - half, phi + half)
-
-
-def _outside(o: FloatArray, radius: float, q: FloatArray, rad_q: float) -> _Cut:
-    """Return the angles of circle ``(o, radius)`` strictly outside the disk ``(q, rad_q)``."""
-    d = math.hypot(q[0] - o[0], q[1] - o[1])
-    if d == 0.0:
-        return "all" if radius > rad_q else None
-    kappa = (radius * radius + d * d - rad_q * rad_q) / (2.0 * radius * d)
-    if kappa > 1.0:
-        return "all"
-    if kappa <= -1.0:
-        return None
-    phi = math.atan2(q[1] - o[1], q[0] - o[0])
-    half = math.acos(kappa)
-    return (phi + half, phi + 2.0 * math.pi - half)
-
-
-def _allowed(cuts: list[_Cut], start: float) -> list[tuple[float, float]]:
-    """Return the closed angular intervals ``[lo, hi]`` (hi > lo) left by open ``cuts``.
-
-    A circle without cuts is one interval starting at ``start``. Intervals are in
-    counter-clockwise order and each lies within one turn.
-    """
-    two_pi = 2.0 * math.pi
-    if any(cut == "all" for cut in cuts):
-        return []
-    ivs = sorted(
-        (lo % two_pi, lo % two_pi + (hi - lo)) for lo, hi in (c for c in cuts if c is not None)
-    )
-    if not ivs:
-        return [(start, start + two_pi)]
-    merged = [list(ivs[0])]
-    for lo, hi in ivs[1:]:
-        if lo < merged[-1][1]:
-            merged[-1][1] = max(merged[-1][1], hi)
-        else:
-            merged.append([lo, hi])
-    # The last interval may wrap past 2 pi and cover the first ones.
-    while len(merged) > 1 and merged[0][0] + two_pi < merged[-1][1]:
-        first = merged.pop(0)
-        merged[-1][1] = max(merged[-1][1], first[1] + two_pi)
-    out = [(merged[j][1], merged[j + 1][0]) for j in range(len(merged) - 1)]
-    out.append((merged[-1][1], merged[0][0] + two_pi))
-    return [(lo, hi) for lo, hi in out if hi > lo]
 
 
 def sensor_modes_of(c: FloatArray, r: FloatArray, rho: FloatArray) -> tuple[np.ndarray, FloatArray]:

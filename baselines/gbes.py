@@ -29,7 +29,7 @@ pose covariance (docs/sensor-models-design.md), so the grid stays on the curves 
 candidates' entries are :func:`activetrack.sensor_models.information_entries` (the paper's
 case keeps :func:`activetrack.objective.sensor_information`, bit-identical). With K > 1
 targets the grid covers the whole boundary of each sensor's feasible set ``F_i`` (reach
-disk minus the K ``rho`` disks, :func:`activetrack.baselines._common.feasible_arcs`):
+disk minus the K ``rho`` disks, :func:`activetrack.feasible_set.boundary_arcs`):
 each arc (reach-circle pieces outside the ``rho`` disks, ``rho``-circle pieces inside the
 reach disk) is discretized as above, its end points (the feasible circle-circle
 intersections) included once. A candidate's features are the K targets' entries (3K
@@ -50,7 +50,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from activetrack import geometry, sensor_models
-from activetrack.baselines._common import feasible_arcs, sensor_modes
+from activetrack.baselines._common import sensor_modes
+from activetrack.feasible_set import boundary_arcs
 from activetrack.objective import TRACE, TraceObjective, sensor_information
 from activetrack.problem import PlanningProblem
 from activetrack.validation import FloatArray
@@ -181,7 +182,7 @@ class GBES:
         end point of an earlier arc or of its own start (a full circle). Counted from the
         end points alone, so the grid size is known before the grid is built.
         """
-        arcs = feasible_arcs(
+        arcs = boundary_arcs(
             problem.sensors[i], float(problem.r[i]), problem.targets, float(problem.rho[i])
         )
         seen: list[FloatArray] = []

@@ -9,9 +9,9 @@ speed limit (eq. 15) and the minimum distance (eq. 16). Sensors that cannot move
 With K > 1 predicted targets there is no single direction "towards the target": every
 free sensor moves to a point drawn uniformly by arc length from the whole boundary of its
 feasible set (the reach disk minus the K ``rho`` disks,
-:func:`activetrack.baselines._common.feasible_arcs`: reach-circle pieces outside the
+:func:`activetrack.feasible_set.boundary_arcs`: reach-circle pieces outside the
 ``rho`` disks and ``rho``-circle pieces inside the reach disk); sensors whose feasible set
-is empty go to :func:`activetrack.baselines._common.multi_target_fallback`. With one target
+is empty go to :func:`activetrack.feasible_set.fallback`. With one target
 (any sensor model or pose covariance) the curve ADB as above.
 """
 

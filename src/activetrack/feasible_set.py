@@ -16,8 +16,11 @@ projection of ``q`` onto one of the circles, or one of those intersections
 ``F`` may be empty (the reach disk covered by the ``rho`` disks); :func:`project` then
 returns the *fallback point*: among the reach disk's centre, the points of the reach circle
 farthest from each target (``p_i + r_i (p_i - t_k) / |p_i - t_k|``, the x axis for
-``p_i = t_k``) and the intersections of the reach circle with the ``rho`` circles, the one
-maximizing ``min_k |s - t_k| - rho_i`` (the first such in that order). For K = 1 this is
+``p_i = t_k``), the intersections of the reach circle with the ``rho`` circles and the points
+of the reach circle equidistant from two targets, the one maximizing
+``min_k |s - t_k| - rho_i`` (the first such in that order): the least violation of eq. (16)
+on the reach circle, exactly (for K <= 2 also over the disk; for K >= 3 a Voronoi vertex
+inside the disk could do better). For K = 1 this is
 :func:`activetrack.geometry.unreachable_fallback`.
 
 Membership carries the relative tolerance of :data:`activetrack.sensor_motion.TOL`:
@@ -152,10 +155,28 @@ def fallback(center: FloatArray, r: FloatArray, targets: FloatArray, rho: FloatA
     P, Q, meet = intersections(
         origins[..., :1, :], radii[..., :1], origins[..., 1:, :], radii[..., 1:]
     )
+    # Points of the reach circle equidistant from two targets (where the nearest target
+    # changes): with the farthest points, the maximum of min_k |s - t_k| on the circle.
+    ia, ib = pairs(k)
+    n = targets[..., ib, :] - targets[..., ia, :]
+    norm = np.hypot(n[..., 0], n[..., 1])
+    h = 0.5 * (np.sum(targets[..., ib, :] ** 2, -1) - np.sum(targets[..., ia, :] ** 2, -1))
+    safe_r = np.where(r > 0.0, r, 1.0)[..., None]
+    cos_d = (h - np.sum(n * center[..., None, :], -1)) / (safe_r * np.where(norm > 0, norm, 1.0))
+    split = (norm > 0) & (np.abs(cos_d) <= 1.0) & (r[..., None] > 0.0)
+    phi = np.arctan2(n[..., 1], n[..., 0])
+    delta = np.arccos(np.clip(cos_d, -1.0, 1.0))
+    bis = [
+        center[..., None, :] + r[..., None, None] * np.stack([np.cos(a), np.sin(a)], -1)
+        for a in (phi + delta, phi - delta)
+    ]
     cand = np.concatenate(
-        [far, np.broadcast_to(center[..., None, :], far.shape[:-2] + (1, 2)), P, Q], axis=-2
+        [far, np.broadcast_to(center[..., None, :], far.shape[:-2] + (1, 2)), P, Q, *bis],
+        axis=-2,
     )
-    valid = np.concatenate([np.ones(meet.shape[:-1] + (k + 1,), bool), meet, meet], axis=-1)
+    valid = np.concatenate(
+        [np.ones(meet.shape[:-1] + (k + 1,), bool), meet, meet, split, split], axis=-1
+    )
     e = cand[..., :, None, :] - targets[..., None, :, :]
     margin = np.min(np.hypot(e[..., 0], e[..., 1]), axis=-1) - rho[..., None]
     best = np.argmax(np.where(valid, margin, -np.inf), axis=-1)
