@@ -28,6 +28,7 @@ the same results.
 
 from __future__ import annotations
 
+import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -51,6 +52,9 @@ class PolicyEvaluation:
         seeds: the episodes' seeds.
         mean_trace, rmse, returns: per-episode mean trace (m^2), RMSE (m) and return.
         requested: False for GSR when it was only added as the ratio's reference.
+        nees: per-episode mean position NEES (2 for a consistent filter; the mean over
+            targets), NaN where the environment has no world to read it from.
+        ms_per_step: per-episode mean time of the policy's decision (plan or act) per step.
     """
 
     policy: str
@@ -59,6 +63,8 @@ class PolicyEvaluation:
     rmse: np.ndarray
     returns: np.ndarray
     requested: bool = True
+    nees: np.ndarray | None = None
+    ms_per_step: np.ndarray | None = None
 
     def summary(self, reference: PolicyEvaluation | None = None) -> dict[str, Any]:
         """Return the JSON summary; the ratio is to ``reference``'s mean trace (GSR)."""
@@ -73,6 +79,10 @@ class PolicyEvaluation:
             "rmse_ci95": [rm_lo, rm_hi],
             "mean_return": ret,
             "mean_return_ci95": [ret_lo, ret_hi],
+            "nees": None
+            if self.nees is None or not np.all(np.isfinite(self.nees))
+            else float(np.mean(self.nees)),
+            "ms_per_step": None if self.ms_per_step is None else float(np.mean(self.ms_per_step)),
             "ratio_to_gsr": None,
             "ratio_to_gsr_ci95": None,
             "episodes": len(self.seeds),
@@ -151,21 +161,51 @@ def _reset_policy(policy: Any, seed: int) -> None:
         reset(seed)
 
 
-def run_episode(env: Any, policy: Any, seed: int) -> tuple[float, float, float]:
-    """Return ``(mean_trace, rmse, return)`` of one episode of ``policy`` from ``seed``."""
+def run_episode(env: Any, policy: Any, seed: int) -> tuple[float, float, float, float, float]:
+    """Return ``(mean_trace, rmse, return, mean_nees, ms_per_step)`` of one episode of
+    ``policy`` from ``seed`` (``ms_per_step``: the policy's decision time per step)."""
     from activetrack.envs import policy_step
 
     _reset_policy(policy, seed)
     obs, _ = env.reset(seed=seed)
-    traces, errors, total = [], [], 0.0
+    traces, errors, nees, total = [], [], [], 0.0
     first = env.possible_agents[0]
+    world = getattr(env.unwrapped, "world", None)
+    timed, seconds = _timed(policy)
     while env.agents:
-        obs, rewards, _, _, infos = policy_step(env, policy, obs)
+        obs, rewards, _, _, infos = policy_step(env, timed, obs)
         traces.append(infos[first]["trace"])
         errors.append(infos[first]["position_error"])
+        nees.append(float(world.position_nees(0)) if world is not None else np.nan)
         total += float(rewards[first])
     errors_arr = np.asarray(errors)
-    return float(np.mean(traces)), float(np.sqrt(np.mean(errors_arr**2))), total
+    return (
+        float(np.mean(traces)),
+        float(np.sqrt(np.mean(errors_arr**2))),
+        total,
+        float(np.mean(nees)),
+        1e3 * seconds[0] / len(traces),
+    )
+
+
+def _timed(policy: Any) -> tuple[Any, list[float]]:
+    """Return ``policy`` behind a proxy that adds its decisions' seconds to the list."""
+    from types import SimpleNamespace
+
+    seconds = [0.0]
+
+    def timing(fn: Any) -> Any:
+        def call(arg: Any) -> Any:
+            start = time.perf_counter()
+            out = fn(arg)
+            seconds[0] += time.perf_counter() - start
+            return out
+
+        return call
+
+    if callable(getattr(policy, "plan", None)):
+        return SimpleNamespace(plan=timing(policy.plan)), seconds
+    return SimpleNamespace(act=timing(getattr(policy, "act", policy))), seconds
 
 
 def check_compatible(policy: Any, env: Any, label: str) -> None:
@@ -256,13 +296,17 @@ def evaluate(
     for index, ((label, _), rows) in enumerate(zip(items, per_policy, strict=True)):
         arr = np.asarray(rows)
         requested = has_gsr or index < len(items) - 1
-        results.append(PolicyEvaluation(label, seeds, arr[:, 0], arr[:, 1], arr[:, 2], requested))
+        results.append(
+            PolicyEvaluation(
+                label, seeds, arr[:, 0], arr[:, 1], arr[:, 2], requested, arr[:, 3], arr[:, 4]
+            )
+        )
     return results
 
 
 def run_episodes(
     scenario: Any, overrides: dict[str, Any], policy: Any, seeds: list[int]
-) -> list[tuple[float, float, float]]:
+) -> list[tuple[float, float, float, float, float]]:
     """Return :func:`run_episode` on each of ``seeds`` in a new environment (one Ray task)."""
     from activetrack.envs import parallel_env
 
@@ -281,7 +325,7 @@ def _episodes_on_ray(
     workers: int,
     address: str | None,
     bar: Any,
-) -> list[list[tuple[float, float, float]]]:
+) -> list[list[tuple[float, float, float, float, float]]]:
     """Return every policy's episode rows, computed as Ray tasks over chunks of ``seeds``."""
     from activetrack.baselines import distributed
 
@@ -314,7 +358,8 @@ def summaries(results: Sequence[PolicyEvaluation]) -> list[dict[str, Any]]:
 def format_table(rows: Sequence[dict[str, Any]]) -> str:
     """Return the summaries as a plain-text table (GSR added only for the ratio is marked)."""
     head = (
-        f"{'policy':<34} {'mean trace [95% CI]':>26} {'RMSE':>7} {'return':>8} {'ratio to GSR':>22}"
+        f"{'policy':<34} {'mean trace [95% CI]':>26} {'RMSE':>7} {'NEES':>5} {'ms/step':>8} "
+        f"{'return':>8} {'ratio to GSR':>22}"
     )
     lines = [head, "-" * len(head)]
     for r in rows:
@@ -327,8 +372,11 @@ def format_table(rows: Sequence[dict[str, Any]]) -> str:
         if r["ratio_to_gsr"] is not None:
             rlo, rhi = r["ratio_to_gsr_ci95"]
             ratio = f"{r['ratio_to_gsr']:.3f} [{rlo:.3f}, {rhi:.3f}]"
+        nees = "-" if r.get("nees") is None else f"{r['nees']:.2f}"
+        ms = "-" if r.get("ms_per_step") is None else f"{r['ms_per_step']:.3g}"
         lines.append(
-            f"{name:<34} {trace:>26} {r['rmse']:>7.3f} {r['mean_return']:>8.2f} {ratio:>22}"
+            f"{name:<34} {trace:>26} {r['rmse']:>7.3f} {nees:>5} {ms:>8} "
+            f"{r['mean_return']:>8.2f} {ratio:>22}"
         )
     return "\n".join(lines)
 
@@ -364,6 +412,8 @@ def write_results(
                 "mean_trace": r.mean_trace.tolist(),
                 "rmse": r.rmse.tolist(),
                 "return": r.returns.tolist(),
+                **({} if r.nees is None else {"nees": r.nees.tolist()}),
+                **({} if r.ms_per_step is None else {"ms_per_step": r.ms_per_step.tolist()}),
             }
             for r in results
         },
