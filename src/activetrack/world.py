@@ -20,10 +20,20 @@ follows the paper's timeline:
 Environments, the simulation runner and the expert policies are adapters over this loop;
 none of them repeats a step of it.
 
+Beyond the paper (:mod:`activetrack.sensor_models`, ``docs/tasks.md``) the same loop runs K
+targets, each with its own model and EKF (known data association; every sensor keeps
+``rho`` from every predicted target; the score is the scenario's objective over the
+targets), sensors of any measurement model, and sensors whose position is known only
+through a fix ``p_S + e``, ``e ~ N(0, Sigma_i)`` drawn afresh every step: the world moves
+and measures from the true positions (``sensors``), the filter, the planners and the
+observations use the fixes (``fixes``).
+
 Randomness: copy ``i`` draws from its own ``np.random.default_rng(seed_i)``: at reset ``2M``
-uniforms for the sensors' start (uniform by area in the start disk), then ``n`` normals
-for the true target if it starts from ``N(x0_hat, P0)``; at every step ``n + 2M`` standard
-normals (``n`` process noise, then ``2M`` measurement noise, sensor-major). With
+uniforms for the sensors' start (uniform by area in the start disk), then ``n_k`` normals
+per target if they start from ``N(x0_hat, P0)``, then ``2M`` normals for the first fixes
+when poses are uncertain; at every step ``n + 2M`` standard normals in the paper (``n``
+process noise, then ``2M`` measurement noise, sensor-major), in general every target's
+process noise, then every target's ``2M`` measurement noise, then ``2M`` for the new fixes. With
 ``noise_block = b > 1`` the step normals are drawn ``b`` steps at a time, never past the
 episode's last step, which leaves the stream in the same state at every episode end (a
 copy terminated early on ``max_trace`` has drawn the rest of its block). A world of one
