@@ -223,21 +223,16 @@ class World:
         views, refreshed by every step (keep a copy, not a reference).
         """
         if name in _TARGET_FIELDS:
-            if target is None and self.n_targets > 1:
-                parts = [self.get(name, index, k) for k in range(self.n_targets)]
-                if len({np.shape(v) for v in parts}) != 1:
+            if target is None:
+                if self.n_targets > 1:
+                    return self._stacked(name, index)
+                v = self._t[0][name]
+            else:
+                if not isinstance(target, (int, np.integer)) or not 0 <= target < self.n_targets:
                     raise ValueError(
-                        f"the targets' states differ in dimension: give target= (0 to "
-                        f"{self.n_targets - 1}) to read {name!r}"
+                        f"target must be an integer in [0, {self.n_targets - 1}], got {target!r}"
                     )
-                axis = 0 if (index is not None) else 1
-                return np.stack(parts, axis=axis)
-            k = 0 if target is None else target
-            if not isinstance(k, (int, np.integer)) or not 0 <= k < self.n_targets:
-                raise ValueError(
-                    f"target must be an integer in [0, {self.n_targets - 1}], got {target!r}"
-                )
-            v = self._t[k][name]
+                v = self._t[target][name]
         else:
             try:
                 v = self._s[name]
@@ -247,6 +242,16 @@ class World:
         if self._one:
             return v if index is not None else np.asarray(v)[None]
         return v if index is None else v[index]
+
+    def _stacked(self, name: str, index: int | None) -> np.ndarray:
+        """Return a per-target field of every target, stacked after the copies' axis."""
+        parts = [self.get(name, index, k) for k in range(self.n_targets)]
+        if len({np.shape(v) for v in parts}) != 1:
+            raise ValueError(
+                f"the targets' states differ in dimension: give target= (0 to "
+                f"{self.n_targets - 1}) to read {name!r}"
+            )
+        return np.stack(parts, axis=0 if index is not None else 1)
 
     x_true = property(lambda self: self.get("x_true"), doc="True target states (N, n).")
     x_hat = property(lambda self: self.get("x_hat"), doc="Posterior means x_hat(k|k) (N, n).")
@@ -452,14 +457,15 @@ class World:
         p = self.params
         K = self.n_targets
         tgt = self._t
+        # (One target without a comprehension: on Python 3.11 each one is a function call.)
         if self._one:
             sensors = st["sensors"]
             fixes = st["fixes"] if self._pose else sensors
-            x_preds = [t["x_pred"] for t in tgt]
+            x_preds = [tgt[0]["x_pred"]] if K == 1 else [t["x_pred"] for t in tgt]
         else:
             sensors = st["sensors"][calc]
             fixes = st["fixes"][calc] if self._pose else sensors
-            x_preds = [t["x_pred"][calc] for t in tgt]
+            x_preds = [tgt[0]["x_pred"][calc]] if K == 1 else [t["x_pred"][calc] for t in tgt]
         # Sensors move from where they believe they are, out of every target's rho disk.
         where = x_preds[0][..., :2] if K == 1 else np.stack([x[..., :2] for x in x_preds], -2)
         mv = moves if self._one and moves.ndim == 2 else moves[calc]
