@@ -561,14 +561,14 @@ PRESETS: dict[str, dict[str, Any]] = {
         "x0": (0.0, 0.0, -8.0, 6.0),
         "x0_hat": (0.0, 0.0, -8.0, 6.0),
     },
-    # Range-and-bearing sensors (1 m^2, 0.01 rad^2) whose position fixes are uncertain
+    # Range-and-bearing sensors (1 m^2, 0.05 rad^2) whose position fixes are uncertain
     # (isotropic variances 0.25 to 2 m^2, a 0.5 to 1.4 m standard deviation), accounted
     # for by the filter.
     "uncertain_poses": {
         **_TASK,
         "name": "uncertain_poses",
         "sigma_d2": 1.0,
-        "sigma_theta2": 0.01,
+        "sigma_theta2": 0.05,
         "pose_cov": (0.25, 0.5, 1.0, 2.0),
         "x0": (0.0, 0.0, -8.0, 6.0),
         "x0_hat": (0.0, 0.0, -8.0, 6.0),
