@@ -171,15 +171,17 @@ def extended_features(
 ) -> tuple[FloatArray, FloatArray]:
     """Return the extended layout's target blocks, flattened (..., 7K), and sensor blocks
     (..., M, 12) from every target's prediction and the sensors' position fixes."""
-    pos = np.stack([x[..., :2] for x in x_preds], -2)  # (..., K, 2)
-    origin = pos.mean(axis=-2)
-    blocks = []
-    for x, P, q in zip(x_preds, P_preds, np.moveaxis(pos, -2, 0), strict=True):
-        out = np.empty(x.shape[:-1] + (EXT_TARGET_DIM,))
-        out[..., :2] = (q - origin) / L
-        out[..., 2:] = target_features(x, P, dt, L)
-        blocks.append(out)
-    target = np.concatenate(blocks, -1)
+    K = len(x_preds)
+    batch = fixes.shape[:-2]
+    blocks = np.empty(batch + (K, EXT_TARGET_DIM))
+    for k, (x, P) in enumerate(zip(x_preds, P_preds, strict=True)):
+        blocks[..., k, :2] = x[..., :2]
+        blocks[..., k, 2:] = target_features(x, P, dt, L)
+    pos = blocks[..., :2]
+    origin = np.add.reduce(pos, axis=-2) * (1.0 / K)  # the centroid (cheaper than mean)
+    pos -= origin[..., None, :]
+    pos *= 1.0 / L
+    target = blocks.reshape(batch + (K * EXT_TARGET_DIM,))
     sensor = np.empty(fixes.shape[:-1] + (EXT_SENSOR_DIM,))
     sensor[..., :2] = (fixes - origin[..., None, :]) / L
     sensor[..., 2:] = constants

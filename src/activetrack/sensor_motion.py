@@ -80,15 +80,24 @@ def _keep_distances(
     """:func:`keep_distance` for K predicted targets ``targets`` (..., K, 2)."""
     from activetrack import feasible_set  # noqa: PLC0415 (only several-target scenarios)
 
-    rho = np.broadcast_to(np.asarray(rho, dtype=np.float64), new.shape[:-1])
+    rho = np.asarray(rho, dtype=np.float64)
     dist = np.abs(as_complex(new[..., None, :, :] - targets[..., :, None, :]))  # (..., K, M)
-    inside = np.any(dist < rho[..., None, :] * _INSIDE, axis=-2)
+    near = dist < rho[..., None, :] * _INSIDE
+    if not np.count_nonzero(near):  # the common case: nothing to project
+        return new, np.zeros(new.shape[:-1], dtype=bool)
+    inside = np.any(near, axis=-2)
+    rho = np.broadcast_to(rho, inside.shape)
     if np.count_nonzero(inside):
         r = np.broadcast_to(np.asarray(r, dtype=np.float64), inside.shape)
         inside &= r > 0.0  # a sensor that cannot move (r = 0) stays, even inside
         each = np.broadcast_to(targets[..., None, :, :], (*new.shape[:-1], *targets.shape[-2:]))
-        fixed = feasible_set.project(new, sensors, r, each, rho)
-        new = np.where(inside[..., None], fixed, new)
+        # Only the moves that ended inside are projected (the projection is elementwise,
+        # so a sensor's result does not depend on which others are projected with it).
+        sensors = np.broadcast_to(sensors, new.shape)
+        new = np.array(new)  # a copy: the caller's array stays as it was
+        new[inside] = feasible_set.project(
+            new[inside], sensors[inside], r[inside], each[inside], rho[inside]
+        )
     return new, inside
 
 

@@ -130,8 +130,8 @@ class World:
         self._scale = float(sc.reward_scale)
         #: The score of a configuration (eq. 12, 17); the reward is minus it at the posterior.
         self.objective = OBJECTIVES[sc.objective]
-        # The paper's loop (one target, the trace): the score is the trace itself.
-        self._plain = K == 1 and self.objective is TRACE
+        # The trace objective (the paper's; with K targets their sum): the score is the trace.
+        self._plain = self.objective is TRACE
         self._pose = p.pose_cov is not None
         if self._pose:  # a square root of each sensor's (PSD) fix covariance
             w, v = np.linalg.eigh(p.pose_cov)
@@ -467,7 +467,12 @@ class World:
             fixes = st["fixes"][calc] if self._pose else sensors
             x_preds = [tgt[0]["x_pred"][calc]] if K == 1 else [t["x_pred"][calc] for t in tgt]
         # Sensors move from where they believe they are, out of every target's rho disk.
-        where = x_preds[0][..., :2] if K == 1 else np.stack([x[..., :2] for x in x_preds], -2)
+        if K == 1:
+            where = x_preds[0][..., :2]
+        else:  # (..., K, 2), filled row by row (cheaper than np.stack on small arrays)
+            where = np.empty(x_preds[0].shape[:-1] + (K, 2))
+            for k, x in enumerate(x_preds):
+                where[..., k, :] = x[..., :2]
         mv = moves if self._one and moves.ndim == 2 else moves[calc]
         moved, projected = move(mv, fixes, where, p.r, p.rho)
         if self._one and self._noise is None:  # the single env's draw, without a call
@@ -605,10 +610,15 @@ class World:
     def _features(self, index: int | None) -> tuple[FloatArray, FloatArray]:
         L = self.length_scale
         if self._extended:
-            K = self.n_targets
-            x_preds = [self.get("x_pred", index, k) for k in range(K)]
-            P_preds = [self.get("P_pred", index, k) for k in range(K)]
-            fixes = self.get("fixes", index)
+            if self._one and index is not None:  # the single env: no get() calls
+                x_preds = [t["x_pred"] for t in self._t]
+                P_preds = [t["P_pred"] for t in self._t]
+                fixes = self._s["fixes"]
+            else:
+                K = self.n_targets
+                x_preds = [self.get("x_pred", index, k) for k in range(K)]
+                P_preds = [self.get("P_pred", index, k) for k in range(K)]
+                fixes = self.get("fixes", index)
             return observation.extended_features(x_preds, P_preds, fixes, self._constants,
                                                  self._dt, L)  # fmt: skip
         if self._one and index is not None:  # the common single-env call: no get() calls
@@ -659,8 +669,16 @@ class World:
             )
             (x0, x1, *_), (h0, h1, *_) = x.tolist(), h.tolist()
             err = math.hypot(x0 - h0, x1 - h1)  # position_error(index), without a call
-        else:
-            err = float(self.position_error(index))
+        else:  # the root mean square over the targets, on Python numbers as above
+            sq = 0.0
+            for t in self._t:
+                x, h = (
+                    (t["x_true"], t["x_hat"]) if self._one
+                    else (t["x_true"][index], t["x_hat"][index])
+                )  # fmt: skip
+                (x0, x1, *_), (h0, h1, *_) = x.tolist(), h.tolist()
+                sq += (x0 - h0) ** 2 + (x1 - h1) ** 2
+            err = math.sqrt(sq / self.n_targets)
         return (
             int(get("k")),
             float(get("trace")),
