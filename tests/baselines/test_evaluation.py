@@ -170,3 +170,20 @@ def test_results_in_the_folder_need_overwrite(rm_and_gsr, tmp_path, monkeypatch)
     paths = write_results(rm_and_gsr, tmp_path, plot=False, overwrite=True)
     assert set(paths) == {"results", "episodes"}
     assert not (tmp_path / "mean_trace.png").exists()  # the old figure does not stay
+
+
+def test_evaluation_nees_and_trace_equal_the_simulation_runners():
+    # Two drivers of the same world: evaluate() through the PettingZoo env and the
+    # simulation runner through World directly; the same seeds give the same episodes.
+    from activetrack.baselines import GSR
+    from activetrack.baselines.evaluation import evaluate
+    from activetrack.baselines.simulation import simulate
+    from activetrack.scenarios import make_scenario
+
+    sc = make_scenario("mixed", n_steps=10)
+    (ev,) = evaluate(["gsr"], sc, 3, 1000, progress=False)
+    for i, seed in enumerate(range(1000, 1003)):
+        rec = simulate(sc, GSR(), seed)
+        assert ev.mean_trace[i] == rec.mean_trace
+        assert ev.nees[i] == rec.mean_nees
+        assert ev.ms_per_step[i] > 0.0
