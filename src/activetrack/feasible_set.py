@@ -215,8 +215,14 @@ def project(
     best = np.argmin(dist, axis=-1)
     out = np.take_along_axis(cand, best[..., None, None], axis=-2)[..., 0, :]
     empty = ~np.any(ok, axis=-1)
-    if np.any(empty):
-        out = np.where(empty[..., None], fallback(center, r, targets, rho), out)
+    if np.any(empty):  # the fallback of the empty sets only (it is elementwise)
+        k = targets.shape[-2]
+        out[empty] = fallback(
+            np.broadcast_to(center, shape + (2,))[empty],
+            np.broadcast_to(r, shape)[empty],
+            np.broadcast_to(targets, shape + (k, 2))[empty],
+            np.broadcast_to(rho, shape)[empty],
+        )
     return out
 
 
