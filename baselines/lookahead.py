@@ -46,7 +46,7 @@ from activetrack.baselines.prediction_tracker import PredictionTracker
 from activetrack.geometry import project_feasible
 from activetrack.objective import sensor_information
 from activetrack.problem import PlanningProblem
-from activetrack.validation import FloatArray
+from activetrack.validation import FloatArray, check_float, check_int
 from activetrack.world import World
 
 
@@ -67,25 +67,6 @@ class LookaheadResult:
     score: FloatArray
     gsr_plan: FloatArray
     gsr_score: FloatArray
-
-
-def _check_int(name: str, value: object, low: int, high: int) -> int:
-    # The upper bound: arrays of that length are allocated.
-    ok = not isinstance(value, bool) and isinstance(value, (int, np.integer))
-    if not ok or not low <= value <= high:
-        raise ValueError(f"{name} must be an integer in [{low}, {high}], got {value!r}")
-    return int(value)
-
-
-def _check_real(name: str, value: object, low: float, high: float) -> float:
-    if (
-        isinstance(value, bool)
-        or not isinstance(value, (int, float, np.integer, np.floating))
-        or not math.isfinite(value)
-        or not low <= value <= high
-    ):
-        raise ValueError(f"{name} must be a number in [{low}, {high}], got {value!r}")
-    return float(value)
 
 
 @dataclass
@@ -115,12 +96,12 @@ class Lookahead:
     def __post_init__(self) -> None:
         from activetrack.baselines.gsr import GSR
 
-        self.horizon = _check_int("horizon", self.horizon, 1, 1000)
-        self.discount = _check_real("discount", self.discount, 1e-6, 1.0)
-        self.headings = _check_int("headings", self.headings, 0, 4096)
-        self.bearings = _check_int("bearings", self.bearings, 0, 4096)
-        self.passes = _check_int("passes", self.passes, 0, 100)
-        self.margin = _check_real("margin", self.margin, 0.0, 100.0)
+        self.horizon = check_int("horizon", self.horizon, 1, 1000)
+        self.discount = check_float("discount", self.discount, 1e-6, 1.0)
+        self.headings = check_int("headings", self.headings, 0, 4096)
+        self.bearings = check_int("bearings", self.bearings, 0, 4096)
+        self.passes = check_int("passes", self.passes, 0, 100)
+        self.margin = check_float("margin", self.margin, 0.0, 100.0)
         self._gsr = GSR(tol=self.gsr_tol, max_sweeps=self.gsr_max_sweeps)
 
     # ------------------------------------------------------------------------------
