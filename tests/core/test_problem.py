@@ -298,3 +298,38 @@ def test_the_world_problem_carries_exactly_the_world_prediction(copies):
     kept = problem.prediction.cov.copy()
     world.reset(seeds=[9] * copies)
     np.testing.assert_array_equal(problem.prediction.cov, kept)
+
+
+@pytest.mark.parametrize(
+    "kwargs, field",
+    [
+        ({"models": [0, 1]}, "models"),  # 2 codes for 3 sensors
+        ({"models": [0, 1, 7]}, "models"),
+        ({"models": ["range", "sonar", 0]}, "models"),
+        ({"pose_cov": np.eye(2)[None].repeat(2, 0)}, "pose_cov"),  # 2 matrices, 3 sensors
+        ({"pose_cov": -np.eye(2)[None].repeat(3, 0)}, "pose_cov"),
+        ({"pose_cov": np.full((3, 2, 2), np.nan)}, "pose_cov"),
+        ({"multi_target": 1}, "multi_target"),
+        ({"multi_target": True}, "multi_target"),  # target (2,) has no targets axis
+    ],
+)
+def test_beyond_paper_fields_are_validated_naming_them(kwargs, field):
+    with pytest.raises(ValueError, match=field):
+        PlanningProblem(np.eye(2), np.zeros(2), np.ones((3, 2)), 1.0, 2.0, 1.0, 0.1, **kwargs)
+
+
+def test_multi_target_problem_refuses_a_prediction_and_stacks():
+    pred = Prediction(np.zeros(4), np.eye(4), np.eye(4), np.zeros((4, 4)))
+    with pytest.raises(ValueError, match="prediction"):
+        PlanningProblem(
+            np.eye(2)[None], np.zeros((1, 2)), np.ones((3, 2)), 1.0, 2.0, 1.0, 0.1,
+            prediction=pred, multi_target=True,
+        )  # fmt: skip
+    one = PlanningProblem(
+        np.stack([np.eye(2), 2 * np.eye(2)]), np.array([[0.0, 0.0], [5.0, 0.0]]),
+        np.ones((3, 2)), 1.0, 2.0, 1.0, 0.1, models=["range", 0, 2], multi_target=True,
+    )  # fmt: skip
+    both = PlanningProblem.stack([one, one])
+    assert both.batch_shape == (2,) and both.n_targets == 2
+    assert both.models.tolist() == [[1, 0, 2]] * 2
+    np.testing.assert_array_equal(both[1].score(np.ones((3, 2))), one.score(np.ones((3, 2))))

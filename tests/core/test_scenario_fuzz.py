@@ -82,7 +82,16 @@ overrides = st.dictionaries(st.sampled_from(FIELDS + ["max_cycles"]), field_valu
 
 # Every field a validation error may name for a given override (coupled limits name others).
 COUPLED = {
-    "n_sensors": {"sigma_d2", "sigma_theta2", "vmax", "rho", "orientation"},
+    "n_sensors": {
+        "sigma_d2",
+        "sigma_theta2",
+        "vmax",
+        "rho",
+        "orientation",
+        "sensor_model",
+        "pose_cov",
+    },
+    "n_targets": {"x0", "x0_hat", "P0", "motion", "q"},
     "motion": {"x0", "x0_hat", "P0"},
     "q": {"sigma_d2"},
     "dt": {"sigma_d2", "vmax"},
@@ -108,7 +117,29 @@ def _check_accepted(sc):
         assert np.all(np.isfinite(sc.per_sensor(name)))
     json.dumps(sc.to_dict())  # JSON-friendly
     hash(sc)
-    run_closed_loop(sc, steps=min(sc.n_steps, 12))
+    if sc.n_targets == 1 and sc.pose_covariances is None:
+        run_closed_loop(sc, steps=min(sc.n_steps, 12))
+    else:  # several targets or position fixes: through the world, every target's filter
+        _run_world(sc, steps=min(sc.n_steps, 12))
+
+
+def _run_world(sc, steps):
+    """Run the world with random actions; every target's P stays finite and SPD."""
+    from activetrack.world import World
+
+    world, rng = World(sc), np.random.default_rng(0)
+    world.reset(seeds=[0])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for _ in range(steps):
+            if world.get("truncated", 0):
+                break
+            world.step_actions(rng.uniform(-1, 1, (sc.n_sensors, 2)))
+            for k in range(sc.n_targets):
+                P = world.get("P", 0, k)
+                assert np.all(np.isfinite(P)) and np.all(np.isfinite(world.get("x_hat", 0, k)))
+                np.testing.assert_array_equal(P, P.T)
+                np.linalg.cholesky(P)  # positive definite
 
 
 @settings(
@@ -116,7 +147,7 @@ def _check_accepted(sc):
     deadline=None,
     suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large],
 )
-@given(preset=st.sampled_from(["paper", "homogeneous"]), kwargs=overrides)
+@given(preset=st.sampled_from(["paper", "homogeneous", *scenarios.TASKS]), kwargs=overrides)
 def test_fuzz_scenario_fields(preset, kwargs):
     with warnings.catch_warnings():
         warnings.simplefilter("error")

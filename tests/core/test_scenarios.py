@@ -92,6 +92,26 @@ def test_unknown_keyword_is_a_type_error_worded_like_python():
         ({"sigma_d2": None}, "sigma_d2"),
         ({"name": 3}, "name"),
         ({"motion": "ca"}, "motion='ca'"),  # x0 has 4 entries: the error says why
+        # The fields beyond the paper (several targets, sensor models, uncertain poses).
+        ({"n_targets": 0}, "n_targets"),
+        ({"n_targets": 2.0}, "n_targets"),
+        ({"n_targets": 2}, "x0"),  # the paper's single x0 is not one state per target
+        ({"n_targets": 2, "x0": ((0, 0, 1, 1),), "x0_hat": ((0, 0, 1, 1),)}, "x0"),
+        ({"n_targets": 2, "x0": ((0, 0, 1, 1), (0, 0, 1, np.nan))}, r"x0\[1\]"),
+        ({"n_targets": 2, "motion": ("cv",)}, "motion"),
+        ({"n_targets": 2, "q": (1.0, -1.0)}, "q"),
+        ({"sensor_model": "sonar"}, "sensor_model"),
+        ({"sensor_model": ("range", "range")}, "sensor_model"),  # 2 names for 3 sensors
+        ({"sensor_model": 1}, "sensor_model"),
+        ({"pose_cov": -0.1}, "pose_cov"),
+        ({"pose_cov": np.nan}, "pose_cov"),
+        ({"pose_cov": (0.1, 0.2)}, "pose_cov"),  # neither 1 nor 3 (M) variances
+        ({"pose_cov": ((1.0, 2.0), (2.0, 1.0))}, "pose_cov"),  # not PSD
+        ({"pose_cov": ((1.0, 0.1), (0.0, 1.0))}, "pose_cov"),  # not symmetric
+        ({"pose_cov": 1e9}, "pose_cov"),
+        ({"account_pose": 1}, "account_pose"),
+        ({"objective": "det"}, "objective"),
+        ({"objective": None}, "objective"),
     ],
 )
 def test_invalid_values_are_rejected_naming_the_field(kwargs, field):
@@ -131,3 +151,26 @@ def test_equality_and_hash_compare_field_values():
     assert a == b and hash(a) == hash(b)
     assert a != at.make_scenario("paper", q=11.0)
     assert a.replace() == a
+
+
+def test_several_targets_sensor_models_and_poses_are_stored_converted():
+    sc = at.make_scenario(
+        "paper",
+        n_targets=2,
+        motion=("cv", "ca"),
+        q=(1.0, np.float32(2.0)),
+        x0=((0, 0, 1, 1), np.arange(6)),
+        x0_hat=((0, 0, 1, 1), (0, 0, 0, 0, 0, 0)),
+        P0=((4, 4, 25, 25), np.full(6, 4.0)),
+        sensor_model=["range", "bearing", "range_bearing"],
+        pose_cov=np.array([0.1, 0.0, 0.2]),
+    )
+    assert sc.q == (1.0, 2.0) and all(type(v) is float for v in sc.q)
+    assert sc.x0[1] == (0.0, 1.0, 2.0, 3.0, 4.0, 5.0) and type(sc.x0[1][1]) is float
+    assert [m.dim for m in sc.target_models] == [4, 6]
+    assert sc.sensor_model == ("range", "bearing", "range_bearing")
+    assert sc.sensor_models.tolist() == [1, 2, 0]
+    assert sc.pose_cov == (0.1, 0.0, 0.2)
+    np.testing.assert_array_equal(sc.pose_covariances[2], 0.2 * np.eye(2))
+    json.dumps(sc.to_dict())  # JSON-friendly, the new fields included
+    assert at.make_scenario("paper", sensor_model=("range",) * 3).sensor_model == "range"
