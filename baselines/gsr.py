@@ -219,7 +219,7 @@ class GSR:
             positions=positions,
             value=float(value),
             sweeps=int(sweeps),
-            n_solves=int(sweeps) * problem.n_sensors,
+            n_solves=int(sweeps) * int(np.count_nonzero(problem.r > 0.0)),  # free sensors
             start="warm",
             converged=bool(sweeps < self.max_sweeps),
             warm_value=float(warm),

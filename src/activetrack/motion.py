@@ -46,8 +46,7 @@ class LinearMotionModel:
         q = 0.5 * (q + q.T)
         object.__setattr__(self, "Q", q)
         # A square root of G Qd G^T that also works when it is only semidefinite.
-        w, v = np.linalg.eigh(q)
-        object.__setattr__(self, "noise_factor", v * np.sqrt(np.clip(w, 0.0, None)))
+        object.__setattr__(self, "noise_factor", psd_factor(q))
 
     @property
     def dim(self) -> int:
@@ -65,6 +64,16 @@ class LinearMotionModel:
 
     def __reduce__(self):  # the derived fields are recomputed, keeping pickles small
         return (LinearMotionModel, (self.Phi, self.G, self.Qd, self.dt, self.name))
+
+
+def psd_factor(A: FloatArray) -> FloatArray:
+    """Return ``F`` with ``F F^T = A`` for symmetric positive semidefinite ``A`` (..., n, n).
+
+    From the eigendecomposition (eigenvalues rounded below 0 clipped), so it also works
+    when ``A`` is singular, where a Cholesky factor does not exist.
+    """
+    w, v = np.linalg.eigh(A)
+    return v * np.sqrt(np.clip(w, 0.0, None))[..., None, :]
 
 
 def predict(

@@ -70,6 +70,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from activetrack.scenarios import Scenario
+from activetrack.sensor_models import USES
 from activetrack.validation import FloatArray
 
 TARGET_DIM = 5
@@ -121,7 +122,7 @@ class Layout:
         if not self.extended:
             return base
         codes = sc.sensor_models
-        uses = np.array([[True, True], [True, False], [False, True]])[codes]
+        uses = USES[codes]  # (M, 2): which of range and bearing each sensor measures
         base[:, :2] = np.where(uses, base[:, :2], 0.0)
         onehot = np.eye(3)[codes]
         cov = sc.pose_covariances

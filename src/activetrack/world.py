@@ -51,7 +51,7 @@ import numpy as np
 
 from activetrack import observation, sensor_motion, tracking
 from activetrack.ekf import position_nees
-from activetrack.motion import predict
+from activetrack.motion import predict, psd_factor
 from activetrack.objective import OBJECTIVES, TRACE
 from activetrack.problem import PlanningProblem, Prediction
 from activetrack.scenarios import Scenario, make_scenario
@@ -134,8 +134,7 @@ class World:
         self._plain = self.objective is TRACE
         self._pose = p.pose_cov is not None
         if self._pose:  # a square root of each sensor's (PSD) fix covariance
-            w, v = np.linalg.eigh(p.pose_cov)
-            self._pose_factor = v * np.sqrt(np.clip(w, 0.0, None))[..., None, :]
+            self._pose_factor = psd_factor(p.pose_cov)
         self._dt = float(sc.dt)
         self._x0s = sc.target_states("x0")
         self._x0_hats = sc.target_states("x0_hat")
