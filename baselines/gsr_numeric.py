@@ -14,19 +14,25 @@ it evaluated.
 The rules are GSR's: sensors with ``r = 0`` stay; the warm start is the current positions
 (a sensor inside a ``rho`` disk from its nearest feasible point,
 :func:`activetrack.feasible_set.project`); a sensor's update is kept only if it lowers
-the objective, so the result is never worse than the warm start; sweeps stop when one
-improves the objective by at most ``tol`` (relative; by ``tol`` in absolute terms for an
-objective that may be negative, the log-determinant), or after ``max_sweeps``. A batch is
-relaxed in one vectorized sweep over the copies (copies that have stopped are carried).
+the objective, so the result is never worse than the warm start; a sensor whose
+subproblem has not changed since its last solve (no other sensor moved) is skipped;
+sweeps stop when one improves the objective by at most ``tol`` (relative; by ``tol`` in
+absolute terms for an objective that may be negative, the log-determinant), when no
+sensor is left to re-solve, or after ``max_sweeps``. A batch is relaxed in one vectorized
+sweep over the copies (copies that have stopped are carried).
+
+The sweeps change only the base of a sensor's subproblem, so its candidates and its
+information there are prepared once per plan (:func:`activetrack.solver_numeric.prepare`),
+and a re-solve refines from where the sensor's last solve ended
+(:class:`activetrack.solver_numeric.Prepared`, ``remember``).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from activetrack import feasible_set, sensor_models
+from activetrack import feasible_set, sensor_models, solver_numeric
 from activetrack.problem import PlanningProblem
-from activetrack.solver_numeric import solve_sensor
 from activetrack.validation import FloatArray
 
 
@@ -57,6 +63,10 @@ def relax(
     sweeps = np.zeros(B, dtype=np.int64)
     active = np.ones(B, dtype=bool)
     free = r > 0.0
+    # changed[b, i]: sensor i's subproblem in copy b changed since its last solve (another
+    # sensor moved); an unchanged subproblem would give the same answer, so it is skipped.
+    changed = free.copy()
+    prepared = _Prepared(problem, current, r, targets, rho, w_d, w_t, pose)
     for _ in range(max_sweeps):
         rows = np.flatnonzero(active)
         if rows.size == 0:
@@ -64,20 +74,19 @@ def relax(
         before = value[rows].copy()
         sweeps[rows] += 1
         for i in range(M):
-            sub = rows[free[rows, i]]
+            sub = rows[changed[rows, i]]
             if sub.size == 0:
                 continue
             others = tuple(totals[e][sub] - entries[e][sub, :, i] for e in range(3))
-            cov = None if pose is None else pose[sub, i]
-            pos, val = solve_sensor(
-                others, current[sub, i], r[sub, i], targets[sub], rho[sub, i],
-                w_d[sub, i], w_t[sub, i], cov, problem.objective,
-            )  # fmt: skip
+            pos, val = solver_numeric.solve_prepared(prepared.rows(sub, i), others)
+            changed[sub, i] = False
             better = val < value[sub]
             if not np.any(better):
                 continue
             keep = sub[better]
             s[keep, i] = pos[better]
+            changed[keep] |= free[keep]
+            changed[keep, i] = False
             one = slice(i, i + 1)
             cov1 = None if pose is None else pose[keep, one]
             new = _entries(s[keep, one], targets[keep], w_d[keep, one], w_t[keep, one], cov1)
@@ -88,8 +97,52 @@ def relax(
             value[keep] = problem.objective.of_targets(*(t[keep] for t in totals))
         gain = before - value[rows]
         scale = np.maximum(np.abs(before), 1.0) if problem.objective.name == "logdet" else before
-        active[rows] = gain > tol * scale
+        active[rows] = (gain > tol * scale) & changed[rows].any(axis=1)
     return s.reshape(*shape, M, 2), value.reshape(shape), sweeps.reshape(shape), warm.reshape(shape)
+
+
+class _Prepared:
+    """Every sensor's candidates and information there (:class:`solver_numeric.Prepared`).
+
+    They do not change over the sweeps (the reach disk, the targets and ``rho`` are
+    fixed; only the other sensors' information does), so a small batch prepares all
+    sensors of all copies once, in one call; a large batch (whose preparation is
+    vectorized over its copies anyway) prepares sensor ``i``'s rows when it solves them,
+    which bounds the memory to one sensor's candidates.
+    """
+
+    #: Batches of at most this many sensor rows (copies x M) are prepared at once.
+    ROWS = 256
+
+    def __init__(self, problem, current, r, targets, rho, w_d, w_t, pose) -> None:
+        self.args = (current, r, targets, rho, w_d, w_t, pose)
+        self.objective = problem.objective
+        B, M = r.shape
+        self.m = M
+        self.all = None
+        self.b = B
+        self.each: dict[int, solver_numeric.Prepared] = {}  # sensor -> its rows of all copies
+        if B * M <= self.ROWS:
+            self.all = self._prepare(np.arange(B)[:, None], np.arange(M)[None, :])
+
+    def _prepare(self, rows: np.ndarray, cols: np.ndarray) -> solver_numeric.Prepared:
+        current, r, targets, rho, w_d, w_t, pose = self.args
+        return solver_numeric.prepare(
+            current[rows, cols], r[rows, cols], targets[rows], rho[rows, cols],
+            w_d[rows, cols], w_t[rows, cols], None if pose is None else pose[rows, cols],
+            self.objective,
+        )  # fmt: skip
+
+    def rows(self, sub: np.ndarray, i: int) -> solver_numeric.Prepared:
+        """Return the prepared subproblems of sensor ``i`` in copies ``sub``."""
+        if self.all is not None:
+            if len(sub) < self.b:
+                return self.all.take(sub * self.m + i)
+            if i not in self.each:
+                self.each[i] = self.all.take(np.arange(self.b) * self.m + i)
+                self.each[i].remember = True
+            return self.each[i]
+        return self._prepare(sub, np.array(i))
 
 
 def _warm_start(

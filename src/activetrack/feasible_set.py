@@ -33,6 +33,8 @@ Kernels are unchecked and broadcast over leading axes: ``center`` (..., 2), ``r`
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from activetrack.geometry import Arc, sample_uniform
@@ -94,9 +96,11 @@ def circles(
     return origins, radii
 
 
+@functools.lru_cache(maxsize=16)
 def pairs(n: int) -> tuple[np.ndarray, np.ndarray]:
     """Return the index pairs ``(i, j)``, ``i < j < n``, of the circles (fixed order)."""
     i, j = np.triu_indices(n, k=1)
+    i.flags.writeable = j.flags.writeable = False
     return i, j
 
 
@@ -197,6 +201,9 @@ def project(
     q, center = np.asarray(q, np.float64), np.asarray(center, np.float64)
     targets = np.asarray(targets, np.float64)
     r, rho = np.asarray(r, np.float64), np.asarray(rho, np.float64)
+    inside = contains(q, center, r, targets, rho)
+    if np.all(inside):  # the common case: every point is already feasible
+        return np.broadcast_to(q, inside.shape + (2,)).copy()
     origins, radii = circles(center, r, targets, rho)
     shape = np.broadcast_shapes(q.shape[:-1], radii.shape[:-1])
     q = np.broadcast_to(q, shape + (2,))

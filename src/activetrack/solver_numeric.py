@@ -25,23 +25,34 @@ Method (deterministic, batched over leading axes without Python loops over the b
    (Lemma 3 holds for every measurement model and pose covariance), so no interior grid.
    Infeasible candidates get the value ``+inf`` (ragged arc sets become masks). All
    candidates are evaluated in one call.
-2. Refinement. From the best ``N_LOCAL_ARC`` local minima (along the sorted angles) of each
+2. Refinement. From the best ``N_LOCAL_ARC`` local minima (no neighbour lower) of each
    circle, steps on the angle; from the best ``N_LOCAL_PLANE`` local minima of the
-   interior grid, steps in the plane. Derivatives are central differences with a step
+   interior grids, steps in the plane. Derivatives are central differences with a step
    ``FD_STEP`` of the local length scale (the distance to the nearest target, capped by
    the radius). Steps minimize a local model within a trust radius that starts at the
    grid spacing and shrinks by 4 after a rejected step: Newton's quadratic model for a
    smooth objective (TRACE, LOGDET); for an objective that takes the maximum over
    targets (WORST_TRACE, nonsmooth where two targets tie), the maximum of the per-target
    quadratic models, minimized over its kinks as in SQP for minimax problems. A step is
-   accepted only when its point is feasible and strictly better; a start stops when its
-   step falls below ``CONVERGED`` of the local scale (or, in the plane, after
-   ``MAX_MISSES`` steps leaving F: the boundary starts cover that optimum).
-   In large batches the converged rows drop out.
+   accepted only when its point is feasible and strictly better. A start stops when its
+   proposed step falls below ``CONVERGED`` of the local scale; for a smooth objective
+   also after an accepted step shorter than ``SETTLED`` of it (Newton's next step would
+   be of the order of its square, below the resolution of the difference quotients); and
+   after ``MAX_MISSES`` steps leaving F (the optimum nearby lies on another piece of the
+   boundary: a circle intersection, which is a candidate, or an arc, which has its own
+   starts). In large batches the converged rows drop out.
 3. The answer is the best point evaluated (grid, intersections, accepted steps), so it is
    never worse than any candidate. When no candidate is feasible (``F`` empty), the
    answer is :func:`activetrack.feasible_set.fallback` and its value. The returned value
    is ``f`` at the returned absolute position.
+
+Gauss-Seidel relaxation solves the same sensor's subproblem once per sweep with another
+base: :func:`prepare` computes everything that does not depend on the base once (the
+candidates, their feasibility, the sensor's information there, the neighbour tables of
+the local-minimum test), :func:`solve_prepared` the rest. A prepared batch with
+``remember`` set (the relaxation's own) starts the next solve's refinement, in the rows
+whose starts come from the same candidates, where the last one ended; the answer is then
+the same local minima to the refinement's tolerance, not bit for bit.
 
 Special cases: ``r = 0`` returns the sensor's position (its only reachable point, feasible
 or the fallback); a point at zero distance from a target gets no information about it
@@ -54,6 +65,8 @@ with the absolute coordinates); the returned positions are absolute.
 """
 
 from __future__ import annotations
+
+import functools
 
 import numpy as np
 
@@ -76,8 +89,11 @@ POLAR_ANGLES = 12
 FD_STEP = 1e-4
 #: A refinement step shorter than this fraction of the local length scale ends it.
 CONVERGED = 1e-7
-#: Infeasible plane steps after which an interior start stops.
-MAX_MISSES = 3
+#: An accepted step shorter than this fraction of the local scale ends a start (smooth
+#: objectives: Newton's next step would be of the order of its square).
+SETTLED = 1e-4
+#: Infeasible steps after which a start stops.
+MAX_MISSES = 1
 #: Batches of at least this many rows drop their converged rows during refinement.
 COMPACT_ROWS = 64
 _TINY = 1e-300
@@ -92,30 +108,27 @@ class _Problem:
     """The flattened batch (B rows), relative to each sensor's position, and ``f``."""
 
     def __init__(self, base, center, r, targets, rho, w_d, w_theta, pose_cov, objective):
-        a0, b0, c0 = (np.asarray(x, dtype=np.float64) for x in base)
+        """Flatten the batch; ``base=None`` leaves the base to :meth:`with_base`."""
         center = np.asarray(center, dtype=np.float64)
         targets = np.asarray(targets, dtype=np.float64)
         r, rho = np.asarray(r, dtype=np.float64), np.asarray(rho, dtype=np.float64)
         w_d, w_theta = np.asarray(w_d, dtype=np.float64), np.asarray(w_theta, dtype=np.float64)
         k = targets.shape[-2]
         shapes = [
-            a0.shape[:-1], b0.shape[:-1], c0.shape[:-1], center.shape[:-1],
-            targets.shape[:-2], r.shape, rho.shape, w_d.shape, w_theta.shape,
+            center.shape[:-1], targets.shape[:-2], r.shape, rho.shape, w_d.shape, w_theta.shape,
         ]  # fmt: skip
+        if base is not None:
+            base = tuple(np.asarray(x, dtype=np.float64) for x in base)
+            shapes += [x.shape[:-1] for x in base]
         if pose_cov is not None:
             pose_cov = np.asarray(pose_cov, dtype=np.float64)
             shapes.append(pose_cov.shape[:-2])
         self.shape = np.broadcast_shapes(*shapes)
-        n = int(np.prod(self.shape))
         self.k = k
-
-        def flat(x, tail=()):
-            if x.shape != self.shape + tail:
-                x = np.broadcast_to(x, self.shape + tail)
-            return x.reshape((n,) + tail)
-
+        flat = self._flat
         self.center = flat(center, (2,))
-        self.a0, self.b0, self.c0 = flat(a0, (k,)), flat(b0, (k,)), flat(c0, (k,))
+        if base is not None:
+            self.a0, self.b0, self.c0 = (flat(x, (k,)) for x in base)
         self.t_abs = flat(targets, (k, 2))
         self.t = self.t_abs - self.center[:, None, :]
         self.r, self.rho = flat(r), flat(rho)
@@ -125,8 +138,26 @@ class _Problem:
         self.pc_abs = None if pose_cov is None else self.pc[:, 0]
         self.objective = objective
         self.minimax = k > 1 and _is_max(objective)
-        self.zero = np.zeros((n, 2))
+        self.zero = np.zeros((len(self.r), 2))
         self.origins, self.radii = feasible_set.circles(self.zero, self.r, self.t, self.rho)
+
+    def _flat(self, x: FloatArray, tail: tuple[int, ...] = ()) -> FloatArray:
+        """Return ``x`` broadcast to the batch and flattened, (B,) + tail."""
+        if x.shape != self.shape + tail:
+            x = np.broadcast_to(x, self.shape + tail)
+        return x.reshape((int(np.prod(self.shape)),) + tail)
+
+    def with_base(self, base: tuple[FloatArray, FloatArray, FloatArray]) -> _Problem:
+        """Return this (flattened) batch with the base entries ``(a0, b0, c0)``, each (B, K)."""
+        sub = object.__new__(_Problem)
+        sub.__dict__.update(vars(self))
+        sub.a0, sub.b0, sub.c0 = (np.asarray(x, dtype=np.float64) for x in base)
+        return sub
+
+    def entries(self, pts: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Return the sensor's information entries at points (B, C, 2) (relative), 3 x (B, C, K)."""
+        rel = pts[:, :, None, :] - self.t[:, None, :, :]
+        return information_entries(rel, self.wd, self.wt, self.pc)
 
     def at_absolute(self, positions: FloatArray) -> FloatArray:
         """Return ``f`` at absolute positions (B, 2), (B,)."""
@@ -143,8 +174,11 @@ class _Problem:
 
     def f(self, pts: FloatArray) -> FloatArray:
         """Return the objective at points (B, C, 2) relative to the sensor, (B, C)."""
-        rel = pts[:, :, None, :] - self.t[:, None, :, :]
-        a, b, c = information_entries(rel, self.wd, self.wt, self.pc)
+        return self.value(self.entries(pts))
+
+    def value(self, info: tuple[FloatArray, FloatArray, FloatArray]) -> FloatArray:
+        """Return the objective from the sensor's information entries 3 x (B, C, K), (B, C)."""
+        a, b, c = info
         a0, b0, c0 = self.a0[:, None], self.b0[:, None], self.c0[:, None]
         return self.objective.of_targets(a0 + a, b0 + b, c0 + c)
 
@@ -224,12 +258,20 @@ def _arc_candidates(p: _Problem, n_boundary: int) -> list[tuple[FloatArray, ...]
     return groups
 
 
+@functools.lru_cache(maxsize=8)
+def _unit_grid(n: int) -> tuple[FloatArray, np.ndarray]:
+    """Return the ``n x n`` square grid over [-1, 1]^2 (n n, 2) and the indices in the unit disk."""
+    u = np.linspace(-1.0, 1.0, n)
+    grid = np.stack(np.meshgrid(u, u, indexing="ij"), -1).reshape(-1, 2)
+    inside = np.flatnonzero(np.hypot(grid[:, 0], grid[:, 1]) <= 1.0)
+    grid.flags.writeable = inside.flags.writeable = False
+    return grid, inside
+
+
 def _interior_candidates(p: _Problem, n_interior: int) -> tuple[FloatArray, np.ndarray, FloatArray]:
     """Return the square grid over the reach disk (B, n n, 2), the indices inside the disk,
     and the spacing (B,)."""
-    u = np.linspace(-1.0, 1.0, n_interior)
-    grid = np.stack(np.meshgrid(u, u, indexing="ij"), -1).reshape(-1, 2)  # (n n, 2)
-    inside = np.flatnonzero(np.hypot(grid[:, 0], grid[:, 1]) <= 1.0)
+    grid, inside = _unit_grid(n_interior)
     pts = p.r[:, None, None] * grid
     return pts, inside, p.r * (2.0 / max(n_interior - 1, 1))
 
@@ -252,30 +294,6 @@ def _polar_candidates(p: _Problem) -> tuple[FloatArray, FloatArray]:
     pts = p.t[:, :, None, None, :] + radii[:, None, :, None, None] * unit
     step = np.broadcast_to(radii[:, None, :] * (2.0 * np.pi / POLAR_ANGLES), pts.shape[:3])
     return pts, step
-
-
-def _polar_starts(pts: FloatArray, vals: FloatArray, step: FloatArray) -> tuple[FloatArray, ...]:
-    """Return the ``N_LOCAL_PLANE`` best local minima of the polar grids as plane starts."""
-    b = len(pts)
-    pad = np.pad(vals, ((0, 0), (0, 0), (1, 1), (0, 0)), constant_values=np.inf)
-    local = (
-        (vals <= np.roll(vals, 1, axis=-1))
-        & (vals <= np.roll(vals, -1, axis=-1))
-        & (vals <= pad[:, :, :-2])
-        & (vals <= pad[:, :, 2:])
-    )
-    idx, fp = _best_local(vals.reshape(b, -1), local.reshape(b, -1), N_LOCAL_PLANE)
-    x0 = np.take_along_axis(pts.reshape(b, -1, 2), idx[..., None], axis=1)
-    steps = np.broadcast_to(step[..., None], vals.shape).reshape(b, -1)
-    return x0, fp, np.take_along_axis(steps, idx, axis=1)
-
-
-def _best_local(vals: FloatArray, local: np.ndarray, m: int) -> tuple[np.ndarray, FloatArray]:
-    """Return the indices (B, m) of the ``m`` smallest local minima of ``vals`` (B, C), values."""
-    masked = np.where(local & np.isfinite(vals), vals, np.inf)
-    m = min(m, masked.shape[-1])
-    idx = np.argsort(masked, axis=-1, kind="stable")[:, :m]
-    return idx, np.take_along_axis(masked, idx, axis=-1)
 
 
 def _model_max(f: FloatArray, g: FloatArray, H: FloatArray, d: FloatArray) -> FloatArray:
@@ -422,6 +440,24 @@ _PLANE_STENCIL = np.array(
 )
 
 
+#: Difference quotients of the arc stencil (values at 0, +h, -h): h g and h^2 H.
+_ARC_DIFF = np.array([[0.0, 0.5, -0.5], [-2.0, 1.0, 1.0]])
+#: Difference quotients of the plane stencil (values at _PLANE_STENCIL): h g_x, h g_y,
+#: h^2 H_xx, h^2 H_xy, h^2 H_yy.
+_PLANE_DIFF = np.array(
+    [
+        [0.0, 0.5, -0.5, 0.0, 0.0, 0.0],
+        [0.0, 0.0, 0.0, 0.5, -0.5, 0.0],
+        [-2.0, 1.0, 1.0, 0.0, 0.0, 0.0],
+        [1.0, -1.0, 0.0, -1.0, 0.0, 1.0],
+        [-2.0, 0.0, 0.0, 1.0, 1.0, 0.0],
+    ]
+)
+
+_ARC_POWERS = np.array([[1.0], [2.0]])
+_PLANE_POWERS = np.array([[1.0], [1.0], [2.0], [2.0], [2.0]])
+
+
 def _stencils(p: _Problem, o: FloatArray, rad: FloatArray, th: FloatArray, x: FloatArray) -> dict:
     """Return values, pieces and difference-quotient derivatives at arc angles and points.
 
@@ -431,60 +467,40 @@ def _stencils(p: _Problem, o: FloatArray, rad: FloatArray, th: FloatArray, x: Fl
     b, ma = th.shape
     mp = x.shape[1]
     pa = _circle_points(o, rad, th)
-    ha = FD_STEP * np.minimum(p.scale(pa) / np.maximum(rad, _TINY), 1.0)
+    centres = np.concatenate([pa, x], axis=1)
+    scale = p.scale(centres)
+    feas = p.feasible(centres)
+    ha = FD_STEP * np.minimum(scale[:, :ma] / np.maximum(rad, _TINY), 1.0)
     tha = th[..., None] + ha[..., None] * _ARC_STENCIL
-    pts_a = _circle_points(o[:, :, None], np.broadcast_to(rad[..., None], tha.shape), tha)
-    if mp == 0:  # one target: no interior starts (Lemma 3)
-        vals = p.pieces(pts_a.reshape(b, -1, 2))
-        va = vals.reshape(b, ma, 3, vals.shape[-1])
-        feas = p.feasible(pa)
-        return {
-            "fa": np.where(feas, p.combine(va[..., 0, :]), np.inf),
-            "pa": va[..., 0, :],
-            "ga": _finite((va[..., 1, :] - va[..., 2, :]) / (2.0 * ha[..., None])),
-            "Ha": _finite(
-                (va[..., 1, :] - 2.0 * va[..., 0, :] + va[..., 2, :]) / (ha * ha)[..., None]
-            ),
-            "ha": ha,
-        }
-    hp = FD_STEP * np.minimum(p.scale(x), p.r[:, None])
-    pts_p = x[:, :, None, :] + hp[..., None, None] * _PLANE_STENCIL
-    vals = p.pieces(np.concatenate([pts_a.reshape(b, -1, 2), pts_p.reshape(b, -1, 2)], axis=1))
+    pts = [_circle_points(o[:, :, None], rad[..., None], tha).reshape(b, -1, 2)]
+    if mp:
+        hp = FD_STEP * np.minimum(scale[:, ma:], p.r[:, None])
+        pts.append((x[:, :, None, :] + hp[..., None, None] * _PLANE_STENCIL).reshape(b, -1, 2))
+    vals = p.pieces(np.concatenate(pts, axis=1) if mp else pts[0])
     npc = vals.shape[-1]
     va = vals[:, : 3 * ma].reshape(b, ma, 3, npc)
-    vp = vals[:, 3 * ma :].reshape(b, mp, 6, npc)
-    h1, h2 = ha[..., None], hp[..., None]
-    ga = (va[..., 1, :] - va[..., 2, :]) / (2.0 * h1)
-    Ha = (va[..., 1, :] - 2.0 * va[..., 0, :] + va[..., 2, :]) / (h1 * h1)
-    gp = np.stack([vp[..., 1, :] - vp[..., 2, :], vp[..., 3, :] - vp[..., 4, :]], -1)
-    gp = gp / (2.0 * h2[..., None])
-    Hp = (
-        np.stack(
-            [
-                vp[..., 1, :] - 2.0 * vp[..., 0, :] + vp[..., 2, :],
-                vp[..., 5, :] - vp[..., 1, :] - vp[..., 3, :] + vp[..., 0, :],
-                vp[..., 3, :] - 2.0 * vp[..., 0, :] + vp[..., 4, :],
-            ],
-            -1,
-        )
-        / (h2 * h2)[..., None]
-    )
-    feas = p.feasible(np.concatenate([pa, x], axis=1))
-    return {
+    da = _finite((_ARC_DIFF @ va) / ha[..., None, None] ** _ARC_POWERS)
+    out = {
         "fa": np.where(feas[:, :ma], p.combine(va[..., 0, :]), np.inf),
         "pa": va[..., 0, :],
-        "ga": _finite(ga),
-        "Ha": _finite(Ha),
+        "ga": da[..., 0, :],
+        "Ha": da[..., 1, :],
         "ha": ha,
-        "fp": np.where(feas[:, ma:], p.combine(vp[..., 0, :]), np.inf),
-        "pp": vp[..., 0, :],
-        "gp": _finite(gp),
-        "Hp": _finite(Hp),
-        "hp": hp,
     }
+    if mp:
+        vp = vals[:, 3 * ma :].reshape(b, mp, 6, npc)
+        dp = _finite((_PLANE_DIFF @ vp) / hp[..., None, None] ** _PLANE_POWERS).swapaxes(-1, -2)
+        out.update(
+            fp=np.where(feas[:, ma:], p.combine(vp[..., 0, :]), np.inf),
+            pp=vp[..., 0, :],
+            gp=dp[..., :2],
+            Hp=dp[..., 2:],
+            hp=hp,
+        )
+    return out
 
 
-_ARC_KEYS = ("th", "fa", "pa", "ga", "Ha", "ha", "da", "active_a", "o", "rad")
+_ARC_KEYS = ("th", "fa", "pa", "ga", "Ha", "ha", "da", "active_a", "o", "rad", "miss_a")
 _PLANE_KEYS = ("x", "fp", "pp", "gp", "Hp", "hp", "dp", "active_p", "miss")
 
 
@@ -499,12 +515,25 @@ def _iterate(p: _Problem, st: dict) -> None:
         sp = np.where(st["active_p"][..., None], sp, 0.0)
         norm = np.hypot(sp[..., 0], sp[..., 1])
         st["active_p"] &= norm > (CONVERGED / FD_STEP) * st["hp"]
+    if not (st["active_a"].any() or (plane and st["active_p"].any())):
+        return  # every start has converged: nothing to evaluate
+    # A smooth objective converges quadratically under Newton's steps: after an accepted
+    # step shorter than SETTLED of the local scale the next would change f by less than
+    # the rounding of the difference quotients, so the start ends there.
+    settle = 0.0 if p.minimax else SETTLED / FD_STEP
+    settled_a = np.abs(sa) <= settle * st["ha"]
+    if plane:
+        settled_p = norm <= settle * st["hp"]
         new = _stencils(p, st["o"], st["rad"], st["th"] + sa, st["x"] + sp)
         new["x"] = st["x"] + sp
     else:
         new = _stencils(p, st["o"], st["rad"], st["th"] + sa, st["x"])
     new["th"] = st["th"] + sa
     acc_a = st["active_a"] & (new["fa"] < st["fa"])
+    # An arc step leaving F ends the arc at another circle: that end (a circle
+    # intersection) is a candidate itself, so MAX_MISSES such steps stop the start.
+    st["miss_a"] = st["miss_a"] + (st["active_a"] & ~np.isfinite(new["fa"]))
+    st["active_a"] &= (st["miss_a"] < MAX_MISSES) & ~(acc_a & settled_a)
     for key in ("th", "fa", "pa", "ga", "Ha", "ha"):
         mask = acc_a.reshape(acc_a.shape + (1,) * (new[key].ndim - acc_a.ndim))
         st[key] = np.where(mask, new[key], st[key])
@@ -515,7 +544,7 @@ def _iterate(p: _Problem, st: dict) -> None:
     # Plane steps leaving F MAX_MISSES times (each shrinking the trust radius): the
     # optimum nearby lies on the boundary, which the arc refinement covers; stop.
     st["miss"] = st["miss"] + ~np.isfinite(new["fp"])
-    st["active_p"] &= st["miss"] < MAX_MISSES
+    st["active_p"] &= (st["miss"] < MAX_MISSES) & ~(acc_p & settled_p)
     for key in _PLANE_KEYS[:6]:
         mask = acc_p.reshape(acc_p.shape + (1,) * (new[key].ndim - acc_p.ndim))
         st[key] = np.where(mask, new[key], st[key])
@@ -527,29 +556,34 @@ def _refine(
     arcs: tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray],
     plane: tuple[FloatArray, FloatArray, FloatArray],
     n_iter: int,
-) -> tuple[FloatArray, FloatArray]:
-    """Return the refined points (B, m, 2) and values (B, m) (``+inf`` where none started).
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """Return the refined points (B, m, 2) and values (B, m) (``+inf`` where none started),
+    and the final angles (B, ma) and plane points (B, mp, 2).
 
     ``arcs = (origin (B, ma, 2), radius (B, ma), theta (B, ma), value (B, ma), delta)``,
-    ``plane = (x (B, mp, 2), value (B, mp), delta (B, mp))``; one evaluation of all stencils
-    per iteration. Models are per piece (:meth:`_Problem.pieces`). Rows whose starts have
-    all converged drop out of the batch (when they are at least half of it).
+    ``plane = (x (B, mp, 2), value (B, mp), delta (B, mp))``; a start with value ``+inf``
+    does not start (otherwise the value is recomputed at the start). One evaluation of all
+    stencils per iteration. Models are per piece (:meth:`_Problem.pieces`). Rows whose
+    starts have all converged drop out of the batch (when they are at least half of it).
     """
     o, rad, th, fa, da = arcs
     x, fp, dp = plane
     st = {"pp": fp[..., None], "gp": x[..., None, :], "Hp": np.zeros(fp.shape + (1, 3))}
-    st["hp"] = fp
+    st.update(hp=fp, fp=fp)
     st.update(_stencils(p, o, rad, th, x))
-    st.update(th=th, x=x, o=o, rad=rad, da=da, dp=dp, fa=fa, fp=fp)
-    st["active_a"], st["active_p"] = np.isfinite(fa), np.isfinite(fp)
+    st.update(th=th, x=x, o=o, rad=rad, da=da, dp=dp)
+    st["fa"] = np.where(np.isfinite(fa), st["fa"], np.inf)
+    st["fp"] = np.where(np.isfinite(fp), st["fp"], np.inf)
+    st["active_a"], st["active_p"] = np.isfinite(st["fa"]), np.isfinite(st["fp"])
     st["miss"] = np.zeros(fp.shape, dtype=np.int64)
+    st["miss_a"] = np.zeros(fa.shape, dtype=np.int64)
     if len(p.r) < COMPACT_ROWS:  # small batches: no compaction, stop when all converged
         for _ in range(n_iter):
             _iterate(p, st)
             if not (st["active_a"].any() or st["active_p"].any()):
                 break
         pts = np.concatenate([_circle_points(o, rad, st["th"]), st["x"]], axis=1)
-        return pts, np.concatenate([st["fa"], st["fp"]], axis=1)
+        return pts, np.concatenate([st["fa"], st["fp"]], axis=1), st["th"], st["x"]
     full = {key: st[key].copy() for key in _ARC_KEYS + _PLANE_KEYS}
     rows = np.arange(len(p.r))
     sub = p
@@ -567,7 +601,7 @@ def _refine(
     for key in full:
         full[key][rows] = st[key]
     pts = np.concatenate([_circle_points(o, rad, full["th"]), full["x"]], axis=1)
-    return pts, np.concatenate([full["fa"], full["fp"]], axis=1)
+    return pts, np.concatenate([full["fa"], full["fp"]], axis=1), full["th"], full["x"]
 
 
 def solve_sensor(
@@ -608,64 +642,246 @@ def solve_sensor(
     """
     p = _Problem(base, center, r, targets, rho, w_d, w_theta, pose_cov, objective)
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        pts, _ = _solve(p, n_boundary, n_interior, n_iter)
-    positions = pts + p.center
-    # The value at the returned (absolute) positions, as a caller computes it: it differs
-    # from the value found in relative coordinates by the rounding of the addition.
-    values = p.at_absolute(positions)
+        prepared = Prepared(p, n_boundary, n_interior, n_iter)
+    positions, values = solve_prepared(prepared, (p.a0, p.b0, p.c0))
     return positions.reshape(p.shape + (2,)), values.reshape(p.shape)
 
 
-def _arc_starts(
-    p: _Problem, cand: tuple[FloatArray, ...], va: FloatArray, n_boundary: int
-) -> tuple[FloatArray, ...]:
-    """Return the arc refinement starts ``(origin, radius, theta, value, delta)``.
-
-    ``cand`` from :func:`_arc_candidates`, ``va`` its values (B, n, M).
-    The starts are the ``N_LOCAL_ARC`` best local minima along each circle; the trust radius
-    is the larger gap to a neighbouring angle, at least the uniform spacing in units of the
-    local scale (repeated angles have gap 0).
-    """
-    origins, radii, th, _ = cand
-    b, n, m = th.shape
-    local = (va <= np.roll(va, 1, axis=-1)) & (va <= np.roll(va, -1, axis=-1))
-    gap = np.diff(th, axis=-1, append=th[..., :1] + 2.0 * np.pi)  # to the next angle
-    reach = np.maximum(gap, np.roll(gap, 1, axis=-1))
-    idx, fa = _best_local(va.reshape(b * n, m), local.reshape(b * n, m), N_LOCAL_ARC)
-    th0 = np.take_along_axis(th.reshape(b * n, m), idx, -1).reshape(b, -1)
-    da0 = np.take_along_axis(reach.reshape(b * n, m), idx, -1).reshape(b, -1)
-    ka = idx.shape[-1]
-    o0, r0 = np.repeat(origins, ka, axis=1), np.repeat(radii, ka, axis=1)
-    local_scale = p.scale(_circle_points(o0, r0, th0)) / np.maximum(r0, _TINY)
-    da0 = np.maximum(da0, (2.0 * np.pi / n_boundary) * np.minimum(local_scale, 1.0))
-    return o0, r0, th0, fa.reshape(b, -1), da0
-
-
-def _plane_starts(
-    grid: FloatArray, vg: FloatArray, spacing: FloatArray, n_interior: int
-) -> tuple[FloatArray, ...]:
-    """Return the interior refinement starts ``(x, value, delta)``.
-
-    ``grid`` (B, n n, 2) and its values ``vg`` (B, n n) from :func:`_interior_candidates`;
-    the starts are the ``N_LOCAL_PLANE`` best local minima of the grid (4 neighbours).
-    """
-    b = len(grid)
-    vg = vg.reshape(b, n_interior, n_interior)
-    pad = np.pad(vg, ((0, 0), (1, 1), (1, 1)), constant_values=np.inf)
-    local = (
-        (vg <= pad[:, :-2, 1:-1])
-        & (vg <= pad[:, 2:, 1:-1])
-        & (vg <= pad[:, 1:-1, :-2])
-        & (vg <= pad[:, 1:-1, 2:])
+def _cyclic(n_rings: int, n: int) -> np.ndarray:
+    """Return the neighbours (n_rings n, 4) of points on rings of ``n`` cyclic angles:
+    the previous and next angle, and the same angle on the previous and next ring (-1
+    where there is none)."""
+    ring, ang = np.divmod(np.arange(n_rings * n), n)
+    return np.stack(
+        [
+            ring * n + (ang - 1) % n,
+            ring * n + (ang + 1) % n,
+            np.where(ring > 0, (ring - 1) * n + ang, -1),
+            np.where(ring < n_rings - 1, (ring + 1) * n + ang, -1),
+        ],
+        -1,
     )
-    ip, fp = _best_local(vg.reshape(b, -1), local.reshape(b, -1), N_LOCAL_PLANE)
-    x0 = np.take_along_axis(grid, ip[..., None], axis=1)
-    return x0, fp, np.broadcast_to(spacing[:, None], fp.shape).copy()
 
 
-def _solve(
-    p: _Problem, n_boundary: int, n_interior: int, n_iter: int
+def _grid_neighbours(n: int, inside: np.ndarray) -> np.ndarray:
+    """Return the 4 neighbours (len(inside), 4) of the square grid points ``inside`` (flat
+    indices of an ``n x n`` grid), as positions in ``inside`` (-1 outside the disk)."""
+    where = np.full(n * n, -1)
+    where[inside] = np.arange(len(inside))
+    i, j = np.divmod(inside, n)
+    out = []
+    for di, dj in ((-1, 0), (1, 0), (0, -1), (0, 1)):
+        ii, jj = i + di, j + dj
+        ok = (ii >= 0) & (ii < n) & (jj >= 0) & (jj < n)
+        out.append(np.where(ok, where[np.where(ok, ii * n + jj, 0)], -1))
+    return np.stack(out, -1)
+
+
+@functools.lru_cache(maxsize=64)
+def _tables(
+    nv: int, n0: int, n1: int, k: int, n_interior: int
+) -> tuple[np.ndarray, np.ndarray, int]:
+    """Return the candidates' neighbours (C, 4), the start groups (G, n) and how many of
+    the groups are circles, for the layout of :class:`Prepared` (``C`` stands for none).
+
+    Neighbours: the previous and next angle on each circle (cyclic); the 4 grid neighbours
+    inside the disk; on the polar grids the previous and next angle (cyclic) and the same
+    angle on the previous and next ring of the same target. Groups: the reach circle, each
+    ``rho`` circle, and (``n_interior > 0``) the square grid and the polar grids.
+    """
+    # Circles: only the neighbouring angles (no rings across circles).
+    nbr = [
+        np.full((nv, 4), -1),
+        np.concatenate([nv + _cyclic(1, n0)[:, :2], np.full((n0, 2), -1)], 1),
+        np.concatenate([nv + n0 + _cyclic(k, n1)[:, :2], np.full((k * n1, 2), -1)], 1),
+    ]
+    groups = [nv + np.arange(n0)] + [nv + n0 + c * n1 + np.arange(n1) for c in range(k)]
+    arc_groups = len(groups)
+    if n_interior:
+        inside = _unit_grid(n_interior)[1]
+        start, ng = nv + n0 + k * n1, len(inside)
+        g_nbr = _grid_neighbours(n_interior, inside)
+        p_nbr = _cyclic(k * POLAR_RINGS, POLAR_ANGLES)
+        # Polar rings of different targets are not neighbours.
+        ring = np.arange(k * POLAR_RINGS * POLAR_ANGLES) // POLAR_ANGLES % POLAR_RINGS
+        p_nbr[:, 2] = np.where(ring > 0, p_nbr[:, 2], -1)
+        p_nbr[:, 3] = np.where(ring < POLAR_RINGS - 1, p_nbr[:, 3], -1)
+        nbr.append(np.where(g_nbr >= 0, start + g_nbr, -1))
+        nbr.append(np.where(p_nbr >= 0, start + ng + p_nbr, -1))
+        groups += [start + np.arange(ng), start + ng + np.arange(k * POLAR_RINGS * POLAR_ANGLES)]
+    nbr = np.concatenate(nbr, axis=0)
+    c = len(nbr)
+    table = np.full((len(groups), max(len(g) for g in groups)), c)
+    for i, g in enumerate(groups):
+        table[i, : len(g)] = g
+    neighbours = np.where(nbr >= 0, nbr, c)
+    neighbours.flags.writeable = table.flags.writeable = False
+    return neighbours, table, arc_groups
+
+
+class Prepared:
+    """The part of a batch of subproblems that does not depend on the base ``(a0, b0, c0)``.
+
+    The candidates (:func:`_arc_candidates`, the circle intersections, with K >= 2 the
+    interior and polar grids), their feasibility, the sensor's information entries at them
+    and the refinement start each would be depend only on the sensor's reach disk, the
+    targets, ``rho``, the weights and the pose covariance, which Gauss-Seidel relaxation
+    keeps fixed over its sweeps while the base (the other sensors' information) changes.
+    Built once by :func:`prepare`, solved for any base by :func:`solve_prepared`.
+
+    Candidates are laid out as [circle intersections, reach circle (sorted angles),
+    ``rho`` circles, interior grid points inside the disk, polar grids]; ``neighbours``
+    (C, 4) and the start ``groups`` (G, n) index them, with ``C`` standing for "none"
+    (value ``+inf``).
+    """
+
+    def __init__(self, p: _Problem, n_boundary: int, n_interior: int, n_iter: int):
+        b, k = len(p.r), p.k
+        self.problem, self.n_iter = p, n_iter
+        #: With ``remember``, each solve keeps its starts and where they ended (``last``);
+        #: the next solve refines from there the rows whose starts are the same candidates.
+        self.remember, self.last = False, None
+        (o0, r0, th0, pts0), (o1, r1, th1, pts1) = _arc_candidates(p, n_boundary)
+        n0, n1 = th0.shape[-1], th1.shape[-1]
+        pts_v, ok_v = feasible_set.pair_points(p.origins, p.radii)
+        nv, na = pts_v.shape[1], n0 + k * n1
+        self.nv, self.na = nv, na
+        # Arc candidates: circle origin, radius, angle and initial trust radius.
+        self.arc_o = np.concatenate([np.repeat(o0, n0, axis=1), np.repeat(o1, n1, axis=1)], axis=1)
+        self.arc_r = np.concatenate([np.repeat(r0, n0, axis=1), np.repeat(r1, n1, axis=1)], axis=1)
+        self.arc_th = np.concatenate([th0.reshape(b, -1), th1.reshape(b, -1)], axis=1)
+        pts_a = np.concatenate([pts0.reshape(b, -1, 2), pts1.reshape(b, -1, 2)], axis=1)
+        # The trust radius of an arc start: the larger gap to a neighbouring angle, at
+        # least the uniform spacing in units of the local scale (repeated angles: gap 0).
+        reach = []
+        for th in (th0, th1):
+            gap = np.diff(th, axis=-1, append=th[..., :1] + 2.0 * np.pi)
+            reach.append(np.maximum(gap, np.roll(gap, 1, axis=-1)).reshape(b, -1))
+        local_scale = p.scale(pts_a) / np.maximum(self.arc_r, _TINY)
+        self.arc_d = np.maximum(
+            np.concatenate(reach, axis=1),
+            (2.0 * np.pi / n_boundary) * np.minimum(local_scale, 1.0),
+        )
+        parts = [pts_v, pts_a]
+        self.interior = k > 1 and n_interior > 0
+        self.plane_x = np.zeros((b, 0, 2))
+        self.plane_d = np.zeros((b, 0))
+        if self.interior:
+            grid, inside, spacing = _interior_candidates(p, n_interior)
+            polar, polar_step = _polar_candidates(p)
+            ng = len(inside)
+            self.plane_x = np.concatenate([grid[:, inside], polar.reshape(b, -1, 2)], axis=1)
+            self.plane_d = np.concatenate(
+                [
+                    np.broadcast_to(spacing[:, None], (b, ng)),
+                    np.broadcast_to(polar_step[..., None], polar.shape[:-1]).reshape(b, -1),
+                ],
+                axis=1,
+            )
+            parts.append(self.plane_x)
+        self.pts = np.concatenate(parts, axis=1)
+        self.neighbours, self.groups, self.arc_groups = _tables(
+            nv, n0, n1, k, n_interior if self.interior else 0
+        )
+        # Start attributes indexed by candidate (and "none", the last index).
+        c = self.pts.shape[1]
+        at = {"arc_o": (nv, 2), "arc_r": (nv, 0), "arc_th": (nv, 0), "arc_d": (nv, 0)}
+        if self.interior:
+            at.update(plane_x=(nv + na, 2), plane_d=(nv + na, 0))
+        for key, (first, width) in at.items():
+            value = getattr(self, key)
+            full = np.zeros((b, c + 1) + ((width,) if width else ()))
+            full[:, first : first + value.shape[1]] = value
+            setattr(self, key, full)
+        feasible = p.feasible(self.pts)
+        feasible[:, :nv] &= ok_v
+        self.feasible = feasible
+        self.info = p.entries(self.pts)
+
+    def take(self, rows: np.ndarray) -> Prepared:
+        """Return the sub-batch of the given rows."""
+        sub = object.__new__(Prepared)
+        sub.__dict__.update(vars(self))
+        sub.problem = self.problem.take(rows)
+        sub.last, sub.remember = None, False
+        for key in ("arc_o", "arc_r", "arc_th", "arc_d", "plane_x", "plane_d", "pts", "feasible"):
+            setattr(sub, key, getattr(self, key)[rows])
+        sub.info = tuple(x[rows] for x in self.info)
+        return sub
+
+    def starts(self, vals: FloatArray) -> tuple[tuple[FloatArray, ...], tuple[FloatArray, ...]]:
+        """Return the refinement starts for candidate values ``vals`` (B, C).
+
+        ``N_LOCAL_ARC`` best local minima (no neighbour lower) of each circle and
+        ``N_LOCAL_PLANE`` of the square and of the polar grids, as
+        ``arcs = (origin, radius, theta, value, delta)`` and ``plane = (x, value, delta)``.
+        """
+        b = len(vals)
+        ext = np.concatenate([vals, np.full((b, 1), np.inf)], axis=1)
+        local = vals <= ext[:, self.neighbours].min(axis=-1)
+        ext[:, :-1] = np.where(local & np.isfinite(vals), vals, np.inf)
+        grouped = ext[:, self.groups]  # (B, G, n)
+        order = np.argsort(grouped, axis=-1, kind="stable")[..., :N_LOCAL_PLANE]
+        idx = self.groups[np.arange(len(self.groups))[:, None], order]  # (B, G, m)
+        rows = np.arange(b)[:, None]
+        value = grouped[rows[..., None], np.arange(len(self.groups))[:, None], order]
+        ga = self.arc_groups
+        self.chosen = idx
+        ia = idx[:, :ga, :N_LOCAL_ARC].reshape(b, -1)
+        fa = value[:, :ga, :N_LOCAL_ARC].reshape(b, -1)
+        arcs = (
+            self.arc_o[rows, ia], self.arc_r[rows, ia], self.arc_th[rows, ia], fa,
+            self.arc_d[rows, ia],
+        )  # fmt: skip
+        if not self.interior:
+            empty = np.zeros((b, 0))
+            return arcs, (np.zeros((b, 0, 2)), empty, empty)
+        ip = idx[:, ga:].reshape(b, -1)
+        plane = (self.plane_x[rows, ip], value[:, ga:].reshape(b, -1), self.plane_d[rows, ip])
+        return arcs, plane
+
+
+def prepare(
+    center: FloatArray,
+    r: FloatArray,
+    targets: FloatArray,
+    rho: FloatArray,
+    w_d: FloatArray,
+    w_theta: FloatArray,
+    pose_cov: FloatArray | None = None,
+    objective: TraceObjective = TRACE,
+    *,
+    n_boundary: int = 64,
+    n_interior: int = 16,
+    n_iter: int = 30,
+) -> Prepared:
+    """Return the base-independent part of a batch of subproblems, flattened to B rows.
+
+    Arguments as :func:`solve_sensor` without ``base`` (their leading axes broadcast to
+    the batch shape, flattened row-major).
+    """
+    p = _Problem(None, center, r, targets, rho, w_d, w_theta, pose_cov, objective)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        return Prepared(p, n_boundary, n_interior, n_iter)
+
+
+def solve_prepared(
+    prepared: Prepared, base: tuple[FloatArray, FloatArray, FloatArray]
 ) -> tuple[FloatArray, FloatArray]:
+    """Return ``(positions (B, 2), values (B,))`` of :func:`solve_sensor` for a prepared batch.
+
+    ``base`` ``(a0, b0, c0)``, each (B, K), for the rows of ``prepared``.
+    """
+    p = prepared.problem.with_base(base)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        pts, _ = _solve(p, prepared)
+    positions = pts + p.center
+    # The value at the returned (absolute) positions, as a caller computes it: it differs
+    # from the value found in relative coordinates by the rounding of the addition.
+    return positions, p.at_absolute(positions)
+
+
+def _solve(p: _Problem, cand: Prepared) -> tuple[FloatArray, FloatArray]:
     """Return the best points (B, 2) relative to the sensors and their values (B,).
 
     All candidates (arcs, circle intersections, interior grid) are evaluated in one call.
@@ -673,50 +889,23 @@ def _solve(
     holds for every measurement model and pose covariance, ``docs/sensor-models-design.md``
     section 5).
     """
-    b = len(p.r)
-    groups = _arc_candidates(p, n_boundary)
-    sizes = [g[2].size // b for g in groups]
-    pts_a = np.concatenate([g[3].reshape(b, -1, 2) for g in groups], axis=1)
-    pts_v, ok_v = feasible_set.pair_points(p.origins, p.radii)
-    interior = p.k > 1 and n_interior > 0
-    parts = [pts_a, pts_v]
-    if interior:
-        grid, inside, spacing = _interior_candidates(p, n_interior)
-        polar, polar_step = _polar_candidates(p)
-        parts += [grid[:, inside], polar.reshape(b, -1, 2)]
-    vals = p.masked(np.concatenate(parts, axis=1))
-    na, nv = pts_a.shape[1], pts_v.shape[1]
-    vals_a, vals_v = vals[:, :na], np.where(ok_v, vals[:, na : na + nv], np.inf)
-    split = np.split(vals_a, np.cumsum(sizes)[:-1], axis=1)
-    starts = [
-        _arc_starts(p, g, v.reshape(g[2].shape), n_boundary)
-        for g, v in zip(groups, split, strict=True)
-    ]
-    arcs = tuple(np.concatenate(parts, axis=1) for parts in zip(*starts, strict=True))
-    if interior:
-        ng = len(inside)
-        vals_g = np.full(grid.shape[:2], np.inf)
-        vals_g[:, inside] = vals[:, na + nv : na + nv + ng]
-        vals_p = vals[:, na + nv + ng :].reshape(polar.shape[:-1])
-        plane = tuple(
-            np.concatenate(x, axis=1)
-            for x in zip(
-                _plane_starts(grid, vals_g, spacing, n_interior),
-                _polar_starts(polar, vals_p, polar_step),
-                strict=True,
-            )
-        )
-        grid = np.concatenate([grid, polar.reshape(b, -1, 2)], axis=1)
-        vals_g = np.concatenate([vals_g, vals_p.reshape(b, -1)], axis=1)
-    else:
-        grid, vals_g = np.zeros((b, 0, 2)), np.zeros((b, 0))
-        plane = (grid, vals_g, vals_g)
-    pts_r, vals_r = _refine(p, arcs, plane, n_iter)
-    all_pts = np.concatenate([pts_r, pts_v, pts_a, grid], axis=1)
-    all_vals = np.concatenate([vals_r, vals_v, vals_a, vals_g], axis=1)
+    vals = np.where(cand.feasible, p.value(cand.info), np.inf)
+    arcs, plane = cand.starts(vals)
+    chosen = cand.chosen
+    if cand.last is not None:
+        # A repeated solve (Gauss-Seidel's next sweep, the base changed a little): rows
+        # whose starts come from the same candidates refine from where those ended.
+        same = np.all(chosen == cand.last[0], axis=(1, 2))
+        arcs = arcs[:2] + (np.where(same[:, None], cand.last[1], arcs[2]),) + arcs[3:]
+        plane = (np.where(same[:, None, None], cand.last[2], plane[0]),) + plane[1:]
+    pts_r, vals_r, th_r, x_r = _refine(p, arcs, plane, cand.n_iter)
+    if cand.remember:
+        cand.last = (chosen, th_r, x_r)
+    all_pts = np.concatenate([pts_r, cand.pts], axis=1)
+    all_vals = np.concatenate([vals_r, vals], axis=1)
     best = np.argmin(all_vals, axis=1)
-    s = np.take_along_axis(all_pts, best[:, None, None], axis=1)[:, 0]
-    value = np.take_along_axis(all_vals, best[:, None], axis=1)[:, 0]
+    rows = np.arange(len(best))
+    s, value = all_pts[rows, best], all_vals[rows, best]
     empty = ~np.isfinite(value)
     if np.any(empty):  # F empty: no candidate is feasible
         fb = feasible_set.fallback(p.zero, p.r, p.t, p.rho)

@@ -109,8 +109,12 @@ def _named(message, given):
 def _check_accepted(sc):
     """Stored values are the converted ones, and the scenario runs."""
     assert type(sc.n_sensors) is int and type(sc.n_steps) is int
-    for name in ("dt", "q", "sensor_radius", "reward_scale"):
+    for name in ("dt", "sensor_radius", "reward_scale"):
         assert type(getattr(sc, name)) is float
+    # q: one intensity, or one per target (n_targets > 1).
+    assert type(sc.q) is float or (
+        type(sc.q) is tuple and len(sc.q) == sc.n_targets and all(type(e) is float for e in sc.q)
+    )
     for name in ("sigma_d2", "sigma_theta2", "vmax", "rho", "orientation"):
         v = getattr(sc, name)
         assert type(v) is float or (type(v) is tuple and all(type(e) is float for e in v))

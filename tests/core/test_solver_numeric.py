@@ -230,3 +230,38 @@ def test_special_cases_are_finite():
             base2, [0.5, 0.5], 1.0, two, 0.2, w_d, w_t, 0.01 * np.eye(2), WORST_TRACE
         )
         assert np.all(np.isfinite(pos)) and np.isfinite(val)
+
+
+@settings(max_examples=20, deadline=None)
+@given(seed=st.integers(0, 10_000), k=st.integers(1, 3))
+def test_prepared_solves_equal_fresh_solves(seed, k):
+    """A prepared batch solved for two bases gives a fresh solve's answer for each; with
+    ``remember`` (the relaxation's warm refinement) the second is the same optimum to the
+    refinement's tolerance, never worse than the fresh solve's by more than 1e-9."""
+    rng = np.random.default_rng(seed)
+    case = random_case(rng, k)
+    center, r, targets, rho, priors, w_d, w_theta, pose_cov = case
+    pc = None if pose_cov is None else pose_cov[None]
+    prepared = solver_numeric.prepare(
+        center[None], np.array([r]), targets[None], np.array([rho]), np.array([w_d]),
+        np.array([w_theta]), pc,
+    )  # fmt: skip
+    warm = solver_numeric.prepare(
+        center[None], np.array([r]), targets[None], np.array([rho]), np.array([w_d]),
+        np.array([w_theta]), pc,
+    )  # fmt: skip
+    warm.remember = True
+    for step in range(3):
+        # The other sensors' information grows a little each sweep.
+        grown = priors + step * 0.05 * np.array([random_spd(rng, 2) for _ in range(k)])
+        base = (grown[:, 0, 0], grown[:, 0, 1], grown[:, 1, 1])
+        fresh_pos, fresh_val = solve_one((*case[:4], grown, *case[5:]))
+        pos, val = solver_numeric.solve_prepared(prepared, tuple(b[None] for b in base))
+        np.testing.assert_array_equal(pos[0], fresh_pos)
+        np.testing.assert_array_equal(val[0], fresh_val)
+        wpos, wval = solver_numeric.solve_prepared(warm, tuple(b[None] for b in base))
+        assert wval[0] <= fresh_val + 1e-9 * abs(fresh_val)
+        mine = longhand_objective(wpos[0], targets, grown, w_d, w_theta, pose_cov, TRACE)
+        assert abs(wval[0] - mine) <= 1e-8 * abs(mine)
+        assert np.linalg.norm(wpos[0] - center) <= r * (1 + 1e-12)
+        assert np.all(np.linalg.norm(wpos[0] - targets, axis=-1) >= rho * (1 - 1e-12))
