@@ -257,6 +257,9 @@ def observations(target: FloatArray, sensor: FloatArray, order: np.ndarray) -> n
     m, td, sd = sensor.shape[-2], target.shape[-1], sensor.shape[-1]
     out = np.empty(sensor.shape[:-2] + (m, td + sd * m), dtype=np.float32)
     out[..., :td] = target[..., None, :]
+    if sensor.ndim == 2:  # one copy: a single gather
+        out[:, td:] = sensor[order].reshape(m, m * sd)
+        return out
     # Agent i sees sensors i, i+1, ... (mod M): a contiguous window of the doubled list.
     # Slicing windows is ~5x faster than fancy indexing with ``order`` on large batches.
     doubled = np.concatenate([sensor, sensor], axis=-2)

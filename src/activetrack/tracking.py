@@ -162,20 +162,48 @@ def advance_target(
     (eq. 11) updates at the position fixes ``fixes`` the team believes (the same array
     when poses are known), with ``params.filter_pose_cov`` in its noise.
     """
-    x_next = x_true @ target.Phi.T + process_noise @ target.noise_factor.T
-    z = measurement.range_bearing(x_next[..., :2], sensors, params.orientation, wrap=False)
-    z += measurement_noise.reshape(*measurement_noise.shape[:-1], -1, 2) * params.noise_std
-    measurement.wrap_angle(z[..., 1], inplace=True)  # wrapped once, after the noise
+    x_next = move_target(target, x_true, process_noise)
+    z = measure(params, x_next[..., :2], sensors, measurement_noise)
+    x_post, P_post = filter_update(params, x_pred, P_pred, z, fixes)
+    return x_next, z, x_post, P_post
+
+
+def move_target(target: TargetParams, x_true: FloatArray, process_noise: FloatArray) -> FloatArray:
+    """Return the true target's next state (eq. 2) from ``process_noise`` (..., n) normals."""
+    return x_true @ target.Phi.T + process_noise @ target.noise_factor.T
+
+
+def measure(
+    params: LoopParams, positions: FloatArray, sensors: FloatArray, noise: FloatArray
+) -> FloatArray:
+    """Return every sensor's noisy measurement (eq. 4) of targets at ``positions``.
+
+    One target: ``positions`` (..., 2), ``noise`` (..., 2M) -> (..., M, 2); K targets in one
+    call: ``positions`` (..., K, 2), ``noise`` (..., 2MK) target-major -> (..., K, M, 2).
+    ``sensors`` (..., M, 2) are the true positions. Bearings are wrapped once, after the
+    noise; a component a sensor's model does not measure is exactly 0.
+    """
+    if positions.ndim > sensors.ndim - 1:  # K targets: a target axis before the sensors'
+        sensors = sensors[..., None, :, :]
+    z = measurement.range_bearing(positions, sensors, params.orientation, wrap=False)
+    z += noise.reshape(z.shape) * params.noise_std
+    measurement.wrap_angle(z[..., 1], inplace=True)
+    if params.models is not None:  # an unmeasured component is exactly 0
+        z = np.where(sensor_models.USES[params.models], z, 0.0)
+    return z
+
+
+def filter_update(
+    params: LoopParams, x_pred: FloatArray, P_pred: FloatArray, z: FloatArray, fixes: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """Return one target's EKF posterior (eq. 11) from its measurements ``z`` (..., M, 2)
+    taken by sensors the team believes at ``fixes``."""
     if params.models is None and params.filter_pose_cov is None:
-        x_post, P_post = ekf.update(
+        return ekf.update(
             x_pred, P_pred, z, fixes, params.sigma_d2, params.sigma_theta2, params.orientation,
             weights=params.weights,
         )  # fmt: skip
-        return x_next, z, x_post, P_post
-    if params.models is not None:  # an unmeasured component is exactly 0
-        z = np.where(sensor_models.USES[params.models], z, 0.0)
-    x_post, P_post = ekf.update(
+    return ekf.update(
         x_pred, P_pred, z, fixes, params.sigma_d2, params.sigma_theta2, params.orientation,
         models=params.models, weights=params.weights, pose_cov=params.filter_pose_cov,
     )  # fmt: skip
-    return x_next, z, x_post, P_post

@@ -149,10 +149,13 @@ class World:
             for k in range(K)
         ]  # fmt: skip
         self._pose_slice = slice(int(proc[-1]) + 2 * m * K, None)
+        # Every target's measurement normals, contiguous (target-major).
+        self._meas_slice = slice(int(proc[-1]), int(proc[-1]) + 2 * m * K)
         if N > 1:  # the step's normals are (copies, n_noise) then; one copy's are (n_noise,)
             self._noise_slices = [
                 ((slice(None), a), (slice(None), b)) for a, b in self._noise_slices
             ]
+            self._meas_slice = (slice(None), self._meas_slice)
         self._center = np.asarray(sc.sensor_center, dtype=np.float64)
         # Observation constants (activetrack.observation).
         self.length_scale = observation.length_scale(sc)
@@ -491,14 +494,29 @@ class World:
             sensors = fixes = moved
         trace = None
         scores = []
-        for t, tp, x_pred, (proc, meas) in zip(
-            tgt, p.targets, x_preds, self._noise_slices, strict=True
+        if K > 1:  # every target moves, then all are measured in one call
+            moved_t = [
+                tracking.move_target(tp, t["x_true"] if self._one else t["x_true"][calc],
+                                     noise[proc])
+                for t, tp, (proc, _) in zip(tgt, p.targets, self._noise_slices, strict=True)
+            ]  # fmt: skip
+            true_pos = np.empty(moved_t[0].shape[:-1] + (K, 2))
+            for k, x in enumerate(moved_t):
+                true_pos[..., k, :] = x[..., :2]
+            z_all = tracking.measure(p, true_pos, sensors, noise[self._meas_slice])
+        for k, (t, tp, x_pred, (proc, meas)) in enumerate(
+            zip(tgt, p.targets, x_preds, self._noise_slices, strict=True)
         ):
-            x_true, P_pred = (t["x_true"], t["P_pred"]) if self._one else (
-                t["x_true"][calc], t["P_pred"][calc])  # fmt: skip
-            x_true, _, x_post, P_post = tracking.advance_target(
-                p, tp, x_true, x_pred, P_pred, sensors, fixes, noise[proc], noise[meas]
-            )
+            P_pred = t["P_pred"] if self._one else t["P_pred"][calc]
+            if K == 1:
+                x_true = t["x_true"] if self._one else t["x_true"][calc]
+                x_true, _, x_post, P_post = tracking.advance_target(
+                    p, tp, x_true, x_pred, P_pred, sensors, fixes, noise[proc], noise[meas]
+                )
+            else:
+                x_true = moved_t[k]
+                z = z_all[..., k, :, :]
+                x_post, P_post = tracking.filter_update(p, x_pred, P_pred, z, fixes)
             x_next, P_next = predict(x_post, P_post, tp.Phi, tp.Q)
             if partial:
                 x_true, x_post, P_post, x_next, P_next = (
