@@ -151,6 +151,8 @@ def _warm_start(
     """Return the current positions, each sensor inside a ``rho`` disk at its nearest
     feasible point (sensors that cannot move stay)."""
     each = np.broadcast_to(targets[:, None], (*current.shape[:-1], *targets.shape[-2:]))
+    if feasible_set.contains(current, current, r, each, rho).all():
+        return current.copy()  # the common case: project would return every point as is
     start = feasible_set.project(current, current, r, each, rho)
     return np.where((r > 0.0)[..., None], start, current)
 

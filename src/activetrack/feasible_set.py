@@ -201,9 +201,6 @@ def project(
     q, center = np.asarray(q, np.float64), np.asarray(center, np.float64)
     targets = np.asarray(targets, np.float64)
     r, rho = np.asarray(r, np.float64), np.asarray(rho, np.float64)
-    inside = contains(q, center, r, targets, rho)
-    if np.all(inside):  # the common case: every point is already feasible
-        return np.broadcast_to(q, inside.shape + (2,)).copy()
     origins, radii = circles(center, r, targets, rho)
     shape = np.broadcast_shapes(q.shape[:-1], radii.shape[:-1])
     q = np.broadcast_to(q, shape + (2,))
