@@ -36,7 +36,7 @@ from typing import Any
 
 import numpy as np
 
-from activetrack.baselines.simulation import mean_ci
+from activetrack.baselines.simulation import detection_gaps, mean_ci
 from activetrack.files import RunOutputs, prepare_output_dir
 
 #: Names that resolve to the planners' expert policies.
@@ -55,6 +55,10 @@ class PolicyEvaluation:
         nees: per-episode mean position NEES (2 for a consistent filter; the mean over
             targets), NaN where the environment has no world to read it from.
         ms_per_step: per-episode mean time of the policy's decision (plan or act) per step.
+        no_detection, longest_gap: per-episode fraction of steps without a measurement of
+            a target and the longest such run
+            (:func:`activetrack.baselines.simulation.detection_gaps`); None with unlimited
+            sensing.
     """
 
     policy: str
@@ -65,6 +69,8 @@ class PolicyEvaluation:
     requested: bool = True
     nees: np.ndarray | None = None
     ms_per_step: np.ndarray | None = None
+    no_detection: np.ndarray | None = None
+    longest_gap: np.ndarray | None = None
 
     def summary(self, reference: PolicyEvaluation | None = None) -> dict[str, Any]:
         """Return the JSON summary; the ratio is to ``reference``'s mean trace (GSR)."""
@@ -89,6 +95,9 @@ class PolicyEvaluation:
             "seeds": [self.seeds[0], self.seeds[-1]],
             "requested": self.requested,
         }
+        if self.no_detection is not None and np.all(np.isfinite(self.no_detection)):
+            out["no_detection"] = float(np.mean(self.no_detection))
+            out["longest_gap"] = int(np.max(self.longest_gap))
         if reference is not None:
             out["ratio_to_gsr"] = mt / float(np.mean(reference.mean_trace))
             out["ratio_to_gsr_ci95"] = list(paired_ratio_ci(self.mean_trace, reference.mean_trace))
@@ -161,14 +170,16 @@ def _reset_policy(policy: Any, seed: int) -> None:
         reset(seed)
 
 
-def run_episode(env: Any, policy: Any, seed: int) -> tuple[float, float, float, float, float]:
-    """Return ``(mean_trace, rmse, return, mean_nees, ms_per_step)`` of one episode of
-    ``policy`` from ``seed`` (``ms_per_step``: the policy's decision time per step)."""
+def run_episode(env: Any, policy: Any, seed: int) -> tuple[float, ...]:
+    """Return ``(mean_trace, rmse, return, mean_nees, ms_per_step, no_detection,
+    longest_gap)`` of one episode of ``policy`` from ``seed`` (``ms_per_step``: the
+    policy's decision time per step; the last two as
+    :func:`activetrack.baselines.simulation.detection_gaps`, NaN without a world)."""
     from activetrack.envs import policy_step
 
     _reset_policy(policy, seed)
     obs, _ = env.reset(seed=seed)
-    traces, errors, nees, total = [], [], [], 0.0
+    traces, errors, nees, seen, total = [], [], [], [], 0.0
     first = env.possible_agents[0]
     world = getattr(env.unwrapped, "world", None)
     timed, seconds = _timed(policy)
@@ -177,14 +188,18 @@ def run_episode(env: Any, policy: Any, seed: int) -> tuple[float, float, float, 
         traces.append(infos[first]["trace"])
         errors.append(infos[first]["position_error"])
         nees.append(float(world.position_nees(0)) if world is not None else np.nan)
+        if world is not None:
+            seen.append(world.get("detected", 0).any(axis=-1))
         total += float(rewards[first])
     errors_arr = np.asarray(errors)
+    gaps = detection_gaps(np.array(seen)) if world is not None else (np.nan, np.nan)
     return (
         float(np.mean(traces)),
         float(np.sqrt(np.mean(errors_arr**2))),
         total,
         float(np.mean(nees)),
         1e3 * seconds[0] / len(traces),
+        *gaps,
     )
 
 
@@ -264,6 +279,7 @@ def evaluate(
         items.append(("gsr", "gsr"))
     seeds = [seed + j for j in range(episodes)]
     env = parallel_env(scenario, **overrides)
+    limited = env.unwrapped.world.scenario.limited_sensing
     try:
         # Every policy loaded and checked before the first episode.
         resolved = []
@@ -296,17 +312,26 @@ def evaluate(
     for index, ((label, _), rows) in enumerate(zip(items, per_policy, strict=True)):
         arr = np.asarray(rows)
         requested = has_gsr or index < len(items) - 1
+        gaps = (arr[:, 5], arr[:, 6]) if limited else (None, None)
         results.append(
             PolicyEvaluation(
-                label, seeds, arr[:, 0], arr[:, 1], arr[:, 2], requested, arr[:, 3], arr[:, 4]
-            )
+                label,
+                seeds,
+                arr[:, 0],
+                arr[:, 1],
+                arr[:, 2],
+                requested,
+                arr[:, 3],
+                arr[:, 4],
+                *gaps,
+            )  # fmt: skip
         )
     return results
 
 
 def run_episodes(
     scenario: Any, overrides: dict[str, Any], policy: Any, seeds: list[int]
-) -> list[tuple[float, float, float, float, float]]:
+) -> list[tuple[float, ...]]:
     """Return :func:`run_episode` on each of ``seeds`` in a new environment (one Ray task)."""
     from activetrack.envs import parallel_env
 
@@ -374,10 +399,13 @@ def format_table(rows: Sequence[dict[str, Any]]) -> str:
             ratio = f"{r['ratio_to_gsr']:.3f} [{rlo:.3f}, {rhi:.3f}]"
         nees = "-" if r.get("nees") is None else f"{r['nees']:.2f}"
         ms = "-" if r.get("ms_per_step") is None else f"{r['ms_per_step']:.3g}"
-        lines.append(
+        line = (
             f"{name:<34} {trace:>26} {r['rmse']:>7.3f} {nees:>5} {ms:>8} "
             f"{r['mean_return']:>8.2f} {ratio:>22}"
         )
+        if "no_detection" in r:  # limited sensing: steps without a measurement, longest run
+            line += f"  no detection {r['no_detection']:.3f}, longest gap {r['longest_gap']}"
+        lines.append(line)
     return "\n".join(lines)
 
 
@@ -414,6 +442,14 @@ def write_results(
                 "return": r.returns.tolist(),
                 **({} if r.nees is None else {"nees": r.nees.tolist()}),
                 **({} if r.ms_per_step is None else {"ms_per_step": r.ms_per_step.tolist()}),
+                **(
+                    {}
+                    if r.no_detection is None
+                    else {
+                        "no_detection": r.no_detection.tolist(),
+                        "longest_gap": r.longest_gap.tolist(),
+                    }
+                ),
             }
             for r in results
         },

@@ -48,6 +48,8 @@ class RunRecord:
         sensors: (K + 1, M, 2) sensor positions.
         position_covs: (K + 1, 2, 2) posterior position covariances.
         terminated: whether the run stopped early because the trace exceeded ``max_trace``.
+        seen: (steps, K) whether some sensor measured each target at each step; None
+            with unlimited sensing (every sensor measures every target every step).
     """
 
     seed: int
@@ -61,6 +63,7 @@ class RunRecord:
     sensors: FloatArray
     position_covs: FloatArray
     terminated: bool = False
+    seen: np.ndarray | None = None
 
     @property
     def mean_trace(self) -> float:
@@ -77,6 +80,34 @@ class RunRecord:
         """Return the mean position NEES over the run's steps (2 for a consistent filter)."""
         return float(np.mean(self.nees))
 
+    @property
+    def no_detection(self) -> float:
+        """Return the fraction of steps in which no sensor measured a target (mean over
+        targets; 0 with unlimited sensing)."""
+        return 0.0 if self.seen is None else detection_gaps(self.seen)[0]
+
+    @property
+    def longest_gap(self) -> int:
+        """Return the longest run of consecutive steps in which no sensor measured a target
+        (the longest over targets; 0 with unlimited sensing)."""
+        return 0 if self.seen is None else detection_gaps(self.seen)[1]
+
+
+def detection_gaps(seen: np.ndarray) -> tuple[float, int]:
+    """Return ``(fraction, longest)`` for ``seen`` (steps, K): the fraction of (step, target)
+    pairs in which no sensor measured the target, and the longest run of consecutive steps
+    in which some one target went unmeasured."""
+    seen = np.asarray(seen, dtype=bool).reshape(len(seen), -1)
+    if seen.size == 0:
+        return 0.0, 0
+    longest = 0
+    for column in (~seen).T:
+        # Lengths of the runs of True: differences of the run boundaries.
+        edges = np.flatnonzero(np.diff(np.concatenate([[0], column.astype(np.int8), [0]])))
+        if edges.size:
+            longest = max(longest, int(np.max(edges[1::2] - edges[::2])))
+    return float(np.mean(~seen)), longest
+
 
 def simulate(scenario: Scenario, planner: Planner, seed: int) -> RunRecord:
     """Return one closed-loop run of ``planner`` on ``scenario`` with world seed ``seed``."""
@@ -87,7 +118,8 @@ def simulate(scenario: Scenario, planner: Planner, seed: int) -> RunRecord:
     g = world.get
     true_states, estimates = [g("x_true", 0).copy()], [g("x_hat", 0).copy()]
     sensor_hist, covs = [g("sensors", 0).copy()], [g("P", 0)[..., :2, :2].copy()]
-    trace, error, nees, plan_time, violation = [], [], [], [], []
+    trace, error, nees, plan_time, violation, seen = [], [], [], [], [], []
+    limited = world.scenario.limited_sensing
     terminated = truncated = False
     while not (terminated or truncated):
         problem = world.planning_problem(0)
@@ -104,6 +136,8 @@ def simulate(scenario: Scenario, planner: Planner, seed: int) -> RunRecord:
         trace.append(float(g("trace", 0)))
         error.append(float(world.position_error(0)))
         nees.append(float(world.position_nees(0)))
+        if limited:
+            seen.append(g("detected", 0).any(axis=-1))
         true_states.append(g("x_true", 0).copy())
         estimates.append(g("x_hat", 0).copy())
         sensor_hist.append(g("sensors", 0).copy())
@@ -120,6 +154,7 @@ def simulate(scenario: Scenario, planner: Planner, seed: int) -> RunRecord:
         sensors=np.array(sensor_hist),
         position_covs=np.array(covs),
         terminated=bool(terminated),
+        seen=np.array(seen) if limited else None,
     )
 
 
@@ -147,6 +182,9 @@ class MonteCarloResult:
         max_violation: largest constraint violation over all steps and runs (m).
         n_terminated: runs stopped early on ``max_trace``.
         records: the kept :class:`RunRecord` objects (by default the first run's only).
+        no_detection, longest_gap: per-run fraction of steps without a measurement of a
+            target and longest such run (:func:`detection_gaps`); None with unlimited
+            sensing.
     """
 
     name: str
@@ -158,6 +196,8 @@ class MonteCarloResult:
     max_violation: float
     n_terminated: int
     records: list[RunRecord] = field(default_factory=list)
+    no_detection: FloatArray | None = None
+    longest_gap: np.ndarray | None = None
 
     def summary(self) -> dict[str, Any]:
         """Return JSON-friendly summary statistics with 95% intervals of the means."""
@@ -176,6 +216,9 @@ class MonteCarloResult:
         out["max_violation"] = self.max_violation
         out["n_terminated"] = self.n_terminated
         out["seeds"] = [self.seeds[0], self.seeds[-1]]
+        if self.no_detection is not None:
+            out["no_detection"] = float(np.mean(self.no_detection))
+            out["longest_gap"] = int(np.max(self.longest_gap))
         return out
 
 
@@ -273,4 +316,6 @@ def _result(name: str, seeds: list[int], recs: list[RunRecord], keep: int) -> Mo
         max_violation=float(max(np.max(r.violation) for r in recs)),
         n_terminated=sum(r.terminated for r in recs),
         records=recs[: max(0, keep)],
+        no_detection=None if recs[0].seen is None else np.array([r.no_detection for r in recs]),
+        longest_gap=None if recs[0].seen is None else np.array([r.longest_gap for r in recs]),
     )

@@ -151,6 +151,11 @@ class Scenario:
         objective: ``"trace"`` (sum of the targets' posterior position traces, eq. 17),
             ``"worst_trace"`` (the largest) or ``"logdet"`` (sum of log-determinants);
             the reward is minus it at the posterior.
+        max_range: per-sensor sensing range (m) [1e-6, 1e9], or None (unlimited, the
+            paper): a sensor farther than it from a target does not measure it that step.
+        p_detect: per-sensor detection probability within range [0, 1] (1, the paper): each
+            step each sensor detects each target in range independently with it; a sensor
+            that does not detect a target contributes no measurement of it that step.
 
     One coupled limit: the first predicted position variance (from P0, the model and q)
     may be at most 1e10 times the smallest range variance, so that one update never
@@ -181,6 +186,8 @@ class Scenario:
     pose_cov: float | tuple = 0.0
     account_pose: bool = True
     objective: str = "trace"
+    max_range: float | tuple[float, ...] | None = None
+    p_detect: float | tuple[float, ...] = 1.0
     _cache: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -215,6 +222,10 @@ class Scenario:
         put("account_pose", bool(self.account_pose))
         put("sensor_model", self._converted_models(m))
         put("pose_cov", self._converted_pose_cov(m))
+        if self.max_range is not None:
+            put("max_range", _sensor_values("max_range", self.max_range, m, 1e-6, LENGTH_MAX,
+                                            zero=False))  # fmt: skip
+        put("p_detect", _sensor_values("p_detect", self.p_detect, m, 0.0, 1.0, zero=True))
         put(
             "sensor_center",
             _vector("sensor_center", self.sensor_center, 2, -LENGTH_MAX, LENGTH_MAX, zero=True),
@@ -455,14 +466,36 @@ class Scenario:
         return np.array(np.broadcast_to(arr, (m, 2, 2)))
 
     @property
+    def max_ranges(self) -> FloatArray | None:
+        """Return the per-sensor sensing ranges (M,), or None when unlimited."""
+        if self.max_range is None:
+            return None
+        return np.broadcast_to(
+            np.asarray(self.max_range, dtype=np.float64), (self.n_sensors,)
+        ).copy()
+
+    @property
+    def detection_probs(self) -> FloatArray | None:
+        """Return the per-sensor detection probabilities (M,), or None when all are 1."""
+        p = np.broadcast_to(np.asarray(self.p_detect, dtype=np.float64), (self.n_sensors,))
+        return None if np.all(p == 1.0) else p.copy()
+
+    @property
+    def limited_sensing(self) -> bool:
+        """Return whether a sensor may miss a target (a finite range or p_detect < 1)."""
+        return self.max_range is not None or self.detection_probs is not None
+
+    @property
     def is_paper_model(self) -> bool:
         """Return whether this is the paper's measurement setup: one target, every sensor
-        range-and-bearing, poses known, the trace objective (today's arithmetic applies)."""
+        range-and-bearing, poses known, unlimited sensing, the trace objective (today's
+        arithmetic applies)."""
         return (
             self.n_targets == 1
             and self.sensor_model == "range_bearing"
             and self.pose_covariances is None
             and self.objective == "trace"
+            and not self.limited_sensing
         )
 
     def per_sensor(self, name: str) -> FloatArray:
@@ -500,8 +533,12 @@ class Scenario:
         return out
 
 
-#: The fields added beyond the paper's setup (several targets, sensor models, poses).
-EXTENSIONS = ("n_targets", "sensor_model", "pose_cov", "account_pose", "objective")
+#: The fields added beyond the paper's setup (several targets, sensor models, poses,
+#: limited sensing).
+EXTENSIONS = (
+    "n_targets", "sensor_model", "pose_cov", "account_pose", "objective", "max_range",
+    "p_detect",
+)  # fmt: skip
 
 #: The beyond-the-paper tasks start the filter consistent: the true state is drawn from
 #: the prior N(x0_hat, P0).

@@ -60,6 +60,8 @@ class LoopParams:
     weights: tuple[FloatArray, FloatArray] | None = None
     pose_cov: FloatArray | None = None
     filter_pose_cov: FloatArray | None = None
+    max_range: FloatArray | None = None
+    p_detect: FloatArray | None = None
 
     def __post_init__(self) -> None:
         if not self.targets:
@@ -105,6 +107,8 @@ class LoopParams:
             weights,
             pose,
             pose if sc.account_pose else None,
+            sc.max_ranges,
+            sc.detection_probs,
         )
 
     @property
@@ -116,10 +120,27 @@ class LoopParams:
     def n_noise(self) -> int:
         """Return the standard normals one step consumes: ``sum_k n_k + 2MK`` (process noise
         of every target, then every target's measurements, sensor-major), ``+ 2M`` for the
-        sensors' position fixes when they are uncertain. The paper: ``n + 2M``."""
+        sensors' position fixes when they are uncertain, ``+ MK`` for the detection draws
+        when some ``p_detect < 1`` (target-major). The paper: ``n + 2M``."""
         m, kk = self.n_sensors, len(self.targets)
         pose = 2 * m if self.pose_cov is not None else 0
-        return sum(t.dim for t in self.targets) + 2 * m * kk + pose
+        detect = m * kk if self.p_detect is not None else 0
+        return sum(t.dim for t in self.targets) + 2 * m * kk + pose + detect
+
+    @property
+    def detect_threshold(self) -> FloatArray | None:
+        """Return the (M,) thresholds of the detection draws: a sensor detects a target
+        when its standard normal is below ``Phi^{-1}(p_detect)`` (probability ``p_detect``;
+        ``-inf`` for 0 and ``+inf`` for 1)."""
+        if self.p_detect is None:
+            return None
+        t = self.__dict__.get("_threshold")
+        if t is None:
+            from scipy.special import ndtri  # noqa: PLC0415 (limited sensing only)
+
+            t = ndtri(self.p_detect)
+            object.__setattr__(self, "_threshold", t)
+        return t
 
 
 def advance(
@@ -193,17 +214,44 @@ def measure(
     return z
 
 
+def detections(
+    params: LoopParams, positions: FloatArray, sensors: FloatArray, draws: FloatArray | None
+) -> np.ndarray | None:
+    """Return which sensor detects which target this step, (..., K, M) bool, or None (all).
+
+    A sensor detects a target when it is within its ``max_range`` of the target's true
+    position ``positions`` (..., K, 2) and its standard normal ``draws`` (..., K M,
+    target-major) is below :attr:`LoopParams.detect_threshold`.
+    """
+    if params.max_range is None and params.p_detect is None:
+        return None
+    shape = positions.shape[:-1] + (params.n_sensors,)
+    seen = np.ones(shape, dtype=bool)
+    if params.max_range is not None:
+        d = sensors[..., None, :, :] - positions[..., :, None, :]
+        seen &= d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1] <= params.max_range**2
+    if params.p_detect is not None:
+        seen &= draws.reshape(shape) < params.detect_threshold
+    return seen
+
+
 def filter_update(
-    params: LoopParams, x_pred: FloatArray, P_pred: FloatArray, z: FloatArray, fixes: FloatArray
+    params: LoopParams,
+    x_pred: FloatArray,
+    P_pred: FloatArray,
+    z: FloatArray,
+    fixes: FloatArray,
+    detected: np.ndarray | None = None,
 ) -> tuple[FloatArray, FloatArray]:
     """Return one target's EKF posterior (eq. 11) from its measurements ``z`` (..., M, 2)
-    taken by sensors the team believes at ``fixes``."""
-    if params.models is None and params.filter_pose_cov is None:
+    taken by sensors the team believes at ``fixes``; only the sensors ``detected`` (..., M)
+    measured it (None: every sensor)."""
+    if params.models is None and params.filter_pose_cov is None and detected is None:
         return ekf.update(
             x_pred, P_pred, z, fixes, params.sigma_d2, params.sigma_theta2, params.orientation,
             weights=params.weights,
         )  # fmt: skip
     return ekf.update(
         x_pred, P_pred, z, fixes, params.sigma_d2, params.sigma_theta2, params.orientation,
-        models=params.models, weights=params.weights, pose_cov=params.filter_pose_cov,
+        detected, models=params.models, weights=params.weights, pose_cov=params.filter_pose_cov,
     )  # fmt: skip

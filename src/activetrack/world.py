@@ -148,14 +148,19 @@ class World:
              slice(int(proc[-1]) + 2 * m * k, int(proc[-1]) + 2 * m * (k + 1)))
             for k in range(K)
         ]  # fmt: skip
-        self._pose_slice = slice(int(proc[-1]) + 2 * m * K, None)
+        end = int(proc[-1]) + 2 * m * K
+        self._pose_slice = slice(end, end + 2 * m)
         # Every target's measurement normals, contiguous (target-major).
-        self._meas_slice = slice(int(proc[-1]), int(proc[-1]) + 2 * m * K)
+        self._meas_slice = slice(int(proc[-1]), end)
+        # The detection draws (p_detect < 1), M per target, last.
+        self._detect_slice = slice(p.n_noise - m * K, p.n_noise)
+        self._limited = sc.limited_sensing
         if N > 1:  # the step's normals are (copies, n_noise) then; one copy's are (n_noise,)
             self._noise_slices = [
                 ((slice(None), a), (slice(None), b)) for a, b in self._noise_slices
             ]
             self._meas_slice = (slice(None), self._meas_slice)
+            self._detect_slice = (slice(None), self._detect_slice)
         self._center = np.asarray(sc.sensor_center, dtype=np.float64)
         # Observation constants (activetrack.observation).
         self.length_scale = observation.length_scale(sc)
@@ -200,6 +205,8 @@ class World:
             "truncated": False,
             "ended": True,  # not started, or its episode is over
         }
+        if self._limited:  # which sensor detected which target at the last step
+            state["detected"] = np.zeros((K, m), dtype=bool)
         if not self._one:
             state = {k: np.broadcast_to(v, (N, *np.shape(v))).copy() for k, v in state.items()}
             targets = [
@@ -218,7 +225,9 @@ class World:
         plans from; the true positions when poses are known), ``k``, ``trace`` (the sum of
         the targets' posterior position traces), ``score`` (the objective, minus the
         reward; the trace for one target), ``projected``, ``n_projected``, ``terminated``,
-        ``truncated``. A per-target field is target ``target``'s; ``target=None`` gives
+        ``truncated``, ``detected`` (K, M): which sensor measured which target at the
+        last step (all True with unlimited sensing; all False right after a reset). A
+        per-target field is target ``target``'s; ``target=None`` gives
         the only target's (K = 1, shapes as in the paper) or all targets stacked on an
         axis after the copies' (K > 1, e.g. ``x_pred`` (N, K, n); their state dimensions
         must then agree). The attributes of the same names are ``get(name)``: read-only
@@ -235,6 +244,9 @@ class World:
                         f"target must be an integer in [0, {self.n_targets - 1}], got {target!r}"
                     )
                 v = self._t[target][name]
+        elif name == "detected" and not self._limited:  # every sensor sees every target
+            shape = (self.n_targets, self.n_sensors)
+            v = np.ones(shape if self._one else (self.num_copies, *shape), dtype=bool)
         else:
             try:
                 v = self._s[name]
@@ -269,6 +281,7 @@ class World:
     n_projected = property(lambda self: self.get("n_projected"), doc="Their count (N, M).")
     terminated = property(lambda self: self.get("terminated"), doc="Trace above max_trace (N,).")
     truncated = property(lambda self: self.get("truncated"), doc="Reached n_steps (N,).")
+    detected = property(lambda self: self.get("detected"), doc="Who measured whom (N, K, M).")
 
     # Random streams ---------------------------------------------------------------------
     def rng(self, i: int = 0) -> np.random.Generator:
@@ -404,9 +417,13 @@ class World:
             "truncated": False,
             "ended": False,
         }
+        if self._limited:
+            new["detected"] = False
         if self._one:
             new["projected"] = np.zeros(self.n_sensors, dtype=bool)
             new["n_projected"] = np.zeros(self.n_sensors, dtype=np.int64)
+            if self._limited:
+                new["detected"] = np.zeros((self.n_targets, self.n_sensors), dtype=bool)
             self._s.update(new)
         else:
             for key, value in new.items():
@@ -494,7 +511,9 @@ class World:
             sensors = fixes = moved
         trace = None
         scores = []
-        if K > 1:  # every target moves, then all are measured in one call
+        general = K > 1 or self._limited
+        detected = None
+        if general:  # every target moves, then all are measured in one call
             moved_t = [
                 tracking.move_target(tp, t["x_true"] if self._one else t["x_true"][calc],
                                      noise[proc])
@@ -504,11 +523,14 @@ class World:
             for k, x in enumerate(moved_t):
                 true_pos[..., k, :] = x[..., :2]
             z_all = tracking.measure(p, true_pos, sensors, noise[self._meas_slice])
+            if self._limited:
+                draws = noise[self._detect_slice] if p.p_detect is not None else None
+                detected = tracking.detections(p, true_pos, sensors, draws)
         for k, (t, tp, x_pred, (proc, meas)) in enumerate(
             zip(tgt, p.targets, x_preds, self._noise_slices, strict=True)
         ):
             P_pred = t["P_pred"] if self._one else t["P_pred"][calc]
-            if K == 1:
+            if not general:
                 x_true = t["x_true"] if self._one else t["x_true"][calc]
                 x_true, _, x_post, P_post = tracking.advance_target(
                     p, tp, x_true, x_pred, P_pred, sensors, fixes, noise[proc], noise[meas]
@@ -516,7 +538,8 @@ class World:
             else:
                 x_true = moved_t[k]
                 z = z_all[..., k, :, :]
-                x_post, P_post = tracking.filter_update(p, x_pred, P_pred, z, fixes)
+                seen = None if detected is None else detected[..., k, :]
+                x_post, P_post = tracking.filter_update(p, x_pred, P_pred, z, fixes, seen)
             x_next, P_next = predict(x_post, P_post, tp.Phi, tp.Q)
             if partial:
                 x_true, x_post, P_post, x_next, P_next = (
@@ -535,6 +558,8 @@ class World:
                 scores.append(self.objective.of_covariance(P_post))
         if partial:
             sensors, fixes, projected = sensors[sel], fixes[sel], projected[sel]
+            if detected is not None:
+                detected = detected[sel]
         score = trace if self._plain else self.objective.combine(np.stack(scores, -1))
         terminated = trace > self._max_trace  # never when max_trace is None (inf)
         new = {
@@ -545,6 +570,8 @@ class World:
             "score": score,
             "terminated": terminated,
         }
+        if detected is not None:
+            new["detected"] = detected
         if self._one:
             k = st["k"] + 1
             truncated = k >= self._n_steps
