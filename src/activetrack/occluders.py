@@ -193,10 +193,7 @@ def _check_simple(name: str, p: np.ndarray, eps: float) -> None:
     q = np.roll(p, -1, axis=0)
     if np.any(np.all(p == q, axis=-1)):
         raise ValueError(f"{name} has a repeated consecutive vertex (zero-length edge)")
-    area = 0.5 * np.sum(_cross(p, q))
     span = float(np.max(np.ptp(p, axis=0)))
-    if abs(area) <= eps * span:
-        raise ValueError(f"{name} must have non-zero area, got area {area!r}")
     n = len(p)
     i, j = np.triu_indices(n, k=1)
     adjacent = (j == i + 1) | ((i == 0) & (j == n - 1))
@@ -211,6 +208,9 @@ def _check_simple(name: str, p: np.ndarray, eps: float) -> None:
     if np.any(bad):
         k = int(np.argmax(bad))
         raise ValueError(f"{name} must not self-intersect: edges {i[k]} and {j[k]} meet")
+    area = 0.5 * float(np.sum(_cross(p, q)))
+    if abs(area) <= eps * span:
+        raise ValueError(f"{name} must have non-zero area, got area {area!r}")
 
 
 def _crossings(a: np.ndarray, b: np.ndarray, ep: np.ndarray, eps: float) -> np.ndarray:
