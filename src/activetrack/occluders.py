@@ -29,7 +29,8 @@ Definitions.
   sub-intervals on each of which membership in ``U`` is constant; the segment is blocked
   iff the midpoint of one of them is :func:`inside`.
 - :func:`project_move` ``(start, desired, r)``: ``desired`` itself if ``[start, desired]``
-  is not blocked, else the point nearest to ``desired`` of the *reachable set*
+  is not blocked and ``desired`` is within reach, else the point nearest to ``desired`` of
+  the *reachable set*
   ``R = {p : |p - start| <= r, [start, p] not blocked}`` (start's visibility region cut by
   its reach disk, with the tolerances ``|p - start| <= r (1 + REACH_TOL)`` and ``eps``).
 
@@ -50,6 +51,10 @@ are candidates; each is kept if it lies in ``R`` (the same :func:`blocked` test)
 nearest kept one is ``p*``. Candidates are tested lazily in order of distance to ``q`` (the
 first reachable one is the answer), so typically only a few :func:`blocked` calls run.
 A ``start`` inside ``U`` (excluded by the world) reaches nothing: it stays, projected.
+With ``desired`` inside the reach disk (the world's case) the reach-circle candidates are
+never the answer (``R`` is star-shaped about ``start``, so the nearest point of
+``[start, p]`` to ``q`` would beat any ``p`` on the circle); they make the projection exact
+for a ``desired`` beyond the reach too.
 """
 
 from __future__ import annotations
@@ -391,22 +396,30 @@ def project_move(
 ) -> tuple[FloatArray, np.ndarray]:
     """Return ``(positions (..., 2), projected bool (...))`` of straight moves (module docstring).
 
-    ``desired`` is assumed inside the reach disk of radius ``r`` (...) about ``start``.
-    Unblocked moves return ``desired`` bit for bit (``projected`` False); blocked ones the
-    nearest reachable point (``projected`` True). A ``start`` inside ``U`` stays (projected).
+    ``start`` (..., 2) the sensors, ``desired`` (..., 2) their intended positions, ``r``
+    (...) their reach. A ``desired`` within ``r (1 + REACH_TOL)`` of ``start`` whose segment
+    is not blocked is returned bit for bit (``projected`` False); any other (blocked, or
+    beyond the reach) goes to the nearest reachable point (``projected`` True). A ``start``
+    inside ``U`` stays where it is (projected). With no occluders this is the radial
+    projection onto the reach disk (identity inside it).
     """
     o, q = np.asarray(start, np.float64), np.asarray(desired, np.float64)
     r = np.asarray(r, np.float64)
     shape = np.broadcast_shapes(o.shape[:-1], q.shape[:-1], r.shape)
-    q = np.broadcast_to(q, shape + (2,))
-    if occ.n_edges == 0:
-        return q.copy(), np.zeros(shape, bool)
     o = np.broadcast_to(o, shape + (2,)).reshape(-1, 2)
     rf = np.broadcast_to(r, shape).reshape(-1)
-    out = q.reshape(-1, 2).copy()
-    need = _blocked_flat(o, out, occ)
-    if np.any(need):
-        out[need] = _nearest_reachable(o[need], out[need], rf[need], occ)
+    out = np.broadcast_to(q, shape + (2,)).reshape(-1, 2).copy()
+    d = out - o
+    lim = rf * (1.0 + REACH_TOL)
+    need = d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] > lim * lim
+    if occ.n_edges == 0:
+        if np.any(need):  # the reach disk only
+            n = np.hypot(d[need, 0], d[need, 1])
+            out[need] = o[need] + (rf[need] / n)[:, None] * d[need]
+    else:
+        need |= _blocked_flat(o, out, occ)
+        if np.any(need):
+            out[need] = _nearest_reachable(o[need], out[need], rf[need], occ)
     return out.reshape(shape + (2,)), need.reshape(shape)
 
 
