@@ -23,11 +23,13 @@ Definitions.
 - :func:`blocked` ``(a, b)``: some sub-interval of positive length of the closed segment
   ``[a, b]`` lies in ``U``. A segment that touches a boundary at a point, runs along an edge
   or through a vertex, or ends on an edge is not blocked (a sensor on a wall sees along it);
-  one with an endpoint in ``U`` is. Computed exactly from the definition: the parameters
-  ``t`` where ``[a, b]`` crosses an edge, together with the projections of all vertices
-  onto it (they delimit the pieces of edges collinear with it), cut ``[0, 1]`` into
+  one with an endpoint in ``U`` is. Computed from the definition: the parameters ``t``
+  where ``[a, b]`` crosses an edge, together with the projections of the vertices lying on
+  its line (they delimit the pieces of edges collinear with it), cut ``[0, 1]`` into
   sub-intervals on each of which membership in ``U`` is constant; the segment is blocked
-  iff the midpoint of one of them is :func:`inside`.
+  iff the midpoint of one of them is :func:`inside`. Cuts are taken with a margin
+  (``1e-9`` in the edge parameter, ``1e-9 * scale`` off the line): a surplus cut only
+  splits an interval, a missing one could merge an inside and an outside piece.
 - :func:`project_move` ``(start, desired, r)``: ``desired`` itself if ``[start, desired]``
   is not blocked and ``desired`` is within reach, else the point nearest to ``desired`` of
   the *reachable set*
@@ -70,6 +72,8 @@ from activetrack.validation import FloatArray
 TOL = 1e-10
 #: Relative tolerance of the reach disk in :func:`project_move`.
 REACH_TOL = 1e-10
+#: Margin of the cuts of :func:`blocked` (edge parameter; vertex offset from the line).
+_CUT = 1e-9
 
 
 def _frozen(a: np.ndarray) -> np.ndarray:
@@ -304,11 +308,20 @@ def _blocked_flat(a: np.ndarray, b: np.ndarray, occ: Occluders) -> np.ndarray:
     sden = np.where(ok, den, 1.0)
     t = (wx * f[:, 1] - wy * f[:, 0]) / sden
     s = (wx * d[:, 1, None] - wy * d[:, 0, None]) / sden
-    t = np.where(ok & (s >= 0) & (s <= 1), np.clip(t, 0.0, 1.0), 0.0)
+    # Crossings (with a margin in s, so that a crossing at a vertex is never lost between
+    # its two edges; surplus cuts are harmless, they only split an interval).
+    t = np.where(ok & (s >= -_CUT) & (s <= 1 + _CUT) & (t > 0) & (t < 1), t, -1.0)
+    # Vertices close to the segment's line: the ends of edges collinear with it.
     dd = np.sum(d * d, -1)[:, None]
-    tv = np.clip((wx * d[:, 0, None] + wy * d[:, 1, None]) / np.where(dd > 0, dd, 1.0), 0.0, 1.0)
+    tv = (wx * d[:, 0, None] + wy * d[:, 1, None]) / np.where(dd > 0, dd, 1.0)
+    off = np.abs(wx * d[:, 1, None] - wy * d[:, 0, None])
+    tv = np.where((off <= _CUT * occ.scale * np.sqrt(dd)) & (tv > 0) & (tv < 1), tv, -1.0)
+    cuts = np.sort(np.concatenate([t, tv], axis=-1), axis=-1)
+    k = int(np.max(np.sum(cuts >= 0, axis=-1)))  # the valid cuts are the last k columns
     m = len(a)
-    ts = np.sort(np.concatenate([np.zeros((m, 1)), np.ones((m, 1)), t, tv], axis=-1), axis=-1)
+    ts = np.concatenate(
+        [np.zeros((m, 1)), np.maximum(cuts[:, cuts.shape[1] - k :], 0.0), np.ones((m, 1))], -1
+    )
     mid = 0.5 * (ts[:, 1:] + ts[:, :-1])
     pts = a[:, None, :] + mid[..., None] * d[:, None, :]
     out[near] = np.any(_inside_flat(pts.reshape(-1, 2), occ).reshape(mid.shape), axis=-1)
