@@ -266,10 +266,13 @@ def _inside_flat(p: np.ndarray, occ: Occluders) -> np.ndarray:
     slope = (b[:, 0] - a[:, 0]) / np.where(dy != 0, dy, 1.0)
     cross = up & (qx < a[:, 0] + (qy - a[:, 1]) * slope)
     odd = np.logical_xor.reduceat(cross, occ.starts, axis=-1)
+    # The boundary test only where the parity says inside some polygon.
+    some = np.any(odd, axis=-1)
     onb = np.logical_or.reduceat(
-        _point_edge_dist2(q, a, b) <= occ.eps * occ.eps, occ.starts, axis=-1
+        _point_edge_dist2(q[some], a, b) <= occ.eps * occ.eps, occ.starts, axis=-1
     )
-    out[near] = np.any(odd & ~onb, axis=-1)
+    idx = np.flatnonzero(near)[some]
+    out[idx] = np.any(odd[some] & ~onb, axis=-1)
     return out
 
 
@@ -483,14 +486,13 @@ def ray_distances(
     if occ.n_edges == 0:
         return out
     c, f = occ.edges_a, occ.edges_b - occ.edges_a
-    w = c - o[..., None, None, :]  # (..., 1, E, 2)
-    g = dirs[:, None, :]  # (R, 1, 2)
-    den = g[..., 0] * f[:, 1] - g[..., 1] * f[:, 0]  # (R, E)
-    ok = den != 0
-    sden = np.where(ok, den, 1.0)
-    s = (w[..., 0] * f[:, 1] - w[..., 1] * f[:, 0]) / sden
-    u = (w[..., 0] * g[..., 1] - w[..., 1] * g[..., 0]) / sden
-    hit = ok & (u >= 0) & (u <= 1) & (s > occ.eps)
+    gx, gy = dirs[:, 0, None], dirs[:, 1, None]  # (R, 1)
+    den = gx * f[:, 1] - gy * f[:, 0]  # (R, E); parallel edges never hit (inv = 0)
+    inv = np.divide(1.0, den, out=np.zeros_like(den), where=den != 0)
+    wx, wy = c[:, 0] - o[..., 0, None], c[:, 1] - o[..., 1, None]  # (..., E)
+    s = (wx * f[:, 1] - wy * f[:, 0])[..., None, :] * inv  # (..., R, E)
+    u = (wx[..., None, :] * gy - wy[..., None, :] * gx) * inv
+    hit = (u >= 0) & (u <= 1) & (s > occ.eps)
     return np.minimum(out, np.min(np.where(hit, s, np.inf), axis=-1))
 
 
