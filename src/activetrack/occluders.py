@@ -54,9 +54,13 @@ nearest kept one is ``p*``. Candidates are tested lazily in order of distance to
 first reachable one is the answer), so typically only a few :func:`blocked` calls run.
 A ``start`` inside ``U`` (excluded by the world) reaches nothing: it stays, projected.
 With ``desired`` inside the reach disk (the world's case) the reach-circle candidates are
-never the answer (``R`` is star-shaped about ``start``, so the nearest point of
-``[start, p]`` to ``q`` would beat any ``p`` on the circle); they make the projection exact
-for a ``desired`` beyond the reach too.
+never the answer: ``R`` is star-shaped about ``start``, so for ``p`` on the circle the
+segment ``[start, p]`` lies in ``R``, and when ``|q - start| <= r`` its point nearest to
+``q`` is not ``p`` (unless ``q = p``). They make the projection exact for a ``desired``
+beyond the reach too.
+
+Only :meth:`Occluders.from_polygons` and :func:`random_layout` validate their input; the
+kernels are unchecked (finite float arrays, as the world passes them).
 """
 
 from __future__ import annotations
