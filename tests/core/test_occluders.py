@@ -352,15 +352,42 @@ def test_project_move_hand_cases():
     # Start on an edge, moving along it or away from it: unchanged.
     out, proj = oc.project_move([0.5, 0.0], [0.9, 0.0], occ, 1.0)
     assert not proj and out.tolist() == [0.9, 0.0]
-    # The reach circle binds: a wall x in [0, 0.1], the corner (0, -1) out of reach.
+    # Beyond the reach, the wall x in [0, 0.1] in the way: where the reach circle meets
+    # the wall's face x = 0 (the radial projection lies beyond the wall).
     wall = oc.Occluders.from_polygons([[[0.0, -1.0], [0.1, -1.0], [0.1, 5.0], [0.0, 5.0]]])
-    o, q, r = np.array([-1.0, 0.0]), np.array([0.05, -0.2]), 1.07
-    out, _ = oc.project_move(o, q, wall, r)
-    np.testing.assert_allclose(out, [0.0, -0.2], atol=1e-15)  # the edge foot, reachable
-    o, q, r = np.array([-0.5, -1.2]), np.array([0.3, -1.5]), 0.86
-    out, _ = oc.project_move(o, q, wall, r)
-    # Nearest reachable: below the wall's bottom edge y = -1 the move is free.
-    np.testing.assert_array_equal(out, q)
+    out, proj = oc.project_move([-1.0, 0.0], [1.0, 0.8], wall, 1.2)
+    np.testing.assert_allclose(out, [0.0, np.sqrt(1.2**2 - 1.0)], rtol=0, atol=1e-15)
+    # Beyond the reach behind the square: where the reach circle meets the shadow ray
+    # through (0, 1) (the segment to it grazes that vertex).
+    o, g = np.array([-1.0, 0.5]), np.array([1.0, 0.5])
+    out, proj = oc.project_move(o, [2.0, 0.9], occ, 1.6)
+    np.testing.assert_allclose(out, o + 1.6 * g / np.linalg.norm(g), rtol=0, atol=1e-15)
+    # Hidden in a wall behind the square: where the shadow ray through (0, 1) first meets
+    # the wall x = 2 (the foot on the ray lies beyond, inside the wall).
+    both = oc.Occluders.from_polygons([SQUARE, [[2.0, -5.0], [2.2, -5.0], [2.2, 5.0], [2.0, 5.0]]])
+    out, proj = oc.project_move(o, [2.15, 1.8], both, 10.0)
+    np.testing.assert_allclose(out, [2.0, 2.0], rtol=0, atol=1e-15)
+    # Inside two overlapping squares: the reflex corner of their union, where the edges
+    # cross (the feet on both edges lie inside the other square).
+    two = oc.Occluders.from_polygons([SQUARE, SQUARE + 0.5])
+    out, proj = oc.project_move([2.0, 0.3], [0.95, 0.6], two, 2.0)
+    np.testing.assert_allclose(out, [1.0, 0.5], rtol=0, atol=1e-15)
+
+
+def test_project_move_broadcasts_like_single_calls():
+    occ = oc.Occluders.from_polygons([SQUARE, ELL + [2.0, 0.0]])
+    rng = np.random.default_rng(13)
+    start = rng.uniform(-1, 4, (3, 1, 2))
+    start = start[~oc.inside(start, occ)[:, 0]]
+    desired = rng.uniform(-1, 4, (1, 5, 2))
+    r = 2.5
+    out, proj = oc.project_move(start, desired, occ, r)
+    assert out.shape == (len(start), 5, 2) and proj.shape == (len(start), 5)
+    for i in range(len(start)):
+        for j in range(5):
+            one, p = oc.project_move(start[i, 0], desired[0, j], occ, r)
+            np.testing.assert_array_equal(out[i, j], one)
+            assert proj[i, j] == p
 
 
 def test_project_move_unblocked_is_bit_for_bit():
