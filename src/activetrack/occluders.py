@@ -1,0 +1,571 @@
+"""Polygonal occluders: point membership, line of sight, projected straight moves, rays.
+
+The geometric kernel of occluders (issue 13, beyond the paper: its closing sentence names
+visibility and motion constraints from obstacles as future work). An :class:`Occluders` is
+a fixed set of simple polygons (either orientation, convex or not, possibly touching or
+overlapping each other). The *occluded region* ``U`` is the union of the polygons' open
+interiors. Every kernel broadcasts over leading axes, is float64, and is vectorized over
+points and edges at once (``(..., E)`` arrays); with no polygons each returns the trivial
+answer without touching the batch.
+
+Tolerance. All tests use one absolute tolerance ``occ.eps = TOL * occ.scale``, with
+``scale = max(1, max |vertex coordinate|)``: a point within ``eps`` of a polygon's boundary
+counts as *on* it, never inside. So points computed on an edge (up to rounding) are
+classified consistently, and sub-``eps`` dents into ``U`` are ignored.
+
+Definitions.
+
+- :func:`inside` ``(p)``: ``p`` lies in the open interior of some polygon (even-odd
+  crossing rule per polygon), farther than ``eps`` from that polygon's boundary. Points on
+  a boundary are not inside. Caveat of the union-of-interiors convention: two polygons that
+  share an edge exactly leave that seam open (a segment running along it is not blocked);
+  make solid walls from overlapping (not merely abutting) polygons.
+- :func:`blocked` ``(a, b)``: some sub-interval of positive length of the closed segment
+  ``[a, b]`` lies in ``U``. A segment that touches a boundary at a point, runs along an edge
+  or through a vertex, or ends on an edge is not blocked (a sensor on a wall sees along it);
+  one with an endpoint in ``U`` is. Computed from the definition: the parameters ``t``
+  where ``[a, b]`` crosses an edge, together with the projections of the vertices lying on
+  its line (they delimit the pieces of edges collinear with it), cut ``[0, 1]`` into
+  sub-intervals on each of which membership in ``U`` is constant; the segment is blocked
+  iff the midpoint of one of them is :func:`inside`. Cuts are taken with a margin
+  (``1e-9`` in the edge parameter, ``1e-9 * scale`` off the line): a surplus cut only
+  splits an interval, a missing one could merge an inside and an outside piece.
+- :func:`project_move` ``(start, desired, r)``: ``desired`` itself if ``[start, desired]``
+  is not blocked and ``desired`` is within reach, else the point nearest to ``desired`` of
+  the *reachable set*
+  ``R = {p : |p - start| <= r, [start, p] not blocked}`` (start's visibility region cut by
+  its reach disk, with the tolerances ``|p - start| <= r (1 + REACH_TOL)`` and ``eps``).
+
+Why the candidates of :func:`project_move` contain the nearest point. ``R`` is closed (if
+``[start, p]`` met the open set ``U`` so would ``[start, p_n]`` for ``p_n -> p``), so a
+nearest point ``p*`` to ``q = desired`` exists, and it lies on the boundary of ``R``
+since ``q`` is not in ``R``. That boundary is made of three kinds of pieces: arcs of the
+reach circle, pieces of occluder edges, and pieces of *shadow rays* (the ray from
+``start`` through a vertex ``v``, beyond ``v``; visibility changes only across such rays).
+On a straight piece the distance to ``q`` is smallest at the foot of the perpendicular
+from ``q`` (the projection of ``q`` onto the edge, or onto the shadow ray) or at an end of
+the piece; on an arc, at the radial projection of ``q`` or at an end. The ends of pieces
+are the corners of ``R``: occluder vertices, edge-edge crossings (overlapping polygons),
+reach circle with an edge or a shadow ray, the first point where a shadow ray meets an
+edge beyond its vertex (a shadow ray that grazes a further vertex ``u`` continues as ``u``'s
+shadow ray, whose first hit is a candidate of its own), and ``start`` itself. All of these
+are candidates; each is kept if it lies in ``R`` (the same :func:`blocked` test), and the
+nearest kept one is ``p*``. Candidates are tested lazily in order of distance to ``q`` (the
+first reachable one is the answer), so typically only a few :func:`blocked` calls run.
+A ``start`` inside ``U`` (excluded by the world) reaches nothing: it stays, projected.
+With ``desired`` inside the reach disk (the world's case) the reach-circle candidates are
+never the answer: ``R`` is star-shaped about ``start``, so for ``p`` on the circle the
+segment ``[start, p]`` lies in ``R``, and when ``|q - start| <= r`` its point nearest to
+``q`` is not ``p`` (unless ``q = p``). They make the projection exact for a ``desired``
+beyond the reach too.
+
+Only :meth:`Occluders.from_polygons` and :func:`random_layout` validate their input; the
+kernels are unchecked (finite float arrays, as the world passes them).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from activetrack.validation import FloatArray
+
+#: Relative tolerance of boundary membership (times ``occ.scale``: ``occ.eps``).
+TOL = 1e-10
+#: Relative tolerance of the reach disk in :func:`project_move`.
+REACH_TOL = 1e-10
+#: Margin of the cuts of :func:`blocked` (edge parameter; vertex offset from the line).
+_CUT = 1e-9
+
+
+def _frozen(a: np.ndarray) -> np.ndarray:
+    a = np.ascontiguousarray(a)
+    a.flags.writeable = False
+    return a
+
+
+def _cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    return u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
+
+
+def _segments_meet(p1, p2, q1, q2, eps: float) -> np.ndarray:
+    """Return whether closed segments ``[p1, p2]`` and ``[q1, q2]`` share a point (batched)."""
+    d1, d2 = p2 - p1, q2 - q1
+    o1 = _cross(d1, q1 - p1)
+    o2 = _cross(d1, q2 - p1)
+    o3 = _cross(d2, p1 - q1)
+    o4 = _cross(d2, p2 - q1)
+    s = eps * (np.hypot(d1[..., 0], d1[..., 1]) + np.hypot(d2[..., 0], d2[..., 1]))
+    proper = (o1 * o2 < 0) & (o3 * o4 < 0) & (np.abs(o1) > s) & (np.abs(o2) > s)
+    proper &= (np.abs(o3) > s) & (np.abs(o4) > s)
+
+    def on(a, b, p, o):  # p on segment [a, b] (collinear up to s)
+        lo, hi = np.minimum(a, b) - eps, np.maximum(a, b) + eps
+        box = np.all((p >= lo) & (p <= hi), axis=-1)
+        return (np.abs(o) <= s) & box
+
+    return (
+        proper | on(p1, p2, q1, o1) | on(p1, p2, q2, o2) | on(q1, q2, p1, o3) | on(q1, q2, p2, o4)
+    )
+
+
+@dataclass(frozen=True, eq=False)
+class Occluders:
+    """An immutable set of simple polygons; build it with :meth:`from_polygons`.
+
+    Attributes (read-only float64/int arrays): ``polygons`` (tuple of (n_i, 2) vertex
+    arrays), ``edges_a``, ``edges_b`` (E, 2) the edges' ends (polygon ``i``'s edges are the
+    contiguous block ``starts[i]:starts[i] + n_i``, edge ``j`` runs from vertex ``j`` to
+    ``j + 1`` cyclically), ``edge_polygon`` (E,) the polygon of each edge, ``starts`` (P,),
+    ``bbox`` (P, 4) each polygon's ``(xmin, ymin, xmax, ymax)``, ``crossings`` (X, 2) the
+    points where edges of different polygons meet, ``scale`` and ``eps`` (module docstring).
+    """
+
+    polygons: tuple[np.ndarray, ...]
+    edges_a: np.ndarray
+    edges_b: np.ndarray
+    edge_polygon: np.ndarray
+    starts: np.ndarray
+    bbox: np.ndarray
+    crossings: np.ndarray
+    scale: float
+    eps: float
+
+    @property
+    def n_polygons(self) -> int:
+        """Return the number of polygons."""
+        return len(self.polygons)
+
+    @property
+    def n_edges(self) -> int:
+        """Return the total number of edges (= vertices)."""
+        return int(self.edges_a.shape[0])
+
+    @classmethod
+    def empty(cls) -> Occluders:
+        """Return the empty set (no occlusion anywhere)."""
+        return cls.from_polygons([])
+
+    @classmethod
+    def from_polygons(cls, polygons: Sequence[object]) -> Occluders:
+        """Return the occluders of ``polygons`` (a sequence of (n_i, 2) vertex arrays).
+
+        Raises ``ValueError`` naming ``polygons[i]`` for fewer than 3 vertices, a wrong
+        shape, non-finite or non-real values, a repeated consecutive vertex, zero area, or
+        edges that meet other than consecutive edges at their common vertex.
+        """
+        if isinstance(polygons, np.ndarray) and polygons.ndim == 2:
+            raise ValueError("polygons must be a sequence of (n_i, 2) vertex arrays, got one array")
+        polys: list[np.ndarray] = []
+        for i, raw in enumerate(polygons):
+            name = f"polygons[{i}]"
+            try:
+                arr = np.asarray(raw)
+            except (TypeError, ValueError) as exc:
+                raise ValueError(f"{name} must be an (n, 2) array of real numbers") from exc
+            if arr.dtype.kind not in "iuf":
+                raise ValueError(f"{name} must hold real numbers, got dtype {arr.dtype}")
+            if arr.ndim != 2 or arr.shape[1] != 2 or arr.shape[0] < 3:
+                raise ValueError(f"{name} must have shape (n, 2) with n >= 3, got {arr.shape}")
+            arr = arr.astype(np.float64)
+            if not np.all(np.isfinite(arr)):
+                raise ValueError(f"{name} must be finite (no NaN or inf)")
+            polys.append(arr)
+        scale = max([1.0] + [float(np.max(np.abs(p))) for p in polys])
+        eps = TOL * scale
+        for i, p in enumerate(polys):
+            _check_simple(f"polygons[{i}]", p, eps)
+        n = np.array([len(p) for p in polys], dtype=np.intp)
+        starts = np.concatenate([[0], np.cumsum(n)[:-1]]).astype(np.intp) if polys else n
+        if polys:
+            a = np.concatenate(polys)
+            b = np.concatenate([np.roll(p, -1, axis=0) for p in polys])
+            ep = np.repeat(np.arange(len(polys)), n)
+            bbox = np.array([[*p.min(0), *p.max(0)] for p in polys])
+        else:
+            a = b = np.empty((0, 2))
+            ep = np.empty(0, np.intp)
+            bbox = np.empty((0, 4))
+        return cls(
+            polygons=tuple(_frozen(p) for p in polys),
+            edges_a=_frozen(a),
+            edges_b=_frozen(b),
+            edge_polygon=_frozen(ep),
+            starts=_frozen(starts),
+            bbox=_frozen(bbox),
+            crossings=_frozen(_crossings(a, b, ep, eps)),
+            scale=scale,
+            eps=eps,
+        )
+
+
+def _check_simple(name: str, p: np.ndarray, eps: float) -> None:
+    """Raise ``ValueError`` unless ``p`` is a simple polygon of non-zero area."""
+    q = np.roll(p, -1, axis=0)
+    if np.any(np.all(p == q, axis=-1)):
+        raise ValueError(f"{name} has a repeated consecutive vertex (zero-length edge)")
+    span = float(np.max(np.ptp(p, axis=0)))
+    n = len(p)
+    i, j = np.triu_indices(n, k=1)
+    adjacent = (j == i + 1) | ((i == 0) & (j == n - 1))
+    meet = _segments_meet(p[i], q[i], p[j], q[j], eps)
+    # Consecutive edges share a vertex; they must meet only there (no fold-back).
+    nxt = np.where(j == i + 1, j, i)  # the edge that starts at the shared vertex
+    prv = np.where(j == i + 1, i, j)
+    d_prev = p[prv] - q[prv]  # from the shared vertex back along the previous edge
+    d_next = q[nxt] - p[nxt]
+    fold = (np.abs(_cross(d_prev, d_next)) <= eps * span * span) & (np.sum(d_prev * d_next, -1) > 0)
+    bad = np.where(adjacent, fold, meet)
+    if np.any(bad):
+        k = int(np.argmax(bad))
+        raise ValueError(f"{name} must not self-intersect: edges {i[k]} and {j[k]} meet")
+    area = 0.5 * float(np.sum(_cross(p, q)))
+    if abs(area) <= eps * span:
+        raise ValueError(f"{name} must have non-zero area, got area {area!r}")
+
+
+def _crossings(a: np.ndarray, b: np.ndarray, ep: np.ndarray, eps: float) -> np.ndarray:
+    """Return the points (X, 2) where edges of different polygons cross or touch."""
+    if len(a) == 0:
+        return np.empty((0, 2))
+    i, j = np.triu_indices(len(a), k=1)
+    keep = ep[i] != ep[j]
+    i, j = i[keep], j[keep]
+    d1, d2 = b[i] - a[i], b[j] - a[j]
+    den = _cross(d1, d2)
+    w = a[j] - a[i]
+    ok = den != 0
+    sden = np.where(ok, den, 1.0)
+    t, s = _cross(w, d2) / sden, _cross(w, d1) / sden
+    ok &= (t >= 0) & (t <= 1) & (s >= 0) & (s <= 1)
+    pts = a[i] + t[:, None] * d1
+    return np.unique(pts[ok], axis=0) if np.any(ok) else np.empty((0, 2))
+
+
+def _point_edge_dist2(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Return squared distances (..., E) from points ``p`` (..., 2) to edges ``[a, b]``."""
+    d = b - a
+    dd = np.sum(d * d, -1)
+    px, py = p[..., 0, None] - a[:, 0], p[..., 1, None] - a[:, 1]
+    t = np.clip((px * d[:, 0] + py * d[:, 1]) / dd, 0.0, 1.0)
+    ex, ey = px - t * d[:, 0], py - t * d[:, 1]
+    return ex * ex + ey * ey
+
+
+def _inside_flat(p: np.ndarray, occ: Occluders) -> np.ndarray:
+    """Return :func:`inside` for points ``p`` (M, 2), computed only near some polygon."""
+    bb = occ.bbox
+    x, y = p[:, 0, None], p[:, 1, None]
+    near = np.any((x > bb[:, 0]) & (x < bb[:, 2]) & (y > bb[:, 1]) & (y < bb[:, 3]), axis=-1)
+    out = np.zeros(len(p), bool)
+    if not np.any(near):
+        return out
+    q = p[near]
+    a, b = occ.edges_a, occ.edges_b
+    qx, qy = q[:, 0, None], q[:, 1, None]
+    up = (a[:, 1] > qy) != (b[:, 1] > qy)
+    dy = b[:, 1] - a[:, 1]
+    slope = (b[:, 0] - a[:, 0]) / np.where(dy != 0, dy, 1.0)
+    cross = up & (qx < a[:, 0] + (qy - a[:, 1]) * slope)
+    odd = np.logical_xor.reduceat(cross, occ.starts, axis=-1)
+    # The boundary test only where the parity says inside some polygon.
+    some = np.any(odd, axis=-1)
+    onb = np.logical_or.reduceat(
+        _point_edge_dist2(q[some], a, b) <= occ.eps * occ.eps, occ.starts, axis=-1
+    )
+    idx = np.flatnonzero(near)[some]
+    out[idx] = np.any(odd[some] & ~onb, axis=-1)
+    return out
+
+
+def inside(points: FloatArray, occ: Occluders) -> np.ndarray:
+    """Return whether each point (..., 2) lies in ``U`` (module docstring), bool (...).
+
+    Even-odd crossing rule per polygon; a point within ``occ.eps`` of a polygon's boundary
+    is not inside that polygon.
+    """
+    p = np.asarray(points, np.float64)
+    if occ.n_edges == 0:
+        return np.zeros(p.shape[:-1], bool)
+    return _inside_flat(p.reshape(-1, 2), occ).reshape(p.shape[:-1])
+
+
+def _blocked_flat(a: np.ndarray, b: np.ndarray, occ: Occluders) -> np.ndarray:
+    """Return :func:`blocked` for segments ``a``, ``b`` (M, 2)."""
+    bb, e = occ.bbox, occ.eps
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    near = np.any(
+        (hi[:, 0, None] > bb[:, 0] + e)
+        & (lo[:, 0, None] < bb[:, 2] - e)
+        & (hi[:, 1, None] > bb[:, 1] + e)
+        & (lo[:, 1, None] < bb[:, 3] - e),
+        axis=-1,
+    )
+    out = np.zeros(len(a), bool)
+    if not np.any(near):
+        return out
+    a, b = a[near], b[near]
+    d = b - a
+    c, f = occ.edges_a, occ.edges_b - occ.edges_a
+    den = d[:, 0, None] * f[:, 1] - d[:, 1, None] * f[:, 0]
+    wx, wy = c[:, 0] - a[:, 0, None], c[:, 1] - a[:, 1, None]
+    ok = den != 0
+    sden = np.where(ok, den, 1.0)
+    t = (wx * f[:, 1] - wy * f[:, 0]) / sden
+    s = (wx * d[:, 1, None] - wy * d[:, 0, None]) / sden
+    # Crossings (with a margin in s, so that a crossing at a vertex is never lost between
+    # its two edges; surplus cuts are harmless, they only split an interval).
+    t = np.where(ok & (s >= -_CUT) & (s <= 1 + _CUT) & (t > 0) & (t < 1), t, -1.0)
+    # Vertices close to the segment's line: the ends of edges collinear with it.
+    dd = np.sum(d * d, -1)[:, None]
+    tv = (wx * d[:, 0, None] + wy * d[:, 1, None]) / np.where(dd > 0, dd, 1.0)
+    off = np.abs(wx * d[:, 1, None] - wy * d[:, 0, None])
+    tv = np.where((off <= _CUT * occ.scale * np.sqrt(dd)) & (tv > 0) & (tv < 1), tv, -1.0)
+    cuts = np.sort(np.concatenate([t, tv], axis=-1), axis=-1)
+    k = int(np.max(np.sum(cuts >= 0, axis=-1)))  # the valid cuts are the last k columns
+    m = len(a)
+    ts = np.concatenate(
+        [np.zeros((m, 1)), np.maximum(cuts[:, cuts.shape[1] - k :], 0.0), np.ones((m, 1))], -1
+    )
+    mid = 0.5 * (ts[:, 1:] + ts[:, :-1])
+    pts = a[:, None, :] + mid[..., None] * d[:, None, :]
+    out[near] = np.any(_inside_flat(pts.reshape(-1, 2), occ).reshape(mid.shape), axis=-1)
+    return out
+
+
+def blocked(a: FloatArray, b: FloatArray, occ: Occluders) -> np.ndarray:
+    """Return whether the closed segments ``[a, b]`` (..., 2) are blocked, bool (...).
+
+    Blocked: a sub-interval of positive length lies in ``U`` (module docstring); touching
+    a boundary, running along an edge or ending on one does not block; an endpoint in ``U``
+    does. The line-of-sight test (sensor to target) and the motion test (a straight move).
+    """
+    a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
+    shape = np.broadcast_shapes(a.shape, b.shape)[:-1]
+    if occ.n_edges == 0:
+        return np.zeros(shape, bool)
+    a = np.broadcast_to(a, shape + (2,)).reshape(-1, 2)
+    b = np.broadcast_to(b, shape + (2,)).reshape(-1, 2)
+    return _blocked_flat(a, b, occ).reshape(shape)
+
+
+def _candidates(o: np.ndarray, q: np.ndarray, r: np.ndarray, occ: Occluders) -> np.ndarray:
+    """Return the candidates (M, C, 2) of :func:`project_move` (NaN where one does not exist).
+
+    ``o`` start, ``q`` desired (M, 2), ``r`` reach (M,); the list of the module docstring.
+    """
+    m = len(o)
+    c, f, v = occ.edges_a, occ.edges_b - occ.edges_a, occ.edges_a
+    ff = np.sum(f * f, -1)
+    # q projected onto every edge.
+    u = np.clip(np.sum((q[:, None, :] - c) * f, -1) / ff, 0.0, 1.0)
+    on_edge = c + u[..., None] * f
+    verts = np.broadcast_to(v, (m,) + v.shape)
+    # Shadow rays o + s g, s >= 1, g = v - o: q's projection, the reach point, the first hit.
+    g = v - o[:, None, :]
+    gg = np.sum(g * g, -1)
+    has = gg > 0
+    sgg = np.where(has, gg, 1.0)
+    s = np.maximum(1.0, np.sum((q - o)[:, None, :] * g, -1) / sgg)
+    shadow = o[:, None, :] + s[..., None] * g
+    glen = np.sqrt(gg)
+    reach = np.where(
+        (has & (glen <= r[:, None]))[..., None],
+        o[:, None, :] + (r[:, None] / np.where(has, glen, 1.0))[..., None] * g,
+        np.nan,
+    )
+    w = c[None, None, :, :] - o[:, None, None, :]  # (M, 1, E, 2)
+    den = g[..., None, 0] * f[:, 1] - g[..., None, 1] * f[:, 0]  # (M, V, E)
+    okd = den != 0
+    sden = np.where(okd, den, 1.0)
+    sh = (w[..., 0] * f[:, 1] - w[..., 1] * f[:, 0]) / sden
+    uh = (w[..., 0] * g[..., None, 1] - w[..., 1] * g[..., None, 0]) / sden
+    tol = 1e-9
+    hit = okd & (uh >= -tol) & (uh <= 1 + tol) & (sh > 1 + tol) & has[..., None]
+    smin = np.min(np.where(hit, sh, np.inf), axis=-1)
+    first = np.where(
+        np.isfinite(smin)[..., None],
+        o[:, None, :] + np.where(np.isfinite(smin), smin, 0)[..., None] * g,
+        np.nan,
+    )
+    # Reach circle with edges: |c - o + u f| = r.
+    co = c - o[:, None, :]
+    bq = np.sum(co * f, -1)
+    cq = np.sum(co * co, -1) - (r * r)[:, None]
+    disc = bq * bq - ff * cq
+    sq = np.sqrt(np.maximum(disc, 0.0))
+    circ = []
+    for root in ((-bq - sq) / ff, (-bq + sq) / ff):
+        okr = (disc >= 0) & (root >= 0) & (root <= 1)
+        circ.append(np.where(okr[..., None], c + root[..., None] * f, np.nan))
+    # q's radial projection onto the reach circle, and the start.
+    dq = q - o
+    nq = np.hypot(dq[:, 0], dq[:, 1])
+    radial = np.where((nq > 0)[:, None], o + (r / np.where(nq > 0, nq, 1.0))[:, None] * dq, np.nan)
+    cross = np.broadcast_to(occ.crossings, (m,) + occ.crossings.shape)
+    return np.concatenate(
+        [on_edge, verts, shadow, reach, first, *circ, cross, radial[:, None], o[:, None]],
+        axis=1,
+    )
+
+
+def project_move(
+    start: FloatArray, desired: FloatArray, occ: Occluders, r: FloatArray
+) -> tuple[FloatArray, np.ndarray]:
+    """Return ``(positions (..., 2), projected bool (...))`` of straight moves (module docstring).
+
+    ``start`` (..., 2) the sensors, ``desired`` (..., 2) their intended positions, ``r``
+    (...) their reach. A ``desired`` within ``r (1 + REACH_TOL)`` of ``start`` whose segment
+    is not blocked is returned bit for bit (``projected`` False); any other (blocked, or
+    beyond the reach) goes to the nearest reachable point (``projected`` True). A ``start``
+    inside ``U`` stays where it is (projected). With no occluders this is the radial
+    projection onto the reach disk (identity inside it).
+    """
+    o, q = np.asarray(start, np.float64), np.asarray(desired, np.float64)
+    r = np.asarray(r, np.float64)
+    shape = np.broadcast_shapes(o.shape[:-1], q.shape[:-1], r.shape)
+    o = np.broadcast_to(o, shape + (2,)).reshape(-1, 2)
+    rf = np.broadcast_to(r, shape).reshape(-1)
+    out = np.broadcast_to(q, shape + (2,)).reshape(-1, 2).copy()
+    d = out - o
+    lim = rf * (1.0 + REACH_TOL)
+    need = d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] > lim * lim
+    if occ.n_edges == 0:
+        if np.any(need):  # the reach disk only
+            n = np.hypot(d[need, 0], d[need, 1])
+            out[need] = o[need] + (rf[need] / n)[:, None] * d[need]
+    else:
+        need |= _blocked_flat(o, out, occ)
+        if np.any(need):
+            out[need] = _nearest_reachable(o[need], out[need], rf[need], occ)
+    return out.reshape(shape + (2,)), need.reshape(shape)
+
+
+def _nearest_reachable(o: np.ndarray, q: np.ndarray, r: np.ndarray, occ: Occluders) -> np.ndarray:
+    """Return the nearest point of ``R`` to ``q`` (M, 2); ``o`` where ``R`` is empty."""
+    cand = _candidates(o, q, r, occ)
+    d = cand - o[:, None, :]
+    lim = (r * (1.0 + REACH_TOL))[:, None]
+    okr = np.sum(d * d, -1) <= lim * lim  # False for NaN candidates
+    e = cand - q[:, None, :]
+    dist = np.where(okr, np.sum(e * e, -1), np.inf)
+    order = np.argsort(dist, axis=-1, kind="stable")
+    rows = np.arange(len(o))
+    out = o.copy()
+    todo = rows
+    k, chunk = 0, 4
+    while len(todo) and k < order.shape[1]:
+        idx = order[todo, k : k + chunk]  # (T, chunk)
+        pts = cand[todo[:, None], idx]
+        fin = np.isfinite(dist[todo[:, None], idx])
+        ok = fin & ~_blocked_flat(
+            np.repeat(o[todo], idx.shape[1], axis=0), pts.reshape(-1, 2), occ
+        ).reshape(idx.shape)
+        found = np.any(ok, axis=-1)
+        first = np.argmax(ok, axis=-1)
+        out[todo[found]] = pts[found, first[found]]
+        k += chunk
+        if k >= order.shape[1]:
+            break
+        # Rows whose remaining candidates are all infinite have nothing reachable left.
+        todo = todo[~found & np.isfinite(dist[todo, order[todo, k]])]
+    return out
+
+
+def ray_distances(
+    origins: FloatArray, directions: FloatArray, occ: Occluders, max_distance: float
+) -> FloatArray:
+    """Return the distance (..., R) along each ray to the first occluder edge, capped.
+
+    ``origins`` (..., 2), ``directions`` (R, 2) unit vectors: for each origin and direction
+    the smallest ``s > occ.eps`` with ``origin + s direction`` on an edge, or
+    ``max_distance`` if none is nearer (a range finder; an origin on an edge does not see
+    the edge it stands on).
+    """
+    o = np.asarray(origins, np.float64)
+    dirs = np.asarray(directions, np.float64)
+    out = np.full(o.shape[:-1] + (dirs.shape[0],), float(max_distance))
+    if occ.n_edges == 0:
+        return out
+    c, f = occ.edges_a, occ.edges_b - occ.edges_a
+    gx, gy = dirs[:, 0, None], dirs[:, 1, None]  # (R, 1)
+    den = gx * f[:, 1] - gy * f[:, 0]  # (R, E); parallel edges never hit (inv = 0)
+    inv = np.divide(1.0, den, out=np.zeros_like(den), where=den != 0)
+    wx, wy = c[:, 0] - o[..., 0, None], c[:, 1] - o[..., 1, None]  # (..., E)
+    s = (wx * f[:, 1] - wy * f[:, 0])[..., None, :] * inv  # (..., R, E)
+    u = (wx[..., None, :] * gy - wy[..., None, :] * gx) * inv
+    hit = (u >= 0) & (u <= 1) & (s > occ.eps)
+    return np.minimum(out, np.min(np.where(hit, s, np.inf), axis=-1))
+
+
+def _rectangle(center: np.ndarray, w: float, h: float, angle: float) -> np.ndarray:
+    """Return the 4 vertices (counter-clockwise) of a rotated rectangle."""
+    corners = 0.5 * np.array([[-w, -h], [w, -h], [w, h], [-w, h]])
+    c, s = np.cos(angle), np.sin(angle)
+    return center + corners @ np.array([[c, s], [-s, c]])
+
+
+def random_layout(
+    rng: np.random.Generator,
+    n: int,
+    bounds: Sequence[float],
+    size_range: Sequence[float],
+    *,
+    clear: FloatArray | None = None,
+    clearance: float = 0.0,
+    rotate: bool = True,
+    max_tries: int = 1000,
+) -> Occluders:
+    """Return ``n`` random rectangles inside ``bounds`` keeping the ``clear`` points clear.
+
+    ``bounds`` = ``(xmin, ymin, xmax, ymax)``; each rectangle's side lengths are uniform in
+    ``size_range = (lo, hi)``, its orientation uniform (or axis-aligned with
+    ``rotate=False``), its centre uniform among the positions keeping it inside ``bounds``.
+    Rectangles may overlap. With ``clear`` (k, 2), a rectangle is redrawn while any clear
+    point is inside it or closer than ``clearance`` to it; after ``max_tries`` draws of one
+    rectangle a ``ValueError`` is raised. Deterministic given ``rng``'s state.
+    """
+    if not isinstance(n, (int, np.integer)) or isinstance(n, bool) or n < 0:
+        raise ValueError(f"n must be an integer >= 0, got {n!r}")
+    bx = np.asarray(bounds, np.float64)
+    if bx.shape != (4,) or not np.all(np.isfinite(bx)) or bx[2] <= bx[0] or bx[3] <= bx[1]:
+        raise ValueError(
+            f"bounds must be finite (xmin, ymin, xmax, ymax) with min < max, got {bounds!r}"
+        )
+    sz = np.asarray(size_range, np.float64)
+    if sz.shape != (2,) or not np.all(np.isfinite(sz)) or not 0 < sz[0] <= sz[1]:
+        raise ValueError(f"size_range must be (lo, hi) with 0 < lo <= hi, got {size_range!r}")
+    if not np.isfinite(clearance) or clearance < 0:
+        raise ValueError(f"clearance must be finite and >= 0, got {clearance!r}")
+    pts = np.empty((0, 2)) if clear is None else np.asarray(clear, np.float64).reshape(-1, 2)
+    if not np.all(np.isfinite(pts)):
+        raise ValueError("clear must be finite (no NaN or inf)")
+    polys: list[np.ndarray] = []
+    for k in range(n):
+        for _ in range(max_tries):
+            w, h = rng.uniform(sz[0], sz[1], 2)
+            ang = rng.uniform(0.0, np.pi) if rotate else 0.0
+            half = (
+                0.5
+                * np.abs(np.array([[np.cos(ang), np.sin(ang)], [np.sin(ang), np.cos(ang)]]))
+                @ [w, h]
+            )
+            lo, hi = bx[:2] + half, bx[2:] - half
+            if np.any(lo > hi):
+                continue
+            poly = _rectangle(rng.uniform(lo, hi), w, h, ang)
+            if len(pts):
+                one = Occluders.from_polygons([poly])
+                d2 = np.min(_point_edge_dist2(pts, one.edges_a, one.edges_b), axis=-1)
+                if np.any(inside(pts, one)) or np.any(d2 < clearance * clearance):
+                    continue
+            polys.append(poly)
+            break
+        else:
+            raise ValueError(
+                f"could not place rectangle {k} in {max_tries} tries (max_tries, bounds, "
+                "size_range or clearance too tight)"
+            )
+    return Occluders.from_polygons(polys)
