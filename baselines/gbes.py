@@ -317,16 +317,19 @@ def _target_features(problem: PlanningProblem, candidates: list[FloatArray]) -> 
     """Return every candidate's information entries about every target, (K_i, K, 3) each.
 
     :func:`activetrack.sensor_models.information_entries` at ``candidate - t_k`` with the
-    sensor's weights and pose covariance (candidates relative to ``problem.targets[0]``).
+    sensor's weights, pose covariance and detection (candidates relative to
+    ``problem.targets[0]``).
     """
     targets = problem.targets
     shift = targets[0] - targets  # (K, 2): candidate + shift_k = position - t_k
     w_d, w_t = problem.weights
     out = []
+    det = problem.detect
     for i, p in enumerate(candidates):
         cov = None if problem.pose_cov is None else problem.pose_cov[i]
         rel = p[:, None, :] + shift[None, :, :]  # (K_i, K, 2)
-        out.append(np.stack(sensor_models.information_entries(rel, w_d[i], w_t[i], cov), -1))
+        di = None if det is None else (det[0][i], det[1][i])  # the expected information
+        out.append(np.stack(sensor_models.information_entries(rel, w_d[i], w_t[i], cov, di), -1))
     return out
 
 

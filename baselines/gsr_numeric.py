@@ -54,8 +54,9 @@ def relax(
     rho = problem.rho.reshape(B, M)
     w_d, w_t = (w.reshape(B, M) for w in problem.weights)
     pose = None if problem.pose_cov is None else problem.pose_cov.reshape(B, M, 2, 2)
+    det = None if problem.detect is None else tuple(d.reshape(B, M) for d in problem.detect)
     s = _warm_start(current, r, targets, rho)
-    entries = _entries(s, targets, w_d, w_t, pose)  # 3 x (B, K, M)
+    entries = _entries(s, targets, w_d, w_t, pose, det)  # 3 x (B, K, M)
     base = (prior[..., 0, 0], prior[..., 0, 1], prior[..., 1, 1])
     totals = [base[e] + entries[e].sum(axis=-1) for e in range(3)]
     value = problem.objective.of_targets(*totals)
@@ -66,7 +67,7 @@ def relax(
     # changed[b, i]: sensor i's subproblem in copy b changed since its last solve (another
     # sensor moved); an unchanged subproblem would give the same answer, so it is skipped.
     changed = free.copy()
-    prepared = _Prepared(problem, current, r, targets, rho, w_d, w_t, pose)
+    prepared = _Prepared(problem, current, r, targets, rho, w_d, w_t, pose, det)
     for _ in range(max_sweeps):
         rows = np.flatnonzero(active)
         if rows.size == 0:
@@ -89,7 +90,8 @@ def relax(
             changed[keep, i] = False
             one = slice(i, i + 1)
             cov1 = None if pose is None else pose[keep, one]
-            new = _entries(s[keep, one], targets[keep], w_d[keep, one], w_t[keep, one], cov1)
+            det1 = None if det is None else tuple(d[keep, one] for d in det)
+            new = _entries(s[keep, one], targets[keep], w_d[keep, one], w_t[keep, one], cov1, det1)
             for e in range(3):
                 entries[e][keep, :, i] = new[e][..., 0]
                 # Rebuilt from the parts (not updated by differences): no drift over sweeps.
@@ -98,7 +100,42 @@ def relax(
         gain = before - value[rows]
         scale = np.maximum(np.abs(before), 1.0) if problem.objective.name == "logdet" else before
         active[rows] = (gain > tol * scale) & changed[rows].any(axis=1)
+    if det is not None and np.any(np.isfinite(det[1])):
+        s, value = _approach(problem, s, value, current, r, targets, rho, det, (w_d, w_t, pose))
     return s.reshape(*shape, M, 2), value.reshape(shape), sweeps.reshape(shape), warm.reshape(shape)
+
+
+def _approach(problem, s, value, current, r, targets, rho, det, weights):
+    """Return ``(positions, value)`` with every free sensor out of range of every target
+    moved to its feasible point nearest the nearest predicted target, where that is no worse.
+
+    Out of range the sensor's expected information is 0 wherever it can reach (its
+    subproblem is flat), so relaxation leaves it where it stands; closing in is the
+    sensible tie-break (it can only add information), and it is what lets a sensor that has
+    lost a target find it again.
+    """
+    rel = s[:, None, :, :] - targets[:, :, None, :]  # (B, K, M, 2)
+    seen = sensor_models.detection_factor(rel, det[0][:, None], det[1][:, None]) > 0.0
+    lost = ~seen.any(axis=1) & (r > 0.0) & (det[0] > 0.0)  # (B, M)
+    if not np.any(lost):
+        return s, value
+    b, i = np.nonzero(lost)
+    d2 = np.sum((targets[b] - current[b, i][:, None]) ** 2, axis=-1)  # (L, K)
+    goal = targets[b, np.argmin(d2, axis=-1)]
+    moved = s.copy()
+    moved[b, i] = feasible_set.project(goal, current[b, i], r[b, i], targets[b], rho[b, i])
+    w_d, w_t, pose = weights
+    prior = problem.prior_infos.reshape(len(s), -1, 2, 2)
+    new = problem.objective.of_targets(
+        *(
+            prior[..., e0, e1] + x.sum(axis=-1)
+            for (e0, e1), x in zip(
+                ((0, 0), (0, 1), (1, 1)), _entries(moved, targets, w_d, w_t, pose, det), strict=True
+            )
+        )
+    )
+    better = new <= value
+    return np.where(better[:, None, None], moved, s), np.where(better, new, value)
 
 
 class _Prepared:
@@ -114,8 +151,8 @@ class _Prepared:
     #: Batches of at most this many sensor rows (copies x M) are prepared at once.
     ROWS = 256
 
-    def __init__(self, problem, current, r, targets, rho, w_d, w_t, pose) -> None:
-        self.args = (current, r, targets, rho, w_d, w_t, pose)
+    def __init__(self, problem, current, r, targets, rho, w_d, w_t, pose, det) -> None:
+        self.args = (current, r, targets, rho, w_d, w_t, pose, det)
         self.objective = problem.objective
         B, M = r.shape
         self.m = M
@@ -126,11 +163,12 @@ class _Prepared:
             self.all = self._prepare(np.arange(B)[:, None], np.arange(M)[None, :])
 
     def _prepare(self, rows: np.ndarray, cols: np.ndarray) -> solver_numeric.Prepared:
-        current, r, targets, rho, w_d, w_t, pose = self.args
+        current, r, targets, rho, w_d, w_t, pose, det = self.args
         return solver_numeric.prepare(
             current[rows, cols], r[rows, cols], targets[rows], rho[rows, cols],
             w_d[rows, cols], w_t[rows, cols], None if pose is None else pose[rows, cols],
             self.objective,
+            detect=None if det is None else tuple(d[rows, cols] for d in det),
         )  # fmt: skip
 
     def rows(self, sub: np.ndarray, i: int) -> solver_numeric.Prepared:
@@ -163,8 +201,10 @@ def _entries(
     w_d: FloatArray,
     w_t: FloatArray,
     pose: FloatArray | None,
+    det: tuple[FloatArray, FloatArray] | None = None,
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Return the sensors' information entries about every target, 3 x (B, K, M)."""
+    """Return the sensors' (expected) information entries about every target, 3 x (B, K, M)."""
     rel = s[:, None, :, :] - targets[:, :, None, :]  # (B, K, M, 2)
     cov = None if pose is None else pose[:, None]
-    return sensor_models.information_entries(rel, w_d[:, None], w_t[:, None], cov)
+    d = None if det is None else tuple(x[:, None] for x in det)
+    return sensor_models.information_entries(rel, w_d[:, None], w_t[:, None], cov, d)

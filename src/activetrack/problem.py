@@ -37,7 +37,7 @@ from numpy.typing import ArrayLike
 from activetrack import sensor_models
 from activetrack.linalg2 import inv2
 from activetrack.objective import TRACE, TraceObjective, total_information
-from activetrack.validation import FloatArray, as_finite, positive, psd, spd
+from activetrack.validation import FloatArray, as_finite, positive, psd, real_array, spd
 
 #: The per-sensor parameters and whether 0 is allowed.
 _PER_SENSOR = (("r", True), ("rho", True), ("sigma_d2", False), ("sigma_theta2", False))
@@ -159,6 +159,10 @@ class PlanningProblem:
             positions known exactly.
         multi_target: whether ``prior_cov`` and ``target`` carry a targets axis K (after
             the batch axes). A prediction is only carried for one target.
+        p_detect: per-sensor detection probability in [0, 1] (..., M), or None: 1.
+        max_range: per-sensor sensing range (..., M), > 0 (inf: unlimited), or None:
+            unlimited. With either, a sensor's information counts at its expected value
+            (:func:`activetrack.sensor_models.detection_factor` at the predicted targets).
     """
 
     prior_cov: FloatArray
@@ -173,6 +177,8 @@ class PlanningProblem:
     models: np.ndarray | None = None
     pose_cov: FloatArray | None = None
     multi_target: bool = False
+    p_detect: FloatArray | None = None
+    max_range: FloatArray | None = None
 
     def __post_init__(self) -> None:
         sensors = as_finite("sensors", self.sensors)
@@ -249,6 +255,23 @@ class PlanningProblem:
                 raise ValueError(f"pose_cov must have shape (..., {m}, 2, 2), got {cov.shape}")
             batch_of["pose_cov"] = cov.shape[:-3]
             values["pose_cov"] = cov
+        for name in ("p_detect", "max_range"):
+            value = getattr(self, name)
+            if value is None:
+                continue
+            arr = real_array(name, value, finite=False)
+            bad = np.isnan(arr) | (arr > 1.0) | (arr < 0.0) if name == "p_detect" else (
+                np.isnan(arr) | (arr <= 0.0))  # fmt: skip
+            if np.any(bad):
+                allowed = "[0, 1]" if name == "p_detect" else "(0, inf]"
+                raise ValueError(f"{name} must lie in {allowed}, got {value!r}")
+            if arr.ndim > 0 and arr.shape[-1] != m:
+                raise ValueError(
+                    f"{name} must be a scalar or have shape (..., {m}) (one entry per sensor), "
+                    f"got {arr.shape}"
+                )
+            batch_of[name] = arr.shape[:-1]
+            values[name] = arr
         k_axis = (kk,) if multi else ()
         trailing = {
             "prior_cov": (*k_axis, 2, 2),
@@ -306,12 +329,14 @@ class PlanningProblem:
         objective: TraceObjective = TRACE,
         models: ArrayLike | None = None,
         pose_cov: ArrayLike | None = None,
+        p_detect: ArrayLike | None = None,
+        max_range: ArrayLike | None = None,
     ) -> PlanningProblem:
         """Return the problem at ``prediction`` (``prior_cov`` and ``target`` its position
         blocks); the other arguments are the fields of the same names."""
         return cls(
             None, None, sensors, r, rho, sigma_d2, sigma_theta2, objective, prediction,
-            models, pose_cov,
+            models, pose_cov, p_detect=p_detect, max_range=max_range,
         )  # fmt: skip
 
     @classmethod
@@ -342,11 +367,15 @@ class PlanningProblem:
             if f.name in ("objective", "prediction", "multi_target"):
                 continue
             vals = [getattr(p, f.name) for p in problems]
-            if f.name in ("models", "pose_cov"):
+            if f.name in ("models", "pose_cov", "p_detect", "max_range"):
                 if all(v is None for v in vals):
                     arrays[f.name] = None
                     continue
-                if f.name == "models":
+                if f.name in ("p_detect", "max_range"):  # None: always, unlimited
+                    fill = 1.0 if f.name == "p_detect" else np.inf
+                    vals = [np.full(p.n_sensors, fill) if v is None else v
+                            for v, p in zip(vals, problems, strict=True)]  # fmt: skip
+                elif f.name == "models":
                     vals = [np.zeros(p.n_sensors, np.int8) if v is None else v
                             for v, p in zip(vals, problems, strict=True)]  # fmt: skip
                 else:
@@ -409,7 +438,19 @@ class PlanningProblem:
             and (self.models is None or not np.any(self.models))
             and self.pose_cov is None
             and self.objective.name == "trace"
+            and self.detect is None
         )
+
+    @cached_property
+    def detect(self) -> tuple[FloatArray, FloatArray] | None:
+        """Return ``(p_detect, max_range**2)`` (..., M) for the expected information, or
+        None when every sensor always measures."""
+        if self.p_detect is None and self.max_range is None:
+            return None
+        shape = self.sensors.shape[:-1]
+        p = np.ones(shape) if self.p_detect is None else self.p_detect
+        r2 = np.full(shape, np.inf) if self.max_range is None else self.max_range**2
+        return p, r2
 
     @property
     def targets(self) -> FloatArray:
@@ -463,8 +504,9 @@ class PlanningProblem:
         rel = pos[..., None, :, :] - self.targets[..., :, None, :]  # (..., K, M, 2)
         w_d, w_t = self.weights
         cov = None if self.pose_cov is None else self.pose_cov[..., None, :, :, :]
+        det = None if self.detect is None else tuple(d[..., None, :] for d in self.detect)
         a, b, c = sensor_models.team_entries(
-            self.prior_infos, rel, w_d[..., None, :], w_t[..., None, :], cov
+            self.prior_infos, rel, w_d[..., None, :], w_t[..., None, :], cov, det
         )
         return self.objective.of_targets(a, b, c)
 

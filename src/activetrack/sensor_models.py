@@ -260,19 +260,33 @@ def information_entries(
     w_d: FloatArray,
     w_theta: FloatArray,
     pose_cov: FloatArray | None = None,
+    detect: tuple[FloatArray, FloatArray] | None = None,
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Return each sensor's information entries ``(a, b, c)`` = ``(J11, J12, J22)``, (..., M).
 
     ``rel = p_S - p_T_hat`` (..., M, 2) (eq. 10), weights (..., M) from :func:`weights`,
     ``pose_cov`` (..., M, 2, 2) PSD or None. ``J = J_eff`` of the module docstring
     (``J0`` of eq. 17 when ``pose_cov`` is None or zero); a sensor at zero distance gives 0.
+    ``detect = (p_detect, max_range**2)`` (..., M): the expected information of a sensor
+    that measures with probability ``p_detect`` when within ``max_range``,
+    ``p_detect 1[|p| <= max_range] J`` (:func:`detection_factor`); None: always.
     """
     a, b, c, ux, uy, _, wd, wv = _j0_terms(rel, w_d, w_theta)
-    if pose_cov is None:
+    if pose_cov is not None:
+        det_j, den = _pose_denominator(ux, uy, wd, wv, pose_cov)
+        s11, s12, s22 = pose_cov[..., 0, 0], pose_cov[..., 0, 1], pose_cov[..., 1, 1]
+        a, b, c = (a + det_j * s22) / den, (b - det_j * s12) / den, (c + det_j * s11) / den
+    if detect is None:
         return a, b, c
-    det_j, den = _pose_denominator(ux, uy, wd, wv, pose_cov)
-    s11, s12, s22 = pose_cov[..., 0, 0], pose_cov[..., 0, 1], pose_cov[..., 1, 1]
-    return (a + det_j * s22) / den, (b - det_j * s12) / den, (c + det_j * s11) / den
+    f = detection_factor(rel, *detect)
+    return a * f, b * f, c * f
+
+
+def detection_factor(rel: FloatArray, p_detect: FloatArray, range2: FloatArray) -> FloatArray:
+    """Return the probability that a sensor at offset ``rel`` (..., M, 2) measures the
+    target: ``p_detect`` within the range (``|rel|^2 <= range2``), else 0; (..., M)."""
+    n2 = rel[..., 0] * rel[..., 0] + rel[..., 1] * rel[..., 1]
+    return np.where(n2 <= range2, p_detect, 0.0)
 
 
 def _matrix(a: FloatArray, b: FloatArray, c: FloatArray) -> FloatArray:
@@ -298,13 +312,15 @@ def team_entries(
     w_d: FloatArray,
     w_theta: FloatArray,
     pose_cov: FloatArray | None = None,
+    detect: tuple[FloatArray, FloatArray] | None = None,
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Return the entries ``(a, b, c)`` (...) of ``Y = P11^{-1} + sum_i J_i`` (eq. 12).
 
     The form :meth:`activetrack.objective.TraceObjective.of_entries` and ``tangent`` take.
-    ``prior_info`` (..., 2, 2) broadcasts against the leading axes of ``rel`` (..., M, 2).
+    ``prior_info`` (..., 2, 2) broadcasts against the leading axes of ``rel`` (..., M, 2);
+    ``detect`` as in :func:`information_entries` (the expected information).
     """
-    a, b, c = information_entries(rel, w_d, w_theta, pose_cov)
+    a, b, c = information_entries(rel, w_d, w_theta, pose_cov, detect)
     return (
         prior_info[..., 0, 0] + a.sum(axis=-1),
         prior_info[..., 0, 1] + b.sum(axis=-1),

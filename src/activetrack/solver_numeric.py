@@ -107,7 +107,9 @@ def _finite(x: FloatArray) -> FloatArray:
 class _Problem:
     """The flattened batch (B rows), relative to each sensor's position, and ``f``."""
 
-    def __init__(self, base, center, r, targets, rho, w_d, w_theta, pose_cov, objective):
+    def __init__(
+        self, base, center, r, targets, rho, w_d, w_theta, pose_cov, objective, detect=None
+    ):
         """Flatten the batch; ``base=None`` leaves the base to :meth:`with_base`."""
         center = np.asarray(center, dtype=np.float64)
         targets = np.asarray(targets, dtype=np.float64)
@@ -123,6 +125,9 @@ class _Problem:
         if pose_cov is not None:
             pose_cov = np.asarray(pose_cov, dtype=np.float64)
             shapes.append(pose_cov.shape[:-2])
+        if detect is not None:
+            detect = tuple(np.asarray(x, dtype=np.float64) for x in detect)
+            shapes += [x.shape for x in detect]
         self.shape = np.broadcast_shapes(*shapes)
         self.k = k
         flat = self._flat
@@ -140,6 +145,20 @@ class _Problem:
         self.minimax = k > 1 and _is_max(objective)
         self.zero = np.zeros((len(self.r), 2))
         self.origins, self.radii = feasible_set.circles(self.zero, self.r, self.t, self.rho)
+        self.det = self.det_abs = None
+        if detect is not None:  # the expected information (p_detect, max_range^2)
+            p_det, r2 = flat(detect[0]), flat(detect[1])
+            self.det = (p_det[:, None, None], r2[:, None, None])
+            self.det_abs = (p_det[:, None], r2[:, None])
+            finite = np.isfinite(r2)
+            if np.any(finite):
+                # The objective jumps where a target leaves the range: candidates and arc
+                # refinement on each range circle, just inside (0 where unlimited).
+                rad = np.where(finite, np.sqrt(np.where(finite, r2, 0.0)) * (1.0 - 1e-9), 0.0)
+                self.origins = np.concatenate([self.origins, self.t], axis=1)
+                self.radii = np.concatenate(
+                    [self.radii, np.broadcast_to(rad[:, None], self.t.shape[:-1])], axis=1
+                )
 
     def _flat(self, x: FloatArray, tail: tuple[int, ...] = ()) -> FloatArray:
         """Return ``x`` broadcast to the batch and flattened, (B,) + tail."""
@@ -157,18 +176,20 @@ class _Problem:
     def entries(self, pts: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
         """Return the sensor's information entries at points (B, C, 2) (relative), 3 x (B, C, K)."""
         rel = pts[:, :, None, :] - self.t[:, None, :, :]
-        return information_entries(rel, self.wd, self.wt, self.pc)
+        return information_entries(rel, self.wd, self.wt, self.pc, self.det)
 
     def at_absolute(self, positions: FloatArray) -> FloatArray:
         """Return ``f`` at absolute positions (B, 2), (B,)."""
         rel = positions[:, None, :] - self.t_abs
-        a, b, c = information_entries(rel, self.wd[:, 0], self.wt[:, 0], self.pc_abs)
+        a, b, c = information_entries(rel, self.wd[:, 0], self.wt[:, 0], self.pc_abs, self.det_abs)
         return self.objective.of_targets(self.a0 + a, self.b0 + b, self.c0 + c)
 
     def take(self, rows: np.ndarray) -> _Problem:
         """Return the sub-batch of the given rows."""
         sub = object.__new__(_Problem)
         for key, value in vars(self).items():
+            if key in ("det", "det_abs") and value is not None:  # (p_detect, range^2)
+                value = tuple(v[rows] for v in value)
             sub.__dict__[key] = value[rows] if isinstance(value, np.ndarray) else value
         return sub
 
@@ -190,8 +211,7 @@ class _Problem:
         """
         if not self.minimax:
             return self.f(pts)[..., None]
-        rel = pts[:, :, None, :] - self.t[:, None, :, :]
-        a, b, c = information_entries(rel, self.wd, self.wt, self.pc)
+        a, b, c = self.entries(pts)
         a0, b0, c0 = self.a0[:, None], self.b0[:, None], self.c0[:, None]
         return self.objective.of_entries(a0 + a, b0 + b, c0 + c)
 
@@ -249,7 +269,7 @@ def _arc_candidates(p: _Problem, n_boundary: int) -> list[tuple[FloatArray, ...]
     uniform = np.linspace(-np.pi, np.pi, n_boundary, endpoint=False)
     th0 = np.concatenate([np.broadcast_to(uniform, (b, n_boundary)), well], axis=-1)
     th0 = np.sort(np.mod(th0 + np.pi, 2.0 * np.pi) - np.pi, axis=-1)[:, None]
-    th1 = np.broadcast_to(uniform, (b, p.k, n_boundary))
+    th1 = np.broadcast_to(uniform, (b, p.origins.shape[1] - 1, n_boundary))
     groups = []
     for sl, th in ((slice(0, 1), th0), (slice(1, None), th1)):
         o, rad = p.origins[:, sl], p.radii[:, sl]
@@ -618,6 +638,7 @@ def solve_sensor(
     n_boundary: int = 64,
     n_interior: int = 16,
     n_iter: int = 30,
+    detect: tuple[FloatArray, FloatArray] | None = None,
 ) -> tuple[FloatArray, FloatArray]:
     """Return ``(positions (..., 2), values (...))``: the best next position of one sensor.
 
@@ -636,11 +657,14 @@ def solve_sensor(
         n_boundary: uniform angles per boundary circle.
         n_interior: points per side of the square interior grid.
         n_iter: refinement iterations (one batched evaluation each).
+        detect: ``(p_detect, max_range**2)`` (...): the sensor's information counts at its
+            expected value (:func:`activetrack.sensor_models.detection_factor`); None:
+            always measured.
 
     Returns ``values = f(positions)``; positions lie in ``F`` (to the tolerance of
     :func:`activetrack.feasible_set.contains`) unless ``F`` is empty (then the fallback).
     """
-    p = _Problem(base, center, r, targets, rho, w_d, w_theta, pose_cov, objective)
+    p = _Problem(base, center, r, targets, rho, w_d, w_theta, pose_cov, objective, detect)
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         prepared = Prepared(p, n_boundary, n_interior, n_iter)
     positions, values = solve_prepared(prepared, (p.a0, p.b0, p.c0))
@@ -679,7 +703,7 @@ def _grid_neighbours(n: int, inside: np.ndarray) -> np.ndarray:
 
 @functools.lru_cache(maxsize=64)
 def _tables(
-    nv: int, n0: int, n1: int, k: int, n_interior: int
+    nv: int, n0: int, n1: int, nc: int, k: int, n_interior: int
 ) -> tuple[np.ndarray, np.ndarray, int]:
     """Return the candidates' neighbours (C, 4), the start groups (G, n) and how many of
     the groups are circles, for the layout of :class:`Prepared` (``C`` stands for none).
@@ -687,19 +711,20 @@ def _tables(
     Neighbours: the previous and next angle on each circle (cyclic); the 4 grid neighbours
     inside the disk; on the polar grids the previous and next angle (cyclic) and the same
     angle on the previous and next ring of the same target. Groups: the reach circle, each
-    ``rho`` circle, and (``n_interior > 0``) the square grid and the polar grids.
+    of the ``nc`` circles about the targets (``rho``, then the sensing ranges), and
+    (``n_interior > 0``) the square grid and the K polar grids.
     """
     # Circles: only the neighbouring angles (no rings across circles).
     nbr = [
         np.full((nv, 4), -1),
         np.concatenate([nv + _cyclic(1, n0)[:, :2], np.full((n0, 2), -1)], 1),
-        np.concatenate([nv + n0 + _cyclic(k, n1)[:, :2], np.full((k * n1, 2), -1)], 1),
+        np.concatenate([nv + n0 + _cyclic(nc, n1)[:, :2], np.full((nc * n1, 2), -1)], 1),
     ]
-    groups = [nv + np.arange(n0)] + [nv + n0 + c * n1 + np.arange(n1) for c in range(k)]
+    groups = [nv + np.arange(n0)] + [nv + n0 + c * n1 + np.arange(n1) for c in range(nc)]
     arc_groups = len(groups)
     if n_interior:
         inside = _unit_grid(n_interior)[1]
-        start, ng = nv + n0 + k * n1, len(inside)
+        start, ng = nv + n0 + nc * n1, len(inside)
         g_nbr = _grid_neighbours(n_interior, inside)
         p_nbr = _cyclic(k * POLAR_RINGS, POLAR_ANGLES)
         # Polar rings of different targets are not neighbours.
@@ -744,7 +769,8 @@ class Prepared:
         (o0, r0, th0, pts0), (o1, r1, th1, pts1) = _arc_candidates(p, n_boundary)
         n0, n1 = th0.shape[-1], th1.shape[-1]
         pts_v, ok_v = feasible_set.pair_points(p.origins, p.radii)
-        nv, na = pts_v.shape[1], n0 + k * n1
+        nc = th1.shape[1]  # circles about the targets
+        nv, na = pts_v.shape[1], n0 + nc * n1
         self.nv, self.na = nv, na
         # Arc candidates: circle origin, radius, angle and initial trust radius.
         self.arc_o = np.concatenate([np.repeat(o0, n0, axis=1), np.repeat(o1, n1, axis=1)], axis=1)
@@ -781,7 +807,7 @@ class Prepared:
             parts.append(self.plane_x)
         self.pts = np.concatenate(parts, axis=1)
         self.neighbours, self.groups, self.arc_groups = _tables(
-            nv, n0, n1, k, n_interior if self.interior else 0
+            nv, n0, n1, nc, k, n_interior if self.interior else 0
         )
         # Start attributes indexed by candidate (and "none", the last index).
         c = self.pts.shape[1]
@@ -854,13 +880,14 @@ def prepare(
     n_boundary: int = 64,
     n_interior: int = 16,
     n_iter: int = 30,
+    detect: tuple[FloatArray, FloatArray] | None = None,
 ) -> Prepared:
     """Return the base-independent part of a batch of subproblems, flattened to B rows.
 
     Arguments as :func:`solve_sensor` without ``base`` (their leading axes broadcast to
     the batch shape, flattened row-major).
     """
-    p = _Problem(None, center, r, targets, rho, w_d, w_theta, pose_cov, objective)
+    p = _Problem(None, center, r, targets, rho, w_d, w_theta, pose_cov, objective, detect)
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         return Prepared(p, n_boundary, n_interior, n_iter)
 

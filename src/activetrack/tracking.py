@@ -155,12 +155,14 @@ def advance(
 
     One target (the first), sensors at known positions: ``sensors`` are the sensors' new
     positions ``p_S(k+1)`` and ``noise`` holds the step's ``n + 2M`` standard normals
-    (shape (..., n + 2M)). :func:`advance_target` is the general step of one target.
+    (shape (..., n + 2M); further normals, such as the detection draws of limited sensing,
+    are not read: every sensor measures). :func:`advance_target` is the general step of
+    one target.
     """
-    n = x_true.shape[-1]
+    n, m = x_true.shape[-1], params.n_sensors
     return advance_target(
         params, params.targets[0], x_true, x_pred, P_pred, sensors, sensors,
-        noise[..., :n], noise[..., n:],
+        noise[..., :n], noise[..., n : n + 2 * m],
     )  # fmt: skip
 
 

@@ -613,6 +613,8 @@ class World:
             "pose_cov": p.filter_pose_cov,
             "objective": self.objective,
         }
+        if self._limited:  # the planners count each sensor's information at its expected value
+            extra.update(p_detect=p.p_detect, max_range=p.max_range)
         sensors = self.get("fixes" if self._pose else "sensors", index)
         if self.n_targets > 1:
             P_preds = [self.get("P_pred", index, k)[..., :2, :2] for k in range(self.n_targets)]

@@ -121,9 +121,9 @@ def _check_accepted(sc):
         assert np.all(np.isfinite(sc.per_sensor(name)))
     json.dumps(sc.to_dict())  # JSON-friendly
     hash(sc)
-    if sc.n_targets == 1 and sc.pose_covariances is None:
+    if sc.n_targets == 1 and sc.pose_covariances is None and not sc.limited_sensing:
         run_closed_loop(sc, steps=min(sc.n_steps, 12))
-    else:  # several targets or position fixes: through the world, every target's filter
+    else:  # several targets, position fixes, limited sensing: through the world
         _run_world(sc, steps=min(sc.n_steps, 12))
 
 

@@ -123,3 +123,125 @@ def test_filter_is_consistent_with_missed_detections():
     lo, hi = stats.chi2.ppf([0.025, 0.975], 2 * runs) / runs
     mean = float(np.mean(out))
     assert lo <= mean <= hi, mean
+
+
+def test_expected_information_matches_monte_carlo_over_detections():
+    # E[detected J] over the detection draws and the range test, against the closed form
+    # p 1[|p| <= R] J of information_entries(..., detect=...).
+    from activetrack import sensor_models
+
+    rng = np.random.default_rng(5)
+    rel = rng.normal(size=(200, 3, 2)) * 4
+    w_d, w_t = rng.uniform(0.2, 2.0, 3), rng.uniform(0.5, 5.0, 3)
+    p, r = np.array([0.3, 0.7, 1.0]), np.array([3.0, 5.0, 4.0])
+    full = np.stack(sensor_models.information_entries(rel, w_d, w_t), -1)  # (200, 3, 3)
+    want = np.stack(sensor_models.information_entries(rel, w_d, w_t, None, (p, r**2)), -1)
+    n = 20_000
+    hits = (rng.random((n, 200, 3)) < p) & (np.linalg.norm(rel, axis=-1) <= r)
+    mc = full * hits.mean(axis=0)[..., None]
+    # Binomial standard error of the hit frequency, times the entry: 5 sigma.
+    se = np.sqrt(p * (1 - p) / n)[None, :, None] * np.abs(full)
+    assert np.all(np.abs(mc - want) <= 5 * se + 1e-15)
+    assert np.all(want[np.linalg.norm(rel, axis=-1) > r] == 0.0)
+
+
+def test_problem_score_counts_expected_information():
+    from activetrack.problem import PlanningProblem
+
+    rng = np.random.default_rng(6)
+    for _ in range(20):
+        m = 3
+        sensors = rng.normal(size=(m, 2)) * 5
+        target = rng.normal(size=2)
+        prior = np.diag(rng.uniform(0.5, 3.0, 2))
+        sd2, st2 = rng.uniform(0.5, 2.0, m), rng.uniform(0.05, 0.5, m)
+        p_det, rng_max = rng.uniform(0, 1, m), rng.uniform(2, 8, m)
+        prob = PlanningProblem(prior, target, sensors, 1.0, 0.5, sd2, st2,
+                               p_detect=p_det, max_range=rng_max)  # fmt: skip
+        nxt = sensors + rng.normal(size=(m, 2)) * 0.3
+        Y = np.linalg.inv(prior)
+        for i in range(m):
+            d = nxt[i] - target
+            n2 = d @ d
+            if n2 > rng_max[i] ** 2:
+                continue
+            u = d / np.sqrt(n2)
+            v = np.array([u[1], -u[0]])
+            Y = Y + p_det[i] * (np.outer(u, u) / sd2[i] + np.outer(v, v) / (st2[i] * n2))
+        np.testing.assert_allclose(prob.score(nxt), np.trace(np.linalg.inv(Y)), rtol=1e-12)
+        assert not prob.is_paper
+
+
+@pytest.mark.parametrize(
+    ("field", "value"), [("p_detect", 1.5), ("p_detect", -0.5), ("max_range", 0.0),
+                         ("max_range", float("nan")), ("max_range", (1.0, 2.0))],
+)  # fmt: skip
+def test_problem_rejects_bad_limits(field, value):
+    from activetrack.problem import PlanningProblem
+
+    with pytest.raises(ValueError, match=field):
+        PlanningProblem(np.eye(2), np.zeros(2), np.ones((3, 2)), 1.0, 0.5, 1.0, 0.1,
+                        **{field: value})  # fmt: skip
+
+
+def test_gsr_closes_in_on_a_target_out_of_range():
+    # Out of range the expected information is 0 wherever a sensor can reach: GSR moves it
+    # its full reach towards the nearest predicted target (outside rho), never worse.
+    from activetrack.baselines import GSR
+    from activetrack.problem import PlanningProblem
+
+    sensors = np.array([[20.0, 0.0], [0.0, 3.0]])
+    prob = PlanningProblem(np.eye(2), np.zeros(2), sensors, 1.0, 0.5, 1.0, 0.1,
+                           max_range=(5.0, 5.0))  # fmt: skip
+    res = GSR().plan_with_info(prob)
+    np.testing.assert_allclose(res.positions[0], [19.0, 0.0], atol=1e-9)
+    assert res.value <= prob.score(sensors) + 1e-12
+    np.testing.assert_allclose(res.value, prob.score(res.positions), rtol=1e-12)
+
+
+@pytest.mark.slow
+def test_solver_never_worse_than_dense_search_with_limits():
+    from activetrack import solver_numeric
+    from activetrack.objective import TRACE
+
+    from .test_solver_numeric import dense_feasible_points, random_case
+
+    rng = np.random.default_rng(7)
+    for k in (1, 2):
+        for _ in range(15):
+            center, r, targets, rho, priors, w_d, w_theta, pose_cov = random_case(rng, k)
+            p_det = rng.uniform(0.2, 1.0)
+            rmax = np.linalg.norm(targets - center, axis=-1).min() + rng.uniform(-r, r)
+            rmax = max(rmax, 0.5 * rho + 1e-3)
+            pts = dense_feasible_points(center, r, targets, rho)
+
+            args = (targets, priors, w_d, w_theta, pose_cov, p_det, rmax)
+            ref = _limited(pts, *args).min()
+            base = (priors[:, 0, 0], priors[:, 0, 1], priors[:, 1, 1])
+            pos, val = solver_numeric.solve_sensor(
+                base, center, r, targets, rho, w_d, w_theta, pose_cov, TRACE,
+                detect=(p_det, rmax**2),
+            )  # fmt: skip
+            mine = _limited(pos, *args)
+            assert mine <= ref + 1e-6 * abs(ref), (k, mine, ref)
+            assert abs(val - mine) <= 1e-8 * abs(mine)
+
+
+def _limited(x, targets, priors, w_d, w_theta, pose_cov, p_det, rmax):
+    """Return the sum over targets of tr((Y0_k + s_k J)^-1), s_k = p within range, else 0."""
+    out = 0.0
+    for t in range(len(targets)):
+        d2 = np.sum((x - targets[t]) ** 2, axis=-1)
+        scale = np.where(d2 <= rmax**2, p_det, 0.0)
+        out = out + _scaled(x, targets[t], priors[t], w_d, w_theta, pose_cov, scale)
+    return out
+
+
+def _scaled(x, target, prior_info, w_d, w_theta, pose_cov, scale):
+    """Return tr((Y0 + scale J(x - t))^-1) longhand (J of the textbook form, Y0 the prior
+    information as the solver's tests draw it)."""
+    from .test_solver_numeric import longhand_information
+
+    J = longhand_information(x, target, w_d, w_theta, pose_cov)
+    Y = prior_info + np.asarray(scale)[..., None, None] * J
+    return np.trace(np.linalg.inv(Y), axis1=-2, axis2=-1)
