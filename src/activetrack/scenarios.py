@@ -156,6 +156,10 @@ class Scenario:
         p_detect: per-sensor detection probability within range [0, 1] (1, the paper): each
             step each sensor detects each target in range independently with it; a sensor
             that does not detect a target contributes no measurement of it that step.
+        occluders: polygons (each a sequence of at least 3 (x, y) vertices, simple, of
+            non-zero area; :mod:`activetrack.occluders`) that block the line of sight
+            (no measurement through them) and the sensors' straight moves; stored as
+            tuples of (x, y) tuples. Empty: an open plane (the paper).
 
     One coupled limit: the first predicted position variance (from P0, the model and q)
     may be at most 1e10 times the smallest range variance, so that one update never
@@ -188,6 +192,7 @@ class Scenario:
     objective: str = "trace"
     max_range: float | tuple[float, ...] | None = None
     p_detect: float | tuple[float, ...] = 1.0
+    occluders: tuple = ()
     _cache: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -226,6 +231,7 @@ class Scenario:
             put("max_range", _sensor_values("max_range", self.max_range, m, 1e-6, LENGTH_MAX,
                                             zero=False))  # fmt: skip
         put("p_detect", _sensor_values("p_detect", self.p_detect, m, 0.0, 1.0, zero=True))
+        put("occluders", self._converted_occluders())
         put(
             "sensor_center",
             _vector("sensor_center", self.sensor_center, 2, -LENGTH_MAX, LENGTH_MAX, zero=True),
@@ -465,6 +471,38 @@ class Scenario:
             return np.broadcast_to(arr, (m,))[:, None, None] * np.eye(2)
         return np.array(np.broadcast_to(arr, (m, 2, 2)))
 
+    def _converted_occluders(self) -> tuple:
+        """Return ``occluders`` checked, as tuples of (x, y) float tuples."""
+        from activetrack.occluders import Occluders  # noqa: PLC0415 (occluded scenarios)
+
+        raw = self.occluders
+        if not isinstance(raw, (tuple, list)):
+            raise ValueError(
+                f"occluders must be a sequence of polygons (each >= 3 (x, y) vertices), got {raw!r}"
+            )
+        if not raw:
+            return ()
+        try:
+            occ = Occluders.from_polygons(list(raw))
+        except ValueError as exc:  # name the scenario's field
+            raise ValueError(str(exc).replace("polygons", "occluders")) from None
+        if occ.scale > LENGTH_MAX:
+            raise ValueError(f"occluders coordinates must be at most {LENGTH_MAX:g} in magnitude")
+        self._cache["occluders"] = occ
+        return tuple(tuple((float(x), float(y)) for x, y in poly) for poly in occ.polygons)
+
+    @property
+    def occluder_set(self):  # -> activetrack.occluders.Occluders | None
+        """Return the occluders as an :class:`activetrack.occluders.Occluders`, or None."""
+        if not self.occluders:
+            return None
+        occ = self._cache.get("occluders")
+        if occ is None:
+            from activetrack.occluders import Occluders  # noqa: PLC0415
+
+            occ = self._cache["occluders"] = Occluders.from_polygons(self.occluders)
+        return occ
+
     @property
     def max_ranges(self) -> FloatArray | None:
         """Return the per-sensor sensing ranges (M,), or None when unlimited."""
@@ -482,8 +520,11 @@ class Scenario:
 
     @property
     def limited_sensing(self) -> bool:
-        """Return whether a sensor may miss a target (a finite range or p_detect < 1)."""
-        return self.max_range is not None or self.detection_probs is not None
+        """Return whether a sensor may miss a target (a finite range, p_detect < 1 or
+        occluders)."""
+        return (
+            self.max_range is not None or self.detection_probs is not None or bool(self.occluders)
+        )
 
     @property
     def is_paper_model(self) -> bool:
@@ -537,7 +578,7 @@ class Scenario:
 #: limited sensing).
 EXTENSIONS = (
     "n_targets", "sensor_model", "pose_cov", "account_pose", "objective", "max_range",
-    "p_detect",
+    "p_detect", "occluders",
 )  # fmt: skip
 
 #: The beyond-the-paper tasks start the filter consistent: the true state is drawn from

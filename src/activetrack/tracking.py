@@ -12,6 +12,7 @@ several targets, with the sensors' measurement models and uncertain position fix
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -62,6 +63,7 @@ class LoopParams:
     filter_pose_cov: FloatArray | None = None
     max_range: FloatArray | None = None
     p_detect: FloatArray | None = None
+    occluders: Any = None  # activetrack.occluders.Occluders or None
 
     def __post_init__(self) -> None:
         if not self.targets:
@@ -109,6 +111,7 @@ class LoopParams:
             pose if sc.account_pose else None,
             sc.max_ranges,
             sc.detection_probs,
+            sc.occluder_set,
         )
 
     @property
@@ -222,10 +225,11 @@ def detections(
     """Return which sensor detects which target this step, (..., K, M) bool, or None (all).
 
     A sensor detects a target when it is within its ``max_range`` of the target's true
-    position ``positions`` (..., K, 2) and its standard normal ``draws`` (..., K M,
-    target-major) is below :attr:`LoopParams.detect_threshold`.
+    position ``positions`` (..., K, 2), the segment between them is not blocked by an
+    occluder (:func:`activetrack.occluders.blocked`), and its standard normal ``draws``
+    (..., K M, target-major) is below :attr:`LoopParams.detect_threshold`.
     """
-    if params.max_range is None and params.p_detect is None:
+    if params.max_range is None and params.p_detect is None and params.occluders is None:
         return None
     shape = positions.shape[:-1] + (params.n_sensors,)
     seen = np.ones(shape, dtype=bool)
@@ -234,6 +238,11 @@ def detections(
         seen &= d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1] <= params.max_range**2
     if params.p_detect is not None:
         seen &= draws.reshape(shape) < params.detect_threshold
+    if params.occluders is not None:
+        from activetrack import occluders  # noqa: PLC0415 (occluded scenarios only)
+
+        seen &= ~occluders.blocked(sensors[..., None, :, :], positions[..., :, None, :],
+                                   params.occluders)  # fmt: skip
     return seen
 
 

@@ -380,9 +380,9 @@ class World:
             u = u[0]
             g = None if g is None else [gk[0] for gk in g]
             e = None if e is None else e[0]
-        radius = self.scenario.sensor_radius * np.sqrt(u[..., 0])  # uniform by area
-        angle = 2.0 * np.pi * u[..., 1]
-        sensors = self._center + radius[..., None] * np.stack([np.cos(angle), np.sin(angle)], -1)
+        sensors = self._start_positions(u)
+        if p.occluders is not None:  # no sensor starts inside an occluder: draw again
+            sensors = self._outside_occluders(sensors, rows, one=isinstance(sel, int))
         batch = u.shape[:-2]
         trace = 0.0
         score = []
@@ -431,6 +431,32 @@ class World:
         self._noise_left[sel] = 0
         if self._noise is not None:
             self._draw_noise(rows)
+
+    def _start_positions(self, u: FloatArray) -> FloatArray:
+        """Return start positions uniform (by area) in the sensors' disk from uniforms ``u``
+        (..., M, 2)."""
+        radius = self.scenario.sensor_radius * np.sqrt(u[..., 0])
+        angle = 2.0 * np.pi * u[..., 1]
+        return self._center + radius[..., None] * np.stack([np.cos(angle), np.sin(angle)], -1)
+
+    def _outside_occluders(self, sensors: FloatArray, rows: np.ndarray, one: bool) -> FloatArray:
+        """Return ``sensors`` with each start inside an occluder drawn again (from its copy's
+        generator, after the copy's other draws) until it is outside."""
+        from activetrack import occluders  # noqa: PLC0415 (occluded scenarios only)
+
+        occ = self.params.occluders
+        batch = sensors[None] if one else sensors
+        for j, i in enumerate(rows.tolist()):
+            for _ in range(1000):
+                bad = occluders.inside(batch[j], occ)
+                if not bad.any():
+                    break
+                batch[j][bad] = self._start_positions(self.rng(i).random((int(bad.sum()), 2)))
+            else:
+                raise ValueError(
+                    "occluders cover the sensors' start disk: no start outside them found"
+                )
+        return batch[0] if one else batch
 
     def _fix(self, sensors: FloatArray, normals: FloatArray) -> FloatArray:
         """Return the position fixes ``p_S + e``, ``e ~ N(0, Sigma_i)`` from standard normals."""
@@ -494,6 +520,8 @@ class World:
                 where[..., k, :] = x[..., :2]
         mv = moves if self._one and moves.ndim == 2 else moves[calc]
         moved, projected = move(mv, fixes, where, p.r, p.rho)
+        if p.occluders is not None:  # no move ends in or passes through an occluder
+            moved, projected = self._around_occluders(sensors, fixes, moved, projected)
         if self._one and self._noise is None:  # the single env's draw, without a call
             noise = (self._rngs[0] or self.rng(0)).standard_normal(self._n_noise)
         else:
@@ -591,6 +619,22 @@ class World:
             st["k"][sel], st["truncated"][sel] = k, truncated
             st["ended"][sel] = terminated | truncated
         return StepResult(-self._scale * score, terminated, truncated)
+
+    def _around_occluders(
+        self, sensors: FloatArray, fixes: FloatArray, moved: FloatArray, projected: np.ndarray
+    ) -> tuple[FloatArray, np.ndarray]:
+        """Return the moves ``moved`` (from the fixes) mended so that each true straight
+        move from ``sensors`` neither passes through nor ends in an occluder
+        (:func:`activetrack.occluders.project_move`, the nearest reachable point), and the
+        projected marks including those mended."""
+        from activetrack import occluders  # noqa: PLC0415 (occluded scenarios only)
+
+        desired = sensors + (moved - fixes) if self._pose else moved
+        occ, r = self.params.occluders, self.params.r
+        reached, hit = occluders.project_move(sensors, desired, occ, r)
+        if not np.any(hit):
+            return moved, projected
+        return (fixes + (reached - sensors) if self._pose else reached), projected | hit
 
     def _started(self, i: int) -> bool:
         """Return whether copy ``i`` was ever reset."""
