@@ -60,6 +60,15 @@ Sensor block of sensor j (12 entries)::
 
 Agent i's observation: the K target blocks (target order), then the sensor blocks in
 agent i's cyclic order; size ``7K + 12M``; the global state adds ``k / n_steps``.
+
+**Limited sensing** (a finite ``max_range``, ``p_detect < 1`` or occluders: the extended
+layout always). Each sensor block gains K entries after entry 11: ``12 + k`` is 1 if sensor
+j measured target k at the last step, else 0 (0 after a reset). With occluders each agent's
+observation ends with its own :data:`RAYS` range-finder readings: rays at the angles
+``2 pi r / RAYS`` (world frame) from the sensor's true position, the distance to the first
+occluder edge over :data:`RAY_MAX` (1: nothing within ``RAY_MAX`` m). Sizes: sensor
+block ``12 + K``, observation ``7K + (12 + K) M (+ RAYS)``; the global state holds every
+agent's rays (``M RAYS``) before ``k / n_steps``.
 :class:`Layout` says which layout a scenario uses and its sizes and bounds.
 """
 
@@ -78,6 +87,13 @@ SENSOR_DIM = 6
 #: Block sizes of the extended layout.
 EXT_TARGET_DIM = 7
 EXT_SENSOR_DIM = 12
+#: Range-finder rays per agent with occluders, and their maximum distance (m).
+RAYS = 16
+RAY_MAX = 10.0
+#: The rays' unit directions (RAYS, 2).
+RAY_DIRECTIONS = np.stack(
+    [np.cos(2 * np.pi * np.arange(RAYS) / RAYS), np.sin(2 * np.pi * np.arange(RAYS) / RAYS)], -1
+)
 
 
 @dataclass(frozen=True)
@@ -89,11 +105,15 @@ class Layout:
             known positions: ``5 + 6M``), True for the extended one (``7K + 12M``).
         n_targets: K.
         n_sensors: M.
+        flags: detection flags per sensor block (K with limited sensing, else 0).
+        rays: range-finder rays per agent (:data:`RAYS` with occluders, else 0).
     """
 
     extended: bool
     n_targets: int
     n_sensors: int
+    flags: int = 0
+    rays: int = 0
 
     @property
     def target_dim(self) -> int:
@@ -103,17 +123,17 @@ class Layout:
     @property
     def sensor_dim(self) -> int:
         """Return the entries of one sensor block."""
-        return EXT_SENSOR_DIM if self.extended else SENSOR_DIM
+        return EXT_SENSOR_DIM + self.flags if self.extended else SENSOR_DIM
 
     @property
     def obs_dim(self) -> int:
         """Return the size of one agent's observation."""
-        return self.target_dim + self.sensor_dim * self.n_sensors
+        return self.target_dim + self.sensor_dim * self.n_sensors + self.rays
 
     @property
     def state_dim(self) -> int:
         """Return the size of the global state."""
-        return self.obs_dim + 1
+        return self.target_dim + self.sensor_dim * self.n_sensors + self.rays * self.n_sensors + 1
 
     def sensor_constants(self, sc: Scenario, L: float) -> FloatArray:
         """Return the constant entries of every sensor block: (M, 4) or (M, 10)."""
@@ -144,22 +164,34 @@ class Layout:
             b = EXT_TARGET_DIM * k
             low[b + 4], high[b + 4] = -1.0, 1.0
         for j in range(self.n_sensors):
-            b = self.target_dim + EXT_SENSOR_DIM * j
+            b = self.target_dim + self.sensor_dim * j
             low[b + 4 : b + 11] = 0.0  # r, rho, one-hot, pose standard deviations
             high[b + 6 : b + 9] = 1.0
             low[b + 11], high[b + 11] = -1.0, 1.0
+            low[b + 12 : b + 12 + self.flags] = 0.0  # detection flags
+            high[b + 12 : b + 12 + self.flags] = 1.0
+        if self.rays:
+            low[-self.rays :], high[-self.rays :] = 0.0, 1.0
         return low, high
 
     def state_bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """Return float32 ``(low, high)`` of the global state."""
         low, high = self.bounds()
+        if self.rays:  # every agent's rays instead of one agent's
+            extra = np.float32(np.ones(self.rays * (self.n_sensors - 1)))
+            low = np.concatenate([low, 0.0 * extra]).astype(np.float32)
+            high = np.concatenate([high, extra]).astype(np.float32)
         return np.append(low, np.float32(0.0)), np.append(high, np.float32(1.0))
 
 
 def layout_of(sc: Scenario) -> Layout:
     """Return the layout of scenario ``sc`` (the paper's unless it needs the extended one)."""
     paper = sc.n_targets == 1 and sc.sensor_model == "range_bearing" and sc.pose_covariances is None
-    return Layout(not paper, sc.n_targets, sc.n_sensors)
+    limited = sc.limited_sensing
+    return Layout(
+        not paper or limited, sc.n_targets, sc.n_sensors,
+        sc.n_targets if limited else 0, RAYS if sc.occluders else 0,
+    )  # fmt: skip
 
 
 def extended_features(
@@ -169,9 +201,11 @@ def extended_features(
     constants: FloatArray,
     dt: float,
     L: float,
+    detected: np.ndarray | None = None,
 ) -> tuple[FloatArray, FloatArray]:
     """Return the extended layout's target blocks, flattened (..., 7K), and sensor blocks
-    (..., M, 12) from every target's prediction and the sensors' position fixes."""
+    (..., M, 12), or (..., M, 12 + K) with the detection flags ``detected`` (..., K, M),
+    from every target's prediction and the sensors' position fixes."""
     K = len(x_preds)
     batch = fixes.shape[:-2]
     blocks = np.empty(batch + (K, EXT_TARGET_DIM))
@@ -183,9 +217,12 @@ def extended_features(
     pos -= origin[..., None, :]
     pos *= 1.0 / L
     target = blocks.reshape(batch + (K * EXT_TARGET_DIM,))
-    sensor = np.empty(fixes.shape[:-1] + (EXT_SENSOR_DIM,))
+    flags = 0 if detected is None else K
+    sensor = np.empty(fixes.shape[:-1] + (EXT_SENSOR_DIM + flags,))
     sensor[..., :2] = (fixes - origin[..., None, :]) / L
-    sensor[..., 2:] = constants
+    sensor[..., 2:EXT_SENSOR_DIM] = constants
+    if flags:
+        sensor[..., EXT_SENSOR_DIM:] = np.swapaxes(detected, -1, -2)
     return target, sensor
 
 
@@ -252,10 +289,18 @@ def cyclic_order(n_sensors: int) -> np.ndarray:
     return (idx[:, None] + idx[None, :]) % n_sensors
 
 
-def observations(target: FloatArray, sensor: FloatArray, order: np.ndarray) -> np.ndarray:
-    """Return all agents' observations, float32 of shape (..., M, 5 + 6M)."""
+def observations(
+    target: FloatArray, sensor: FloatArray, order: np.ndarray, rays: FloatArray | None = None
+) -> np.ndarray:
+    """Return all agents' observations, float32 of shape (..., M, 5 + 6M); with ``rays``
+    (..., M, R) each agent's own rays last."""
     m, td, sd = sensor.shape[-2], target.shape[-1], sensor.shape[-1]
-    out = np.empty(sensor.shape[:-2] + (m, td + sd * m), dtype=np.float32)
+    nr = 0 if rays is None else rays.shape[-1]
+    out = np.empty(sensor.shape[:-2] + (m, td + sd * m + nr), dtype=np.float32)
+    if nr:
+        out[..., td + sd * m :] = rays
+        out[..., : td + sd * m] = observations(target, sensor, order)
+        return out
     if sensor.ndim == 2:  # one copy: a single gather
         out[:, :td] = target
         out[:, td:] = sensor[order].reshape(m, m * sd)
@@ -271,14 +316,32 @@ def observations(target: FloatArray, sensor: FloatArray, order: np.ndarray) -> n
     return out
 
 
-def global_state(target: FloatArray, sensor: FloatArray, elapsed: FloatArray | float) -> np.ndarray:
-    """Return the global state, float32 of shape (..., 6 + 6M)."""
+def global_state(
+    target: FloatArray,
+    sensor: FloatArray,
+    elapsed: FloatArray | float,
+    rays: FloatArray | None = None,
+) -> np.ndarray:
+    """Return the global state, float32 of shape (..., 6 + 6M) (with ``rays`` (..., M, R):
+    every agent's rays before the elapsed fraction)."""
     m, td, sd = sensor.shape[-2], target.shape[-1], sensor.shape[-1]
-    out = np.empty(sensor.shape[:-2] + (td + sd * m + 1,), dtype=np.float32)
+    nr = 0 if rays is None else rays.shape[-1] * m
+    out = np.empty(sensor.shape[:-2] + (td + sd * m + nr + 1,), dtype=np.float32)
     out[..., :td] = target
-    out[..., td:-1] = sensor.reshape(sensor.shape[:-2] + (m * sd,))
+    out[..., td : td + sd * m] = sensor.reshape(sensor.shape[:-2] + (m * sd,))
+    if nr:
+        out[..., td + sd * m : -1] = rays.reshape(rays.shape[:-2] + (nr,))
     out[..., -1] = elapsed
     return out
+
+
+def ray_readings(positions: FloatArray, occ: object) -> FloatArray:
+    """Return the range-finder readings (..., M, RAYS) in [0, 1] from sensors at
+    ``positions`` (..., M, 2) among the occluders ``occ``
+    (:func:`activetrack.occluders.ray_distances` over :data:`RAY_MAX`)."""
+    from activetrack import occluders  # noqa: PLC0415 (occluded scenarios only)
+
+    return occluders.ray_distances(positions, RAY_DIRECTIONS, occ, RAY_MAX) / RAY_MAX
 
 
 def observation_bounds(n_sensors: int) -> tuple[np.ndarray, np.ndarray]:

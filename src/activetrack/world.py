@@ -690,12 +690,19 @@ class World:
         the paper): the prediction and the team as seen from each agent's seat.
         """
         target, sensor = self._features(index)
-        return observation.observations(target, sensor, self._order)
+        return observation.observations(target, sensor, self._order, self._rays(index))
 
     def state(self, index: int | None = None) -> np.ndarray:
         """Return the global state, float32 (N, D + 1) or (D + 1,) for one copy."""
         target, sensor = self._features(index)
-        return observation.global_state(target, sensor, self.get("k", index) / self._n_steps)
+        elapsed = self.get("k", index) / self._n_steps
+        return observation.global_state(target, sensor, elapsed, self._rays(index))
+
+    def _rays(self, index: int | None) -> FloatArray | None:
+        """Return every agent's range-finder readings (..., M, RAYS), or None (no occluders)."""
+        if not self.layout.rays:
+            return None
+        return observation.ray_readings(self.get("sensors", index), self.params.occluders)
 
     def _features(self, index: int | None) -> tuple[FloatArray, FloatArray]:
         L = self.length_scale
@@ -709,8 +716,9 @@ class World:
                 x_preds = [self.get("x_pred", index, k) for k in range(K)]
                 P_preds = [self.get("P_pred", index, k) for k in range(K)]
                 fixes = self.get("fixes", index)
+            detected = self.get("detected", index) if self._limited else None
             return observation.extended_features(x_preds, P_preds, fixes, self._constants,
-                                                 self._dt, L)  # fmt: skip
+                                                 self._dt, L, detected)  # fmt: skip
         if self._one and index is not None:  # the common single-env call: no get() calls
             t = self._t[0]
             x_pred, P_pred, sensors = t["x_pred"], t["P_pred"], self._s["sensors"]
