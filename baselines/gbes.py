@@ -329,6 +329,11 @@ def _target_features(problem: PlanningProblem, candidates: list[FloatArray]) -> 
         cov = None if problem.pose_cov is None else problem.pose_cov[i]
         rel = p[:, None, :] + shift[None, :, :]  # (K_i, K, 2)
         di = None if det is None else (det[0][i], det[1][i])  # the expected information
+        if problem.occluders is not None:
+            from activetrack.occluders import blocked  # noqa: PLC0415
+
+            seen = ~blocked(p[:, None, :] + targets[0], targets[None], problem.occluders)
+            di = (*di, seen)
         out.append(np.stack(sensor_models.information_entries(rel, w_d[i], w_t[i], cov, di), -1))
     return out
 

@@ -55,8 +55,9 @@ def relax(
     w_d, w_t = (w.reshape(B, M) for w in problem.weights)
     pose = None if problem.pose_cov is None else problem.pose_cov.reshape(B, M, 2, 2)
     det = None if problem.detect is None else tuple(d.reshape(B, M) for d in problem.detect)
+    occ = problem.occluders
     s = _warm_start(current, r, targets, rho)
-    entries = _entries(s, targets, w_d, w_t, pose, det)  # 3 x (B, K, M)
+    entries = _entries(s, targets, w_d, w_t, pose, det, occ)  # 3 x (B, K, M)
     base = (prior[..., 0, 0], prior[..., 0, 1], prior[..., 1, 1])
     totals = [base[e] + entries[e].sum(axis=-1) for e in range(3)]
     value = problem.objective.of_targets(*totals)
@@ -67,7 +68,7 @@ def relax(
     # changed[b, i]: sensor i's subproblem in copy b changed since its last solve (another
     # sensor moved); an unchanged subproblem would give the same answer, so it is skipped.
     changed = free.copy()
-    prepared = _Prepared(problem, current, r, targets, rho, w_d, w_t, pose, det)
+    prepared = _Prepared(problem, current, r, targets, rho, w_d, w_t, pose, det, occ)
     for _ in range(max_sweeps):
         rows = np.flatnonzero(active)
         if rows.size == 0:
@@ -91,7 +92,9 @@ def relax(
             one = slice(i, i + 1)
             cov1 = None if pose is None else pose[keep, one]
             det1 = None if det is None else tuple(d[keep, one] for d in det)
-            new = _entries(s[keep, one], targets[keep], w_d[keep, one], w_t[keep, one], cov1, det1)
+            new = _entries(
+                s[keep, one], targets[keep], w_d[keep, one], w_t[keep, one], cov1, det1, occ
+            )
             for e in range(3):
                 entries[e][keep, :, i] = new[e][..., 0]
                 # Rebuilt from the parts (not updated by differences): no drift over sweeps.
@@ -100,7 +103,7 @@ def relax(
         gain = before - value[rows]
         scale = np.maximum(np.abs(before), 1.0) if problem.objective.name == "logdet" else before
         active[rows] = (gain > tol * scale) & changed[rows].any(axis=1)
-    if det is not None and np.any(np.isfinite(det[1])):
+    if det is not None and (occ is not None or np.any(np.isfinite(det[1]))):
         s, value = _approach(problem, s, value, current, r, targets, rho, det, (w_d, w_t, pose))
     return s.reshape(*shape, M, 2), value.reshape(shape), sweeps.reshape(shape), warm.reshape(shape)
 
@@ -116,6 +119,8 @@ def _approach(problem, s, value, current, r, targets, rho, det, weights):
     """
     rel = s[:, None, :, :] - targets[:, :, None, :]  # (B, K, M, 2)
     seen = sensor_models.detection_factor(rel, det[0][:, None], det[1][:, None]) > 0.0
+    if problem.occluders is not None:
+        seen &= _sight(s, targets, problem.occluders)
     lost = ~seen.any(axis=1) & (r > 0.0) & (det[0] > 0.0)  # (B, M)
     if not np.any(lost):
         return s, value
@@ -130,7 +135,9 @@ def _approach(problem, s, value, current, r, targets, rho, det, weights):
         *(
             prior[..., e0, e1] + x.sum(axis=-1)
             for (e0, e1), x in zip(
-                ((0, 0), (0, 1), (1, 1)), _entries(moved, targets, w_d, w_t, pose, det), strict=True
+                ((0, 0), (0, 1), (1, 1)),
+                _entries(moved, targets, w_d, w_t, pose, det, problem.occluders),
+                strict=True,
             )
         )
     )
@@ -151,8 +158,9 @@ class _Prepared:
     #: Batches of at most this many sensor rows (copies x M) are prepared at once.
     ROWS = 256
 
-    def __init__(self, problem, current, r, targets, rho, w_d, w_t, pose, det) -> None:
+    def __init__(self, problem, current, r, targets, rho, w_d, w_t, pose, det, occ) -> None:
         self.args = (current, r, targets, rho, w_d, w_t, pose, det)
+        self.occ = occ
         self.objective = problem.objective
         B, M = r.shape
         self.m = M
@@ -169,6 +177,7 @@ class _Prepared:
             w_d[rows, cols], w_t[rows, cols], None if pose is None else pose[rows, cols],
             self.objective,
             detect=None if det is None else tuple(d[rows, cols] for d in det),
+            occluders=self.occ,
         )  # fmt: skip
 
     def rows(self, sub: np.ndarray, i: int) -> solver_numeric.Prepared:
@@ -202,9 +211,19 @@ def _entries(
     w_t: FloatArray,
     pose: FloatArray | None,
     det: tuple[FloatArray, FloatArray] | None = None,
+    occ: object = None,
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Return the sensors' (expected) information entries about every target, 3 x (B, K, M)."""
     rel = s[:, None, :, :] - targets[:, :, None, :]  # (B, K, M, 2)
     cov = None if pose is None else pose[:, None]
     d = None if det is None else tuple(x[:, None] for x in det)
+    if occ is not None:
+        d = (*d, _sight(s, targets, occ))
     return sensor_models.information_entries(rel, w_d[:, None], w_t[:, None], cov, d)
+
+
+def _sight(s: FloatArray, targets: FloatArray, occ: object) -> np.ndarray:
+    """Return whether sensors ``s`` (B, M, 2) see each target (B, K, 2): (B, K, M)."""
+    from activetrack.occluders import blocked  # noqa: PLC0415 (occluded problems only)
+
+    return ~blocked(s[:, None, :, :], targets[:, :, None, :], occ)

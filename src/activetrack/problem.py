@@ -163,6 +163,8 @@ class PlanningProblem:
         max_range: per-sensor sensing range (..., M), > 0 (inf: unlimited), or None:
             unlimited. With either, a sensor's information counts at its expected value
             (:func:`activetrack.sensor_models.detection_factor` at the predicted targets).
+        occluders: an :class:`activetrack.occluders.Occluders` (shared by the batch) or
+            None: a sensor counts no information about a predicted target it cannot see.
     """
 
     prior_cov: FloatArray
@@ -179,6 +181,7 @@ class PlanningProblem:
     multi_target: bool = False
     p_detect: FloatArray | None = None
     max_range: FloatArray | None = None
+    occluders: Any = None
 
     def __post_init__(self) -> None:
         sensors = as_finite("sensors", self.sensors)
@@ -272,6 +275,14 @@ class PlanningProblem:
                 )
             batch_of[name] = arr.shape[:-1]
             values[name] = arr
+        if self.occluders is not None:
+            from activetrack.occluders import Occluders  # noqa: PLC0415
+
+            if not isinstance(self.occluders, Occluders):
+                raise ValueError(
+                    "occluders must be an activetrack.occluders.Occluders or None, got "
+                    f"{type(self.occluders).__name__}"
+                )
         k_axis = (kk,) if multi else ()
         trailing = {
             "prior_cov": (*k_axis, 2, 2),
@@ -331,12 +342,13 @@ class PlanningProblem:
         pose_cov: ArrayLike | None = None,
         p_detect: ArrayLike | None = None,
         max_range: ArrayLike | None = None,
+        occluders: Any = None,
     ) -> PlanningProblem:
         """Return the problem at ``prediction`` (``prior_cov`` and ``target`` its position
         blocks); the other arguments are the fields of the same names."""
         return cls(
             None, None, sensors, r, rho, sigma_d2, sigma_theta2, objective, prediction,
-            models, pose_cov, p_detect=p_detect, max_range=max_range,
+            models, pose_cov, p_detect=p_detect, max_range=max_range, occluders=occluders,
         )  # fmt: skip
 
     @classmethod
@@ -362,9 +374,12 @@ class PlanningProblem:
         multi = problems[0].multi_target
         if any(p.multi_target != multi for p in problems):
             raise ValueError("problems must all be multi_target, or none")
-        arrays: dict[str, Any] = {"multi_target": multi}
+        occ = problems[0].occluders
+        if any(p.occluders is not occ for p in problems):
+            raise ValueError("problems must all have the same occluders")
+        arrays: dict[str, Any] = {"multi_target": multi, "occluders": occ}
         for f in fields(cls):
-            if f.name in ("objective", "prediction", "multi_target"):
+            if f.name in ("objective", "prediction", "multi_target", "occluders"):
                 continue
             vals = [getattr(p, f.name) for p in problems]
             if f.name in ("models", "pose_cov", "p_detect", "max_range"):
@@ -413,7 +428,7 @@ class PlanningProblem:
                     mean.setflags(write=False)
                     cov.setflags(write=False)
                     value = value._trusted(mean, cov)
-            elif f.name not in ("objective", "multi_target") and value is not None:
+            elif f.name not in ("objective", "multi_target", "occluders") and value is not None:
                 value = np.array(value[index])
                 value.setflags(write=False)
             values[f.name] = value
@@ -445,7 +460,7 @@ class PlanningProblem:
     def detect(self) -> tuple[FloatArray, FloatArray] | None:
         """Return ``(p_detect, max_range**2)`` (..., M) for the expected information, or
         None when every sensor always measures."""
-        if self.p_detect is None and self.max_range is None:
+        if self.p_detect is None and self.max_range is None and self.occluders is None:
             return None
         shape = self.sensors.shape[:-1]
         p = np.ones(shape) if self.p_detect is None else self.p_detect
@@ -505,10 +520,22 @@ class PlanningProblem:
         w_d, w_t = self.weights
         cov = None if self.pose_cov is None else self.pose_cov[..., None, :, :, :]
         det = None if self.detect is None else tuple(d[..., None, :] for d in self.detect)
+        if self.occluders is not None:
+            det = (*det, self.line_of_sight(pos))
         a, b, c = sensor_models.team_entries(
             self.prior_infos, rel, w_d[..., None, :], w_t[..., None, :], cov, det
         )
         return self.objective.of_targets(a, b, c)
+
+    def line_of_sight(self, positions: ArrayLike) -> np.ndarray:
+        """Return whether sensors at ``positions`` (..., M, 2) see each predicted target,
+        (..., K, M) bool (all True without occluders)."""
+        pos = np.asarray(positions, dtype=np.float64)
+        if self.occluders is None:
+            return np.ones(pos.shape[:-2] + (self.n_targets, pos.shape[-2]), dtype=bool)
+        from activetrack.occluders import blocked  # noqa: PLC0415
+
+        return ~blocked(pos[..., None, :, :], self.targets[..., :, None, :], self.occluders)
 
     def trace(self, next_positions: ArrayLike) -> FloatArray:
         """Return :meth:`score` (the name from when the trace was the only objective)."""

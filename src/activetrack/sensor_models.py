@@ -269,7 +269,8 @@ def information_entries(
     (``J0`` of eq. 17 when ``pose_cov`` is None or zero); a sensor at zero distance gives 0.
     ``detect = (p_detect, max_range**2)`` (..., M): the expected information of a sensor
     that measures with probability ``p_detect`` when within ``max_range``,
-    ``p_detect 1[|p| <= max_range] J`` (:func:`detection_factor`); None: always.
+    ``p_detect 1[|p| <= max_range] J`` (:func:`detection_factor`); None: always. A third
+    entry, (..., M) bool, is the line of sight (False: an occluder hides the target).
     """
     a, b, c, ux, uy, _, wd, wv = _j0_terms(rel, w_d, w_theta)
     if pose_cov is not None:
@@ -278,7 +279,9 @@ def information_entries(
         a, b, c = (a + det_j * s22) / den, (b - det_j * s12) / den, (c + det_j * s11) / den
     if detect is None:
         return a, b, c
-    f = detection_factor(rel, *detect)
+    f = detection_factor(rel, *detect[:2])
+    if len(detect) > 2:  # the line of sight (..., M) bool, computed by the caller
+        f = np.where(detect[2], f, 0.0)
     return a * f, b * f, c * f
 
 

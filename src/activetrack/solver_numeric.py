@@ -72,6 +72,7 @@ import numpy as np
 
 from activetrack import feasible_set
 from activetrack.objective import TRACE, TraceObjective
+from activetrack.occluders import blocked
 from activetrack.sensor_models import information_entries
 from activetrack.validation import FloatArray
 
@@ -108,8 +109,9 @@ class _Problem:
     """The flattened batch (B rows), relative to each sensor's position, and ``f``."""
 
     def __init__(
-        self, base, center, r, targets, rho, w_d, w_theta, pose_cov, objective, detect=None
-    ):
+        self, base, center, r, targets, rho, w_d, w_theta, pose_cov, objective, detect=None,
+        occluders=None,
+    ):  # fmt: skip
         """Flatten the batch; ``base=None`` leaves the base to :meth:`with_base`."""
         center = np.asarray(center, dtype=np.float64)
         targets = np.asarray(targets, dtype=np.float64)
@@ -145,7 +147,10 @@ class _Problem:
         self.minimax = k > 1 and _is_max(objective)
         self.zero = np.zeros((len(self.r), 2))
         self.origins, self.radii = feasible_set.circles(self.zero, self.r, self.t, self.rho)
+        self.occ = occluders  # the line of sight (activetrack.occluders), or None
         self.det = self.det_abs = None
+        if occluders is not None and detect is None:
+            detect = (np.ones(self.shape), np.full(self.shape, np.inf))
         if detect is not None:  # the expected information (p_detect, max_range^2)
             p_det, r2 = flat(detect[0]), flat(detect[1])
             self.det = (p_det[:, None, None], r2[:, None, None])
@@ -176,12 +181,20 @@ class _Problem:
     def entries(self, pts: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
         """Return the sensor's information entries at points (B, C, 2) (relative), 3 x (B, C, K)."""
         rel = pts[:, :, None, :] - self.t[:, None, :, :]
-        return information_entries(rel, self.wd, self.wt, self.pc, self.det)
+        det = self.det
+        if self.occ is not None:  # no information about a target it cannot see
+            seen = ~blocked((pts + self.center[:, None])[:, :, None, :],
+                            self.t_abs[:, None, :, :], self.occ)  # fmt: skip
+            det = (*det, seen)
+        return information_entries(rel, self.wd, self.wt, self.pc, det)
 
     def at_absolute(self, positions: FloatArray) -> FloatArray:
         """Return ``f`` at absolute positions (B, 2), (B,)."""
         rel = positions[:, None, :] - self.t_abs
-        a, b, c = information_entries(rel, self.wd[:, 0], self.wt[:, 0], self.pc_abs, self.det_abs)
+        det = self.det_abs
+        if self.occ is not None:
+            det = (*det, ~blocked(positions[:, None, :], self.t_abs, self.occ))
+        a, b, c = information_entries(rel, self.wd[:, 0], self.wt[:, 0], self.pc_abs, det)
         return self.objective.of_targets(self.a0 + a, self.b0 + b, self.c0 + c)
 
     def take(self, rows: np.ndarray) -> _Problem:
@@ -639,6 +652,7 @@ def solve_sensor(
     n_interior: int = 16,
     n_iter: int = 30,
     detect: tuple[FloatArray, FloatArray] | None = None,
+    occluders: object = None,
 ) -> tuple[FloatArray, FloatArray]:
     """Return ``(positions (..., 2), values (...))``: the best next position of one sensor.
 
@@ -660,11 +674,17 @@ def solve_sensor(
         detect: ``(p_detect, max_range**2)`` (...): the sensor's information counts at its
             expected value (:func:`activetrack.sensor_models.detection_factor`); None:
             always measured.
+        occluders: an :class:`activetrack.occluders.Occluders`: no information about a
+            target hidden from a point (the line of sight); None: an open plane. The
+            objective then jumps across shadow boundaries, which the candidates resolve
+            only to their spacing (no candidates are placed on the boundaries).
 
     Returns ``values = f(positions)``; positions lie in ``F`` (to the tolerance of
     :func:`activetrack.feasible_set.contains`) unless ``F`` is empty (then the fallback).
     """
-    p = _Problem(base, center, r, targets, rho, w_d, w_theta, pose_cov, objective, detect)
+    p = _Problem(
+        base, center, r, targets, rho, w_d, w_theta, pose_cov, objective, detect, occluders
+    )
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         prepared = Prepared(p, n_boundary, n_interior, n_iter)
     positions, values = solve_prepared(prepared, (p.a0, p.b0, p.c0))
@@ -881,13 +901,16 @@ def prepare(
     n_interior: int = 16,
     n_iter: int = 30,
     detect: tuple[FloatArray, FloatArray] | None = None,
+    occluders: object = None,
 ) -> Prepared:
     """Return the base-independent part of a batch of subproblems, flattened to B rows.
 
     Arguments as :func:`solve_sensor` without ``base`` (their leading axes broadcast to
     the batch shape, flattened row-major).
     """
-    p = _Problem(None, center, r, targets, rho, w_d, w_theta, pose_cov, objective, detect)
+    p = _Problem(
+        None, center, r, targets, rho, w_d, w_theta, pose_cov, objective, detect, occluders
+    )
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         return Prepared(p, n_boundary, n_interior, n_iter)
 

@@ -658,7 +658,7 @@ class World:
             "objective": self.objective,
         }
         if self._limited:  # the planners count each sensor's information at its expected value
-            extra.update(p_detect=p.p_detect, max_range=p.max_range)
+            extra.update(p_detect=p.p_detect, max_range=p.max_range, occluders=p.occluders)
         sensors = self.get("fixes" if self._pose else "sensors", index)
         if self.n_targets > 1:
             P_preds = [self.get("P_pred", index, k)[..., :2, :2] for k in range(self.n_targets)]

@@ -245,3 +245,37 @@ def _scaled(x, target, prior_info, w_d, w_theta, pose_cov, scale):
     J = longhand_information(x, target, w_d, w_theta, pose_cov)
     Y = prior_info + np.asarray(scale)[..., None, None] * J
     return np.trace(np.linalg.inv(Y), axis1=-2, axis2=-1)
+
+
+def test_score_counts_no_information_through_an_occluder():
+    # A sensor behind a wall contributes nothing; moved into the open it contributes its
+    # information of eq. (17) (longhand).
+    from activetrack.occluders import Occluders
+    from activetrack.problem import PlanningProblem
+
+    wall = Occluders.from_polygons([[(2.0, -1.0), (3.0, -1.0), (3.0, 1.0), (2.0, 1.0)]])
+    prob = PlanningProblem(np.eye(2), np.zeros(2), np.array([[5.0, 0.0]]), 1.0, 0.5, 1.0, 0.1,
+                           occluders=wall)  # fmt: skip
+    assert not prob.is_paper
+    np.testing.assert_allclose(prob.score(np.array([[5.0, 0.0]])), 2.0)  # tr(I): no info
+    visible = np.array([[0.0, 5.0]])
+    u, v, n2 = np.array([0.0, 1.0]), np.array([1.0, 0.0]), 25.0
+    Y = np.eye(2) + np.outer(u, u) / 1.0 + np.outer(v, v) / (0.1 * n2)
+    np.testing.assert_allclose(prob.score(visible), np.trace(np.linalg.inv(Y)), rtol=1e-12)
+    np.testing.assert_array_equal(prob.line_of_sight(np.array([[5.0, 0.0]])), [[False]])
+
+
+def test_gsr_plans_around_an_occluder():
+    # A sensor behind a wall: GSR moves it where it sees the target (its expected
+    # information), never worse than staying.
+    from activetrack.baselines import GSR
+    from activetrack.occluders import Occluders
+    from activetrack.problem import PlanningProblem
+
+    wall = Occluders.from_polygons([[(2.0, -0.3), (3.0, -0.3), (3.0, 0.3), (2.0, 0.3)]])
+    start = np.array([[3.5, 0.0]])
+    prob = PlanningProblem(np.eye(2), np.zeros(2), start, 1.0, 0.5, 1.0, 0.1, occluders=wall)
+    res = GSR().plan_with_info(prob)
+    assert prob.line_of_sight(res.positions)[0, 0]
+    assert res.value < prob.score(start)
+    np.testing.assert_allclose(res.value, prob.score(res.positions), rtol=1e-12)
