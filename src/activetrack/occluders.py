@@ -70,7 +70,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from activetrack.validation import FloatArray
+from activetrack.validation import FloatArray, real_array
 
 #: Relative tolerance of boundary membership (times ``occ.scale``: ``occ.eps``).
 TOL = 1e-10
@@ -161,15 +161,9 @@ class Occluders:
         polys: list[np.ndarray] = []
         for i, raw in enumerate(polygons):
             name = f"polygons[{i}]"
-            try:
-                arr = np.asarray(raw)
-            except (TypeError, ValueError) as exc:
-                raise ValueError(f"{name} must be an (n, 2) array of real numbers") from exc
-            if arr.dtype.kind not in "iuf":
-                raise ValueError(f"{name} must hold real numbers, got dtype {arr.dtype}")
+            arr = real_array(name, raw, finite=False)
             if arr.ndim != 2 or arr.shape[1] != 2 or arr.shape[0] < 3:
                 raise ValueError(f"{name} must have shape (n, 2) with n >= 3, got {arr.shape}")
-            arr = arr.astype(np.float64)
             if not np.all(np.isfinite(arr)):
                 raise ValueError(f"{name} must be finite (no NaN or inf)")
             polys.append(arr)
