@@ -26,17 +26,19 @@ none of this is drawn for the paper's open plane, so its frames are unchanged) a
 also shows
 
 * the occluders as filled grey polygons (:data:`OCCLUDER_FACE`, edged
-  :data:`OCCLUDER_EDGE`), under every other element of the frame but the grid; they are
-  part of the cached background, redrawn only when the layout changes;
+  :data:`OCCLUDER_EDGE`), drawn first: over the faint grid, under every track, marker,
+  line and the legend; they are part of the cached background, redrawn only when the
+  layout changes (a new episode's random layout);
 * each sensor's sensing range as a thin, sparsely dotted circle of radius
   ``max_range_i`` around the sensor in its colour (only for a finite range);
 * the lines of sight of the step: a thin solid line in the sensor's colour from each
   sensor to the true position of each target it measured, and a faint dashed grey line
   (:data:`MISSED_COLOR`) to each target it did not measure (out of range, behind an
-  occluder, or a missed detection), so missed detections are visible where they happen
-  (a dashed line rather than none: an absent line would not tell a miss from clutter);
+  occluder, or a missed detection): a dashed line rather than none, so a frame shows
+  which sensor missed which target and why (the line crosses an occluder, leaves the
+  range circle, or neither: a missed detection), not only that fewer lines are drawn;
 * ``missed n/KM`` in the title line: how many of the K M sensor-target pairs gave no
-  measurement.
+  measurement at the step.
 
 The frame after a reset (step 0, before any measurement) has no lines of sight and no
 count. The view follows the targets and sensors as before; occluders and range circles

@@ -633,12 +633,12 @@ def test_first_frame_has_no_lines_of_sight_and_no_count():
     assert "missed" not in r._art["title"].get_text()
 
 
-def _limited_env(**kw):
+def _limited_env(render_mode="rgb_array", **kw):
     from activetrack.scenarios import make_scenario
 
     sc = make_scenario("two_targets", occluders=[[(0, -3), (4, -3), (4, 3), (0, 3)]],
                        max_range=12.0, p_detect=0.8, sensor_center=(-6.0, 0.0), **kw)  # fmt: skip
-    return parallel_env(scenario=sc, render_mode="rgb_array")
+    return parallel_env(scenario=sc, render_mode=render_mode)
 
 
 def test_missed_count_and_snapshots_come_from_the_world(feasible_set_guard):
@@ -722,3 +722,21 @@ def test_record_video_of_a_limited_task(tmp_path, feasible_set_guard):
     path = record_video(tmp_path / "l.gif", lambda obs: {a: np.zeros(2) for a in obs}, env=env,
                         seed=0, max_steps=3)  # fmt: skip
     assert iio.imread(path, index=None).shape[:3] == (4, 480, 480)
+
+
+def test_human_mode_draws_the_limited_world(monkeypatch, feasible_set_guard):
+    from activetrack.envs import rendering
+
+    monkeypatch.setattr(rendering, "_interactive_backend", lambda: True)
+    env = _limited_env("human", n_steps=2)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # Agg: "cannot show the figure"
+        env.reset(seed=0)
+        env.step({a: np.zeros(2) for a in env.agents})
+        env.render()
+        art = env._renderer._art
+        (path,) = art["occluders"].get_paths()
+        np.testing.assert_allclose(path.vertices[:4], [(0, -3), (4, -3), (4, 3), (0, 3)])
+        det = env.world.get("detected", 0)
+        assert art["title"].get_text().endswith(f"missed {int((~det).sum())}/8")
+        env.close()
