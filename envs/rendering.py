@@ -21,6 +21,29 @@ The environment records one :class:`Snapshot` per time step in an :class:`Episod
   covariance around the fix;
 * the step and the posterior trace ``tr P(k|k)_11`` (summed over the targets) above.
 
+With limited sensing (issue 13: occluders, a finite ``max_range`` or ``p_detect < 1``;
+none of this is drawn for the paper's open plane, so its frames are unchanged) a frame
+also shows
+
+* the occluders as filled grey polygons (:data:`OCCLUDER_FACE`, edged
+  :data:`OCCLUDER_EDGE`), drawn first: over the faint grid, under every track, marker,
+  line and the legend; they are part of the cached background, redrawn only when the
+  layout changes (a new episode's random layout);
+* each sensor's sensing range as a thin, sparsely dotted circle of radius
+  ``max_range_i`` around the sensor in its colour (only for a finite range);
+* the lines of sight of the step: a thin solid line in the sensor's colour from each
+  sensor to the true position of each target it measured, and a faint dashed grey line
+  (:data:`MISSED_COLOR`) to each target it did not measure (out of range, behind an
+  occluder, or a missed detection): a dashed line rather than none, so a frame shows
+  which sensor missed which target and why (the line crosses an occluder, leaves the
+  range circle, or neither: a missed detection), not only that fewer lines are drawn;
+* ``missed n/KM`` in the title line: how many of the K M sensor-target pairs gave no
+  measurement at the step.
+
+The frame after a reset (step 0, before any measurement) has no lines of sight and no
+count. The view follows the targets and sensors as before; occluders and range circles
+are clipped to it.
+
 ``rgb_array`` draws on a matplotlib Agg canvas (no window, works headless). ``human``
 draws on a pyplot window; without an interactive backend (no display) it warns once and
 draws nothing. matplotlib is imported only when something is rendered.
@@ -36,6 +59,8 @@ import numpy as np
 
 from activetrack.validation import FloatArray
 
+#: The sensing layout of the paper's open plane: no occluders, ranges or detections drawn.
+_OPEN = (False, False, False)
 #: Points per drawn circle or ellipse.
 _N_CIRCLE = 65
 _UNIT = np.stack(
@@ -60,6 +85,13 @@ MODEL_MARKERS: tuple[tuple[str, str], ...] = (
 )
 #: The pose ellipses are drawn at this many standard deviations.
 POSE_SIGMAS = 2.0
+#: Fill and edge colours of the occluders.
+OCCLUDER_FACE = "#d0d0d0"
+OCCLUDER_EDGE = "#8c8c8c"
+#: Colour of the dashed line from a sensor to a target it did not measure.
+MISSED_COLOR = "#a0a0a0"
+#: Line style of the sensing range circles: sparse dots (the rho circles are dense ``:``).
+RANGE_STYLE = (0, (1, 3))
 
 
 @dataclass(frozen=True)
@@ -73,11 +105,20 @@ class Snapshot:
     sensors: FloatArray  # true sensor positions p_S(k), (M, 2)
     centers: FloatArray  # predictions p_T(k|k-1) the rho circles surround, (K, 2)
     fixes: FloatArray | None = None  # believed sensor positions (uncertain poses), (M, 2)
+    # Limited sensing (all None or empty for the paper's unlimited sensing):
+    detected: np.ndarray | None = None  # which sensor measured which target at k, (K, M) bool
+    occluders: tuple[FloatArray, ...] = ()  # the occluder polygons, (n_i, 2) each
+    max_range: FloatArray | None = None  # per-sensor sensing range (inf: unlimited), (M,)
 
     @property
     def n_targets(self) -> int:
         """Return K."""
         return self.targets.shape[0]
+
+    @property
+    def limited(self) -> bool:
+        """Return whether sensing is limited (detections recorded, occluders or a range)."""
+        return self.detected is not None or bool(self.occluders) or self.max_range is not None
 
 
 def _per_target(value: Any, ndim: int) -> list[np.ndarray]:
@@ -92,18 +133,27 @@ class EpisodeHistory:
     """The snapshots of the current episode."""
 
     frames: list[Snapshot] = field(default_factory=list)
+    # The last occluder set converted (an immutable Occluders is converted once).
+    _occ: tuple[Any, tuple[FloatArray, ...]] = field(default=(None, ()), repr=False)
 
     def clear(self) -> None:
         """Forget the episode."""
         self.frames.clear()
 
-    def append(self, k, x_true, x_est, P, sensors, center, fixes=None) -> None:
+    def append(
+        self, k, x_true, x_est, P, sensors, center, fixes=None, *,
+        detected=None, occluders=None, max_range=None,
+    ) -> None:  # fmt: skip
         """Record time step ``k`` (the position parts are copied).
 
         ``x_true``, ``x_est``, ``center`` are one target's state (n,) or K of them (a
         (K, n) array or a sequence; the states may differ in dimension), ``P`` one (n, n)
         covariance or K of them; ``sensors`` (M, 2) the true positions, ``fixes`` (M, 2)
-        the believed ones (None: poses are known).
+        the believed ones (None: poses are known). Limited sensing: ``detected`` (K, M)
+        bool, which sensor measured which target at step ``k`` (None: unlimited sensing);
+        ``occluders`` an :class:`activetrack.occluders.Occluders` or a sequence of (n_i, 2)
+        polygons (None: none); ``max_range`` (M,) the sensing ranges, > 0, inf for
+        unlimited (None: all unlimited).
         """
         targets = np.array([v[:2] for v in _per_target(x_true, 1)], dtype=np.float64)
         estimates = np.array([v[:2] for v in _per_target(x_est, 1)], dtype=np.float64)
@@ -119,18 +169,56 @@ class EpisodeHistory:
             fixes = np.array(fixes, dtype=np.float64)
             if fixes.shape != sensors.shape:
                 raise ValueError(f"fixes must have shape {sensors.shape}, got {fixes.shape}")
-        self.frames.append(Snapshot(int(k), targets, estimates, covs, sensors, centers, fixes))
+        shape = (len(targets), sensors.shape[0])
+        if detected is not None:
+            detected = np.array(detected)
+            if detected.dtype != np.bool_ or detected.shape != shape:
+                raise ValueError(
+                    f"detected must be a bool array of shape {shape}, got "
+                    f"{detected.dtype} {detected.shape}"
+                )
+        if max_range is not None:
+            max_range = np.array(max_range, dtype=np.float64)
+            if max_range.shape != shape[1:] or not np.all(max_range > 0):
+                raise ValueError(
+                    f"max_range must be {shape[1]} values in (0, inf], got {max_range!r}"
+                )
+        self.frames.append(
+            Snapshot(int(k), targets, estimates, covs, sensors, centers, fixes, detected,
+                     self._polygons(occluders), max_range)
+        )  # fmt: skip
+
+    def _polygons(self, occluders: Any) -> tuple[FloatArray, ...]:
+        """Return ``occluders`` as a tuple of (n_i, 2) float64 arrays (checked copies)."""
+        if occluders is None:
+            return ()
+        if occluders is self._occ[0]:  # the same immutable Occluders as the last step
+            return self._occ[1]
+        raw = getattr(occluders, "polygons", occluders)
+        polys = tuple(np.array(p, dtype=np.float64) for p in raw)
+        for i, p in enumerate(polys):
+            if p.ndim != 2 or p.shape[0] < 3 or p.shape[1] != 2 or not np.all(np.isfinite(p)):
+                raise ValueError(
+                    f"occluders[{i}] must be a finite (n, 2) array with n >= 3, got {p.shape}"
+                )
+        if hasattr(occluders, "polygons"):  # immutable: convert it once
+            self._occ = (occluders, polys)
+        return polys
 
     def record(self, world: Any, centers: FloatArray | None = None) -> None:
         """Record the current step of copy 0 of ``world`` (an :class:`activetrack.World`).
 
         ``centers`` (K, 2): the predictions the step's moves kept ``rho`` from
         (:func:`predicted_positions` before the step); None: the posterior estimates (at
-        reset, before any move). The fixes are recorded when the poses are uncertain.
+        reset, before any move). The fixes are recorded when the poses are uncertain; with
+        limited sensing (``world.scenario.limited_sensing``) the step's detections
+        (``world.get("detected", 0)``), the world's occluders and sensing ranges.
         """
         g = world.get
         K = world.n_targets
+        p = world.params
         x_hat = [g("x_hat", 0, j) for j in range(K)]
+        limited = world.scenario.limited_sensing
         self.append(
             g("k", 0),
             [g("x_true", 0, j) for j in range(K)],
@@ -138,8 +226,26 @@ class EpisodeHistory:
             [g("P", 0, j) for j in range(K)],
             g("sensors", 0),
             x_hat if centers is None else centers,
-            g("fixes", 0) if world.params.pose_cov is not None else None,
+            g("fixes", 0) if p.pose_cov is not None else None,
+            detected=g("detected", 0) if limited else None,
+            occluders=p.occluders if limited else None,
+            max_range=p.max_range if limited else None,
         )
+
+
+def _same_polygons(a: tuple[FloatArray, ...], b: tuple[FloatArray, ...]) -> bool:
+    """Return whether two occluder layouts are equal (cheap when they are one object)."""
+    return a is b or (
+        len(a) == len(b) and all(np.array_equal(p, q) for p, q in zip(a, b, strict=True))
+    )
+
+
+def _segments(a: FloatArray, b: FloatArray) -> FloatArray:
+    """Return the segments ``a[i] -> b[i]`` (broadcast) as one polyline broken by NaN rows."""
+    a, b = np.broadcast_arrays(a, b)
+    out = np.full((a.shape[0], 3, 2), np.nan)
+    out[:, 0], out[:, 1] = a, b
+    return out.reshape(-1, 2)
 
 
 def predicted_positions(world: Any) -> FloatArray:
@@ -231,14 +337,21 @@ class TrackingRenderer:
         self._art: dict[str, Any] = {}
         self._human = False
         self._warned = False
-        self._layout: tuple[int, bool] = (1, False)
+        self._layout: tuple[int, bool, tuple[bool, bool, bool]] = (1, False, _OPEN)
         # Per frame: (snapshot, its K 3-sigma ellipses).
         self._ellipses: list[tuple[Snapshot, list[FloatArray]]] = []
 
     # Figure set-up ------------------------------------------------------------------
-    def _build(self, human: bool, n_targets: int = 1, fixes: bool = False) -> None:
-        """Make the figure and its artists for ``n_targets`` targets (and the fixes)."""
-        from matplotlib.collections import LineCollection
+    def _build(
+        self,
+        human: bool,
+        n_targets: int = 1,
+        fixes: bool = False,
+        sensing: tuple[bool, bool, bool] = _OPEN,
+    ) -> None:
+        """Make the figure and its artists for ``n_targets`` targets (and the fixes);
+        ``sensing``: whether occluders, sensing ranges and detections are drawn."""
+        from matplotlib.collections import LineCollection, PolyCollection
 
         figsize = (self.size[0] / self.dpi, self.size[1] / self.dpi)
         if human:
@@ -263,6 +376,25 @@ class TrackingRenderer:
         ax.yaxis.set_major_locator(MaxNLocator(5))
         ax.grid(True, lw=0.3, alpha=0.5)
         colors = [f"C{i % 10}" for i in range(self.rho.shape[0])]
+        occluded, ranged, detections = sensing
+        art: dict[str, Any] = {"occluders": None, "range": [], "sight": [], "missed": None}
+        self._polys: tuple[FloatArray, ...] = ()  # the occluders drawn
+        if occluded:  # static: part of the cached background, under every data artist
+            art["occluders"] = PolyCollection(
+                [], facecolors=OCCLUDER_FACE, edgecolors=OCCLUDER_EDGE, linewidths=0.8,
+                zorder=1.6, label="occluders",
+            )  # fmt: skip
+            ax.add_collection(art["occluders"])
+        if ranged:
+            for c in colors:
+                art["range"].append(ax.plot([], [], ls=RANGE_STYLE, color=c, lw=0.7)[0])
+            art["range"][0].set_label("sensing range")
+        if detections:
+            for c in colors:
+                art["sight"].append(ax.plot([], [], "-", color=c, lw=0.7, alpha=0.8)[0])
+            art["sight"][0].set_label("lines of sight")
+            art["missed"] = ax.plot([], [], ls=(0, (3, 3)), color=MISSED_COLOR, lw=0.7)[0]
+            art["missed"].set_label("missed detections")
         targets = []
         for j in range(n_targets):
             true_c, est_c, ell_c = TARGET_COLORS[j % len(TARGET_COLORS)]
@@ -284,7 +416,7 @@ class TrackingRenderer:
         for t in targets:
             ax.add_collection(t["ellipses"])
         targets[0]["ellipses"].set_label("3-sigma bounds")
-        art: dict[str, Any] = {"targets": targets, "trails": [], "heads": [], "rho": []}
+        art.update(targets=targets, trails=[], heads=[], rho=[])
         for c, code in zip(colors, self.models.tolist(), strict=True):
             art["trails"].append(ax.plot([], [], "-", color=c, lw=1.0)[0])
             art["heads"].append(ax.plot([], [], MODEL_MARKERS[code][0], color=c, ms=5)[0])
@@ -311,6 +443,7 @@ class TrackingRenderer:
         )
         ax.legend(loc="upper left", fontsize=6, framealpha=0.6)
         self._dynamic = [
+            *art["range"], *([art["missed"]] if detections else []), *art["sight"],
             *(t["ellipses"] for t in targets), *(t["true"] for t in targets),
             *(t["est"] for t in targets), *art["trails"], *art["rho"],
             *([art["pose"]] if art["pose"] is not None else []),
@@ -323,7 +456,7 @@ class TrackingRenderer:
             for a in self._dynamic:
                 a.set_animated(True)
         self._fig, self._canvas, self._art, self._human = fig, canvas, art, human
-        self._layout = (n_targets, fixes)
+        self._layout = (n_targets, fixes, sensing)
         self._ax = ax
         self._view: tuple[FloatArray, float] | None = None
         self._background = None
@@ -374,10 +507,39 @@ class TrackingRenderer:
                 art["pose"].set_segments(list(pose))
                 extra.append(pose.reshape(-1, 2))
         title = "tr P(k|k)_11" if K == 1 else "Σ tr P(k|k)_11"
-        art["title"].set_text(f"step {last.k}   {title} = {trace:.3g} m²")
+        title = f"step {last.k}   {title} = {trace:.3g} m²"
+        if last.limited:
+            title += self._draw_sensing(last)
+        art["title"].set_text(title)
         pts = np.concatenate([true.reshape(-1, 2), est.reshape(-1, 2), trails.reshape(-1, 2),
                               *nows, *extra])  # fmt: skip
         self._fit_view(pts.min(0), pts.max(0))
+
+    def _draw_sensing(self, last: Snapshot) -> str:
+        """Draw the occluders, ranges and lines of sight of ``last``; return the title's
+        missed-detection count ("" before the first measurement)."""
+        art = self._art
+        if art["occluders"] is not None and not _same_polygons(last.occluders, self._polys):
+            art["occluders"].set_verts(list(last.occluders))
+            self._background = None  # the occluders are in the cached background
+        self._polys = last.occluders
+        if art["range"]:
+            for line, center, radius in zip(art["range"], last.sensors, last.max_range,
+                                            strict=True):  # fmt: skip
+                ring = center + radius * _UNIT.T if np.isfinite(radius) else np.empty((0, 2))
+                line.set_data(ring[:, 0], ring[:, 1])
+        if last.detected is None or last.k == 0:  # no measurement yet: nothing was missed
+            for line in [*art["sight"], *([art["missed"]] if art["missed"] else [])]:
+                line.set_data([], [])
+            return ""
+        seen = last.detected  # (K, M)
+        for i, line in enumerate(art["sight"]):
+            seg = _segments(last.sensors[i : i + 1], last.targets[seen[:, i]])
+            line.set_data(seg[:, 0], seg[:, 1])
+        j, i = np.nonzero(~seen)
+        seg = _segments(last.sensors[i], last.targets[j])
+        art["missed"].set_data(seg[:, 0], seg[:, 1])
+        return f"   missed {len(i)}/{seen.size}"
 
     def _fit_view(self, lo: FloatArray, hi: FloatArray) -> None:
         """Keep a square view around the data; change it only when the data leaves it
@@ -410,15 +572,18 @@ class TrackingRenderer:
         )
         return [polys for _, polys in cache]
 
-    def _layout_of(self, history: EpisodeHistory) -> tuple[int, bool]:
-        """Return the (targets, fixes drawn) the history needs."""
+    def _layout_of(self, history: EpisodeHistory) -> tuple[int, bool, tuple[bool, bool, bool]]:
+        """Return the (targets, fixes drawn, (occluders, ranges, detections drawn)) the
+        history needs."""
         last = history.frames[-1]
         if last.sensors.shape[0] != self.rho.shape[0]:
             raise ValueError(
                 f"the history has {last.sensors.shape[0]} sensors, the renderer "
                 f"{self.rho.shape[0]} (rho)"
             )
-        return last.n_targets, last.fixes is not None or self.pose_cov is not None
+        ranged = last.max_range is not None and bool(np.any(np.isfinite(last.max_range)))
+        sensing = (bool(last.occluders), ranged, last.detected is not None)
+        return last.n_targets, last.fixes is not None or self.pose_cov is not None, sensing
 
     # Public ------------------------------------------------------------------------
     def rgb_array(self, history: EpisodeHistory) -> np.ndarray:

@@ -233,7 +233,7 @@ def _without_target_1(history):
 def _fixed_view_frame(history, lim):
     """Render ``history`` with the axes limits ``lim`` held fixed."""
     r = TrackingRenderer(np.full(3, 1.5))
-    r._build(False, history.frames[-1].n_targets)
+    r._build(False, *r._layout_of(history))
     r._fit_view = lambda lo, hi: None
     r._ax.set_xlim(*lim)
     r._ax.set_ylim(*lim)
@@ -460,3 +460,283 @@ def test_paper_frames_are_pixel_identical_to_the_single_target_renderer(monkeypa
                        planned_from)  # fmt: skip
         n += 1
     assert n == env.scenario.n_steps
+
+
+# Limited sensing: occluders, sensing ranges, lines of sight, missed detections ----------
+
+#: One rectangular occluder, clear of every other drawn element of _limited_history.
+BOX = ((2.0, -18.0), (8.0, -18.0), (8.0, -12.0), (2.0, -12.0))
+#: Which sensor measured which target (K = 2, M = 3) at every step after the first.
+SEEN = np.array([[True, False, True], [False, True, False]])
+LIM = (-25.0, 25.0)
+
+
+def _limited_history(n_steps=6, detected=SEEN, occluders=(BOX,), max_range=(5.0, np.inf, 8.0)):
+    """Two targets (top left and top right), three sensors; step 0 has no detections."""
+    h = EpisodeHistory()
+    P = np.diag([0.5, 0.3, 1.0, 1.0])
+    for k in range(n_steps):
+        x0 = np.array([-15.0 + k, 10.0, 1.0, 0.0])
+        x1 = np.array([15.0 - 0.5 * k, 15.0, -0.5, 0.0])
+        sensors = np.array([[-12.5 + 0.1 * k, -12.0], [12.0, -5.0], [-2.0, 0.2 * k]])
+        seen = None if detected is None else (detected if k else np.zeros_like(detected))
+        h.append(k, [x0, x1], [x0 + 0.2, x1 - 0.2], [P, P], sensors, [x0, x1], detected=seen,
+                 occluders=occluders, max_range=max_range)  # fmt: skip
+    return h
+
+
+def _with(history, **changes):
+    """Return ``history`` with the limited-sensing fields of every frame replaced."""
+    h = EpisodeHistory()
+    for f in history.frames:
+        kw = {"detected": f.detected, "occluders": f.occluders, "max_range": f.max_range}
+        kw.update(changes)
+        h.append(f.k, f.targets, f.estimates, f.covs, f.sensors, f.centers, f.fixes, **kw)
+    return h
+
+
+def _to_pixels(renderer, xy):
+    """Return the (row, column) floats of data points ``xy`` (..., 2) in the frame."""
+    pts = renderer._ax.transData.transform(np.reshape(xy, (-1, 2)))
+    return np.column_stack([renderer.size[1] - pts[:, 1], pts[:, 0]])
+
+
+def _hex_rgb(color):
+    return np.array([int(color[i : i + 2], 16) for i in (1, 3, 5)])
+
+
+def test_occluders_are_filled_grey_polygons_under_the_data():
+    from activetrack.envs.rendering import OCCLUDER_FACE
+
+    grey = _hex_rgb(OCCLUDER_FACE)
+    r, frame = _fixed_view_frame(_limited_history(), LIM)
+    _, bare = _fixed_view_frame(_limited_history(occluders=()), LIM)
+    # The box's pixel extent (pixel (r, c) covers [r, r+1) x [c, c+1)).
+    (top, left), (bottom, right) = _to_pixels(r, [(2.0, -12.0), (8.0, -18.0)])
+    # 3 pixels in from the edge line (antialiased over about 2 pixels)
+    inner = (slice(int(top) + 3, int(bottom) - 2), slice(int(left) + 3, int(right) - 2))
+    assert frame[inner].shape[0] > 20 and frame[inner].shape[1] > 20
+    assert np.all(frame[inner] == grey)
+    assert np.all(bare[inner] == 255)  # nothing else is drawn there
+    # Just outside the box the frame is white, as without the occluder.
+    ring = np.zeros(frame.shape[:2], bool)
+    ring[int(top) - 5 : int(bottom) + 6, int(left) - 5 : int(right) + 6] = True
+    ring[int(top) - 2 : int(bottom) + 3, int(left) - 2 : int(right) + 3] = False
+    assert np.all(frame[ring] == 255) and np.all(bare[ring] == 255)
+    # Under the data: a target crossing the box is drawn over it.
+    h = _limited_history()
+    f = h.frames[-1]
+    x = np.array([5.0, -15.0, 0.0, 0.0])
+    h.append(f.k + 1, [x, f.targets[1]], [x, f.estimates[1]], f.covs, f.sensors, [x, f.targets[1]],
+             detected=f.detected, occluders=(BOX,), max_range=f.max_range)  # fmt: skip
+    r, frame = _fixed_view_frame(h, LIM)
+    _, bare = _fixed_view_frame(_with(h, occluders=()), LIM)
+    row, col = _to_pixels(r, x[:2])[0].astype(int)
+    box = (slice(row - 3, row + 4), slice(col - 3, col + 4))
+    black = np.all(bare[box] == 0, axis=-1)  # the black star's opaque pixels
+    assert black.sum() >= 3 and np.all(frame[box][black] == 0)  # drawn over the grey
+    assert np.any(np.all(frame[box] == grey, axis=-1))  # inside the box
+
+
+def test_occluders_are_in_the_cached_background_and_follow_the_layout():
+    h = _limited_history()
+    r = TrackingRenderer(np.full(3, 1.5))
+    for n in range(1, len(h.frames) + 1):  # frame by frame, blitting over one background
+        blitted = r.rgb_array(EpisodeHistory(h.frames[:n]))
+    fresh = TrackingRenderer(np.full(3, 1.5))
+    fresh._build(False, *r._layout)
+    fresh._view = r._view
+    fresh._ax.set_xlim(r._ax.get_xlim())
+    fresh._ax.set_ylim(r._ax.get_ylim())
+    assert np.mean(np.any(blitted != fresh.rgb_array(h), axis=-1)) < 0.002
+    # A new layout (e.g. a new episode's) replaces the drawn one.
+    moved = tuple((x - 10.0, y) for x, y in BOX)
+    frame = r.rgb_array(_limited_history(occluders=(moved,)))
+    r_mid, c_mid = _to_pixels(r, [(5.0, -15.0), (-5.0, -15.0)]).astype(int)
+    from activetrack.envs.rendering import OCCLUDER_FACE
+
+    grey = _hex_rgb(OCCLUDER_FACE)
+    assert np.all(blitted[r_mid[0], r_mid[1]] == grey)
+    assert not np.all(frame[r_mid[0], r_mid[1]] == grey)
+    assert np.all(frame[c_mid[0], c_mid[1]] == grey)
+
+
+def test_sensing_range_is_a_dotted_circle_around_each_sensor():
+    h = _limited_history()
+    r, frame = _fixed_view_frame(h, LIM)
+    last = h.frames[-1]
+    ranges = r._art["range"]
+    assert len(ranges) == 3 and ranges[0].get_label() == "sensing range"
+    for line, center, radius in zip(ranges, last.sensors, last.max_range, strict=True):
+        pts = np.column_stack(line.get_data())
+        if np.isinf(radius):
+            assert len(pts) == 0  # an unlimited sensor has no circle
+            continue
+        np.testing.assert_allclose(np.linalg.norm(pts - center, axis=1), radius, rtol=1e-12)
+        assert line.get_linestyle() != "-"
+    # Pixels: sensor 0's lower half circle (nothing else is drawn there) is dotted in C0.
+    angles = np.linspace(np.pi + 0.3, 2 * np.pi - 0.3, 400)
+    on = last.sensors[0] + 5.0 * np.column_stack([np.cos(angles), np.sin(angles)])
+    rc = np.floor(_to_pixels(r, on)).astype(int)  # the pixel holding each point
+    _, bare = _fixed_view_frame(_limited_history(max_range=None), LIM)
+
+    def coloured(f):  # C0 blue (31, 119, 180), faint on thin dots: blue well above red
+        px = f[rc[:, 0], rc[:, 1]].astype(int)
+        return px[:, 2] - px[:, 0] > 25
+
+    dots = coloured(frame)
+    white = np.all(frame[rc[:, 0], rc[:, 1]] == 255, axis=-1)
+    assert 0.1 < dots.mean() < 0.8 and white.mean() > 0.15  # dots and gaps alternate
+    assert not coloured(bare).any()  # no range, no circle
+
+
+def _pairs(line):
+    """Return the segments of a NaN-broken polyline as a set of rounded point pairs."""
+    pts = np.column_stack(line.get_data())
+    assert len(pts) % 3 == 0 and np.all(np.isnan(pts[2::3]))
+    ends = zip(pts[::3], pts[1::3], strict=True)
+    return {(tuple(np.round(a, 9)), tuple(np.round(b, 9))) for a, b in ends}
+
+
+def test_lines_of_sight_join_each_sensor_to_the_targets_it_measured():
+    h = _limited_history()
+    r, frame = _fixed_view_frame(h, LIM)
+    last = h.frames[-1]
+    S, T = last.sensors, last.targets
+    seg = lambda i, j: (tuple(np.round(S[i], 9)), tuple(np.round(T[j], 9)))  # noqa: E731
+    # By hand from SEEN: sensor 0 saw target 0, sensor 1 target 1, sensor 2 target 0.
+    assert _pairs(r._art["sight"][0]) == {seg(0, 0)}
+    assert _pairs(r._art["sight"][1]) == {seg(1, 1)}
+    assert _pairs(r._art["sight"][2]) == {seg(2, 0)}
+    assert _pairs(r._art["missed"]) == {seg(0, 1), seg(1, 0), seg(2, 1)}
+    for i in range(3):
+        assert r._art["sight"][i].get_color() == f"C{i}"
+        assert r._art["sight"][i].get_linestyle() == "-"
+    assert r._art["missed"].get_linestyle() != "-"
+    assert r._art["title"].get_text().endswith("missed 3/6")
+    # Pixels: the middle of sensor 1's line of sight is orange (C1), drawn only when seen.
+    mid = _to_pixels(r, 0.5 * (S[1] + T[1]))[0].astype(int)
+    orange = (255, 127, 14)
+    assert _near(frame, mid, orange, half=2, tol=70) > 0
+    none_seen = _limited_history(detected=np.zeros((2, 3), bool))
+    r0, f0 = _fixed_view_frame(none_seen, LIM)
+    assert _near(f0, mid, orange, half=2, tol=70) == 0
+    assert all(len(line.get_xdata()) == 0 for line in r0._art["sight"])
+    assert len(_pairs(r0._art["missed"])) == 6
+    assert r0._art["title"].get_text().endswith("missed 6/6")
+
+
+def test_first_frame_has_no_lines_of_sight_and_no_count():
+    h = _limited_history(n_steps=1)
+    r, _ = _fixed_view_frame(h, LIM)
+    assert all(len(line.get_xdata()) == 0 for line in [*r._art["sight"], r._art["missed"]])
+    assert "missed" not in r._art["title"].get_text()
+
+
+def _limited_env(render_mode="rgb_array", **kw):
+    from activetrack.scenarios import make_scenario
+
+    sc = make_scenario("two_targets", occluders=[[(0, -3), (4, -3), (4, 3), (0, 3)]],
+                       max_range=12.0, p_detect=0.8, sensor_center=(-6.0, 0.0), **kw)  # fmt: skip
+    return parallel_env(scenario=sc, render_mode=render_mode)
+
+
+def test_missed_count_and_snapshots_come_from_the_world(feasible_set_guard):
+    env = _limited_env(n_steps=12)
+    env.reset(seed=0)
+    w = env.world
+    env.render()
+    assert "missed" not in env._renderer._art["title"].get_text()
+    counts = []
+    while env.agents:
+        env.step({a: np.array([0.3, 0.2]) for a in env.agents})
+        env.render()
+        det = w.get("detected", 0)
+        snap = env._history.frames[-1]
+        np.testing.assert_array_equal(snap.detected, det)
+        assert not np.shares_memory(snap.detected, det)  # a copy, not a view of the world
+        missed = int(np.sum(~det))
+        title = env._renderer._art["title"].get_text()
+        assert title.endswith(f"missed {missed}/{det.size}")
+        counts.append(missed)
+    assert 0 < min(counts) and max(counts) < 8  # some seen, some missed: a real check
+    snap = env._history.frames[-1]
+    np.testing.assert_array_equal(snap.max_range, np.full(4, 12.0))
+    assert len(snap.occluders) == 1
+    np.testing.assert_array_equal(snap.occluders[0], [(0, -3), (4, -3), (4, 3), (0, 3)])
+    # The world's immutable layout is converted once per history, not per step.
+    assert all(f.occluders is snap.occluders for f in env._history.frames)
+    env.close()
+
+
+def test_unlimited_sensing_records_and_draws_none_of_it():
+    env = parallel_env(scenario="paper", render_mode="rgb_array", n_steps=2)
+    env.reset(seed=0)
+    env.step({a: np.zeros(2) for a in env.agents})
+    env.render()
+    snap = env._history.frames[-1]
+    assert snap.detected is None and snap.occluders == () and snap.max_range is None
+    assert not snap.limited
+    art = env._renderer._art
+    assert art["occluders"] is None and art["missed"] is None
+    assert art["range"] == [] and art["sight"] == []
+    assert "missed" not in art["title"].get_text()
+
+
+def test_detection_probability_alone_draws_lines_but_no_occluders_or_ranges(feasible_set_guard):
+    env = parallel_env(scenario="two_targets", render_mode="rgb_array", p_detect=0.5, n_steps=3)
+    env.reset(seed=1)
+    env.step({a: np.zeros(2) for a in env.agents})
+    env.render()
+    art = env._renderer._art
+    assert art["occluders"] is None and art["range"] == []
+    det = env.world.get("detected", 0)
+    assert sum(len(_pairs(line)) for line in art["sight"]) == int(det.sum())
+    assert len(_pairs(art["missed"])) == int((~det).sum())
+    labels = set(_legend_markers(env._renderer))
+    assert {"lines of sight", "missed detections"} <= labels
+    assert not labels & {"occluders", "sensing range"}
+
+
+def test_limited_history_validates_its_inputs():
+    h = EpisodeHistory()
+    x = np.zeros(4)
+    args = (0, x, x, np.eye(4), np.zeros((3, 2)), x)
+    with pytest.raises(ValueError, match="detected"):
+        h.append(*args, detected=np.ones((1, 2), bool))
+    with pytest.raises(ValueError, match="detected"):
+        h.append(*args, detected=np.ones((1, 3)))  # not bool
+    with pytest.raises(ValueError, match="max_range"):
+        h.append(*args, max_range=[1.0, 0.0, 2.0])
+    with pytest.raises(ValueError, match="max_range"):
+        h.append(*args, max_range=[1.0, 2.0])
+    with pytest.raises(ValueError, match=r"occluders\[0\]"):
+        h.append(*args, occluders=[[(0, 0), (1, 0)]])
+    with pytest.raises(ValueError, match=r"occluders\[1\]"):
+        h.append(*args, occluders=[BOX, [(0, 0), (1, np.nan), (0, 1)]])
+    assert h.frames == []
+
+
+def test_record_video_of_a_limited_task(tmp_path, feasible_set_guard):
+    env = _limited_env(n_steps=50)
+    path = record_video(tmp_path / "l.gif", lambda obs: {a: np.zeros(2) for a in obs}, env=env,
+                        seed=0, max_steps=3)  # fmt: skip
+    assert iio.imread(path, index=None).shape[:3] == (4, 480, 480)
+
+
+def test_human_mode_draws_the_limited_world(monkeypatch, feasible_set_guard):
+    from activetrack.envs import rendering
+
+    monkeypatch.setattr(rendering, "_interactive_backend", lambda: True)
+    env = _limited_env("human", n_steps=2)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # Agg: "cannot show the figure"
+        env.reset(seed=0)
+        env.step({a: np.zeros(2) for a in env.agents})
+        env.render()
+        art = env._renderer._art
+        (path,) = art["occluders"].get_paths()
+        np.testing.assert_allclose(path.vertices[:4], [(0, -3), (4, -3), (4, 3), (0, 3)])
+        det = env.world.get("detected", 0)
+        assert art["title"].get_text().endswith(f"missed {int((~det).sum())}/8")
+        env.close()
