@@ -317,7 +317,8 @@ class TrackingParallelEnv(ParallelEnv):
 
     def render(self) -> np.ndarray | None:
         """Draw the episode so far (Fig. 4 style, every target, the sensors' models and
-        fixes: :mod:`activetrack.envs.rendering`); an RGB array in ``rgb_array`` mode."""
+        fixes; with limited sensing the occluders, sensing ranges, lines of sight and missed
+        detections: :mod:`activetrack.envs.rendering`); an RGB array in ``rgb_array`` mode."""
         if self.render_mode is None:
             gymnasium.logger.warn(
                 "render() called without a render_mode; pass render_mode='rgb_array' or 'human'."
