@@ -453,7 +453,9 @@ class PlanningProblem:
             and (self.models is None or not np.any(self.models))
             and self.pose_cov is None
             and self.objective.name == "trace"
-            and self.detect is None
+            and self.p_detect is None
+            and self.max_range is None
+            and self.occluders is None
         )
 
     @cached_property
