@@ -57,3 +57,19 @@ def test_rays_measure_the_wall_by_hand():
             assert abs(r - 2 / abs(np.cos(a)) / RAY_MAX) < 1e-6
         elif np.cos(a) >= 0:
             assert r == 1.0
+
+
+def test_batched_env_over_an_episode_boundary():
+    from activetrack.envs.batched import BatchedActiveTracking
+
+    env = BatchedActiveTracking(
+        8, scenario="two_targets", occluders=WALL, max_range=15.0, p_detect=0.8
+    )
+    obs, _ = env.reset(seed=0)
+    rng = np.random.default_rng(0)
+    for _ in range(60):  # past the 50-step episodes: autoreset
+        obs, rewards, *_ = env.step(rng.uniform(-1, 1, (8, 8)).astype(np.float32))
+        assert env.observation_space.contains(obs)
+        assert np.all(np.isfinite(rewards))
+    flags = env.world.observe()[:, 0, EXT_TARGET_DIM * 2 + EXT_SENSOR_DIM :][:, :2]
+    np.testing.assert_array_equal(flags, env.world.get("detected")[:, :, 0].astype(np.float32))
