@@ -136,7 +136,7 @@ def _run_world(sc, steps):
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         for _ in range(steps):
-            if world.get("truncated", 0):
+            if world.get("truncated", 0) or world.get("terminated", 0):  # max_trace may end it
                 break
             world.step_actions(rng.uniform(-1, 1, (sc.n_sensors, 2)))
             for k in range(sc.n_targets):
