@@ -32,6 +32,7 @@ from __future__ import annotations
 import numpy as np
 
 from activetrack import feasible_set, sensor_models, solver_numeric
+from activetrack.occluders import line_of_sight
 from activetrack.problem import PlanningProblem
 from activetrack.validation import FloatArray
 
@@ -120,7 +121,7 @@ def _approach(problem, s, value, current, r, targets, rho, det, weights):
     rel = s[:, None, :, :] - targets[:, :, None, :]  # (B, K, M, 2)
     seen = sensor_models.detection_factor(rel, det[0][:, None], det[1][:, None]) > 0.0
     if problem.occluders is not None:
-        seen &= _sight(s, targets, problem.occluders)
+        seen &= line_of_sight(s, targets, problem.occluders)
     lost = ~seen.any(axis=1) & (r > 0.0) & (det[0] > 0.0)  # (B, M)
     if not np.any(lost):
         return s, value
@@ -218,12 +219,5 @@ def _entries(
     cov = None if pose is None else pose[:, None]
     d = None if det is None else tuple(x[:, None] for x in det)
     if occ is not None:
-        d = (*d, _sight(s, targets, occ))
+        d = (*d, line_of_sight(s, targets, occ))
     return sensor_models.information_entries(rel, w_d[:, None], w_t[:, None], cov, d)
-
-
-def _sight(s: FloatArray, targets: FloatArray, occ: object) -> np.ndarray:
-    """Return whether sensors ``s`` (B, M, 2) see each target (B, K, 2): (B, K, M)."""
-    from activetrack.occluders import blocked  # noqa: PLC0415 (occluded problems only)
-
-    return ~blocked(s[:, None, :, :], targets[:, :, None, :], occ)

@@ -468,6 +468,12 @@ def _nearest_reachable(o: np.ndarray, q: np.ndarray, r: np.ndarray, occ: Occlude
     return out
 
 
+def line_of_sight(sensors: FloatArray, targets: FloatArray, occ: Occluders) -> np.ndarray:
+    """Return whether each sensor (..., M, 2) sees each target (..., K, 2): (..., K, M),
+    the segment between them not :func:`blocked`."""
+    return ~blocked(sensors[..., None, :, :], targets[..., :, None, :], occ)
+
+
 def ray_distances(
     origins: FloatArray, directions: FloatArray, occ: Occluders, max_distance: float
 ) -> FloatArray:

@@ -535,9 +535,9 @@ class PlanningProblem:
         pos = np.asarray(positions, dtype=np.float64)
         if self.occluders is None:
             return np.ones(pos.shape[:-2] + (self.n_targets, pos.shape[-2]), dtype=bool)
-        from activetrack.occluders import blocked  # noqa: PLC0415
+        from activetrack.occluders import line_of_sight  # noqa: PLC0415
 
-        return ~blocked(pos[..., None, :, :], self.targets[..., :, None, :], self.occluders)
+        return line_of_sight(pos, self.targets, self.occluders)
 
     def trace(self, next_positions: ArrayLike) -> FloatArray:
         """Return :meth:`score` (the name from when the trace was the only objective)."""

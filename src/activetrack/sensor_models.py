@@ -287,9 +287,14 @@ def information_entries(
 
 def detection_factor(rel: FloatArray, p_detect: FloatArray, range2: FloatArray) -> FloatArray:
     """Return the probability that a sensor at offset ``rel`` (..., M, 2) measures the
-    target: ``p_detect`` within the range (``|rel|^2 <= range2``), else 0; (..., M)."""
-    n2 = rel[..., 0] * rel[..., 0] + rel[..., 1] * rel[..., 1]
-    return np.where(n2 <= range2, p_detect, 0.0)
+    target: ``p_detect`` within the range (:func:`in_range`), else 0; (..., M)."""
+    return np.where(in_range(rel, range2), p_detect, 0.0)
+
+
+def in_range(rel: FloatArray, range2: FloatArray) -> np.ndarray:
+    """Return whether offsets ``rel`` (..., 2) are within the sensing range,
+    ``|rel|^2 <= range2`` (the rule of the world's detections and of the planners)."""
+    return rel[..., 0] * rel[..., 0] + rel[..., 1] * rel[..., 1] <= range2
 
 
 def _matrix(a: FloatArray, b: FloatArray, c: FloatArray) -> FloatArray:

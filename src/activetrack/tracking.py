@@ -234,15 +234,14 @@ def detections(
     shape = positions.shape[:-1] + (params.n_sensors,)
     seen = np.ones(shape, dtype=bool)
     if params.max_range is not None:
-        d = sensors[..., None, :, :] - positions[..., :, None, :]
-        seen &= d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1] <= params.max_range**2
+        rel = sensors[..., None, :, :] - positions[..., :, None, :]
+        seen &= sensor_models.in_range(rel, params.max_range**2)
     if params.p_detect is not None:
         seen &= draws.reshape(shape) < params.detect_threshold
     if params.occluders is not None:
         from activetrack import occluders  # noqa: PLC0415 (occluded scenarios only)
 
-        seen &= ~occluders.blocked(sensors[..., None, :, :], positions[..., :, None, :],
-                                   params.occluders)  # fmt: skip
+        seen &= occluders.line_of_sight(sensors, positions, params.occluders)
     return seen
 
 
