@@ -93,3 +93,26 @@ def test_no_measurement_through_an_occluder():
         # A sampled point inside means blocked; the kernel may also see a thinner sliver.
         assert not np.any(detected & hidden)
         assert (~detected).sum() >= hidden.sum()
+
+
+@pytest.mark.parametrize(
+    ("value", "match"),
+    [
+        ([[(0, 0), (1, 0), (1, float("nan"))]], r"occluders\[0\].*finite"),
+        ([[(0, 0), (2e9, 0), (2e9, 2e9)]], "occluders coordinates"),
+        ([[(0, 0), (1, 1), (1, 0), (0, 1)]], r"occluders\[0\].*self-intersect"),
+        ([[("a", "b"), (1, 0), (0, 1)]], r"occluders\[0\]"),
+        (7, "occluders must be a sequence"),
+    ],
+)
+def test_bad_occluders_name_the_field(value, match):
+    with pytest.raises(ValueError, match=match):
+        make_scenario("paper", occluders=value)
+
+
+def test_problem_rejects_occluders_that_are_not_occluders():
+    from activetrack.problem import PlanningProblem
+
+    with pytest.raises(ValueError, match="occluders must be an activetrack.occluders.Occluders"):
+        PlanningProblem(np.eye(2), np.zeros(2), np.ones((3, 2)), 1.0, 0.5, 1.0, 0.1,
+                        occluders=[[(0, 0), (1, 0), (0, 1)]])  # fmt: skip
