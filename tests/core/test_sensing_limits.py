@@ -107,8 +107,8 @@ def test_detection_gaps_against_a_loop():
 def test_filter_is_consistent_with_missed_detections():
     # 200 GSR-driven runs of the range-only team, each sensor detecting with probability
     # 0.6: the mean over runs of each run's time-averaged position NEES lies in the
-    # chi-square(2) band. (Sparser information makes the EKF's linearization errors show:
-    # about 2.30 with a 12 m range added, 2.49 on the mixed team at 0.6.)
+    # chi-square(2) band. (Sparser information, a range limit added or the mixed team,
+    # makes the EKF's linearization errors show: the mean leaves the band.)
     from activetrack.baselines import GSR
 
     runs = 200
