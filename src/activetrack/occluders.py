@@ -59,12 +59,23 @@ segment ``[start, p]`` lies in ``R``, and when ``|q - start| <= r`` its point ne
 ``q`` is not ``p`` (unless ``q = p``). They make the projection exact for a ``desired``
 beyond the reach too.
 
-Only :meth:`Occluders.from_polygons` and :func:`random_layout` validate their input; the
-kernels are unchecked (finite float arrays, as the world passes them).
+Batched layouts (one layout per copy of an episode). :meth:`Occluders.stack` makes one
+set of ``N`` layouts with the same number of polygons and vertices per polygon; every
+kernel then reads the first axis of its points (of their broadcast shape, without the
+coordinate axis) as the layout axis, of length ``N``: point ``[i, ...]`` is tested against
+layout ``i`` with layout ``i``'s own ``eps`` and ``scale``, bit for bit as the unbatched
+kernel on ``occ[i]`` and the points ``[i]``. The flat kernels see one geometry per row
+(:class:`_Rows`: the shared layout, or each row's layout gathered by index), so both cases
+run the same vectorized code.
+
+Only :meth:`Occluders.from_polygons`, :meth:`Occluders.stack`, :meth:`Occluders.replaced`
+and :func:`random_layout` validate their input; the kernels are unchecked (finite float
+arrays, as the world passes them) except for the layout axis of a batched set.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -113,35 +124,218 @@ def _segments_meet(p1, p2, q1, q2, eps: float) -> np.ndarray:
 
 @dataclass(frozen=True, eq=False)
 class Occluders:
-    """An immutable set of simple polygons; build it with :meth:`from_polygons`.
+    """An immutable set of simple polygons; build it with :meth:`from_polygons` (one layout)
+    or :meth:`stack` (a batch of ``N`` layouts, one per copy).
 
-    Attributes (read-only float64/int arrays): ``polygons`` (tuple of (n_i, 2) vertex
-    arrays), ``edges_a``, ``edges_b`` (E, 2) the edges' ends (polygon ``i``'s edges are the
-    contiguous block ``starts[i]:starts[i] + n_i``, edge ``j`` runs from vertex ``j`` to
-    ``j + 1`` cyclically), ``edge_polygon`` (E,) the polygon of each edge, ``starts`` (P,),
-    ``bbox`` (P, 4) each polygon's ``(xmin, ymin, xmax, ymax)``, ``crossings`` (X, 2) the
-    points where edges of different polygons meet, ``scale`` and ``eps`` (module docstring).
+    Attributes (read-only float64/int arrays) of one layout: ``polygons`` (tuple of (n_i, 2)
+    vertex arrays), ``edges_a``, ``edges_b`` (E, 2) the edges' ends (polygon ``i``'s edges
+    are the contiguous block ``starts[i]:starts[i] + n_i``, edge ``j`` runs from vertex
+    ``j`` to ``j + 1`` cyclically), ``edge_polygon`` (E,) the polygon of each edge,
+    ``starts`` (P,), ``bbox`` (P, 4) each polygon's ``(xmin, ymin, xmax, ymax)``,
+    ``crossings`` (X, 2) the points where edges of different polygons meet, ``scale`` and
+    ``eps`` floats (module docstring).
+
+    A batched set (``batched`` True, ``n_layouts`` = N) shares ``edge_polygon`` and
+    ``starts``; its other arrays get a leading layout axis: ``edges_a``, ``edges_b``
+    (N, E, 2), ``bbox`` (N, P, 4), ``crossings`` (N, X, 2) with X the most of any layout,
+    each layout's rows first and NaN rows after them (no crossing), ``scale`` and ``eps``
+    (N,) arrays; ``polygons`` is the tuple of the layouts' ``polygons`` tuples.
+    ``n_polygons`` and ``n_edges`` count one layout's.
     """
 
-    polygons: tuple[np.ndarray, ...]
+    polygons: tuple
     edges_a: np.ndarray
     edges_b: np.ndarray
     edge_polygon: np.ndarray
     starts: np.ndarray
     bbox: np.ndarray
     crossings: np.ndarray
-    scale: float
-    eps: float
+    scale: float | np.ndarray
+    eps: float | np.ndarray
+
+    def __post_init__(self) -> None:
+        # The flat kernels' view (a leading layout axis, of length 1 when shared), built
+        # once so that a kernel call costs no conversions.
+        lead = (lambda x: x) if self.edges_a.ndim == 3 else (lambda x: x[None])
+        col = lambda x: np.reshape(np.asarray(x, np.float64), (-1, 1))  # noqa: E731
+        geo = (
+            lead(self.edges_a),
+            lead(self.edges_b),
+            lead(self.bbox),
+            lead(self.crossings),
+            col(self.eps),
+            col(self.scale),
+        )
+        object.__setattr__(self, "_geo", geo)
+
+    @property
+    def batched(self) -> bool:
+        """Return whether this is a batch of layouts (:meth:`stack`), one per copy."""
+        return self.edges_a.ndim == 3
+
+    @property
+    def n_layouts(self) -> int | None:
+        """Return the number N of layouts of a batched set, None for one (shared) layout."""
+        return int(self.edges_a.shape[0]) if self.edges_a.ndim == 3 else None
 
     @property
     def n_polygons(self) -> int:
-        """Return the number of polygons."""
-        return len(self.polygons)
+        """Return the number of polygons (of each layout)."""
+        return int(self.starts.shape[0])
 
     @property
     def n_edges(self) -> int:
-        """Return the total number of edges (= vertices)."""
-        return int(self.edges_a.shape[0])
+        """Return the total number of edges (= vertices; of each layout)."""
+        return int(self.edges_a.shape[-2])
+
+    def __getitem__(self, index: object) -> Occluders:
+        """Return layout ``index`` (an int: unbatched, the arrays of the one stacked) or the
+        batched subset of layouts ``index`` (a slice, int array or bool mask). An unbatched
+        set is shared by every copy: ``occ[anything]`` is ``occ`` itself."""
+        if not self.batched:
+            return self
+        n = self.n_layouts
+        if isinstance(index, (int, np.integer)) and not isinstance(index, (bool, np.bool_)):
+            i = int(index)
+            if not -n <= i < n:
+                raise IndexError(f"layout index {i} out of range for {n} layouts")
+            cr = self.crossings[i]
+            return Occluders(
+                polygons=self.polygons[i],
+                edges_a=_frozen(self.edges_a[i]),
+                edges_b=_frozen(self.edges_b[i]),
+                edge_polygon=self.edge_polygon,
+                starts=self.starts,
+                bbox=_frozen(self.bbox[i]),
+                crossings=_frozen(cr[: int(np.sum(~np.isnan(cr[:, 0])))]),
+                scale=float(self.scale[i]),
+                eps=float(self.eps[i]),
+            )
+        sel = np.arange(n)[index]
+        if sel.ndim != 1:
+            raise IndexError(f"layouts index must select along one axis, got shape {sel.shape}")
+        return self._rows_from(sel, self.crossings[sel])
+
+    def _rows_from(self, sel: np.ndarray, crossings: np.ndarray) -> Occluders:
+        """Return the batched set of the layouts ``sel`` with ``crossings`` (NaN padded)."""
+        return Occluders(
+            polygons=tuple(self.polygons[j] for j in sel),
+            edges_a=_frozen(self.edges_a[sel]),
+            edges_b=_frozen(self.edges_b[sel]),
+            edge_polygon=self.edge_polygon,
+            starts=self.starts,
+            bbox=_frozen(self.bbox[sel]),
+            crossings=_frozen(_trimmed(crossings)),
+            scale=_frozen(self.scale[sel]),
+            eps=_frozen(self.eps[sel]),
+        )
+
+    @classmethod
+    def stack(cls, layouts: Sequence[Occluders]) -> Occluders:
+        """Return the batched set of ``layouts`` (N >= 1 unbatched sets), layout ``i`` first.
+
+        Raises ``TypeError`` naming ``layouts[i]`` if it is not an :class:`Occluders`, and
+        ``ValueError`` for no layouts, a batched ``layouts[i]``, or one whose number of
+        polygons or vertices per polygon differs from ``layouts[0]``'s.
+        """
+        if isinstance(layouts, Occluders):
+            raise TypeError("layouts must be a sequence of Occluders, got one Occluders")
+        layouts = list(layouts)
+        if not layouts:
+            raise ValueError("layouts must hold at least 1 Occluders, got none")
+        for i, occ in enumerate(layouts):
+            if not isinstance(occ, Occluders):
+                raise TypeError(f"layouts[{i}] must be an Occluders, got {type(occ).__name__}")
+            if occ.batched:
+                raise ValueError(
+                    f"layouts[{i}] must be one layout, got a batched set of {occ.n_layouts}"
+                )
+        first = layouts[0]
+        counts = first._vertex_counts()
+        for i, occ in enumerate(layouts):
+            if occ.n_polygons != first.n_polygons:
+                raise ValueError(
+                    f"layouts[{i}] has {occ.n_polygons} polygons, layouts[0] has "
+                    f"{first.n_polygons}: stacked layouts need the same number"
+                )
+            if not np.array_equal(occ._vertex_counts(), counts):
+                raise ValueError(
+                    f"layouts[{i}] has polygons of {occ._vertex_counts().tolist()} vertices, "
+                    f"layouts[0] of {counts.tolist()}: stacked layouts need the same counts"
+                )
+        x = max(len(occ.crossings) for occ in layouts)
+        crossings = np.full((len(layouts), x, 2), np.nan)
+        for i, occ in enumerate(layouts):
+            crossings[i, : len(occ.crossings)] = occ.crossings
+        return cls(
+            polygons=tuple(occ.polygons for occ in layouts),
+            edges_a=_frozen(np.stack([occ.edges_a for occ in layouts])),
+            edges_b=_frozen(np.stack([occ.edges_b for occ in layouts])),
+            edge_polygon=first.edge_polygon,
+            starts=first.starts,
+            bbox=_frozen(np.stack([occ.bbox for occ in layouts])),
+            crossings=_frozen(crossings),
+            scale=_frozen(np.array([occ.scale for occ in layouts], np.float64)),
+            eps=_frozen(np.array([occ.eps for occ in layouts], np.float64)),
+        )
+
+    def _vertex_counts(self) -> np.ndarray:
+        """Return the number of vertices of each polygon (P,) (of each layout)."""
+        return np.diff(np.append(self.starts, self.n_edges))
+
+    def replaced(self, rows: object, layouts: Sequence[Occluders]) -> Occluders:
+        """Return a new batched set with layout ``rows[j]`` replaced by ``layouts[j]``.
+
+        ``rows`` distinct ints in ``[0, N)``, ``layouts`` as many unbatched sets of this
+        set's polygon and vertex counts (``ValueError`` naming ``rows`` or ``layouts[j]``
+        otherwise). The other layouts' arrays are copied unchanged.
+        """
+        if not self.batched:
+            raise ValueError("replaced needs a batched set (Occluders.stack), got one layout")
+        n = self.n_layouts
+        idx = np.asarray(rows)
+        if idx.ndim != 1 or (idx.size and not np.issubdtype(idx.dtype, np.integer)):
+            raise ValueError(f"rows must be a 1-D array of ints, got {rows!r}")
+        idx = idx.astype(np.intp)
+        if idx.size and (idx.min() < 0 or idx.max() >= n):
+            raise ValueError(f"rows must lie in [0, {n}), got {idx.tolist()}")
+        if len(np.unique(idx)) != len(idx):
+            raise ValueError(f"rows must be distinct, got {idx.tolist()}")
+        layouts = list(layouts)
+        if len(layouts) != len(idx):
+            raise ValueError(
+                f"layouts must hold one layout per row ({len(idx)}), got {len(layouts)}"
+            )
+        if not layouts:
+            return self
+        new = Occluders.stack(layouts)
+        if new.n_polygons != self.n_polygons or not np.array_equal(
+            new._vertex_counts(), self._vertex_counts()
+        ):
+            raise ValueError(
+                f"layouts[0] has polygons of {new._vertex_counts().tolist()} vertices, the set "
+                f"of {self._vertex_counts().tolist()}: replacements need the same counts"
+            )
+        x = max(self.crossings.shape[1], new.crossings.shape[1])
+        crossings = np.full((n, x, 2), np.nan)
+        crossings[:, : self.crossings.shape[1]] = self.crossings
+        crossings[idx] = np.nan
+        crossings[idx, : new.crossings.shape[1]] = new.crossings
+        polygons = list(self.polygons)
+        for j, i in enumerate(idx.tolist()):
+            polygons[i] = new.polygons[j]
+        arrays = {}
+        for name in ("edges_a", "edges_b", "bbox", "scale", "eps"):
+            arr = getattr(self, name).copy()
+            arr[idx] = getattr(new, name)
+            arrays[name] = _frozen(arr)
+        return Occluders(
+            polygons=tuple(polygons),
+            edge_polygon=self.edge_polygon,
+            starts=self.starts,
+            crossings=_frozen(_trimmed(crossings)),
+            **arrays,
+        )
 
     @classmethod
     def empty(cls) -> Occluders:
@@ -195,6 +389,79 @@ class Occluders:
         )
 
 
+def _trimmed(crossings: np.ndarray) -> np.ndarray:
+    """Return batched ``crossings`` (N, X, 2) without the NaN columns no layout needs."""
+    x = int(np.max(np.sum(~np.isnan(crossings[..., 0]), axis=-1), initial=0))
+    return crossings[:, :x]
+
+
+class _Rows:
+    """The geometry the flat kernels' rows (M points) are tested against.
+
+    ``geo`` is an :class:`Occluders`' ``_geo``: ``edges_a``, ``edges_b`` (L, E, 2),
+    ``bbox`` (L, P, 4), ``crossings`` (L, X, 2), ``eps`` and ``scale`` (L, 1), with L = 1
+    for a shared layout (``lay`` None: every row broadcasts against it) and L = N for a
+    batched set (``lay`` (M,) each row's layout: the getters gather one layout per row).
+    Either way the arrays' results broadcast as ``(M or 1, E)``, elementwise the same
+    arithmetic, so a row's result does not depend on which case it ran in.
+    """
+
+    __slots__ = ("geo", "lay", "starts")
+
+    def __init__(self, occ: Occluders, lay: np.ndarray | None) -> None:
+        self.geo, self.lay, self.starts = occ._geo, lay, occ.starts
+
+    def _with(self, lay: np.ndarray) -> _Rows:
+        out = _Rows.__new__(_Rows)
+        out.geo, out.lay, out.starts = self.geo, lay, self.starts
+        return out
+
+    def take(self, sel: np.ndarray) -> _Rows:
+        """Return the rows ``sel`` (a mask or indices into the M rows)."""
+        return self if self.lay is None else self._with(self.lay[sel])
+
+    def repeat(self, k: int) -> _Rows:
+        """Return each row repeated ``k`` times (as ``np.repeat(points, k, axis=0)``)."""
+        return self if self.lay is None else self._with(np.repeat(self.lay, k))
+
+    def _get(self, i: int) -> np.ndarray:
+        return self.geo[i] if self.lay is None else self.geo[i][self.lay]
+
+    def edges(self) -> tuple[np.ndarray, np.ndarray]:
+        """Return the edges' ends ``(a, b)``, each (L, E, 2)."""
+        return self._get(0), self._get(1)
+
+    def bbox(self) -> np.ndarray:
+        """Return the polygons' boxes (L, P, 4)."""
+        return self._get(2)
+
+    def crossings(self) -> np.ndarray:
+        """Return the crossings (L, X, 2), NaN rows where a layout has fewer."""
+        return self._get(3)
+
+    def eps(self) -> np.ndarray:
+        """Return the boundary tolerance (L, 1)."""
+        return self._get(4)
+
+    def scale(self) -> np.ndarray:
+        """Return the coordinate scale (L, 1)."""
+        return self._get(5)
+
+
+def _rows(occ: Occluders, shape: tuple[int, ...], name: str) -> _Rows:
+    """Return the rows' geometry for points of broadcast ``shape`` (without the coordinate
+    axis), flattened; for a batched set, ``shape[0]`` must be its number of layouts."""
+    if not occ.batched:
+        return _Rows(occ, None)
+    n = occ.n_layouts
+    if len(shape) == 0 or shape[0] != n:
+        raise ValueError(
+            f"{name}: a batched Occluders of {n} layouts needs the points' leading axis to "
+            f"be the layout axis, of length {n}, got points of shape {shape}"
+        )
+    return _Rows(occ, np.repeat(np.arange(n), math.prod(shape[1:])))
+
+
 def _check_simple(name: str, p: np.ndarray, eps: float) -> None:
     """Raise ``ValueError`` unless ``p`` is a simple polygon of non-zero area."""
     q = np.roll(p, -1, axis=0)
@@ -239,36 +506,41 @@ def _crossings(a: np.ndarray, b: np.ndarray, ep: np.ndarray, eps: float) -> np.n
 
 
 def _point_edge_dist2(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Return squared distances (..., E) from points ``p`` (..., 2) to edges ``[a, b]``."""
+    """Return squared distances (..., E) from points ``p`` (..., 2) to edges ``[a, b]``
+    ((E, 2), or (..., E, 2) broadcasting with the points' leading axes)."""
     d = b - a
     dd = np.sum(d * d, -1)
-    px, py = p[..., 0, None] - a[:, 0], p[..., 1, None] - a[:, 1]
-    t = np.clip((px * d[:, 0] + py * d[:, 1]) / dd, 0.0, 1.0)
-    ex, ey = px - t * d[:, 0], py - t * d[:, 1]
+    px, py = p[..., 0, None] - a[..., 0], p[..., 1, None] - a[..., 1]
+    t = np.clip((px * d[..., 0] + py * d[..., 1]) / dd, 0.0, 1.0)
+    ex, ey = px - t * d[..., 0], py - t * d[..., 1]
     return ex * ex + ey * ey
 
 
-def _inside_flat(p: np.ndarray, occ: Occluders) -> np.ndarray:
+def _inside_flat(p: np.ndarray, g: _Rows) -> np.ndarray:
     """Return :func:`inside` for points ``p`` (M, 2), computed only near some polygon."""
-    bb = occ.bbox
+    bb = g.bbox()
     x, y = p[:, 0, None], p[:, 1, None]
-    near = np.any((x > bb[:, 0]) & (x < bb[:, 2]) & (y > bb[:, 1]) & (y < bb[:, 3]), axis=-1)
+    near = np.any(
+        (x > bb[..., 0]) & (x < bb[..., 2]) & (y > bb[..., 1]) & (y < bb[..., 3]), axis=-1
+    )
     out = np.zeros(len(p), bool)
     if not np.any(near):
         return out
     q = p[near]
-    a, b = occ.edges_a, occ.edges_b
+    g = g.take(near)
+    a, b = g.edges()
     qx, qy = q[:, 0, None], q[:, 1, None]
-    up = (a[:, 1] > qy) != (b[:, 1] > qy)
-    dy = b[:, 1] - a[:, 1]
-    slope = (b[:, 0] - a[:, 0]) / np.where(dy != 0, dy, 1.0)
-    cross = up & (qx < a[:, 0] + (qy - a[:, 1]) * slope)
-    odd = np.logical_xor.reduceat(cross, occ.starts, axis=-1)
+    up = (a[..., 1] > qy) != (b[..., 1] > qy)
+    dy = b[..., 1] - a[..., 1]
+    slope = (b[..., 0] - a[..., 0]) / np.where(dy != 0, dy, 1.0)
+    cross = up & (qx < a[..., 0] + (qy - a[..., 1]) * slope)
+    odd = np.logical_xor.reduceat(cross, g.starts, axis=-1)
     # The boundary test only where the parity says inside some polygon.
     some = np.any(odd, axis=-1)
-    onb = np.logical_or.reduceat(
-        _point_edge_dist2(q[some], a, b) <= occ.eps * occ.eps, occ.starts, axis=-1
-    )
+    gs = g.take(some)
+    a, b = gs.edges()
+    eps = gs.eps()
+    onb = np.logical_or.reduceat(_point_edge_dist2(q[some], a, b) <= eps * eps, g.starts, axis=-1)
     idx = np.flatnonzero(near)[some]
     out[idx] = np.any(odd[some] & ~onb, axis=-1)
     return out
@@ -281,33 +553,36 @@ def inside(points: FloatArray, occ: Occluders) -> np.ndarray:
     is not inside that polygon.
     """
     p = np.asarray(points, np.float64)
+    g = _rows(occ, p.shape[:-1], "inside")
     if occ.n_edges == 0:
         return np.zeros(p.shape[:-1], bool)
-    return _inside_flat(p.reshape(-1, 2), occ).reshape(p.shape[:-1])
+    return _inside_flat(p.reshape(-1, 2), g).reshape(p.shape[:-1])
 
 
-def _blocked_flat(a: np.ndarray, b: np.ndarray, occ: Occluders) -> np.ndarray:
+def _blocked_flat(a: np.ndarray, b: np.ndarray, g: _Rows) -> np.ndarray:
     """Return :func:`blocked` for segments ``a``, ``b`` (M, 2)."""
-    bb, e = occ.bbox, occ.eps
+    bb, e = g.bbox(), g.eps()
     lo, hi = np.minimum(a, b), np.maximum(a, b)
     near = np.any(
-        (hi[:, 0, None] > bb[:, 0] + e)
-        & (lo[:, 0, None] < bb[:, 2] - e)
-        & (hi[:, 1, None] > bb[:, 1] + e)
-        & (lo[:, 1, None] < bb[:, 3] - e),
+        (hi[:, 0, None] > bb[..., 0] + e)
+        & (lo[:, 0, None] < bb[..., 2] - e)
+        & (hi[:, 1, None] > bb[..., 1] + e)
+        & (lo[:, 1, None] < bb[..., 3] - e),
         axis=-1,
     )
     out = np.zeros(len(a), bool)
     if not np.any(near):
         return out
     a, b = a[near], b[near]
+    g = g.take(near)
     d = b - a
-    c, f = occ.edges_a, occ.edges_b - occ.edges_a
-    den = d[:, 0, None] * f[:, 1] - d[:, 1, None] * f[:, 0]
-    wx, wy = c[:, 0] - a[:, 0, None], c[:, 1] - a[:, 1, None]
+    c, cb = g.edges()
+    f = cb - c
+    den = d[:, 0, None] * f[..., 1] - d[:, 1, None] * f[..., 0]
+    wx, wy = c[..., 0] - a[:, 0, None], c[..., 1] - a[:, 1, None]
     ok = den != 0
     sden = np.where(ok, den, 1.0)
-    t = (wx * f[:, 1] - wy * f[:, 0]) / sden
+    t = (wx * f[..., 1] - wy * f[..., 0]) / sden
     s = (wx * d[:, 1, None] - wy * d[:, 0, None]) / sden
     # Crossings (with a margin in s, so that a crossing at a vertex is never lost between
     # its two edges; surplus cuts are harmless, they only split an interval).
@@ -316,7 +591,7 @@ def _blocked_flat(a: np.ndarray, b: np.ndarray, occ: Occluders) -> np.ndarray:
     dd = np.sum(d * d, -1)[:, None]
     tv = (wx * d[:, 0, None] + wy * d[:, 1, None]) / np.where(dd > 0, dd, 1.0)
     off = np.abs(wx * d[:, 1, None] - wy * d[:, 0, None])
-    tv = np.where((off <= _CUT * occ.scale * np.sqrt(dd)) & (tv > 0) & (tv < 1), tv, -1.0)
+    tv = np.where((off <= _CUT * g.scale() * np.sqrt(dd)) & (tv > 0) & (tv < 1), tv, -1.0)
     cuts = np.sort(np.concatenate([t, tv], axis=-1), axis=-1)
     k = int(np.max(np.sum(cuts >= 0, axis=-1)))  # the valid cuts are the last k columns
     m = len(a)
@@ -325,7 +600,8 @@ def _blocked_flat(a: np.ndarray, b: np.ndarray, occ: Occluders) -> np.ndarray:
     )
     mid = 0.5 * (ts[:, 1:] + ts[:, :-1])
     pts = a[:, None, :] + mid[..., None] * d[:, None, :]
-    out[near] = np.any(_inside_flat(pts.reshape(-1, 2), occ).reshape(mid.shape), axis=-1)
+    inner = _inside_flat(pts.reshape(-1, 2), g.repeat(mid.shape[1]))
+    out[near] = np.any(inner.reshape(mid.shape), axis=-1)
     return out
 
 
@@ -335,28 +611,36 @@ def blocked(a: FloatArray, b: FloatArray, occ: Occluders) -> np.ndarray:
     Blocked: a sub-interval of positive length lies in ``U`` (module docstring); touching
     a boundary, running along an edge or ending on one does not block; an endpoint in ``U``
     does. The line-of-sight test (sensor to target) and the motion test (a straight move).
+    With a batched ``occ`` the broadcast shape's first axis is the layout axis.
     """
+    return _blocked(a, b, occ, "blocked")
+
+
+def _blocked(a: FloatArray, b: FloatArray, occ: Occluders, name: str) -> np.ndarray:
+    """Return :func:`blocked` (``name`` the public function, for the layout-axis error)."""
     a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
     shape = np.broadcast_shapes(a.shape, b.shape)[:-1]
+    g = _rows(occ, shape, name)
     if occ.n_edges == 0:
         return np.zeros(shape, bool)
     a = np.broadcast_to(a, shape + (2,)).reshape(-1, 2)
     b = np.broadcast_to(b, shape + (2,)).reshape(-1, 2)
-    return _blocked_flat(a, b, occ).reshape(shape)
+    return _blocked_flat(a, b, g).reshape(shape)
 
 
-def _candidates(o: np.ndarray, q: np.ndarray, r: np.ndarray, occ: Occluders) -> np.ndarray:
+def _candidates(o: np.ndarray, q: np.ndarray, r: np.ndarray, gr: _Rows) -> np.ndarray:
     """Return the candidates (M, C, 2) of :func:`project_move` (NaN where one does not exist).
 
     ``o`` start, ``q`` desired (M, 2), ``r`` reach (M,); the list of the module docstring.
     """
     m = len(o)
-    c, f, v = occ.edges_a, occ.edges_b - occ.edges_a, occ.edges_a
+    c, cb = gr.edges()  # (L, E, 2)
+    f, v = cb - c, c
     ff = np.sum(f * f, -1)
     # q projected onto every edge.
     u = np.clip(np.sum((q[:, None, :] - c) * f, -1) / ff, 0.0, 1.0)
     on_edge = c + u[..., None] * f
-    verts = np.broadcast_to(v, (m,) + v.shape)
+    verts = np.broadcast_to(v, (m,) + v.shape[1:])
     # Shadow rays o + s g, s >= 1, g = v - o: q's projection, the reach point, the first hit.
     g = v - o[:, None, :]
     gg = np.sum(g * g, -1)
@@ -370,11 +654,12 @@ def _candidates(o: np.ndarray, q: np.ndarray, r: np.ndarray, occ: Occluders) -> 
         o[:, None, :] + (r[:, None] / np.where(has, glen, 1.0))[..., None] * g,
         np.nan,
     )
-    w = c[None, None, :, :] - o[:, None, None, :]  # (M, 1, E, 2)
-    den = g[..., None, 0] * f[:, 1] - g[..., None, 1] * f[:, 0]  # (M, V, E)
+    w = c[:, None, :, :] - o[:, None, None, :]  # (M, 1, E, 2)
+    fx, fy = f[:, None, :, 0], f[:, None, :, 1]  # (L, 1, E)
+    den = g[..., None, 0] * fy - g[..., None, 1] * fx  # (M, V, E)
     okd = den != 0
     sden = np.where(okd, den, 1.0)
-    sh = (w[..., 0] * f[:, 1] - w[..., 1] * f[:, 0]) / sden
+    sh = (w[..., 0] * fy - w[..., 1] * fx) / sden
     uh = (w[..., 0] * g[..., None, 1] - w[..., 1] * g[..., None, 0]) / sden
     tol = 1e-9
     hit = okd & (uh >= -tol) & (uh <= 1 + tol) & (sh > 1 + tol) & has[..., None]
@@ -398,7 +683,8 @@ def _candidates(o: np.ndarray, q: np.ndarray, r: np.ndarray, occ: Occluders) -> 
     dq = q - o
     nq = np.hypot(dq[:, 0], dq[:, 1])
     radial = np.where((nq > 0)[:, None], o + (r / np.where(nq > 0, nq, 1.0))[:, None] * dq, np.nan)
-    cross = np.broadcast_to(occ.crossings, (m,) + occ.crossings.shape)
+    cr = gr.crossings()
+    cross = np.broadcast_to(cr, (m,) + cr.shape[1:])
     return np.concatenate(
         [on_edge, verts, shadow, reach, first, *circ, cross, radial[:, None], o[:, None]],
         axis=1,
@@ -415,11 +701,13 @@ def project_move(
     is not blocked is returned bit for bit (``projected`` False); any other (blocked, or
     beyond the reach) goes to the nearest reachable point (``projected`` True). A ``start``
     inside ``U`` stays where it is (projected). With no occluders this is the radial
-    projection onto the reach disk (identity inside it).
+    projection onto the reach disk (identity inside it). With a batched ``occ`` the first
+    axis of the broadcast shape of ``start``, ``desired`` and ``r`` is the layout axis.
     """
     o, q = np.asarray(start, np.float64), np.asarray(desired, np.float64)
     r = np.asarray(r, np.float64)
     shape = np.broadcast_shapes(o.shape[:-1], q.shape[:-1], r.shape)
+    g = _rows(occ, shape, "project_move")
     o = np.broadcast_to(o, shape + (2,)).reshape(-1, 2)
     rf = np.broadcast_to(r, shape).reshape(-1)
     out = np.broadcast_to(q, shape + (2,)).reshape(-1, 2).copy()
@@ -431,15 +719,15 @@ def project_move(
             n = np.hypot(d[need, 0], d[need, 1])
             out[need] = o[need] + (rf[need] / n)[:, None] * d[need]
     else:
-        need |= _blocked_flat(o, out, occ)
+        need |= _blocked_flat(o, out, g)
         if np.any(need):
-            out[need] = _nearest_reachable(o[need], out[need], rf[need], occ)
+            out[need] = _nearest_reachable(o[need], out[need], rf[need], g.take(need))
     return out.reshape(shape + (2,)), need.reshape(shape)
 
 
-def _nearest_reachable(o: np.ndarray, q: np.ndarray, r: np.ndarray, occ: Occluders) -> np.ndarray:
+def _nearest_reachable(o: np.ndarray, q: np.ndarray, r: np.ndarray, g: _Rows) -> np.ndarray:
     """Return the nearest point of ``R`` to ``q`` (M, 2); ``o`` where ``R`` is empty."""
-    cand = _candidates(o, q, r, occ)
+    cand = _candidates(o, q, r, g)
     d = cand - o[:, None, :]
     lim = (r * (1.0 + REACH_TOL))[:, None]
     okr = np.sum(d * d, -1) <= lim * lim  # False for NaN candidates
@@ -455,7 +743,9 @@ def _nearest_reachable(o: np.ndarray, q: np.ndarray, r: np.ndarray, occ: Occlude
         pts = cand[todo[:, None], idx]
         fin = np.isfinite(dist[todo[:, None], idx])
         ok = fin & ~_blocked_flat(
-            np.repeat(o[todo], idx.shape[1], axis=0), pts.reshape(-1, 2), occ
+            np.repeat(o[todo], idx.shape[1], axis=0),
+            pts.reshape(-1, 2),
+            g.take(todo).repeat(idx.shape[1]),
         ).reshape(idx.shape)
         found = np.any(ok, axis=-1)
         first = np.argmax(ok, axis=-1)
@@ -470,8 +760,10 @@ def _nearest_reachable(o: np.ndarray, q: np.ndarray, r: np.ndarray, occ: Occlude
 
 def line_of_sight(sensors: FloatArray, targets: FloatArray, occ: Occluders) -> np.ndarray:
     """Return whether each sensor (..., M, 2) sees each target (..., K, 2): (..., K, M),
-    the segment between them not :func:`blocked`."""
-    return ~blocked(sensors[..., None, :, :], targets[..., :, None, :], occ)
+    the segment between them not :func:`blocked` (batched ``occ``: the first of the
+    leading axes ``...`` is the layout axis)."""
+    sensors, targets = np.asarray(sensors, np.float64), np.asarray(targets, np.float64)
+    return ~_blocked(sensors[..., None, :, :], targets[..., :, None, :], occ, "line_of_sight")
 
 
 def ray_distances(
@@ -482,22 +774,28 @@ def ray_distances(
     ``origins`` (..., 2), ``directions`` (R, 2) unit vectors: for each origin and direction
     the smallest ``s > occ.eps`` with ``origin + s direction`` on an edge, or
     ``max_distance`` if none is nearer (a range finder; an origin on an edge does not see
-    the edge it stands on).
+    the edge it stands on). With a batched ``occ`` the first axis of ``origins`` (N, ..., 2)
+    is the layout axis.
     """
     o = np.asarray(origins, np.float64)
     dirs = np.asarray(directions, np.float64)
+    _rows(occ, o.shape[:-1], "ray_distances")  # checks the layout axis
     out = np.full(o.shape[:-1] + (dirs.shape[0],), float(max_distance))
     if occ.n_edges == 0:
         return out
-    c, f = occ.edges_a, occ.edges_b - occ.edges_a
+    # One layout per leading row (L = 1 shared, N batched): origins (L, K, 2).
+    a, b, _, _, eps, _ = occ._geo
+    o = o.reshape(len(a), -1, 2)
+    c, f = a[:, None], (b - a)[:, None]  # (L, 1, E, 2)
     gx, gy = dirs[:, 0, None], dirs[:, 1, None]  # (R, 1)
-    den = gx * f[:, 1] - gy * f[:, 0]  # (R, E); parallel edges never hit (inv = 0)
+    den = gx * f[..., 1] - gy * f[..., 0]  # (L, R, E); parallel edges never hit (inv = 0)
     inv = np.divide(1.0, den, out=np.zeros_like(den), where=den != 0)
-    wx, wy = c[:, 0] - o[..., 0, None], c[:, 1] - o[..., 1, None]  # (..., E)
-    s = (wx * f[:, 1] - wy * f[:, 0])[..., None, :] * inv  # (..., R, E)
-    u = (wx[..., None, :] * gy - wy[..., None, :] * gx) * inv
-    hit = (u >= 0) & (u <= 1) & (s > occ.eps)
-    return np.minimum(out, np.min(np.where(hit, s, np.inf), axis=-1))
+    wx, wy = c[..., 0] - o[..., 0, None], c[..., 1] - o[..., 1, None]  # (L, K, E)
+    s = (wx * f[..., 1] - wy * f[..., 0])[..., None, :] * inv[:, None]  # (L, K, R, E)
+    u = (wx[..., None, :] * gy - wy[..., None, :] * gx) * inv[:, None]
+    hit = (u >= 0) & (u <= 1) & (s > eps[:, :, None, None])
+    near = np.min(np.where(hit, s, np.inf), axis=-1).reshape(out.shape)
+    return np.minimum(out, near)
 
 
 def _rectangle(center: np.ndarray, w: float, h: float, angle: float) -> np.ndarray:
