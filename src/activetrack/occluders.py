@@ -154,19 +154,14 @@ class Occluders:
     eps: float | np.ndarray
 
     def __post_init__(self) -> None:
-        # The flat kernels' view (a leading layout axis, of length 1 when shared), built
-        # once so that a kernel call costs no conversions.
-        lead = (lambda x: x) if self.edges_a.ndim == 3 else (lambda x: x[None])
-        col = lambda x: np.reshape(np.asarray(x, np.float64), (-1, 1))  # noqa: E731
-        geo = (
-            lead(self.edges_a),
-            lead(self.edges_b),
-            lead(self.bbox),
-            lead(self.crossings),
-            col(self.eps),
-            col(self.scale),
-        )
+        # The flat kernels' view (:class:`_Rows`), built once: a shared layout's own arrays
+        # and floats; a batched set's arrays with eps and scale as (N, 1) columns.
+        geo = (self.edges_a, self.edges_b, self.bbox, self.crossings, self.eps, self.scale)
+        if self.edges_a.ndim == 3:
+            geo = geo[:4] + (np.reshape(self.eps, (-1, 1)), np.reshape(self.scale, (-1, 1)))
+        shared = None if self.edges_a.ndim == 3 else _Rows(geo, self.starts, None)
         object.__setattr__(self, "_geo", geo)
+        object.__setattr__(self, "_shared", shared)
 
     @property
     def batched(self) -> bool:
@@ -395,71 +390,61 @@ def _trimmed(crossings: np.ndarray) -> np.ndarray:
     return crossings[:, :x]
 
 
+#: The fields of an :class:`Occluders`' ``_geo`` (and of :class:`_Rows`), in order.
+_GEO = ("edges_a", "edges_b", "bbox", "crossings", "eps", "scale")
+
+
 class _Rows:
     """The geometry the flat kernels' rows (M points) are tested against.
 
-    ``geo`` is an :class:`Occluders`' ``_geo``: ``edges_a``, ``edges_b`` (L, E, 2),
-    ``bbox`` (L, P, 4), ``crossings`` (L, X, 2), ``eps`` and ``scale`` (L, 1), with L = 1
-    for a shared layout (``lay`` None: every row broadcasts against it) and L = N for a
-    batched set (``lay`` (M,) each row's layout: the getters gather one layout per row).
-    Either way the arrays' results broadcast as ``(M or 1, E)``, elementwise the same
-    arithmetic, so a row's result does not depend on which case it ran in.
+    Shared layout (``lay`` None): the attributes are the layout's own ``edges_a``,
+    ``edges_b`` (E, 2), ``bbox`` (P, 4), ``crossings`` (X, 2), floats ``eps`` and ``scale``,
+    and every row broadcasts against them. Batched set (``lay`` (M,) each row's layout):
+    an attribute gathers one layout per row on first use, ``edges_a``, ``edges_b``
+    (M, E, 2), ``bbox`` (M, P, 4), ``crossings`` (M, X, 2), ``eps`` and ``scale`` (M, 1).
+    The kernels index them from the end (``[..., 0]``), so both broadcast as ``(M, E)``
+    with elementwise the same arithmetic: a row's result does not depend on the case.
     """
 
-    __slots__ = ("geo", "lay", "starts")
+    __slots__ = ("geo", "lay", "starts", *_GEO)
 
-    def __init__(self, occ: Occluders, lay: np.ndarray | None) -> None:
-        self.geo, self.lay, self.starts = occ._geo, lay, occ.starts
+    def __init__(self, geo: tuple, starts: np.ndarray, lay: np.ndarray | None) -> None:
+        self.geo, self.starts, self.lay = geo, starts, lay
+        if lay is None:
+            for name, arr in zip(_GEO, geo, strict=True):
+                setattr(self, name, arr)
 
-    def _with(self, lay: np.ndarray) -> _Rows:
-        out = _Rows.__new__(_Rows)
-        out.geo, out.lay, out.starts = self.geo, lay, self.starts
-        return out
+    def __getattr__(self, name: str) -> np.ndarray:
+        # Reached only for an unset geometry slot of a batched set: gather it once.
+        if name not in _GEO:
+            raise AttributeError(name)
+        arr = self.geo[_GEO.index(name)][self.lay]
+        setattr(self, name, arr)
+        return arr
 
     def take(self, sel: np.ndarray) -> _Rows:
         """Return the rows ``sel`` (a mask or indices into the M rows)."""
-        return self if self.lay is None else self._with(self.lay[sel])
+        return self if self.lay is None else _Rows(self.geo, self.starts, self.lay[sel])
 
     def repeat(self, k: int) -> _Rows:
         """Return each row repeated ``k`` times (as ``np.repeat(points, k, axis=0)``)."""
-        return self if self.lay is None else self._with(np.repeat(self.lay, k))
-
-    def _get(self, i: int) -> np.ndarray:
-        return self.geo[i] if self.lay is None else self.geo[i][self.lay]
-
-    def edges(self) -> tuple[np.ndarray, np.ndarray]:
-        """Return the edges' ends ``(a, b)``, each (L, E, 2)."""
-        return self._get(0), self._get(1)
-
-    def bbox(self) -> np.ndarray:
-        """Return the polygons' boxes (L, P, 4)."""
-        return self._get(2)
-
-    def crossings(self) -> np.ndarray:
-        """Return the crossings (L, X, 2), NaN rows where a layout has fewer."""
-        return self._get(3)
-
-    def eps(self) -> np.ndarray:
-        """Return the boundary tolerance (L, 1)."""
-        return self._get(4)
-
-    def scale(self) -> np.ndarray:
-        """Return the coordinate scale (L, 1)."""
-        return self._get(5)
+        if self.lay is None:
+            return self
+        return _Rows(self.geo, self.starts, np.repeat(self.lay, k))
 
 
 def _rows(occ: Occluders, shape: tuple[int, ...], name: str) -> _Rows:
     """Return the rows' geometry for points of broadcast ``shape`` (without the coordinate
     axis), flattened; for a batched set, ``shape[0]`` must be its number of layouts."""
-    if not occ.batched:
-        return _Rows(occ, None)
+    if occ._shared is not None:
+        return occ._shared
     n = occ.n_layouts
     if len(shape) == 0 or shape[0] != n:
         raise ValueError(
             f"{name}: a batched Occluders of {n} layouts needs the points' leading axis to "
             f"be the layout axis, of length {n}, got points of shape {shape}"
         )
-    return _Rows(occ, np.repeat(np.arange(n), math.prod(shape[1:])))
+    return _Rows(occ._geo, occ.starts, np.repeat(np.arange(n), math.prod(shape[1:])))
 
 
 def _check_simple(name: str, p: np.ndarray, eps: float) -> None:
@@ -518,7 +503,7 @@ def _point_edge_dist2(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray
 
 def _inside_flat(p: np.ndarray, g: _Rows) -> np.ndarray:
     """Return :func:`inside` for points ``p`` (M, 2), computed only near some polygon."""
-    bb = g.bbox()
+    bb = g.bbox
     x, y = p[:, 0, None], p[:, 1, None]
     near = np.any(
         (x > bb[..., 0]) & (x < bb[..., 2]) & (y > bb[..., 1]) & (y < bb[..., 3]), axis=-1
@@ -528,7 +513,7 @@ def _inside_flat(p: np.ndarray, g: _Rows) -> np.ndarray:
         return out
     q = p[near]
     g = g.take(near)
-    a, b = g.edges()
+    a, b = g.edges_a, g.edges_b
     qx, qy = q[:, 0, None], q[:, 1, None]
     up = (a[..., 1] > qy) != (b[..., 1] > qy)
     dy = b[..., 1] - a[..., 1]
@@ -538,8 +523,7 @@ def _inside_flat(p: np.ndarray, g: _Rows) -> np.ndarray:
     # The boundary test only where the parity says inside some polygon.
     some = np.any(odd, axis=-1)
     gs = g.take(some)
-    a, b = gs.edges()
-    eps = gs.eps()
+    a, b, eps = gs.edges_a, gs.edges_b, gs.eps
     onb = np.logical_or.reduceat(_point_edge_dist2(q[some], a, b) <= eps * eps, g.starts, axis=-1)
     idx = np.flatnonzero(near)[some]
     out[idx] = np.any(odd[some] & ~onb, axis=-1)
@@ -561,7 +545,7 @@ def inside(points: FloatArray, occ: Occluders) -> np.ndarray:
 
 def _blocked_flat(a: np.ndarray, b: np.ndarray, g: _Rows) -> np.ndarray:
     """Return :func:`blocked` for segments ``a``, ``b`` (M, 2)."""
-    bb, e = g.bbox(), g.eps()
+    bb, e = g.bbox, g.eps
     lo, hi = np.minimum(a, b), np.maximum(a, b)
     near = np.any(
         (hi[:, 0, None] > bb[..., 0] + e)
@@ -576,7 +560,7 @@ def _blocked_flat(a: np.ndarray, b: np.ndarray, g: _Rows) -> np.ndarray:
     a, b = a[near], b[near]
     g = g.take(near)
     d = b - a
-    c, cb = g.edges()
+    c, cb = g.edges_a, g.edges_b
     f = cb - c
     den = d[:, 0, None] * f[..., 1] - d[:, 1, None] * f[..., 0]
     wx, wy = c[..., 0] - a[:, 0, None], c[..., 1] - a[:, 1, None]
@@ -591,7 +575,7 @@ def _blocked_flat(a: np.ndarray, b: np.ndarray, g: _Rows) -> np.ndarray:
     dd = np.sum(d * d, -1)[:, None]
     tv = (wx * d[:, 0, None] + wy * d[:, 1, None]) / np.where(dd > 0, dd, 1.0)
     off = np.abs(wx * d[:, 1, None] - wy * d[:, 0, None])
-    tv = np.where((off <= _CUT * g.scale() * np.sqrt(dd)) & (tv > 0) & (tv < 1), tv, -1.0)
+    tv = np.where((off <= _CUT * g.scale * np.sqrt(dd)) & (tv > 0) & (tv < 1), tv, -1.0)
     cuts = np.sort(np.concatenate([t, tv], axis=-1), axis=-1)
     k = int(np.max(np.sum(cuts >= 0, axis=-1)))  # the valid cuts are the last k columns
     m = len(a)
@@ -634,13 +618,13 @@ def _candidates(o: np.ndarray, q: np.ndarray, r: np.ndarray, gr: _Rows) -> np.nd
     ``o`` start, ``q`` desired (M, 2), ``r`` reach (M,); the list of the module docstring.
     """
     m = len(o)
-    c, cb = gr.edges()  # (L, E, 2)
+    c, cb = gr.edges_a, gr.edges_b  # ([M,] E, 2)
     f, v = cb - c, c
     ff = np.sum(f * f, -1)
     # q projected onto every edge.
     u = np.clip(np.sum((q[:, None, :] - c) * f, -1) / ff, 0.0, 1.0)
     on_edge = c + u[..., None] * f
-    verts = np.broadcast_to(v, (m,) + v.shape[1:])
+    verts = np.broadcast_to(v, (m,) + v.shape[-2:])
     # Shadow rays o + s g, s >= 1, g = v - o: q's projection, the reach point, the first hit.
     g = v - o[:, None, :]
     gg = np.sum(g * g, -1)
@@ -654,8 +638,8 @@ def _candidates(o: np.ndarray, q: np.ndarray, r: np.ndarray, gr: _Rows) -> np.nd
         o[:, None, :] + (r[:, None] / np.where(has, glen, 1.0))[..., None] * g,
         np.nan,
     )
-    w = c[:, None, :, :] - o[:, None, None, :]  # (M, 1, E, 2)
-    fx, fy = f[:, None, :, 0], f[:, None, :, 1]  # (L, 1, E)
+    w = c[..., None, :, :] - o[:, None, None, :]  # (M, 1, E, 2)
+    fx, fy = f[..., None, :, 0], f[..., None, :, 1]  # ([M,] 1, E)
     den = g[..., None, 0] * fy - g[..., None, 1] * fx  # (M, V, E)
     okd = den != 0
     sden = np.where(okd, den, 1.0)
@@ -683,8 +667,8 @@ def _candidates(o: np.ndarray, q: np.ndarray, r: np.ndarray, gr: _Rows) -> np.nd
     dq = q - o
     nq = np.hypot(dq[:, 0], dq[:, 1])
     radial = np.where((nq > 0)[:, None], o + (r / np.where(nq > 0, nq, 1.0))[:, None] * dq, np.nan)
-    cr = gr.crossings()
-    cross = np.broadcast_to(cr, (m,) + cr.shape[1:])
+    cr = gr.crossings
+    cross = np.broadcast_to(cr, (m,) + cr.shape[-2:])
     return np.concatenate(
         [on_edge, verts, shadow, reach, first, *circ, cross, radial[:, None], o[:, None]],
         axis=1,
@@ -779,23 +763,23 @@ def ray_distances(
     """
     o = np.asarray(origins, np.float64)
     dirs = np.asarray(directions, np.float64)
-    _rows(occ, o.shape[:-1], "ray_distances")  # checks the layout axis
     out = np.full(o.shape[:-1] + (dirs.shape[0],), float(max_distance))
+    c, eps = occ.edges_a, occ.eps
+    f = occ.edges_b - c
+    if occ.batched:  # one layout per leading row: origins (N, K, 2), edges (N, 1, E, 2)
+        _rows(occ, o.shape[:-1], "ray_distances")  # checks the layout axis
+        o = o.reshape(len(c), -1, 2)
+        c, f, eps = c[:, None], f[:, None], eps[:, None, None, None]
     if occ.n_edges == 0:
         return out
-    # One layout per leading row (L = 1 shared, N batched): origins (L, K, 2).
-    a, b, _, _, eps, _ = occ._geo
-    o = o.reshape(len(a), -1, 2)
-    c, f = a[:, None], (b - a)[:, None]  # (L, 1, E, 2)
     gx, gy = dirs[:, 0, None], dirs[:, 1, None]  # (R, 1)
-    den = gx * f[..., 1] - gy * f[..., 0]  # (L, R, E); parallel edges never hit (inv = 0)
-    inv = np.divide(1.0, den, out=np.zeros_like(den), where=den != 0)
-    wx, wy = c[..., 0] - o[..., 0, None], c[..., 1] - o[..., 1, None]  # (L, K, E)
-    s = (wx * f[..., 1] - wy * f[..., 0])[..., None, :] * inv[:, None]  # (L, K, R, E)
-    u = (wx[..., None, :] * gy - wy[..., None, :] * gx) * inv[:, None]
-    hit = (u >= 0) & (u <= 1) & (s > eps[:, :, None, None])
-    near = np.min(np.where(hit, s, np.inf), axis=-1).reshape(out.shape)
-    return np.minimum(out, near)
+    den = gx * f[..., 1] - gy * f[..., 0]  # ([N,] R, E); parallel edges never hit (inv = 0)
+    inv = np.divide(1.0, den, out=np.zeros_like(den), where=den != 0)[..., None, :, :]
+    wx, wy = c[..., 0] - o[..., 0, None], c[..., 1] - o[..., 1, None]  # (..., E)
+    s = (wx * f[..., 1] - wy * f[..., 0])[..., None, :] * inv  # (..., R, E)
+    u = (wx[..., None, :] * gy - wy[..., None, :] * gx) * inv
+    hit = (u >= 0) & (u <= 1) & (s > eps)
+    return np.minimum(out, np.min(np.where(hit, s, np.inf), axis=-1).reshape(out.shape))
 
 
 def _rectangle(center: np.ndarray, w: float, h: float, angle: float) -> np.ndarray:
