@@ -9,6 +9,11 @@ rectangles. Timed (median of ``--repeats``, after a warm-up):
   (``--reach``), projected where blocked;
 - ``inside`` of the same points, and ``ray_distances`` with 16 rays.
 
+Then the same four kernels on a batch of per-copy layouts (:meth:`Occluders.stack` of
+``--copies`` seeded layouts of ``--batch-rects`` rectangles, sensors outside their own
+copy's): one batched call vs a Python loop of unbatched calls over ``occ[i]`` (the layouts
+taken out beforehand; median of ``--loop-repeats``).
+
 Run with numpy single-threaded::
 
     OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/bench_occluders.py
@@ -44,6 +49,8 @@ def main() -> None:
     ap.add_argument("--reach", type=float, default=1.0)
     ap.add_argument("--repeats", type=int, default=21)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--batch-rects", type=int, default=4)
+    ap.add_argument("--loop-repeats", type=int, default=3)
     args = ap.parse_args()
     rng = np.random.default_rng(args.seed)
     occ = oc.random_layout(rng, args.rects, (-10, -10, 10, 10), (1.0, 4.0))
@@ -73,6 +80,57 @@ def main() -> None:
     ]
     for name, fn in rows:
         print(f"  {name:<26s} {median_ms(fn, args.repeats):8.2f} ms")
+    batched(args, rng, dirs)
+
+
+def batched(args: argparse.Namespace, rng: np.random.Generator, dirs: np.ndarray) -> None:
+    """Print the batched kernels' times beside a Python loop over the layouts."""
+    n, m = args.copies, args.sensors
+    layouts = [
+        oc.random_layout(rng, args.batch_rects, (-10, -10, 10, 10), (1.0, 4.0)) for _ in range(n)
+    ]
+    occ = oc.Occluders.stack(layouts)
+    pts = rng.uniform(-10, 10, (n, 8 * m, 2))
+    keep = np.argsort(oc.inside(pts, occ), axis=1, kind="stable")[:, :m]  # outside first
+    start = np.take_along_axis(pts, keep[..., None], axis=1)
+    assert not oc.inside(start, occ).any()
+    target = rng.uniform(-10, 10, (n, m, 2))
+    r = np.full((n, m), args.reach)
+    rad = args.reach * np.sqrt(rng.uniform(size=(n, m)))
+    ang = rng.uniform(0, 2 * np.pi, (n, m))
+    desired = start + rad[..., None] * np.stack([np.cos(ang), np.sin(ang)], -1)
+    per = [occ[i] for i in range(n)]
+    _, proj = oc.project_move(start, desired, occ, r)
+    print(
+        f"batched: {n} layouts of {args.batch_rects} rectangles, {m} sensors each; "
+        f"moves projected {proj.mean():.1%}; batched median of {args.repeats}, "
+        f"loop median of {args.loop_repeats}"
+    )
+    rows = [
+        (
+            "blocked (line of sight)",
+            lambda: oc.blocked(start, target, occ),
+            lambda i: oc.blocked(start[i], target[i], per[i]),
+        ),
+        (
+            "project_move",
+            lambda: oc.project_move(start, desired, occ, r),
+            lambda i: oc.project_move(start[i], desired[i], per[i], r[i]),
+        ),
+        ("inside", lambda: oc.inside(desired, occ), lambda i: oc.inside(desired[i], per[i])),
+        (
+            "ray_distances (16 rays)",
+            lambda: oc.ray_distances(start, dirs, occ, 5.0),
+            lambda i: oc.ray_distances(start[i], dirs, per[i], 5.0),
+        ),
+    ]
+    for name, fn, one in rows:
+        t_batch = median_ms(fn, args.repeats)
+        t_loop = median_ms(lambda one=one: [one(i) for i in range(n)], args.loop_repeats)
+        print(
+            f"  {name:<26s} batched {t_batch:8.2f} ms   loop {t_loop:8.2f} ms   "
+            f"loop/batched {t_loop / t_batch:6.1f}"
+        )
 
 
 if __name__ == "__main__":
