@@ -153,6 +153,9 @@ class Occluders:
     scale: float | np.ndarray
     eps: float | np.ndarray
 
+    # Not iterable (an unbatched set would index itself forever): index layouts instead.
+    __iter__ = None
+
     def __post_init__(self) -> None:
         # The flat kernels' view (:class:`_Rows`), built once: a shared layout's own arrays
         # and floats; a batched set's arrays with eps and scale as (N, 1) columns.
@@ -209,9 +212,9 @@ class Occluders:
         sel = np.arange(n)[index]
         if sel.ndim != 1:
             raise IndexError(f"layouts index must select along one axis, got shape {sel.shape}")
-        return self._rows_from(sel, self.crossings[sel])
+        return self._subset(sel, self.crossings[sel])
 
-    def _rows_from(self, sel: np.ndarray, crossings: np.ndarray) -> Occluders:
+    def _subset(self, sel: np.ndarray, crossings: np.ndarray) -> Occluders:
         """Return the batched set of the layouts ``sel`` with ``crossings`` (NaN padded)."""
         return Occluders(
             polygons=tuple(self.polygons[j] for j in sel),

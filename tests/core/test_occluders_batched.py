@@ -7,6 +7,8 @@ distance from an edge between two layouts' ``eps``); the stacked layouts' own ar
 the round trips.
 """
 
+import pickle
+
 import numpy as np
 import pytest
 
@@ -95,6 +97,13 @@ def test_stack_getitem_round_trips_give_the_layouts_back():
     assert occ[np.array([5])].crossings.shape == (1, 0, 2)  # padding trimmed to the subset
     with pytest.raises(IndexError, match="out of range"):
         occ[7]
+    # Pickling (copies sent to worker processes) keeps the layouts and the kernels' view.
+    back = pickle.loads(pickle.dumps(occ))
+    assert_same_batch(back, occ)
+    pts = np.stack([lay.polygons[0].mean(0) for lay in lays])[:, None]  # rectangle centres
+    np.testing.assert_array_equal(oc.inside(pts, back), np.ones((7, 1), bool))
+    with pytest.raises(TypeError, match="not iterable"):
+        iter(occ)
     # One shared layout serves every copy: any index gives it back.
     one = lays[0]
     assert one[3] is one and one[np.array([True, False])] is one and one[1:] is one
