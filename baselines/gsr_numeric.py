@@ -57,6 +57,8 @@ def relax(
     pose = None if problem.pose_cov is None else problem.pose_cov.reshape(B, M, 2, 2)
     det = None if problem.detect is None else tuple(d.reshape(B, M) for d in problem.detect)
     occ = problem.occluders
+    if occ is not None and occ.batched and len(shape) > 1:  # a layout per flattened copy
+        occ = occ[np.repeat(np.arange(shape[0]), B // shape[0])]
     s = _warm_start(current, r, targets, rho)
     entries = _entries(s, targets, w_d, w_t, pose, det, occ)  # 3 x (B, K, M)
     base = (prior[..., 0, 0], prior[..., 0, 1], prior[..., 1, 1])
@@ -94,7 +96,13 @@ def relax(
             cov1 = None if pose is None else pose[keep, one]
             det1 = None if det is None else tuple(d[keep, one] for d in det)
             new = _entries(
-                s[keep, one], targets[keep], w_d[keep, one], w_t[keep, one], cov1, det1, occ
+                s[keep, one],
+                targets[keep],
+                w_d[keep, one],
+                w_t[keep, one],
+                cov1,
+                det1,
+                None if occ is None else occ[keep],
             )
             for e in range(3):
                 entries[e][keep, :, i] = new[e][..., 0]
@@ -105,11 +113,12 @@ def relax(
         scale = np.maximum(np.abs(before), 1.0) if problem.objective.name == "logdet" else before
         active[rows] = (gain > tol * scale) & changed[rows].any(axis=1)
     if det is not None and (occ is not None or np.any(np.isfinite(det[1]))):
-        s, value = _approach(problem, s, value, current, r, targets, rho, det, (w_d, w_t, pose))
+        s, value = _approach(problem, s, value, current, r, targets, rho, det, (w_d, w_t, pose),
+                             occ)  # fmt: skip
     return s.reshape(*shape, M, 2), value.reshape(shape), sweeps.reshape(shape), warm.reshape(shape)
 
 
-def _approach(problem, s, value, current, r, targets, rho, det, weights):
+def _approach(problem, s, value, current, r, targets, rho, det, weights, occ):
     """Return ``(positions, value)`` with every free sensor out of range of every target
     moved to its feasible point nearest the nearest predicted target, where that is no worse.
 
@@ -120,8 +129,8 @@ def _approach(problem, s, value, current, r, targets, rho, det, weights):
     """
     rel = s[:, None, :, :] - targets[:, :, None, :]  # (B, K, M, 2)
     seen = sensor_models.detection_factor(rel, det[0][:, None], det[1][:, None]) > 0.0
-    if problem.occluders is not None:
-        seen &= line_of_sight(s, targets, problem.occluders)
+    if occ is not None:
+        seen &= line_of_sight(s, targets, occ)
     lost = ~seen.any(axis=1) & (r > 0.0) & (det[0] > 0.0)  # (B, M)
     if not np.any(lost):
         return s, value
@@ -137,7 +146,7 @@ def _approach(problem, s, value, current, r, targets, rho, det, weights):
             prior[..., e0, e1] + x.sum(axis=-1)
             for (e0, e1), x in zip(
                 ((0, 0), (0, 1), (1, 1)),
-                _entries(moved, targets, w_d, w_t, pose, det, problem.occluders),
+                _entries(moved, targets, w_d, w_t, pose, det, occ),
                 strict=True,
             )
         )
@@ -178,7 +187,7 @@ class _Prepared:
             w_d[rows, cols], w_t[rows, cols], None if pose is None else pose[rows, cols],
             self.objective,
             detect=None if det is None else tuple(d[rows, cols] for d in det),
-            occluders=self.occ,
+            occluders=None if self.occ is None else self.occ[np.asarray(rows).reshape(-1)],
         )  # fmt: skip
 
     def rows(self, sub: np.ndarray, i: int) -> solver_numeric.Prepared:

@@ -22,6 +22,8 @@ TASK_IDS = {
     "activetrack/BearingOnly-v0": "bearing_only",
     "activetrack/MixedTeam-v0": "mixed",
     "activetrack/UncertainPoses-v0": "uncertain_poses",
+    "activetrack/Urban-v0": "urban",
+    "activetrack/UrbanRandom-v0": "urban_random",
 }
 #: Every registered id and its preset (``ActiveTracking-v0`` is the paper).
 ALL_IDS = {ENV_ID: "paper", **TASK_IDS}

@@ -228,7 +228,7 @@ class EpisodeHistory:
             x_hat if centers is None else centers,
             g("fixes", 0) if p.pose_cov is not None else None,
             detected=g("detected", 0) if limited else None,
-            occluders=p.occluders if limited else None,
+            occluders=world.occluders(0) if limited else None,
             max_range=p.max_range if limited else None,
         )
 

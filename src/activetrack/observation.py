@@ -190,7 +190,7 @@ def layout_of(sc: Scenario) -> Layout:
     limited = sc.limited_sensing
     return Layout(
         not paper or limited, sc.n_targets, sc.n_sensors,
-        sc.n_targets if limited else 0, RAYS if sc.occluders else 0,
+        sc.n_targets if limited else 0, RAYS if sc.has_occluders else 0,
     )  # fmt: skip
 
 

@@ -163,8 +163,9 @@ class PlanningProblem:
         max_range: per-sensor sensing range (..., M), > 0 (inf: unlimited), or None:
             unlimited. With either, a sensor's information counts at its expected value
             (:func:`activetrack.sensor_models.detection_factor` at the predicted targets).
-        occluders: an :class:`activetrack.occluders.Occluders` (shared by the batch) or
-            None: a sensor counts no information about a predicted target it cannot see.
+        occluders: an :class:`activetrack.occluders.Occluders` (one layout shared by the
+            batch, or one per entry of the first batch axis: ``Occluders.stack``) or None:
+            a sensor counts no information about a predicted target it cannot see.
     """
 
     prior_cov: FloatArray
@@ -301,6 +302,12 @@ class PlanningProblem:
                 value = np.array(np.broadcast_to(value, shape) if value.shape != shape else value)
             value.setflags(write=False)
             object.__setattr__(self, name, value)
+        occ = self.occluders
+        if occ is not None and occ.batched and (not batch or batch[0] != occ.n_layouts):
+            raise ValueError(
+                f"occluders holds {occ.n_layouts} layouts (one per copy): the problem's first "
+                f"batch axis must have that length, got batch shape {batch}"
+            )
         if pred is not None:
             self._attach(pred, batch, check_cov=not derived, check_target=not derived_target)
 
@@ -364,7 +371,8 @@ class PlanningProblem:
         """Return the batch (B,) of single problems with the same M and objective.
 
         Their predictions are stacked too: all problems carry one (of the same motion
-        model) or none does.
+        model) or none does. Their occluders: one shared object stays shared; different
+        layouts (same polygon sizes) are stacked, one per problem (``Occluders.stack``).
         """
         if not problems:
             raise ValueError("problems must hold at least one problem")
@@ -375,8 +383,12 @@ class PlanningProblem:
         if any(p.multi_target != multi for p in problems):
             raise ValueError("problems must all be multi_target, or none")
         occ = problems[0].occluders
-        if any(p.occluders is not occ for p in problems):
-            raise ValueError("problems must all have the same occluders")
+        if any((p.occluders is None) != (occ is None) for p in problems):
+            raise ValueError("problems must all have occluders, or none")
+        if any(p.occluders is not None and p.occluders.batched for p in problems):
+            raise ValueError("problems must be single problems to stack (unbatched occluders)")
+        if any(p.occluders is not occ for p in problems):  # each its own layout
+            occ = type(occ).stack([p.occluders for p in problems])
         arrays: dict[str, Any] = {"multi_target": multi, "occluders": occ}
         for f in fields(cls):
             if f.name in ("objective", "prediction", "multi_target", "occluders"):
@@ -428,7 +440,9 @@ class PlanningProblem:
                     mean.setflags(write=False)
                     cov.setflags(write=False)
                     value = value._trusted(mean, cov)
-            elif f.name not in ("objective", "multi_target", "occluders") and value is not None:
+            elif f.name == "occluders" and value is not None:  # the layouts of the first axis
+                value = value[index[0] if isinstance(index, tuple) else index]
+            elif f.name not in ("objective", "multi_target") and value is not None:
                 value = np.array(value[index])
                 value.setflags(write=False)
             values[f.name] = value

@@ -147,7 +147,12 @@ class _Problem:
         self.minimax = k > 1 and _is_max(objective)
         self.zero = np.zeros((len(self.r), 2))
         self.origins, self.radii = feasible_set.circles(self.zero, self.r, self.t, self.rho)
-        self.occ = occluders  # the line of sight (activetrack.occluders), or None
+        # The line of sight (activetrack.occluders), or None; a layout per copy (batched
+        # over the batch's first axis) is gathered to one per flattened row.
+        if occluders is not None and occluders.batched:
+            lead = np.arange(self.shape[0]).reshape((-1,) + (1,) * (len(self.shape) - 1))
+            occluders = occluders[np.broadcast_to(lead, self.shape).ravel()]
+        self.occ = occluders
         self.det = self.det_abs = None
         if occluders is not None and detect is None:
             detect = (np.ones(self.shape), np.full(self.shape, np.inf))
@@ -203,6 +208,8 @@ class _Problem:
         for key, value in vars(self).items():
             if key in ("det", "det_abs") and value is not None:  # (p_detect, range^2)
                 value = tuple(v[rows] for v in value)
+            elif key == "occ" and value is not None:  # a layout per row, or one shared
+                value = value[rows]
             sub.__dict__[key] = value[rows] if isinstance(value, np.ndarray) else value
         return sub
 
@@ -674,8 +681,9 @@ def solve_sensor(
         detect: ``(p_detect, max_range**2)`` (...): the sensor's information counts at its
             expected value (:func:`activetrack.sensor_models.detection_factor`); None:
             always measured.
-        occluders: an :class:`activetrack.occluders.Occluders`: no information about a
-            target hidden from a point (the line of sight); None: an open plane. The
+        occluders: an :class:`activetrack.occluders.Occluders` (shared, or batched over
+            the first batch axis): no information about a target hidden from a point (the
+            line of sight); None: an open plane. The
             objective then jumps across shadow boundaries, which the candidates resolve
             only to their spacing (no candidates are placed on the boundaries).
 

@@ -63,7 +63,8 @@ class LoopParams:
     filter_pose_cov: FloatArray | None = None
     max_range: FloatArray | None = None
     p_detect: FloatArray | None = None
-    occluders: Any = None  # activetrack.occluders.Occluders or None
+    occluders: Any = None  # the fixed activetrack.occluders.Occluders, or None
+    filter_iterations: int = 1  # 1: the EKF of eq. (11); more: the iterated EKF
 
     def __post_init__(self) -> None:
         if not self.targets:
@@ -112,6 +113,7 @@ class LoopParams:
             sc.max_ranges,
             sc.detection_probs,
             sc.occluder_set,
+            sc.filter_iterations,
         )
 
     @property
@@ -220,16 +222,22 @@ def measure(
 
 
 def detections(
-    params: LoopParams, positions: FloatArray, sensors: FloatArray, draws: FloatArray | None
+    params: LoopParams,
+    positions: FloatArray,
+    sensors: FloatArray,
+    draws: FloatArray | None,
+    occluders: Any = None,
 ) -> np.ndarray | None:
     """Return which sensor detects which target this step, (..., K, M) bool, or None (all).
 
     A sensor detects a target when it is within its ``max_range`` of the target's true
     position ``positions`` (..., K, 2), the segment between them is not blocked by an
-    occluder (:func:`activetrack.occluders.blocked`), and its standard normal ``draws``
-    (..., K M, target-major) is below :attr:`LoopParams.detect_threshold`.
+    occluder of ``occluders`` (the episode's layout, an
+    :class:`activetrack.occluders.Occluders`, batched over the leading axis when each copy
+    has its own; :func:`activetrack.occluders.line_of_sight`), and its standard normal
+    ``draws`` (..., K M, target-major) is below :attr:`LoopParams.detect_threshold`.
     """
-    if params.max_range is None and params.p_detect is None and params.occluders is None:
+    if params.max_range is None and params.p_detect is None and occluders is None:
         return None
     shape = positions.shape[:-1] + (params.n_sensors,)
     seen = np.ones(shape, dtype=bool)
@@ -238,10 +246,10 @@ def detections(
         seen &= sensor_models.in_range(rel, params.max_range**2)
     if params.p_detect is not None:
         seen &= draws.reshape(shape) < params.detect_threshold
-    if params.occluders is not None:
-        from activetrack import occluders  # noqa: PLC0415 (occluded scenarios only)
+    if occluders is not None:
+        from activetrack.occluders import line_of_sight  # noqa: PLC0415 (occluded scenarios)
 
-        seen &= occluders.line_of_sight(sensors, positions, params.occluders)
+        seen &= line_of_sight(sensors, positions, occluders)
     return seen
 
 
@@ -256,7 +264,13 @@ def filter_update(
     """Return one target's EKF posterior (eq. 11) from its measurements ``z`` (..., M, 2)
     taken by sensors the team believes at ``fixes``; only the sensors ``detected`` (..., M)
     measured it (None: every sensor)."""
-    if params.models is None and params.filter_pose_cov is None and detected is None:
+    iterations = params.filter_iterations
+    if (
+        params.models is None
+        and params.filter_pose_cov is None
+        and detected is None
+        and iterations == 1
+    ):
         return ekf.update(
             x_pred, P_pred, z, fixes, params.sigma_d2, params.sigma_theta2, params.orientation,
             weights=params.weights,
@@ -264,4 +278,5 @@ def filter_update(
     return ekf.update(
         x_pred, P_pred, z, fixes, params.sigma_d2, params.sigma_theta2, params.orientation,
         detected, models=params.models, weights=params.weights, pose_cov=params.filter_pose_cov,
+        iterations=iterations,
     )  # fmt: skip

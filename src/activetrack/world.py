@@ -162,6 +162,13 @@ class World:
             self._meas_slice = (slice(None), self._meas_slice)
             self._detect_slice = (slice(None), self._detect_slice)
         self._center = np.asarray(sc.sensor_center, dtype=np.float64)
+        # The occluders in force: the scenario's fixed set, or with random layouts each
+        # copy's own (batched over copies; a placeholder until a copy's first reset).
+        self._random_layouts = sc.random_occluders > 0
+        self._occ = p.occluders
+        if self._random_layouts:
+            first = sc.draw_occluders(np.random.default_rng(0))
+            self._occ = first if N == 1 else type(first).stack([first] * N)
         # Observation constants (activetrack.observation).
         self.length_scale = observation.length_scale(sc)
         self.layout = observation.layout_of(sc)
@@ -381,7 +388,10 @@ class World:
             g = None if g is None else [gk[0] for gk in g]
             e = None if e is None else e[0]
         sensors = self._start_positions(u)
-        if p.occluders is not None:  # no sensor starts inside an occluder: draw again
+        if self._random_layouts:  # each episode's own layout, drawn after the other draws
+            layouts = [self.scenario.draw_occluders(self.rng(i)) for i in rows.tolist()]
+            self._occ = layouts[0] if self._one else self._occ.replaced(rows, layouts)
+        if self._occ is not None:  # no sensor starts inside an occluder: draw again
             sensors = self._outside_occluders(sensors, rows, one=isinstance(sel, int))
         batch = u.shape[:-2]
         trace = 0.0
@@ -444,9 +454,9 @@ class World:
         generator, after the copy's other draws) until it is outside."""
         from activetrack import occluders  # noqa: PLC0415 (occluded scenarios only)
 
-        occ = self.params.occluders
         batch = sensors[None] if one else sensors
         for j, i in enumerate(rows.tolist()):
+            occ = self._occ if one else self._occ[i]
             for _ in range(1000):
                 bad = occluders.inside(batch[j], occ)
                 if not bad.any():
@@ -520,7 +530,7 @@ class World:
                 where[..., k, :] = x[..., :2]
         mv = moves if self._one and moves.ndim == 2 else moves[calc]
         moved, projected = move(mv, fixes, where, p.r, p.rho)
-        if p.occluders is not None:  # no move ends in or passes through an occluder
+        if self._occ is not None:  # no move ends in or passes through an occluder
             moved, projected = self._around_occluders(sensors, fixes, moved, projected)
         if self._one and self._noise is None:  # the single env's draw, without a call
             noise = (self._rngs[0] or self.rng(0)).standard_normal(self._n_noise)
@@ -539,7 +549,7 @@ class World:
             sensors = fixes = moved
         trace = None
         scores = []
-        general = K > 1 or self._limited
+        general = K > 1 or self._limited or p.filter_iterations > 1
         detected = None
         if general:  # every target moves, then all are measured in one call
             moved_t = [
@@ -553,7 +563,7 @@ class World:
             z_all = tracking.measure(p, true_pos, sensors, noise[self._meas_slice])
             if self._limited:
                 draws = noise[self._detect_slice] if p.p_detect is not None else None
-                detected = tracking.detections(p, true_pos, sensors, draws)
+                detected = tracking.detections(p, true_pos, sensors, draws, self._occ)
         for k, (t, tp, x_pred, (proc, meas)) in enumerate(
             zip(tgt, p.targets, x_preds, self._noise_slices, strict=True)
         ):
@@ -630,8 +640,7 @@ class World:
         from activetrack import occluders  # noqa: PLC0415 (occluded scenarios only)
 
         desired = sensors + (moved - fixes) if self._pose else moved
-        occ, r = self.params.occluders, self.params.r
-        reached, hit = occluders.project_move(sensors, desired, occ, r)
+        reached, hit = occluders.project_move(sensors, desired, self._occ, self.params.r)
         if not np.any(hit):
             return moved, projected
         return (fixes + (reached - sensors) if self._pose else reached), projected | hit
@@ -658,7 +667,9 @@ class World:
             "objective": self.objective,
         }
         if self._limited:  # the planners count each sensor's information at its expected value
-            extra.update(p_detect=p.p_detect, max_range=p.max_range, occluders=p.occluders)
+            extra.update(
+                p_detect=p.p_detect, max_range=p.max_range, occluders=self.occluders(index)
+            )
         sensors = self.get("fixes" if self._pose else "sensors", index)
         if self.n_targets > 1:
             P_preds = [self.get("P_pred", index, k)[..., :2, :2] for k in range(self.n_targets)]
@@ -702,7 +713,19 @@ class World:
         """Return every agent's range-finder readings (..., M, RAYS), or None (no occluders)."""
         if not self.layout.rays:
             return None
-        return observation.ray_readings(self.get("sensors", index), self.params.occluders)
+        return observation.ray_readings(self.get("sensors", index), self.occluders(index))
+
+    def occluders(self, index: int | None = None):  # -> activetrack.occluders.Occluders | None
+        """Return the occluders in force (None: an open plane).
+
+        ``index`` None: every copy's (with random layouts an
+        :class:`~activetrack.occluders.Occluders` batched over the copies, else the
+        scenario's fixed set, shared); an int: copy ``index``'s layout, unbatched.
+        """
+        occ = self._occ
+        if occ is None or index is None or self._one:
+            return occ
+        return occ[index]
 
     def _features(self, index: int | None) -> tuple[FloatArray, FloatArray]:
         L = self.length_scale

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from activetrack import PlanningProblem
+from activetrack import PlanningProblem, observation
 from activetrack.objective import LOGDET, TRACE, WORST_TRACE
 from activetrack.scenarios import TASKS, make_scenario
 from activetrack.world import World
@@ -24,8 +24,11 @@ def test_every_task_is_a_valid_scenario_with_its_layout():
         w.reset(seeds=[0])
         obs = w.observe(0)
         K, M = sc.n_targets, sc.n_sensors
-        assert obs.shape == (M, 7 * K + 12 * M), name
-        assert w.state(0).shape == (7 * K + 12 * M + 1,)
+        # Detection flags (K per sensor block) and rays with limited sensing.
+        d = 7 * K + 12 * M + (K * M if sc.limited_sensing else 0)
+        rays = observation.RAYS if sc.has_occluders else 0  # each agent's own in its view
+        assert obs.shape == (M, d + rays), name
+        assert w.state(0).shape == (d + M * rays + 1,)
         low, high = w.layout.bounds()
         assert np.all(obs >= low) and np.all(obs <= high)
     from activetrack.scenarios import EXTENSIONS
