@@ -32,7 +32,7 @@ from __future__ import annotations
 import numpy as np
 
 from activetrack import feasible_set, sensor_models, solver_numeric
-from activetrack.occluders import line_of_sight
+from activetrack.occluders import line_of_sight, project_move
 from activetrack.problem import PlanningProblem
 from activetrack.validation import FloatArray
 
@@ -139,6 +139,8 @@ def _approach(problem, s, value, current, r, targets, rho, det, weights, occ):
     goal = targets[b, np.argmin(d2, axis=-1)]
     moved = s.copy()
     moved[b, i] = feasible_set.project(goal, current[b, i], r[b, i], targets[b], rho[b, i])
+    if occ is not None:  # a straight move the world allows: around the occluders
+        moved[b, i] = project_move(current[b, i], moved[b, i], occ[b], r[b, i])[0]
     w_d, w_t, pose = weights
     prior = problem.prior_infos.reshape(len(s), -1, 2, 2)
     new = problem.objective.of_targets(

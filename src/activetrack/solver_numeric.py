@@ -54,6 +54,13 @@ the local-minimum test), :func:`solve_prepared` the rest. A prepared batch with
 whose starts come from the same candidates, where the last one ended; the answer is then
 the same local minima to the refinement's tolerance, not bit for bit.
 
+Occluders (``occluders``): a candidate or refinement step counts as feasible only if the
+sensor's straight move to it is not blocked (:func:`activetrack.occluders.blocked`: it
+neither crosses nor ends in an occluder), so the answer lies in the reachable set the
+world's moves keep to (:func:`activetrack.occluders.project_move`); the information about
+a target is counted only where its predicted position is in sight. The objective jumps
+across shadow boundaries, which the candidates resolve only to their spacing.
+
 Special cases: ``r = 0`` returns the sensor's position (its only reachable point, feasible
 or the fallback); a point at zero distance from a target gets no information about it
 (the rule of :mod:`activetrack.sensor_models`); with ``rho = 0`` and a target within reach
@@ -240,10 +247,15 @@ class _Problem:
         return np.max(pieces, axis=-1) if self.minimax else pieces[..., 0]
 
     def feasible(self, pts: FloatArray) -> np.ndarray:
-        """Return whether points (B, C, 2) lie in F (with the tolerance), (B, C)."""
-        return feasible_set.contains(
+        """Return whether points (B, C, 2) lie in F (with the tolerance), (B, C); with
+        occluders also reachable: the straight move there is not blocked."""
+        ok = feasible_set.contains(
             pts, self.zero[:, None], self.r[:, None], self.t[:, None], self.rho[:, None]
         )
+        if self.occ is not None and np.any(ok):
+            c = self.center[:, None, :]
+            ok &= ~blocked(np.broadcast_to(c, pts.shape), pts + c, self.occ)
+        return ok
 
     def masked(self, pts: FloatArray) -> FloatArray:
         """Return ``f`` at points (B, C, 2), ``+inf`` where infeasible."""

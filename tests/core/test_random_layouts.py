@@ -126,6 +126,9 @@ def test_planners_see_each_copys_own_layout():
     planner = GSR()
     batched = planner.plan(problem)
     for i in range(4):
+        # Planned moves are straight moves the world allows (checked by dense sampling).
+        paths = _paths(w.occluders(i))
+        assert not _enters(paths, w.get("sensors", i), batched[i]).any()
         single = w.planning_problem(i)
         assert single.occluders.n_polygons == 6
         for p, q in zip(single.occluders.polygons, w.occluders(i).polygons, strict=True):

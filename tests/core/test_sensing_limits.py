@@ -125,6 +125,36 @@ def test_filter_is_consistent_with_missed_detections():
     assert lo <= mean <= hi, mean
 
 
+def _urban_nees(name: str, runs: int = 200, **overrides) -> float:
+    """Return the mean over ``runs`` random-motion runs of each run's time-averaged NEES."""
+    from activetrack.baselines import RandomMotion
+
+    w = World(name, runs, **overrides)
+    w.reset(seeds=list(range(20_000, 20_000 + runs)))
+    rngs = [np.random.default_rng(s) for s in range(runs)]
+    planner, out = RandomMotion(), []
+    while not w.truncated.all():
+        problem = w.planning_problem()
+        w.step(np.stack([planner.plan(problem[i], rngs[i]) for i in range(runs)]))
+        out.append(w.position_nees())
+    return float(np.mean(out))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["urban", "urban_random"])
+def test_the_iterated_filter_is_consistent_on_the_urban_tasks(name):
+    # 200 runs moving at random (the target unmeasured in about 30% of the steps, gaps of
+    # up to the whole episode): the iterated EKF's mean NEES lies in the chi-square(2)
+    # band. The plain EKF (one linearization at a prediction that is meters off when the
+    # target reappears) leaves it on the fixed layout.
+    lo, hi = stats.chi2.ppf([0.025, 0.975], 2 * 200) / 200
+    mean = _urban_nees(name)
+    assert lo <= mean <= hi, (name, mean)
+    if name == "urban":
+        plain = _urban_nees(name, filter_iterations=1)
+        assert plain > hi, plain
+
+
 def test_expected_information_matches_monte_carlo_over_detections():
     # E[detected J] over the detection draws and the range test, against the closed form
     # p 1[|p| <= R] J of information_entries(..., detect=...).
