@@ -104,7 +104,32 @@ def update(
     """
     args = (z, sensor_pos, sigma_d2, sigma_theta2, orientation, mask, models, weights, pose_cov)
     x_post, P_post = _posterior(x, P, *_terms(x[..., :2], *args))
+    if iterations == 1:
+        return x_post, P_post
+    if x.ndim != 2:  # one filter (or several batch axes): every row iterates together
+        return _relinearized(x, P, x_post, P_post, args, iterations - 1)
+    # A batch (B, n): each filter iterates until its own position settles (most settle
+    # after two or three linearizations; filters that saw nothing after one).
+    x_post, P_post = x_post.copy(), P_post.copy()
+    rows = np.arange(x.shape[0])
     for _ in range(iterations - 1):
+        sub = _take(args, rows)
+        lin = x_post[rows, :2]
+        xr, Pr = _relinearized(x[rows], P[rows], x_post[rows], P_post[rows], sub, 1)
+        x_post[rows], P_post[rows] = xr, Pr
+        step = np.max(np.abs(xr[:, :2] - lin), axis=1)
+        rows = rows[step > ITERATION_TOL * (1.0 + np.max(np.abs(lin), axis=1))]
+        if rows.size == 0:
+            break
+    return x_post, P_post
+
+
+def _relinearized(
+    x: FloatArray, P: FloatArray, x_post: FloatArray, P_post: FloatArray, args: tuple, n: int
+) -> tuple[FloatArray, FloatArray]:
+    """Return the posterior after at most ``n`` more linearizations, at the last estimate
+    ``x_post`` first (all filters together; stops when every position has settled)."""
+    for _ in range(n):
         # Relinearize at the last estimate: the innovation z - h(x_i) - H_i (x - x_i) gives
         # b_i - Y_i (p - p_i) for the terms (Y_i, b_i) at p_i (the prior x, P stay).
         lin = x_post[..., :2]
@@ -118,6 +143,21 @@ def update(
         if step <= ITERATION_TOL * (1.0 + np.max(np.abs(lin))):
             break
     return x_post, P_post
+
+
+def _take(args: tuple, rows: np.ndarray) -> tuple:
+    """Return ``update``'s arguments ``args`` at the filters ``rows`` of a batch (B, n):
+    measurements and positions of shape (B, M, 2), per-sensor values of shape (B, M) and
+    pose covariances of shape (B, M, 2, 2) are indexed, shared ones (M,) kept."""
+    # The batch axis by position in the argument list (a shape alone is ambiguous when B = M).
+    batched_ndim = (3, 3, 2, 2, 2, 2, 2, 2, 4)
+
+    def one(a: Any, nd: int) -> Any:
+        if isinstance(a, tuple):
+            return tuple(one(v, nd) for v in a)
+        return a[rows] if isinstance(a, np.ndarray) and a.ndim == nd else a
+
+    return tuple(one(a, nd) for a, nd in zip(args, batched_ndim, strict=True))
 
 
 def _terms(

@@ -79,21 +79,23 @@ def test_iterated_update_reaches_the_map_estimate_and_its_covariance(seed):
     assert np.linalg.norm(x - best.x) <= np.linalg.norm(x1 - best.x) + 1e-9
 
 
-def test_one_iteration_is_the_ekf_and_a_batch_equals_its_rows():
+@pytest.mark.parametrize(("B", "m", "pose"), [(5, 3, False), (3, 3, True), (4, 3, True)])
+def test_one_iteration_is_the_ekf_and_a_batch_equals_its_rows(B, m, pose):
+    # (B = M with a shared (M, 2, 2) pose covariance: the batch axis is not guessed from shapes.)
     rng = np.random.default_rng(3)
-    B, m = 5, 3
     P = np.stack([np.diag([9.0, 9.0, 4.0, 4.0])] * B)
     x0 = rng.normal(size=(B, 4)) * 3
     sensors = rng.uniform(-10, 10, (B, m, 2))
     z = np.stack([rng.uniform(3, 12, (B, m)), rng.uniform(-3, 3, (B, m))], -1)
     sd2, st2 = np.full(m, 1.0), np.full(m, 0.05)
-    plain = ekf.update(x0, P, z, sensors, sd2, st2)
-    one = ekf.update(x0, P, z, sensors, sd2, st2, iterations=1)
+    cov = np.diag([0.5, 0.2])[None] * np.arange(1, m + 1)[:, None, None] if pose else None
+    plain = ekf.update(x0, P, z, sensors, sd2, st2, pose_cov=cov)
+    one = ekf.update(x0, P, z, sensors, sd2, st2, pose_cov=cov, iterations=1)
     for a, b in zip(plain, one, strict=True):
         np.testing.assert_array_equal(a, b)
-    xb, Pb = ekf.update(x0, P, z, sensors, sd2, st2, iterations=20)
+    xb, Pb = ekf.update(x0, P, z, sensors, sd2, st2, pose_cov=cov, iterations=20)
     for i in range(B):
-        xi, Pi = ekf.update(x0[i], P[i], z[i], sensors[i], sd2, st2, iterations=20)
+        xi, Pi = ekf.update(x0[i], P[i], z[i], sensors[i], sd2, st2, pose_cov=cov, iterations=20)
         np.testing.assert_allclose(xb[i], xi, rtol=1e-9, atol=1e-9)
         np.testing.assert_allclose(Pb[i], Pi, rtol=1e-9, atol=1e-12)
         np.testing.assert_array_equal(Pb[i], Pb[i].T)
