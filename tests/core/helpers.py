@@ -36,3 +36,20 @@ def textbook_update(x, P, z, sensors, sd2, st2):
     S = H @ P @ H.T + R
     K = P @ H.T @ np.linalg.inv(S)
     return x + K @ nu, P - K @ S @ K.T
+
+
+def in_any(paths, pts, margin=1e-7):
+    """Whether points (n, 2) lie inside any of the matplotlib ``paths`` by more than
+    ``margin`` (a dent into the boundary within it is on the boundary)."""
+    out = np.zeros(len(pts), dtype=bool)
+    for path in paths:
+        # A negative radius shrinks the polygon (for counter-clockwise vertices; both tried).
+        out |= path.contains_points(pts, radius=-margin) & path.contains_points(pts, radius=margin)
+    return out
+
+
+def segments_enter(paths, a, b, n=201):
+    """Whether segments a -> b (S, 2) pass inside any of ``paths`` at one of n samples."""
+    t = np.linspace(0.0, 1.0, n)[:, None, None]
+    pts = (a + t * (b - a)).reshape(-1, 2)
+    return in_any(paths, pts).reshape(n, -1).any(axis=0)

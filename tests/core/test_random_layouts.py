@@ -11,27 +11,14 @@ from matplotlib.path import Path
 from activetrack.baselines import GSR
 from activetrack.scenarios import make_scenario
 from activetrack.world import World
+from tests.core.helpers import in_any as _inside
+from tests.core.helpers import segments_enter as _enters
 
 N = 24
 
 
 def _paths(occ):
     return [Path(np.asarray(p)) for p in occ.polygons]
-
-
-def _inside(paths, pts, margin=1e-7):
-    """Whether points (n, 2) lie inside a polygon by more than ``margin`` (either orientation)."""
-    out = np.zeros(len(pts), dtype=bool)
-    for path in paths:
-        out |= path.contains_points(pts, radius=-margin) & path.contains_points(pts, radius=margin)
-    return out
-
-
-def _enters(paths, a, b, n=201):
-    """Whether segments a -> b (S, 2) pass inside a polygon at one of n samples."""
-    t = np.linspace(0.0, 1.0, n)[:, None, None]
-    pts = (a + t * (b - a)).reshape(-1, 2)
-    return _inside(paths, pts).reshape(n, -1).any(axis=0)
 
 
 def test_each_episode_draws_its_layout_from_its_seed():

@@ -9,27 +9,12 @@ from matplotlib.path import Path
 from activetrack import occluders
 from activetrack.scenarios import make_scenario
 from activetrack.world import World
+from tests.core.helpers import in_any as _in_any
+from tests.core.helpers import segments_enter as _segments_enter
 
 
 def _paths(sc):
     return [Path(np.asarray(p)) for p in sc.occluders]
-
-
-def _in_any(paths, pts, margin=1e-7):
-    """Whether points (n, 2) lie inside any polygon by more than ``margin`` (a dent into
-    the boundary within it is on the boundary)."""
-    out = np.zeros(len(pts), dtype=bool)
-    for path in paths:
-        # A negative radius shrinks the polygon (for counter-clockwise vertices; both tried).
-        out |= path.contains_points(pts, radius=-margin) & path.contains_points(pts, radius=margin)
-    return out
-
-
-def _segments_enter(paths, a, b, n=201):
-    """Whether segments a -> b (S, 2) pass inside any polygon at one of n samples."""
-    t = np.linspace(0.0, 1.0, n)[:, None, None]
-    pts = (a + t * (b - a)).reshape(-1, 2)
-    return _in_any(paths, pts).reshape(n, -1).any(axis=0)
 
 
 def _layout(seed):
