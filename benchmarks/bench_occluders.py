@@ -58,11 +58,7 @@ def main() -> None:
     n = args.copies * args.sensors
     pts = rng.uniform(-10, 10, (4 * n, 2))
     start = pts[~oc.inside(pts, occ)][:n].reshape(shape + (2,))
-    target = rng.uniform(-10, 10, shape + (2,))
-    r = np.full(shape, args.reach)
-    rad = args.reach * np.sqrt(rng.uniform(size=shape))
-    ang = rng.uniform(0, 2 * np.pi, shape)
-    desired = start + rad[..., None] * np.stack([np.cos(ang), np.sin(ang)], -1)
+    target, r, desired = _moves(rng, start, args.reach)
     dirs = np.stack([np.cos(a := np.arange(16) * np.pi / 8), np.sin(a)], -1)
 
     los = oc.blocked(start, target, occ)
@@ -83,6 +79,18 @@ def main() -> None:
     batched(args, rng, dirs)
 
 
+def _moves(
+    rng: np.random.Generator, start: np.ndarray, reach: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Return random targets, the reach and desired moves uniform in each reach disk."""
+    shape = start.shape[:-1]
+    target = rng.uniform(-10, 10, shape + (2,))
+    rad = reach * np.sqrt(rng.uniform(size=shape))
+    ang = rng.uniform(0, 2 * np.pi, shape)
+    desired = start + rad[..., None] * np.stack([np.cos(ang), np.sin(ang)], -1)
+    return target, np.full(shape, reach), desired
+
+
 def batched(args: argparse.Namespace, rng: np.random.Generator, dirs: np.ndarray) -> None:
     """Print the batched kernels' times beside a Python loop over the layouts."""
     n, m = args.copies, args.sensors
@@ -94,11 +102,7 @@ def batched(args: argparse.Namespace, rng: np.random.Generator, dirs: np.ndarray
     keep = np.argsort(oc.inside(pts, occ), axis=1, kind="stable")[:, :m]  # outside first
     start = np.take_along_axis(pts, keep[..., None], axis=1)
     assert not oc.inside(start, occ).any()
-    target = rng.uniform(-10, 10, (n, m, 2))
-    r = np.full((n, m), args.reach)
-    rad = args.reach * np.sqrt(rng.uniform(size=(n, m)))
-    ang = rng.uniform(0, 2 * np.pi, (n, m))
-    desired = start + rad[..., None] * np.stack([np.cos(ang), np.sin(ang)], -1)
+    target, r, desired = _moves(rng, start, args.reach)
     per = [occ[i] for i in range(n)]
     _, proj = oc.project_move(start, desired, occ, r)
     print(
