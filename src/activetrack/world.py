@@ -722,6 +722,14 @@ class World:
         :class:`~activetrack.occluders.Occluders` batched over the copies, else the
         scenario's fixed set, shared); an int: copy ``index``'s layout, unbatched.
         """
+        if index is not None and (
+            isinstance(index, (bool, np.bool_))
+            or not isinstance(index, (int, np.integer))
+            or not 0 <= index < self.num_copies
+        ):
+            raise ValueError(
+                f"index must be None or an integer in [0, {self.num_copies - 1}], got {index!r}"
+            )
         occ = self._occ
         if occ is None or index is None or self._one:
             return occ

@@ -144,3 +144,12 @@ def test_planners_see_each_copys_own_layout():
 def test_bad_random_layout_fields_name_the_field(overrides, match):
     with pytest.raises(ValueError, match=match):
         make_scenario("urban_random", **overrides)
+
+
+@pytest.mark.parametrize("index", [3, -1, 1.0, True, "0"])
+def test_occluders_of_a_copy_that_does_not_exist_names_the_index(index):
+    w = World("urban_random", 3)
+    w.reset(seeds=[0, 1, 2])
+    with pytest.raises(ValueError, match=r"index must be None or an integer in \[0, 2\]"):
+        w.occluders(index)
+    assert World("paper").occluders() is None
