@@ -289,6 +289,13 @@ def _add_evaluate(sub: argparse._SubParsersAction) -> None:
     add_output_arguments(p, None)
     p.add_argument("--no-plot", action="store_true", help="do not write mean_trace.png")
     p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    p.add_argument(
+        "--batched",
+        action="store_true",
+        help="run gsr and lookahead on all episodes at once in a batched world (far faster "
+        "for lookahead; rows equal the serial ones to the planner's tolerance; other "
+        "policies run episode by episode)",
+    )
     add_ray_arguments(p, "episodes")
     p.set_defaults(func=_cmd_evaluate, parser=p)
 
@@ -314,5 +321,6 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         overwrite=args.overwrite,
         workers=args.workers,
         address=args.address,
+        batched=args.batched,
     )
     return 0

@@ -22,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 
 from activetrack.motion import predict
-from activetrack.objective import sensor_information
+from activetrack.objective import TRACE, TraceObjective, sensor_information
 from activetrack.validation import FloatArray
 
 
@@ -92,12 +92,14 @@ def rollout(
     weights: FloatArray,
     *,
     return_covariances: bool = False,
+    objective: TraceObjective = TRACE,
 ) -> tuple[FloatArray, FloatArray] | tuple[FloatArray, FloatArray, FloatArray]:
     """Return ``(score, traces)`` of plans with step information ``Y`` (..., H, 2, 2).
 
     ``P_pred`` (..., n, n) is the current prediction ``P(k+1|k)`` (broadcast over the
     candidates' axes of ``Y``); ``traces`` (..., H) are the posterior ``tr P+_11`` of each
-    step and ``score = sum_h weights[h] traces[..., h]``. With ``return_covariances`` the
+    step (``objective.of_covariance`` of the posterior: the trace for eq. 17's objective)
+    and ``score = sum_h weights[h] traces[..., h]``. With ``return_covariances`` the
     posteriors (..., H, n, n) come third.
     """
     H = Y.shape[-3]
@@ -109,7 +111,7 @@ def rollout(
     x0 = np.zeros(batch + (n,))
     for h in range(H):
         post = information_update(P, Y[..., h, :, :])
-        traces[..., h] = post[..., 0, 0] + post[..., 1, 1]
+        traces[..., h] = objective.of_covariance(post)
         if posts is not None:
             posts[..., h, :, :] = post
         if h + 1 < H:

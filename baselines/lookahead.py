@@ -24,7 +24,9 @@ The search (:meth:`Lookahead.plan_prediction`), batched over copies and candidat
    shifted plan, each sensor in turn takes its best option given the others', for
    ``passes`` passes. Each sensor's paths and information are computed once, so a team
    candidate costs one covariance rollout; the score never increases, so the result is
-   never worse in the model than GSR's rollout.
+   never worse in the model than GSR's rollout. With occluders, an option whose move an
+   occluder stops inside a ``rho`` disk is not taken (:meth:`PathModel.outside_rho
+   <activetrack.baselines.horizon_paths.PathModel.outside_rho>`).
 
 Minimum-distance margin: the true target is not where it is predicted; a sensor placed
 on the ``rho`` circle of the predicted target ends inside the true target's ``rho`` disk
@@ -36,15 +38,14 @@ standard deviation of the predicted position along its principal axis, in every 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 
 import numpy as np
 
 from activetrack.baselines import horizon_model as hm
+from activetrack.baselines import horizon_paths as hp
 from activetrack.baselines.gsr import GSR
 from activetrack.baselines.prediction_tracker import PredictionTracker
-from activetrack.geometry import project_feasible
-from activetrack.objective import sensor_information
 from activetrack.problem import PlanningProblem
 from activetrack.validation import FloatArray, check_float, check_int
 from activetrack.world import World
@@ -122,53 +123,41 @@ class Lookahead:
         ``None`` (the default): ``problem.prediction``'s. ``previous`` (batch + (M, H, 2))
         is the last plan, whose shift by one step is a warm-start option.
         """
-        given = [v is not None for v in (x_pred, P_pred, Phi, Q)]
-        if not any(given):
-            pred = problem.prediction
-            if pred is None:
-                raise ValueError(
-                    "problem.prediction is None: pass x_pred, P_pred, Phi and Q, or a problem "
-                    "that carries its prediction (World.planning_problem, "
-                    "PlanningProblem.from_prediction)"
-                )
-            x_pred, P_pred, Phi, Q = pred.mean, pred.cov, pred.Phi, pred.Q
-        elif not all(given):
-            raise ValueError("give all of x_pred, P_pred, Phi and Q, or none of them")
+        preds = _predictions(problem, x_pred, P_pred, Phi, Q)
         shape, M, H = problem.batch_shape, problem.n_sensors, self.horizon
         B = math.prod(shape)
-        n = Phi.shape[0]
-        x_pred = np.asarray(x_pred, dtype=np.float64).reshape(B, n)
-        P_pred = np.asarray(P_pred, dtype=np.float64).reshape(B, n, n)
+        model = hp.PathModel(problem)
         start = problem.sensors.reshape(B, M, 2)
-        r, rho, sd2, st2 = (
-            getattr(problem, k).reshape(B, M) for k in ("r", "rho", "sigma_d2", "sigma_theta2")
-        )
-        means = hm.predicted_means(x_pred, Phi, H)[..., :2]  # (B, H, 2)
-        rho_eff = rho + self.margin * _principal_std(P_pred[:, :2, :2])[:, None]
+        r, rho = problem.r.reshape(B, M), problem.rho.reshape(B, M)
+        # Every target's predicted positions, (B, H, K, 2).
+        means = np.stack([hm.predicted_means(x, F, H)[..., :2] for x, _, F, _ in preds], axis=2)
+        spread = np.max([_principal_std(P[:, :2, :2]) for _, P, _, _ in preds], axis=0)
+        rho_eff = rho + self.margin * spread[:, None]
         weights = hm.discount_weights(H, self.discount)
 
-        gsr_paths = self._gsr_rollout(problem, shape, P_pred, means, start, rho_eff, Phi, Q)
+        gsr_paths = self._gsr_rollout(problem, model, preds, means, start, rho_eff)
         options = [gsr_paths[:, :, None]]  # (B, M, 1, H, 2)
         if previous is not None:
             prev = np.asarray(previous, dtype=np.float64).reshape(B, M, -1, 2)
-            options.append(_shifted_paths(prev, start, means, r, rho_eff)[:, :, None])
+            options.append(hp.shifted_paths(model, prev, start, means, r, rho_eff)[:, :, None])
         if self.headings:
             ang = 2.0 * np.pi * np.arange(self.headings) / self.headings
             dirs = np.stack([np.cos(ang), np.sin(ang)], -1)
-            options.append(_heading_paths(start, means, r, rho_eff, dirs))
+            options.append(hp.heading_paths(model, start, means, r, rho_eff, dirs))
         if self.bearings:
             ang = 2.0 * np.pi * (np.arange(self.bearings) + 0.5) / self.bearings
             dirs = np.stack([np.cos(ang), np.sin(ang)], -1)
-            options.append(_bearing_paths(start, means, r, rho_eff, dirs))
+            options.append(hp.bearing_paths(model, start, means, r, rho_eff, dirs))
         paths = np.concatenate(options, axis=2)  # (B, M, O, H, 2)
         still = r <= 0.0  # a sensor that cannot move has one option: stay
         if np.any(still):
             paths = np.where(still[:, :, None, None, None], gsr_paths[:, :, None], paths)
-        info = hm.path_information(
-            paths, means[:, None, None], sd2[:, :, None], st2[:, :, None]
-        )  # (B, M, O, H, 2, 2)
+        info = model.information(paths, means)  # K x (B, M, O, H, 2, 2)
+        valid = model.outside_rho(paths, means, rho_eff)  # (B, M, O)
+        valid[:, :, 0] = True  # GSR's rollout: its solver's candidates keep rho
 
-        choice, score, gsr_score = self._descend(info, P_pred, Phi, Q, weights, previous)
+        scorer = _Scorer(preds, weights, problem.objective)
+        choice, score, gsr_score = self._descend(info, valid, scorer, previous)
         b = np.arange(B)[:, None]
         plan = paths[b, np.arange(M)[None, :], choice]  # (B, M, H, 2)
         return LookaheadResult(
@@ -180,48 +169,55 @@ class Lookahead:
         )
 
     # ------------------------------------------------------------------------------
-    def _gsr_rollout(self, problem, shape, P_pred, means, start, rho_eff, Phi, Q) -> FloatArray:
+    def _gsr_rollout(self, problem, model, preds, means, start, rho_eff) -> FloatArray:
         """Return GSR's rollout in the model, (B, M, H, 2): GSR at each step's prediction."""
         B, M = start.shape[:2]
-        H = self.horizon
+        H, K = self.horizon, means.shape[2]
+        shape = problem.batch_shape
         paths = np.empty((B, M, H, 2))
-        P, sensors = P_pred, start
-        sd2 = problem.sigma_d2.reshape(B, M)
-        st2 = problem.sigma_theta2.reshape(B, M)
-        x0 = np.zeros((B, P_pred.shape[-1]))
+        covs = [P for _, P, _, _ in preds]
+        sensors = start
+        # The problem's own fields (models, pose, sensing limits, occluders) at every step.
+        fixed = {f.name: getattr(problem, f.name) for f in fields(problem)}
+        fixed.update(prediction=None, rho=rho_eff.reshape(shape + (M,)))
         for h in range(H):
+            blocks = np.stack([P[:, :2, :2] for P in covs], axis=1)  # (B, K, 2, 2)
+            multi = problem.multi_target
             # Arrays built here from a validated problem: no second validation.
-            step = PlanningProblem._validated(
-                prior_cov=np.ascontiguousarray(P[:, :2, :2]).reshape(shape + (2, 2)),
-                target=means[:, h].reshape(shape + (2,)),
-                sensors=sensors.reshape(shape + (M, 2)),
-                r=problem.r,
-                rho=rho_eff.reshape(shape + (M,)),
-                sigma_d2=problem.sigma_d2,
-                sigma_theta2=problem.sigma_theta2,
-                objective=problem.objective,
-            )
+            step = PlanningProblem._validated(**{
+                **fixed,
+                "prior_cov": (blocks if multi else blocks[:, 0]).reshape(
+                    shape + ((K,) if multi else ()) + (2, 2)),
+                "target": (means[:, h] if multi else means[:, h, 0]).reshape(
+                    shape + ((K,) if multi else ()) + (2,)),
+                "sensors": sensors.reshape(shape + (M, 2)),
+            })  # fmt: skip
             sensors = np.asarray(self._gsr.plan(step), dtype=np.float64).reshape(B, M, 2)
             paths[:, :, h] = sensors
             if h + 1 < H:
-                rel = sensors - means[:, h, None]
-                Y = sensor_information(rel, sd2, st2).sum(axis=1)
-                P = hm.predict_covariance(hm.information_update(P, Y), Phi, Q, x0)
+                here = model.information(sensors[:, :, None, None], means[:, h, None])
+                covs = [
+                    hm.predict_covariance(hm.information_update(P, Y[:, :, 0, 0].sum(1)), F, Qk)
+                    for P, Y, (_, _, F, Qk) in zip(covs, here, preds, strict=True)
+                ]
         return paths
 
-    def _descend(self, info, P_pred, Phi, Q, weights, previous):
-        """Return ``(choice (B, M), score (B,), gsr_score (B,))``: coordinate descent."""
-        B, M, O = info.shape[:3]
+    def _descend(self, info, valid, scorer, previous):
+        """Return ``(choice (B, M), score (B,), gsr_score (B,))``: coordinate descent over
+        the ``valid`` (B, M, O) options."""
+        B, M, O = info[0].shape[:3]
         b = np.arange(B)
-        Pb = P_pred[:, None]
         # Starts: GSR's rollout (option 0 for every sensor) and the shifted plan (option 1).
         starts = [np.zeros((B, M), dtype=np.int64)]
         if previous is not None:
             starts.append(np.ones((B, M), dtype=np.int64))
-        Ys = np.stack(
-            [info[b[:, None], np.arange(M)[None], s].sum(axis=1) for s in starts], axis=1
-        )  # (B, S, H, 2, 2)
-        scores = hm.rollout(Pb, Ys, Phi, Q, weights)[0]  # (B, S)
+        Ys = [
+            np.stack([Ik[b[:, None], np.arange(M)[None], s].sum(axis=1) for s in starts], axis=1)
+            for Ik in info
+        ]  # K x (B, S, H, 2, 2)
+        scores = scorer(Ys)  # (B, S)
+        usable = np.stack([valid[b[:, None], np.arange(M)[None], s].all(axis=1) for s in starts], 1)
+        scores = np.where(usable, scores, np.inf)
         gsr_score = scores[:, 0].copy()
         best = np.argmin(scores, axis=1)
         choice = np.stack(starts, 1)[b, best]
@@ -229,10 +225,12 @@ class Lookahead:
         for _ in range(self.passes):
             changed = False
             for i in range(M):
-                chosen = info[b[:, None], np.arange(M)[None], choice]  # (B, M, H, 2, 2)
-                others = chosen.sum(axis=1) - chosen[:, i]
-                cand = others[:, None] + info[:, i]  # (B, O, H, 2, 2)
-                s = hm.rollout(Pb, cand, Phi, Q, weights)[0]
+                cand = []
+                for Ik in info:
+                    chosen = Ik[b[:, None], np.arange(M)[None], choice]  # (B, M, H, 2, 2)
+                    others = chosen.sum(axis=1) - chosen[:, i]
+                    cand.append(others[:, None] + Ik[:, i])  # (B, O, H, 2, 2)
+                s = np.where(valid[:, i], scorer(cand), np.inf)
                 k = np.argmin(s, axis=1)
                 better = s[b, k] < score
                 if np.any(better):
@@ -244,74 +242,66 @@ class Lookahead:
         return choice, score, gsr_score
 
 
+class _Scorer:
+    """The model score of team candidates: every target's covariance rolled out (eq. 11, 3),
+    the objective combining the targets at each step, weighted over the horizon."""
+
+    def __init__(self, preds, weights, objective) -> None:
+        self.preds, self.weights, self.objective = preds, weights, objective
+
+    def __call__(self, Ys: list[FloatArray]) -> FloatArray:
+        """Return the scores (B, C) of candidates' information, K x (B, C, H, 2, 2)."""
+        if len(Ys) == 1:  # one target: the rollout's own weighted sum
+            _, P, F, Qk = self.preds[0]
+            return hm.rollout(P[:, None], Ys[0], F, Qk, self.weights, objective=self.objective)[0]
+        values = np.stack(
+            [
+                hm.rollout(P[:, None], Y, F, Qk, self.weights, objective=self.objective)[1]
+                for Y, (_, P, F, Qk) in zip(Ys, self.preds, strict=True)
+            ],
+            axis=-1,
+        )  # (B, C, H, K)
+        return self.objective.combine(values) @ self.weights
+
+
+def _predictions(problem, x_pred, P_pred, Phi, Q) -> list[tuple]:
+    """Return every target's ``(x (B, n), P (B, n, n), Phi, Q)``: the arguments, or the
+    problem's predictions."""
+    B = math.prod(problem.batch_shape)
+    given = [v is not None for v in (x_pred, P_pred, Phi, Q)]
+    if any(given) and not all(given):
+        raise ValueError("give all of x_pred, P_pred, Phi and Q, or none of them")
+    if all(given):
+        if problem.multi_target:
+            raise ValueError(
+                "x_pred, P_pred, Phi and Q describe one target: a multi_target problem plans "
+                "from problem.prediction (one Prediction per target)"
+            )
+        preds = [(x_pred, P_pred, np.asarray(Phi, np.float64), np.asarray(Q, np.float64))]
+    elif problem.predictions is None:
+        raise ValueError(
+            "problem.prediction is None: pass x_pred, P_pred, Phi and Q, or a problem "
+            "that carries its prediction (World.planning_problem, "
+            "PlanningProblem.from_prediction)"
+        )
+    else:
+        preds = [(q.mean, q.cov, q.Phi, q.Q) for q in problem.predictions]
+    out = []
+    for x, P, F, Qk in preds:
+        n = F.shape[0]
+        out.append((
+            np.asarray(x, dtype=np.float64).reshape(B, n),
+            np.asarray(P, dtype=np.float64).reshape(B, n, n),
+            F,
+            Qk,
+        ))  # fmt: skip
+    return out
+
+
 def _principal_std(P11: FloatArray) -> FloatArray:
     """Return the square root of the larger eigenvalue of 2x2 covariances (...,)."""
     a, b, c = P11[..., 0, 0], P11[..., 0, 1], P11[..., 1, 1]
     return np.sqrt(0.5 * (a + c) + np.hypot(0.5 * (a - c), b))
-
-
-def _mend(prop: FloatArray, prev: FloatArray, t: FloatArray, r: FloatArray, rho: FloatArray):
-    """Return ``prop`` (within reach of ``prev``) pushed out of the ``rho`` disk about ``t``."""
-    return project_feasible(prop - t, prev - t, r, rho) + t
-
-
-def _heading_paths(start, means, r, rho, dirs) -> FloatArray:
-    """Return constant-heading paths at full speed, (B, M, O, H, 2), mended each step."""
-    B, M = start.shape[:2]
-    O, H = dirs.shape[0], means.shape[1]
-    out = np.empty((B, M, O, H, 2))
-    prev = np.broadcast_to(start[:, :, None], (B, M, O, 2))
-    step = r[:, :, None, None] * dirs
-    rr, rh = r[:, :, None], rho[:, :, None]
-    for h in range(H):
-        t = means[:, None, None, h]
-        prev = _mend(prev + step, prev, t, rr, rh)
-        out[:, :, :, h] = prev
-    return out
-
-
-def _toward(prev: FloatArray, goal: FloatArray, r: FloatArray) -> FloatArray:
-    """Return the point at most ``r`` from ``prev`` on the way to ``goal``."""
-    d = goal - prev
-    dist = np.hypot(d[..., 0], d[..., 1])
-    scale = np.where(dist > r, r / np.where(dist > 0.0, dist, 1.0), 1.0)
-    return prev + d * scale[..., None]
-
-
-def _bearing_paths(start, means, r, rho, dirs) -> FloatArray:
-    """Return paths towards target-relative waypoints ``t(h) + rho u``, (B, M, O, H, 2)."""
-    B, M = start.shape[:2]
-    O, H = dirs.shape[0], means.shape[1]
-    out = np.empty((B, M, O, H, 2))
-    prev = np.broadcast_to(start[:, :, None], (B, M, O, 2))
-    offset = rho[:, :, None, None] * dirs  # (B, M, O, 2)
-    rr, rh = r[:, :, None], rho[:, :, None]
-    for h in range(H):
-        t = means[:, None, None, h]
-        prev = _mend(_toward(prev, t + offset, rr), prev, t, rr, rh)
-        out[:, :, :, h] = prev
-    return out
-
-
-def _shifted_paths(previous, start, means, r, rho) -> FloatArray:
-    """Return the previous plan shifted by one step and mended, (B, M, H, 2)."""
-    B, M, Hp = previous.shape[:3]
-    H = means.shape[1]
-    goals = np.empty((B, M, H, 2))
-    k = min(Hp - 1, H)
-    goals[:, :, :k] = previous[:, :, 1 : 1 + k]
-    last = previous[:, :, -1]
-    vel = previous[:, :, -1] - previous[:, :, -2] if Hp > 1 else np.zeros_like(last)
-    for h in range(k, H):
-        last = last + vel
-        goals[:, :, h] = last
-    out = np.empty((B, M, H, 2))
-    prev = start
-    for h in range(H):
-        t = means[:, None, h]
-        prev = _mend(_toward(prev, goals[:, :, h], r), prev, t, r, rho)
-        out[:, :, h] = prev
-    return out
 
 
 class LookaheadPlanner:
@@ -358,9 +348,8 @@ class LookaheadPlanner:
         """Return the next absolute positions, ``batch_shape + (M, 2)`` (``rng`` unused)."""
         shape, M = problem.batch_shape, problem.n_sensors
         B = math.prod(shape)
-        if problem.prediction is not None:
-            pred = problem.prediction
-            x_pred, P_pred, Phi, Q, new = pred.mean, pred.cov, pred.Phi, pred.Q, None
+        if problem.prediction is not None:  # plan_prediction reads it (every target's)
+            x_pred = P_pred = Phi = Q = new = None
         else:
             x_pred, P_pred, Phi, Q, new = self._track(problem)
         previous = self._previous

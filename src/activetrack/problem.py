@@ -153,6 +153,8 @@ class PlanningProblem:
             broadcast to the batch shape. With a prediction, ``prior_cov`` and ``target``
             are its position blocks ``cov[..., :2, :2]`` and ``mean[..., :2]``: ``None``
             derives them (:meth:`from_prediction`), given values must equal them exactly.
+            A ``multi_target`` problem carries a tuple of K predictions, one per target
+            (their state dimensions may differ), whose blocks are target k's.
         models: per-sensor model codes (..., M) int8 (0 range and bearing, 1 range only,
             2 bearing only; names accepted), or None: all range and bearing.
         pose_cov: per-sensor covariance of the position fix (..., M, 2, 2), PSD, or None:
@@ -176,7 +178,7 @@ class PlanningProblem:
     sigma_d2: FloatArray
     sigma_theta2: FloatArray
     objective: TraceObjective = TRACE
-    prediction: Prediction | None = None
+    prediction: Prediction | tuple[Prediction, ...] | None = None
     models: np.ndarray | None = None
     pose_cov: FloatArray | None = None
     multi_target: bool = False
@@ -191,38 +193,46 @@ class PlanningProblem:
                 f"sensors must have shape (..., M, 2) with M >= 1, got {sensors.shape}"
             )
         m = sensors.shape[-2]
-        pred = self.prediction
-        if pred is not None and not isinstance(pred, Prediction):
-            raise ValueError(
-                f"prediction must be an activetrack.problem.Prediction or None, got {pred!r}"
-            )
-        # A prior taken from a prediction is a block of its validated SPD covariance.
-        derived = pred is not None and self.prior_cov is None
-        prior_cov = pred.cov[..., :2, :2] if derived else spd("prior_cov", self.prior_cov)
-        if prior_cov.shape[-2:] != (2, 2):
-            raise ValueError(f"prior_cov must have shape (..., 2, 2), got {prior_cov.shape}")
-        derived_target = pred is not None and self.target is None
-        if derived_target:
-            target = pred.mean[..., :2]
-        else:
-            target = as_finite("target", self.target)
-        if target.ndim < 1 or target.shape[-1] != 2:
-            raise ValueError(f"target must have shape (..., 2), got {target.shape}")
         multi = self.multi_target
         if not isinstance(multi, (bool, np.bool_)):
             raise ValueError(f"multi_target must be True or False, got {multi!r}")
         multi = bool(multi)
         object.__setattr__(self, "multi_target", multi)
+        pred = self.prediction
+        if multi and pred is not None:
+            pred = _target_predictions(pred)
+            object.__setattr__(self, "prediction", pred)
+        elif pred is not None and not isinstance(pred, Prediction):
+            raise ValueError(
+                f"prediction must be an activetrack.problem.Prediction or None, got {pred!r}"
+            )
+        # A prior taken from a prediction is a block of its validated SPD covariance.
+        derived = pred is not None and self.prior_cov is None
+        if derived:
+            prior_cov = _blocks(pred, lambda q: q.cov[..., :2, :2], 2)
+        else:
+            prior_cov = spd("prior_cov", self.prior_cov)
+        if prior_cov.shape[-2:] != (2, 2):
+            raise ValueError(f"prior_cov must have shape (..., 2, 2), got {prior_cov.shape}")
+        derived_target = pred is not None and self.target is None
+        if derived_target:
+            target = _blocks(pred, lambda q: q.mean[..., :2], 1)
+        else:
+            target = as_finite("target", self.target)
+        if target.ndim < 1 or target.shape[-1] != 2:
+            raise ValueError(f"target must have shape (..., 2), got {target.shape}")
         kk = 0
         if multi:
-            if pred is not None:
-                raise ValueError("prediction must be None for a multi_target problem")
             if target.ndim < 2 or prior_cov.ndim < 3 or target.shape[-2] != prior_cov.shape[-3]:
                 raise ValueError(
                     "a multi_target problem needs target (..., K, 2) and prior_cov "
                     f"(..., K, 2, 2), got {target.shape} and {prior_cov.shape}"
                 )
             kk = target.shape[-2]
+            if pred is not None and len(pred) != kk:
+                raise ValueError(
+                    f"prediction must hold one Prediction per target ({kk}), got {len(pred)}"
+                )
         values = {"prior_cov": prior_cov, "target": target, "sensors": sensors}
         tail = 1 if multi else 0
         batch_of = {
@@ -240,7 +250,8 @@ class PlanningProblem:
             values[name] = arr
             batch_of[name] = arr.shape[:-1]
         if pred is not None:
-            batch_of["prediction"] = pred.batch_shape
+            for k, q in enumerate(pred if multi else (pred,)):
+                batch_of[f"prediction[{k}]" if multi else "prediction"] = q.batch_shape
         batch = _broadcast(batch_of)
         if not all(hasattr(self.objective, a) for a in ("name", "of_information")):
             raise ValueError(
@@ -308,14 +319,28 @@ class PlanningProblem:
                 f"occluders holds {occ.n_layouts} layouts (one per copy): the problem's first "
                 f"batch axis must have that length, got batch shape {batch}"
             )
-        if pred is not None:
-            self._attach(pred, batch, check_cov=not derived, check_target=not derived_target)
+        if pred is not None and multi:
+            held = tuple(
+                self._attach(q, batch, not derived, not derived_target, k)
+                for k, q in enumerate(pred)
+            )
+            object.__setattr__(self, "prediction", held)
+        elif pred is not None:
+            pred = self._attach(pred, batch, not derived, not derived_target)
+            object.__setattr__(self, "prediction", pred)
 
     def _attach(
-        self, pred: Prediction, batch: tuple[int, ...], check_cov: bool, check_target: bool
-    ) -> None:
-        """Store ``pred`` broadcast to ``batch``, checking (where given rather than derived)
-        that its position blocks are ``prior_cov`` and ``target``."""
+        self,
+        pred: Prediction,
+        batch: tuple[int, ...],
+        check_cov: bool,
+        check_target: bool,
+        k: int | None = None,
+    ) -> Prediction:
+        """Return ``pred`` broadcast to ``batch``, checking (where given rather than derived)
+        that its position blocks are ``prior_cov`` and ``target`` (target ``k``'s)."""
+        prior_cov = self.prior_cov if k is None else self.prior_cov[..., k, :, :]
+        target = self.target if k is None else self.target[..., k, :]
         if pred.batch_shape != batch:
             n = pred.dim
             mean = np.array(np.broadcast_to(pred.mean, batch + (n,)))
@@ -323,17 +348,26 @@ class PlanningProblem:
             mean.setflags(write=False)
             cov.setflags(write=False)
             pred = pred._trusted(mean, cov)
-        if check_cov and not np.array_equal(pred.cov[..., :2, :2], self.prior_cov):
+        if check_cov and not np.array_equal(pred.cov[..., :2, :2], prior_cov):
             raise ValueError(
                 "prior_cov must equal prediction.cov[..., :2, :2] (the predicted position "
                 "covariance); pass prior_cov=None, or use PlanningProblem.from_prediction"
             )
-        if check_target and not np.array_equal(pred.mean[..., :2], self.target):
+        if check_target and not np.array_equal(pred.mean[..., :2], target):
             raise ValueError(
                 "target must equal prediction.mean[..., :2] (the predicted position); pass "
                 "target=None, or use PlanningProblem.from_prediction"
             )
-        object.__setattr__(self, "prediction", pred)
+        return pred
+
+    @property
+    def predictions(self) -> tuple[Prediction, ...] | None:
+        """Return every target's :class:`Prediction` (K of them; one for a single-target
+        problem), or None when the problem carries none."""
+        pred = self.prediction
+        if pred is None:
+            return None
+        return pred if self.multi_target else (pred,)
 
     @classmethod
     def from_prediction(
@@ -409,21 +443,13 @@ class PlanningProblem:
                     vals = [np.zeros((p.n_sensors, 2, 2)) if v is None else v
                             for v, p in zip(vals, problems, strict=True)]  # fmt: skip
             arrays[f.name] = np.stack(vals)
-        preds = [p.prediction for p in problems]
-        prediction = None
-        if any(q is not None for q in preds):
-            first = preds[0]
-            if any(q is None for q in preds):
+        all_preds = [p.predictions for p in problems]
+        prediction: Any = None
+        if any(q is not None for q in all_preds):
+            if any(q is None for q in all_preds):
                 raise ValueError("problems must all carry a prediction, or none")
-            if any(
-                q.Phi.shape != first.Phi.shape
-                or not (np.array_equal(q.Phi, first.Phi) and np.array_equal(q.Q, first.Q))
-                for q in preds
-            ):
-                raise ValueError("problems must all have the same prediction.Phi and prediction.Q")
-            prediction = first.with_state(
-                np.stack([q.mean for q in preds]), np.stack([q.cov for q in preds])
-            )
+            per_target = [_stacked([q[k] for q in all_preds]) for k in range(len(all_preds[0]))]
+            prediction = tuple(per_target) if multi else per_target[0]
         return cls(**arrays, objective=objective, prediction=prediction)
 
     def __getitem__(self, index: Any) -> PlanningProblem:
@@ -435,11 +461,10 @@ class PlanningProblem:
         for f in fields(self):
             value = getattr(self, f.name)
             if f.name == "prediction":
-                if value is not None:
-                    mean, cov = np.array(value.mean[index]), np.array(value.cov[index])
-                    mean.setflags(write=False)
-                    cov.setflags(write=False)
-                    value = value._trusted(mean, cov)
+                if isinstance(value, tuple):
+                    value = tuple(_indexed(q, index) for q in value)
+                elif value is not None:
+                    value = _indexed(value, index)
             elif f.name == "occluders" and value is not None:  # the layouts of the first axis
                 value = value[index[0] if isinstance(index, tuple) else index]
             elif f.name not in ("objective", "multi_target") and value is not None:
@@ -564,6 +589,46 @@ class PlanningProblem:
         near = np.linalg.norm(p[..., None, :, :] - self.targets[..., :, None, :], axis=-1)
         dist = self.rho - near.min(axis=-2)  # the nearest target
         return np.maximum(np.maximum(step, dist), 0.0)
+
+
+def _indexed(pred: Prediction, index: Any) -> Prediction:
+    """Return the prediction(s) at ``index`` of the batch axes (read-only copies)."""
+    mean, cov = np.array(pred.mean[index]), np.array(pred.cov[index])
+    mean.setflags(write=False)
+    cov.setflags(write=False)
+    return pred._trusted(mean, cov)
+
+
+def _stacked(preds: list[Prediction]) -> Prediction:
+    """Return single predictions of one motion model stacked on a new batch axis."""
+    first = preds[0]
+    if any(
+        q.Phi.shape != first.Phi.shape
+        or not (np.array_equal(q.Phi, first.Phi) and np.array_equal(q.Q, first.Q))
+        for q in preds
+    ):
+        raise ValueError("problems must all have the same prediction.Phi and prediction.Q")
+    return first.with_state(np.stack([q.mean for q in preds]), np.stack([q.cov for q in preds]))
+
+
+def _target_predictions(value: Any) -> tuple[Prediction, ...]:
+    """Return a multi-target problem's predictions as a tuple, or raise naming the field."""
+    if not isinstance(value, (tuple, list)) or not all(isinstance(q, Prediction) for q in value):
+        raise ValueError(
+            "prediction of a multi_target problem must be a tuple of "
+            f"activetrack.problem.Prediction (one per target) or None, got {value!r}"
+        )
+    return tuple(value)
+
+
+def _blocks(preds: tuple[Prediction, ...] | Prediction, block: Any, tail: int) -> FloatArray:
+    """Return ``block`` of one prediction, or those of K stacked on a targets axis before
+    their ``tail`` trailing axes (broadcast to the predictions' common batch)."""
+    if isinstance(preds, Prediction):
+        return block(preds)
+    batch = _broadcast({f"prediction[{k}]": q.batch_shape for k, q in enumerate(preds)})
+    parts = [block(q) for q in preds]
+    return np.stack([np.broadcast_to(v, batch + v.shape[-tail:]) for v in parts], -tail - 1)
 
 
 def _broadcast(batch_of: dict[str, tuple[int, ...]]) -> tuple[int, ...]:

@@ -654,10 +654,10 @@ class World:
         """Return the planning problem of eq. (15)-(17) from the current prediction.
 
         ``index`` None: every copy (leading batch axis N); an int: that copy, unbatched.
-        With one target the problem carries the full prediction
-        (:class:`~activetrack.problem.Prediction`: ``x_pred``, ``P_pred`` and the motion
-        model ``Phi``, ``Q``); with K > 1 it holds every target's predicted position and
-        covariance (``multi_target``). The sensors are the position fixes; the sensors'
+        The problem carries the full prediction (:class:`~activetrack.problem.Prediction`:
+        ``x_pred``, ``P_pred`` and the motion model ``Phi``, ``Q``); with K > 1 targets
+        one per target (``multi_target``), whose positions and covariances are the
+        problem's ``target`` and ``prior_cov``. The sensors are the position fixes; the sensors'
         models and the pose covariance the filter accounts for come along.
         """
         p = self.params
@@ -671,21 +671,23 @@ class World:
                 p_detect=p.p_detect, max_range=p.max_range, occluders=self.occluders(index)
             )
         sensors = self.get("fixes" if self._pose else "sensors", index)
+        models = self.__dict__.get("_prediction_models")
+        if models is None:  # each target's Phi and Q are validated once
+            models = self._prediction_models = [
+                Prediction(self.get("x_pred", index, k), self.get("P_pred", index, k), tp.Phi, tp.Q)
+                for k, tp in enumerate(p.targets)
+            ]
+        preds = [
+            model.with_state(self.get("x_pred", index, k), self.get("P_pred", index, k))
+            for k, model in enumerate(models)
+        ]
         if self.n_targets > 1:
-            P_preds = [self.get("P_pred", index, k)[..., :2, :2] for k in range(self.n_targets)]
-            x_preds = [self.get("x_pred", index, k)[..., :2] for k in range(self.n_targets)]
             return PlanningProblem(
-                np.stack(P_preds, -3), np.stack(x_preds, -2), sensors, p.r, p.rho,
-                p.sigma_d2, p.sigma_theta2, multi_target=True, **extra,
+                None, None, sensors, p.r, p.rho, p.sigma_d2, p.sigma_theta2,
+                prediction=tuple(preds), multi_target=True, **extra,
             )  # fmt: skip
-        x_pred, P_pred = self.get("x_pred", index), self.get("P_pred", index)
-        model = self.__dict__.get("_prediction_model")
-        if model is None:  # Phi and Q are validated once, with the first prediction
-            prediction = self._prediction_model = Prediction(x_pred, P_pred, p.Phi, p.Q)
-        else:
-            prediction = model.with_state(x_pred, P_pred)
         return PlanningProblem.from_prediction(
-            prediction,
+            preds[0],
             sensors=sensors,
             r=p.r,
             rho=p.rho,

@@ -187,3 +187,24 @@ def test_evaluation_nees_and_trace_equal_the_simulation_runners():
         assert ev.mean_trace[i] == rec.mean_trace
         assert ev.nees[i] == rec.mean_nees
         assert ev.ms_per_step[i] > 0.0
+
+
+def test_batched_rows_equal_the_serial_ones_to_the_planners_tolerance():
+    kw = dict(episodes=3, seed=SEED, progress=False, n_steps=6)
+    policies = ["rm", "lookahead"]
+    for scenario in ("paper", "two_targets"):
+        serial = evaluate(policies, scenario, **kw)
+        batched = evaluate(policies, scenario, batched=True, **kw)
+        assert [r.policy for r in batched] == ["rm", "lookahead", "gsr"]
+        for a, b in zip(serial, batched, strict=True):
+            # Random motion is not batched: its rows are the serial ones exactly.
+            rtol = 0.0 if a.policy == "rm" else 1e-6
+            for name in ("mean_trace", "rmse", "returns", "nees"):
+                np.testing.assert_allclose(getattr(b, name), getattr(a, name), rtol=rtol)
+
+
+def test_batched_is_checked():
+    with pytest.raises(ValueError, match="batched must be True or False"):
+        evaluate(["gsr"], "paper", 1, SEED, progress=False, batched="yes")
+    with pytest.raises(ValueError, match="batched runs in this process"):
+        evaluate(["gsr"], "paper", 1, SEED, progress=False, batched=True, workers=2)

@@ -318,9 +318,9 @@ def test_beyond_paper_fields_are_validated_naming_them(kwargs, field):
         PlanningProblem(np.eye(2), np.zeros(2), np.ones((3, 2)), 1.0, 2.0, 1.0, 0.1, **kwargs)
 
 
-def test_multi_target_problem_refuses_a_prediction_and_stacks():
+def test_multi_target_problem_takes_a_prediction_per_target_and_stacks():
     pred = Prediction(np.zeros(4), np.eye(4), np.eye(4), np.zeros((4, 4)))
-    with pytest.raises(ValueError, match="prediction"):
+    with pytest.raises(ValueError, match="prediction of a multi_target problem"):
         PlanningProblem(
             np.eye(2)[None], np.zeros((1, 2)), np.ones((3, 2)), 1.0, 2.0, 1.0, 0.1,
             prediction=pred, multi_target=True,
@@ -333,3 +333,57 @@ def test_multi_target_problem_refuses_a_prediction_and_stacks():
     assert both.batch_shape == (2,) and both.n_targets == 2
     assert both.models.tolist() == [[1, 0, 2]] * 2
     np.testing.assert_array_equal(both[1].score(np.ones((3, 2))), one.score(np.ones((3, 2))))
+
+
+def _two_predictions(rng, shape):
+    """Return two targets' predictions of different state sizes (CV n=4, CA n=6)."""
+    return Prediction(**_prediction_kw(rng, shape, 4)), Prediction(**_prediction_kw(rng, shape, 6))
+
+
+def test_multi_target_predictions_give_the_blocks_and_survive_indexing_and_stacking():
+    rng = np.random.default_rng(8)
+    preds = _two_predictions(rng, (3,))
+    rest = dict(sensors=rng.normal(0, 5, (3, 2, 2)), r=1.0, rho=0.5, sigma_d2=1.0,
+                sigma_theta2=0.3, multi_target=True)  # fmt: skip
+    prob = PlanningProblem(None, None, **rest, prediction=list(preds))
+    assert isinstance(prob.prediction, tuple) and prob.predictions == prob.prediction
+    for k, q in enumerate(preds):
+        np.testing.assert_array_equal(prob.prior_cov[:, k], q.cov[:, :2, :2])
+        np.testing.assert_array_equal(prob.target[:, k], q.mean[:, :2])
+    # Given blocks equal to the predictions' are accepted; others name the field.
+    same = PlanningProblem(prob.prior_cov, prob.target, **rest, prediction=preds)
+    np.testing.assert_array_equal(same.predictions[1].cov, preds[1].cov)
+    with pytest.raises(ValueError, match="target must equal prediction.mean"):
+        PlanningProblem(prob.prior_cov, prob.target + 1.0, **rest, prediction=preds)
+    with pytest.raises(ValueError, match=r"one Prediction per target \(2\), got 1"):
+        PlanningProblem(prob.prior_cov, prob.target, **rest, prediction=preds[:1])
+    with pytest.raises(ValueError, match="prediction of a multi_target problem"):
+        PlanningProblem(None, None, **rest, prediction=(preds[0], "CV"))
+    for i in range(3):
+        sub = prob[i]
+        for k, q in enumerate(preds):
+            np.testing.assert_array_equal(sub.predictions[k].mean, q.mean[i])
+            np.testing.assert_array_equal(sub.predictions[k].Phi, q.Phi)
+    back = PlanningProblem.stack([prob[i] for i in range(3)])
+    for k, q in enumerate(preds):
+        np.testing.assert_array_equal(back.predictions[k].cov, q.cov)
+    np.testing.assert_array_equal(back.target, prob.target)
+    # A single-target problem's predictions are its one prediction.
+    rest.pop("multi_target")
+    one = PlanningProblem.from_prediction(preds[0], **rest)
+    assert one.predictions == (one.prediction,)
+
+
+def test_the_world_problem_carries_every_target_prediction():
+    from activetrack.world import World
+
+    world = World("two_targets", 2, n_steps=2)
+    world.reset(seeds=[0, 1])
+    for index in (None, 1):
+        problem = world.planning_problem(index)
+        assert len(problem.predictions) == world.n_targets == 2
+        for k, q in enumerate(problem.predictions):
+            np.testing.assert_array_equal(q.mean, world.get("x_pred", index, k))
+            np.testing.assert_array_equal(q.cov, world.get("P_pred", index, k))
+            np.testing.assert_array_equal(problem.target[..., k, :], q.mean[..., :2])
+            np.testing.assert_array_equal(q.Phi, world.params.targets[k].Phi)
