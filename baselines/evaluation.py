@@ -255,7 +255,7 @@ def run_batched(
     ]
 
 
-def _batchable(policy: Any) -> bool:
+def batchable(policy: Any) -> bool:
     """Return whether ``policy`` is a deterministic planner that plans batched problems
     (GSR and the look-ahead planner), the policies ``batched`` runs in one world."""
     from activetrack.baselines.policies import GSRPolicy, LookaheadPolicy
@@ -369,7 +369,7 @@ def evaluate(
             per_policy = []
             for (label, _), policy in zip(items, resolved, strict=True):
                 bar.set_description(label)
-                if batched and _batchable(policy):
+                if batched and batchable(policy):
                     per_policy.append(run_batched(scenario, overrides, policy, seeds))
                     bar.update(len(seeds))
                     continue

@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from activetrack.baselines.cli import add_ray_arguments
-from activetrack.baselines.distributed import check_options
+from activetrack.baselines.distributed import check_options, is_distributed
 from activetrack.cli import COMMANDS, add_output_arguments, field_default, nonneg_int
 from activetrack.files import RunOutputs, prepare_output_dir
 from activetrack.scenarios import PRESETS
@@ -166,6 +166,13 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
             default="gsr",
             help="the planner to imitate: gsr, or lookahead (the receding-horizon planner "
             "of activetrack.baselines.lookahead) (default %(default)s)",
+        )
+        q.add_argument(
+            "--batched",
+            action="store_true",
+            help="label all of a round's episodes at once in a batched world (far faster "
+            "with --expert lookahead; the labels equal the serial ones to the planner's "
+            "tolerance)",
         )
         add_ray_arguments(q, "expert-labelled episodes")
         q.set_defaults(func=run_train, parser=q, method_defaults=own)
@@ -397,7 +404,9 @@ def run_train(args: argparse.Namespace) -> int:
     if init is not None:
         load_policy(init)  # a bad file fails now, with its path and problem
     if args.method in ("bc", "dagger"):
-        check_options(args.workers, args.address)  # Ray installed if asked for
+        workers, address = check_options(args.workers, args.address)  # Ray if asked for
+        if args.batched and is_distributed(workers, address):
+            raise ValueError("--batched labels in this process: not with --workers/--address")
     outputs = prepare_output_dir(args.out, OUTPUTS, args.overwrite)
     configure_torch(threads)
     progress = not args.no_progress
@@ -447,10 +456,12 @@ def _run_imitation(
         threads=threads,
         workers=args.workers,
         address=args.address,
+        batched=args.batched,
     )
     train_config = {
         "algo": args.method,
         "expert": args.expert,
+        "batched_labels": args.batched,
         **cfg.to_dict(),
         "labels": len(result.data),
         "final_mse": result.losses,

@@ -183,6 +183,64 @@ def rollout_labels(
     return data, traces
 
 
+def rollout_labels_batched(
+    scenario: Any,
+    overrides: dict[str, Any],
+    expert: Any,
+    seeds: list[int],
+    learner: Callable[[np.ndarray], np.ndarray] | None = None,
+    beta: float = 1.0,
+) -> tuple[Dataset, list[float]]:
+    """Return :func:`rollout_labels`' data for a batched expert, every episode a copy of one
+    :class:`~activetrack.world.World`: the expert labels all copies with one ``plan`` call
+    per step (the look-ahead planner's labels cost a fraction of the serial ones').
+
+    The same seeds, coins and episodes as :func:`rollout_labels`, the data in the same
+    order (episode by episode); the labels equal the serial ones to the planner's
+    tolerance (:func:`activetrack.baselines.evaluation.run_batched`). ``learner`` maps
+    observations (R, D) to actions (R, 2) for any number of rows R.
+    """
+    from activetrack.world import World
+
+    n = len(seeds)
+    world = World(scenario, n, **overrides)
+    world.reset(seeds=seeds)
+    reset = getattr(expert, "reset", None)
+    if callable(reset):
+        reset(seeds[0])  # the batched experts draw nothing; this forgets past episodes
+    coins = [np.random.default_rng([s, 2]) for s in seeds]
+    obs_by: list[list[np.ndarray]] = [[] for _ in range(n)]
+    act_by: list[list[np.ndarray]] = [[] for _ in range(n)]
+    trace_by: list[list[float]] = [[] for _ in range(n)]
+    live = np.ones(n, dtype=bool)
+    while live.any():
+        rows = np.flatnonzero(live)
+        obs = world.observe()  # (N, M, D)
+        problem = world.planning_problem()
+        planned = np.asarray(expert.plan(problem), dtype=np.float64)
+        labels = actions_to_reach(planned, problem.sensors, problem.r).astype(np.float32)
+        for i in rows.tolist():
+            obs_by[i].append(obs[i])
+            act_by[i].append(labels[i])
+        # One coin per live copy and step, drawn only with a learner (as the serial loop).
+        by_expert = np.array([learner is None or coins[i].random() < beta for i in rows])
+        if by_expert.any():
+            world.step(planned, rows[by_expert])
+        if not by_expert.all():
+            own = rows[~by_expert]
+            m, d = obs.shape[1:]
+            acts = np.zeros(planned.shape)
+            acts[own] = np.asarray(learner(obs[own].reshape(-1, d))).reshape(len(own), m, 2)
+            world.step_actions(acts, own)
+        for i in rows.tolist():
+            trace_by[i].append(float(world.get("trace", i)))
+        live &= ~(world.terminated | world.truncated)
+    obs_all = np.concatenate([np.stack(o) for o in obs_by]).reshape(-1, obs.shape[-1])
+    act_all = np.concatenate([np.stack(a) for a in act_by]).reshape(-1, 2)
+    data = Dataset(obs_all.astype(np.float32), act_all)
+    return data, [float(np.mean(t)) for t in trace_by]
+
+
 def label_seeds(
     scenario: Any,
     overrides: dict[str, Any],
@@ -312,6 +370,7 @@ def train_imitation(
     *,
     workers: int = 1,
     address: str | None = None,
+    batched: bool = False,
     **overrides: Any,
 ) -> ImitationResult:
     """Return a policy trained by BC (``iterations == 1``) or DAgger on the expert's labels.
@@ -324,6 +383,8 @@ def train_imitation(
     ``workers > 1`` or an ``address`` collects each round's labels as Ray tasks
     (:mod:`activetrack.baselines.distributed`: a local Ray with ``workers`` CPUs, or the
     cluster at ``address``), the same labels as the serial loop; training stays here.
+    ``batched`` collects them in one batched world instead
+    (:func:`rollout_labels_batched`; GSR and the look-ahead planner as experts).
     """
     from activetrack.baselines import distributed
     from activetrack.envs import parallel_env
@@ -333,6 +394,11 @@ def train_imitation(
         raise TypeError(f"config must be an ImitationConfig, got {type(cfg).__name__}")
     workers, address = distributed.check_options(workers, address)
     on_ray = distributed.is_distributed(workers, address)
+    if expert is None:
+        from activetrack.baselines.policies import GSRPolicy
+
+        expert = GSRPolicy()
+    _check_batched(batched, on_ray, expert)
     configure_torch(threads)
     t0 = time.perf_counter()
     seed_everything(seed)
@@ -340,10 +406,6 @@ def train_imitation(
     env = parallel_env(scenario, **overrides)
     agent = env.possible_agents[0]
     policy = build_policy(env.observation_space(agent), env.action_space(agent), cfg.net, cfg.lr)
-    if expert is None:
-        from activetrack.baselines.policies import GSRPolicy
-
-        expert = GSRPolicy()
 
     writer = None
     if tensorboard_dir is not None:
@@ -368,6 +430,11 @@ def train_imitation(
             if on_ray:
                 new, tr = _labels_on_ray(
                     scenario, overrides, expert, round_seeds, learner, beta, threads, cpus
+                )
+            elif batched:
+                act = None if learner is None else learner_fn(learner)
+                new, tr = rollout_labels_batched(
+                    scenario, overrides, expert, round_seeds, act, beta
                 )
             elif learner is None:
                 new, tr = rollout_labels(env, expert, round_seeds)
@@ -394,3 +461,18 @@ def train_imitation(
         writer.close()
     env.close()
     return ImitationResult(policy, data, losses, traces, time.perf_counter() - t0)
+
+
+def _check_batched(batched: object, on_ray: bool, expert: Any) -> None:
+    """Raise ValueError unless ``batched`` is a bool that the other options allow."""
+    from activetrack.baselines.evaluation import batchable
+
+    if not isinstance(batched, (bool, np.bool_)):
+        raise ValueError(f"batched must be True or False, got {batched!r}")
+    if batched and on_ray:
+        raise ValueError("batched labels are collected in this process: not with Ray workers")
+    if batched and not batchable(expert):
+        raise ValueError(
+            f"batched labels need a batched deterministic expert (GSRPolicy or "
+            f"LookaheadPolicy), got {expert!r}"
+        )
