@@ -10,9 +10,9 @@ the first step and replans at the next step (receding horizon).
 The search (:meth:`Lookahead.plan_prediction`), batched over copies and candidates:
 
 1. **Options per sensor**, each a feasible path of H positions (every position within
-   reach of the previous one and outside the ``rho`` disk, plus a margin, about that
-   step's predicted target; :func:`activetrack.geometry.project_feasible` mends a move
-   exactly as the world does):
+   reach of the previous one and outside the ``rho`` disks, plus a margin, about that
+   step's predicted targets; :class:`~activetrack.baselines.horizon_paths.PathModel`
+   mends a move exactly as the world does, occluders included, on every task):
 
    - GSR's own rollout: GSR planned step after step in the model (option 0);
    - the previous call's plan shifted by one step (warm start, option 1, when given);
