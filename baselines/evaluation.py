@@ -255,6 +255,19 @@ def run_batched(
     ]
 
 
+def check_batched(batched: object, workers: object, address: object) -> tuple[int, str | None]:
+    """Return the checked ``(workers, address)``; raise ValueError unless ``batched`` is a
+    bool that they allow (a batched run is one process: not with Ray workers)."""
+    from activetrack.baselines import distributed
+
+    if not isinstance(batched, (bool, np.bool_)):
+        raise ValueError(f"batched must be True or False, got {batched!r}")
+    workers, address = distributed.check_options(workers, address)
+    if batched and distributed.is_distributed(workers, address):
+        raise ValueError("batched runs in this process: it cannot be combined with Ray workers")
+    return workers, address
+
+
 def batchable(policy: Any) -> bool:
     """Return whether ``policy`` is a deterministic planner that plans batched problems
     (GSR and the look-ahead planner), the policies ``batched`` runs in one world."""
@@ -329,11 +342,7 @@ def evaluate(
 
     if episodes < 1:
         raise ValueError(f"episodes must be >= 1, got {episodes}")
-    if not isinstance(batched, (bool, np.bool_)):
-        raise ValueError(f"batched must be True or False, got {batched!r}")
-    workers, address = distributed.check_options(workers, address)
-    if batched and distributed.is_distributed(workers, address):
-        raise ValueError("batched runs in this process: it cannot be combined with Ray workers")
+    workers, address = check_batched(batched, workers, address)
     if isinstance(policies, Mapping):
         items = list(policies.items())
     else:
@@ -561,9 +570,7 @@ def run_evaluation(
     and every policy (names, policy files, their observation size), and ``workers``,
     ``address`` and ``batched`` (:func:`evaluate`).
     """
-    from activetrack.baselines.distributed import check_options
-
-    workers, address = check_options(workers, address)
+    workers, address = check_batched(batched, workers, address)
     outputs = None if out_dir is None else prepare_output_dir(out_dir, OUTPUTS, overwrite)
     results = evaluate(
         policies,

@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from activetrack.baselines.cli import add_ray_arguments
-from activetrack.baselines.distributed import check_options, is_distributed
+from activetrack.baselines.evaluation import check_batched
 from activetrack.cli import COMMANDS, add_output_arguments, field_default, nonneg_int
 from activetrack.files import RunOutputs, prepare_output_dir
 from activetrack.scenarios import PRESETS
@@ -404,9 +404,7 @@ def run_train(args: argparse.Namespace) -> int:
     if init is not None:
         load_policy(init)  # a bad file fails now, with its path and problem
     if args.method in ("bc", "dagger"):
-        workers, address = check_options(args.workers, args.address)  # Ray if asked for
-        if args.batched and is_distributed(workers, address):
-            raise ValueError("--batched labels in this process: not with --workers/--address")
+        check_batched(args.batched, args.workers, args.address)  # Ray if asked for
     outputs = prepare_output_dir(args.out, OUTPUTS, args.overwrite)
     configure_torch(threads)
     progress = not args.no_progress

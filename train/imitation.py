@@ -398,7 +398,7 @@ def train_imitation(
         from activetrack.baselines.policies import GSRPolicy
 
         expert = GSRPolicy()
-    _check_batched(batched, on_ray, expert)
+    _check_batched(batched, workers, address, expert)
     configure_torch(threads)
     t0 = time.perf_counter()
     seed_everything(seed)
@@ -463,14 +463,12 @@ def train_imitation(
     return ImitationResult(policy, data, losses, traces, time.perf_counter() - t0)
 
 
-def _check_batched(batched: object, on_ray: bool, expert: Any) -> None:
-    """Raise ValueError unless ``batched`` is a bool that the other options allow."""
-    from activetrack.baselines.evaluation import batchable
+def _check_batched(batched: object, workers: object, address: object, expert: Any) -> None:
+    """Raise ValueError unless ``batched`` is a bool that the other options and the expert
+    allow."""
+    from activetrack.baselines.evaluation import batchable, check_batched
 
-    if not isinstance(batched, (bool, np.bool_)):
-        raise ValueError(f"batched must be True or False, got {batched!r}")
-    if batched and on_ray:
-        raise ValueError("batched labels are collected in this process: not with Ray workers")
+    check_batched(batched, workers, address)
     if batched and not batchable(expert):
         raise ValueError(
             f"batched labels need a batched deterministic expert (GSRPolicy or "

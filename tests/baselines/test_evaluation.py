@@ -203,7 +203,14 @@ def test_batched_rows_equal_the_serial_ones_to_the_planners_tolerance():
                 np.testing.assert_allclose(getattr(b, name), getattr(a, name), rtol=rtol)
 
 
-def test_batched_is_checked():
+def test_batched_is_checked(tmp_path, capsys):
+    from activetrack.cli import main
+
+    out = tmp_path / "out"
+    argv = ["evaluate", "--policy", "gsr", "--batched", "--workers", "2", "--out", str(out)]
+    assert main(argv) == 2
+    assert "batched runs in this process" in capsys.readouterr().err
+    assert not out.exists()  # checked before the output folder
     with pytest.raises(ValueError, match="batched must be True or False"):
         evaluate(["gsr"], "paper", 1, SEED, progress=False, batched="yes")
     with pytest.raises(ValueError, match="batched runs in this process"):

@@ -220,6 +220,7 @@ def test_given_options_reach_the_configs():
         ),
         (["dagger", "--beta", "2"], "beta"),
         (["bc", "--threads", "0"], "threads"),
+        (["bc", "--batched", "--workers", "2"], "batched runs in this process"),
     ],
 )
 def test_bad_options_are_argparse_errors_before_training(argv, message, tmp_path, capsys):
