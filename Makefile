@@ -21,8 +21,11 @@ demo: $(STAMP)
 	$(VENV)/bin/activetrack simulate --scenario paper --planner gsr --planner gbes --planner rm \
 		--runs $(DEMO_RUNS) --seed 0 --out results/demo --overwrite
 
+# The kernels are compiled once per clone (numba's cache in __pycache__); the second run
+# checks the same kernels' source as plain Python.
 test: $(STAMP)
 	$(PY) -m pytest -q -p no:cacheprovider
+	NUMBA_DISABLE_JIT=1 $(PY) -m pytest -q -p no:cacheprovider -m kernels
 
 test-fast: $(STAMP)
 	$(PY) -m pytest -q -m "not slow"

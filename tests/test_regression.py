@@ -61,6 +61,13 @@ _GSR = (
     _EKF + "; GSR's flat optima move the sensors by up to ~1e-6 relative in response (a "
     "one-ulp perturbation of P(k+1|k) in the recorded code itself moves them by ~1e-7)"
 )
+_ROOTS = (
+    _GSR + "; the roots of f3 (eq. 33) come from the compiled Hessenberg QR instead of "
+    "LAPACK dgeev (issue 17): the candidates differ in the last bits, so the polished optima "
+    "(where f0 is flat the argmin is defined to ~sqrt(eps)) move ~1e-8 relative, and "
+    "GSR's sweeps, stopping at a tolerance, move the sensors up to ~1e-5 relative (the "
+    "objective values agree to ~1e-15) and may take one solve more or less"
+)
 RTOL: dict[str, tuple[float, float, str]] = {
     **dict.fromkeys(
         [
@@ -79,8 +86,6 @@ RTOL: dict[str, tuple[float, float, str]] = {
             "batched_step_agents",
             "expert_gbes",
             "max_trace_runner",
-            "planners",
-            "batched_gsr",
         ],
         (1e-6, 1e-12, _EKF),
     ),  # fmt: skip
@@ -88,7 +93,6 @@ RTOL: dict[str, tuple[float, float, str]] = {
         [
             "paper_study",
             "cli_simulate",
-            "homogeneous_study",
             "ca_motion",
             "expert_gsr",
             "expert_batched_gsr",
@@ -97,6 +101,9 @@ RTOL: dict[str, tuple[float, float, str]] = {
         ],
         (1e-5, 1e-12, _GSR),
     ),  # fmt: skip
+    "homogeneous_study": (3e-5, 1e-12, _ROOTS),
+    "batched_gsr": (1e-5, 1e-12, _ROOTS),
+    "planners": (1e-6, 1e-12, _ROOTS),
     # One step's position error also differs by one ulp: the parallel env computed it
     # with math.hypot, the runner with np.hypot; the one world computes it with np.hypot.
     "expert_rm": (1e-6, 1e-12, _EKF + "; position_error: math.hypot -> np.hypot"),
@@ -120,8 +127,9 @@ FLOAT32 = ("obs", "state", "final_obs", "last_obs", "reset_obs", "reset_state")
 FLOAT32_TOL = (3e-6, 1e-6)
 
 #: Recorded values that are only comparable bit for bit: skipped where a tolerance applies
-#: (a hash of float32 observations; whether a batched copy equalled a single env bitwise).
-EXACT_ONLY = ("sha256", "equals_single")
+#: (a hash of float32 observations; whether a batched copy equalled a single env bitwise;
+#: how many single-sensor solves GSR took, which a last-bit change can move by one).
+EXACT_ONLY = ("sha256", "equals_single", "n_solves")
 
 
 def _load_tool() -> Any:

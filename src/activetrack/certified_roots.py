@@ -28,8 +28,7 @@ import numpy as np
 from activetrack.companion import (
     IM_TOL,
     RE_TOL,
-    companion_monic,
-    eigvals_stacked,
+    monic_roots,
 )
 from activetrack.validation import FloatArray
 
@@ -323,7 +322,7 @@ def circle_roots(
     eigenvalues.
     """
     if guess is None:
-        return eigvals_stacked(companion_monic(q))
+        return monic_roots(q)
     m = q.shape[0]
     ev = np.empty(q.shape, dtype=np.complex128)
     done = np.zeros(m, dtype=bool)
@@ -332,7 +331,7 @@ def circle_roots(
     cold = np.flatnonzero(~warm & ~bad)
     if cold.size >= _SEED_MIN_ROWS:
         seeds = cold[::_SEED_EVERY]
-        ev[seeds] = eigvals_stacked(companion_monic(q[seeds]))
+        ev[seeds] = monic_roots(q[seeds])
         done[seeds] = True
         rows = np.setdiff1d(cold, seeds, assume_unique=True)
         near = nearest_seed(q, swap, seeds, rows)
@@ -357,5 +356,5 @@ def circle_roots(
         certified[idx[use[ok]]] = True
     rest = np.flatnonzero(~done)
     if rest.size:
-        ev[rest] = eigvals_stacked(companion_monic(q[rest]))
+        ev[rest] = monic_roots(q[rest])
     return ev

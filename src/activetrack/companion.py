@@ -3,9 +3,10 @@
 The critical points of f0 on the speed circle are the real roots of the 10th-order
 Sylvester resultant f3 (eq. 33) in the scaled, centred variable ``X`` of
 :mod:`activetrack._coefficients`; they are the real eigenvalues of f3's companion matrix.
-This module builds the (stacked) companion matrices, computes their eigenvalues (one LAPACK
-sweep for a stack; ``dgeev`` called directly for one polynomial) and applies the
-acceptance rule: eigenvalues within ``IM_TOL`` of the real axis and ``RE_TOL`` of
+This module normalizes f3 to a monic polynomial, builds its companion matrix and takes the
+eigenvalues with the compiled QR of :mod:`activetrack.hessenberg_qr` (a stack of
+polynomials in one kernel call; one polynomial inside the compiled solver), and applies
+the acceptance rule: eigenvalues within ``IM_TOL`` of the real axis and ``RE_TOL`` of
 ``[-1, 1]`` (the circle is ``|X| <= 1``) are kept, real parts clipped onto ``[-1, 1]``.
 Accepting a few spurious near-real roots is harmless: each only adds a candidate point.
 """
@@ -15,16 +16,42 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.linalg import lapack
 
+from activetrack._jit import kernel
+from activetrack.hessenberg_qr import hessenberg_eigvals
 from activetrack.validation import FloatArray
 
 IM_TOL = 1e-2  # accept eigenvalues this close to the real axis (extra candidates are harmless)
 RE_TOL = 1e-2  # ... and this far outside [-1, 1] (clipped onto the circle)
 _RE_BOUND = 1.0 + RE_TOL
 
-_SHIFT = np.eye(10, k=-1)  # the companion matrix below its first row
-_COMPANION_TEMPLATE = np.asfortranarray(np.eye(10, k=-1))
+
+@kernel
+def _monic_into(gam: FloatArray, q: FloatArray) -> None:
+    """Write ``q`` (10,): f3 with coefficients ``gam`` (11,) is ``z^10 + sum q_k z^k``
+    (normalized as in :func:`monic`; NaN if a coefficient is not finite)."""
+    scale = 0.0
+    for k in range(11):
+        if not math.isfinite(gam[k]):
+            q[:] = np.nan
+            return
+        scale = max(scale, abs(gam[k]))
+    if scale == 0.0:
+        scale = 1.0
+    lead = gam[10] / scale
+    if abs(lead) < 1e-15:
+        lead = -1e-15 if lead < 0.0 else 1e-15
+    for k in range(10):
+        q[k] = gam[k] / scale / lead
+
+
+@kernel
+def _monic_rows(gam: FloatArray) -> FloatArray:
+    """Return :func:`monic` of the rows of ``gam`` (m, 11)."""
+    q = np.empty((gam.shape[0], 10))
+    for i in range(gam.shape[0]):
+        _monic_into(gam[i], q[i])
+    return q
 
 
 def monic(gam: FloatArray) -> FloatArray:
@@ -32,28 +59,79 @@ def monic(gam: FloatArray) -> FloatArray:
 
     The polynomial is first scaled by its largest coefficient; a vanishing leading
     coefficient (a root at infinity) is replaced by a tiny one, which only moves that
-    root far outside the unit interval where no candidate is taken.
+    root far outside the unit interval where no candidate is taken. Rows with a
+    coefficient that is not finite give NaN.
     """
-    scale = np.max(np.abs(gam), axis=-1, keepdims=True)
-    g = gam / np.where(scale > 0.0, scale, 1.0)
-    lead = g[..., 10]
-    lead = np.where(np.abs(lead) < 1e-15, np.where(lead < 0.0, -1e-15, 1e-15), lead)
-    return g[..., :10] / lead[..., None]
+    gam = np.asarray(gam, dtype=np.float64)
+    rows = np.ascontiguousarray(gam.reshape(-1, 11))
+    return _monic_rows(rows).reshape(gam.shape[:-1] + (10,))
 
 
-def companion_monic(q: FloatArray) -> FloatArray:
-    """Return the companion matrices (..., 10, 10) of ``z^10 + sum q_k z^k`` (``q`` (..., 10))."""
-    comp = np.broadcast_to(_SHIFT, q.shape[:-1] + (10, 10)).copy()
-    comp[..., 0, :] = -q[..., ::-1]
-    return comp
+@kernel
+def _companion_into(q: FloatArray, a: FloatArray) -> None:
+    """Write the companion matrix of ``z^n + sum q_k z^k`` into ``a`` (n, n), ``n = len(q)``."""
+    n = q.shape[0]
+    a[:, :] = 0.0
+    for j in range(n):
+        a[0, j] = -q[n - 1 - j]
+    for i in range(1, n):
+        a[i, i - 1] = 1.0
 
 
-def companion(gam: FloatArray) -> FloatArray:
-    """Return the companion matrices (..., 10, 10) of f3 with coefficients ``gam`` (..., 11).
+@kernel
+def _roots_into(q: FloatArray, a: FloatArray, wr: FloatArray, wi: FloatArray) -> bool:
+    """Return whether the roots of monic ``q`` (10,) were found (into ``wr + 1j wi``);
+    ``a`` (10, 10) is workspace. NaN roots if ``q`` is not finite or QR fails.
 
-    Normalized as in :func:`monic` (scaled; a vanishing leading coefficient made tiny).
+    Exact zero roots (``q_0 = ... = q_{z-1} = 0``) are taken out first: QR finds a
+    multiple root at 0 only to ~eps^(1/z), and the symmetric problems that give them
+    (the target on an eigen-axis) are common.
     """
-    return companion_monic(monic(gam))
+    for k in range(10):
+        if not math.isfinite(q[k]):
+            wr[:] = np.nan
+            wi[:] = np.nan
+            return False
+    z = 0
+    while z < 10 and q[z] == 0.0:
+        wr[z] = 0.0
+        wi[z] = 0.0
+        z += 1
+    if z == 10:
+        return True
+    n = 10 - z
+    block = a[:n, :n]
+    _companion_into(q[z:], block)
+    if not hessenberg_eigvals(block, wr[z:], wi[z:]):
+        wr[:] = np.nan
+        wi[:] = np.nan
+        return False
+    return True
+
+
+@kernel
+def _roots_rows(q: FloatArray) -> np.ndarray:
+    """Return the roots (m, 10) of the monic polynomials ``q`` (m, 10) (NaN rows: none)."""
+    m = q.shape[0]
+    a = np.empty((10, 10))
+    wr = np.empty(10)
+    wi = np.empty(10)
+    out = np.empty((m, 10), dtype=np.complex128)
+    for i in range(m):
+        _roots_into(q[i], a, wr, wi)
+        for k in range(10):
+            out[i, k] = complex(wr[k], wi[k])
+    return out
+
+
+def monic_roots(q: FloatArray) -> np.ndarray:
+    """Return the roots (m, 10) of ``z^10 + sum q_k z^k`` for each row of ``q`` (m, 10).
+
+    The eigenvalues of the companion matrices by :mod:`activetrack.hessenberg_qr`; a row
+    that is not finite, or where QR fails to converge (not seen), gets NaN roots (no
+    candidates).
+    """
+    return _roots_rows(np.ascontiguousarray(q, dtype=np.float64))
 
 
 def accept(re, im):
@@ -89,47 +167,31 @@ def accepted_first(v: FloatArray, ok: np.ndarray) -> tuple[FloatArray, np.ndarra
     return out_v, out_ok
 
 
-def eigvals_stacked(comp: FloatArray) -> np.ndarray:
-    """Return the eigenvalues of stacked matrices (n, 10, 10) in one LAPACK sweep.
+@kernel
+def accepted_roots_into(gam: FloatArray, work: FloatArray, out: FloatArray) -> int:
+    """Return how many roots of one f3 (coefficients ``gam`` (11,)) are accepted; they go,
+    clipped to [-1, 1], to the front of ``out`` (10,) in the order found.
 
-    If QR fails to converge for some matrix (never seen), the stack is redone one matrix
-    at a time and a failing matrix gets NaN eigenvalues (no root candidates).
+    :func:`monic` + :func:`monic_roots` + :func:`accept_roots` for one polynomial;
+    ``work`` (10, 14) is workspace (the companion matrix, then ``q``, ``wr``, ``wi``).
     """
-    try:
-        return np.linalg.eigvals(comp)
-    except np.linalg.LinAlgError:
-        out = np.full(comp.shape[:-1], np.nan, dtype=complex)
-        for i, m in enumerate(comp):
-            try:
-                out[i] = np.linalg.eigvals(m)
-            except np.linalg.LinAlgError:
-                pass
-        return out
+    a = work[:, :10]
+    q = work[:, 10]
+    wr = work[:, 11]
+    wi = work[:, 12]
+    _monic_into(gam, q)
+    n = 0
+    if _roots_into(q, a, wr, wi):
+        for k in range(10):
+            re = wr[k]
+            if -IM_TOL <= wi[k] <= IM_TOL and -_RE_BOUND <= re <= _RE_BOUND:
+                out[n] = min(1.0, max(-1.0, re))
+                n += 1
+    return n
 
 
 def real_roots_scalar(gam: tuple[float, ...]) -> list[float]:
-    """Return the accepted roots of one f3 (coefficients ``gam``), clipped to [-1, 1].
-
-    The one-polynomial form of :func:`companion` + :func:`eigvals_stacked` +
-    :func:`accept_roots`, calling LAPACK ``dgeev`` directly (numpy's wrapper costs more
-    than the 10x10 solve; ``dgeev`` balances the matrix, so no scaling is needed here).
-    """
-    lead = gam[10]
-    if not (lead != 0.0 and math.isfinite(lead)):
-        ev = np.linalg.eigvals(companion(np.nan_to_num(np.array(gam))))
-        wr, wi = ev.real, ev.imag
-    else:
-        comp = _COMPANION_TEMPLATE.copy(order="F")
-        comp[0, :] = [-gam[j] / lead for j in range(9, -1, -1)]
-        # Positional (keywords cost more): no eigenvectors, lwork = 4 n (its default).
-        wr, wi, _, _, info = lapack.dgeev(comp, 0, 0, 40, 1)
-        if info != 0:  # QR failed to converge (never seen): numpy's driver instead
-            ev = np.linalg.eigvals(companion(np.nan_to_num(np.array(gam))))
-            wr, wi = ev.real, ev.imag
-    # The rule of accept() written out (a call per root costs more than the test); NaN
-    # fails it, so it is dropped.
-    return [
-        -1.0 if re < -1.0 else (1.0 if re > 1.0 else re)
-        for re, im in zip(wr.tolist(), wi.tolist(), strict=True)
-        if -IM_TOL <= im <= IM_TOL and -_RE_BOUND <= re <= _RE_BOUND
-    ]
+    """Return the accepted roots of one f3 (coefficients ``gam``), clipped to [-1, 1]."""
+    out = np.empty(10)
+    n = accepted_roots_into(np.array(gam, dtype=np.float64), np.empty((10, 14)), out)
+    return out[:n].tolist()

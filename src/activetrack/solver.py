@@ -109,7 +109,7 @@ from numpy.typing import ArrayLike
 
 from activetrack._coefficients import sylvester_gammas
 from activetrack.certified_roots import CircleRoots
-from activetrack.companion import companion
+from activetrack.companion import monic, monic_roots
 from activetrack.solver_batch import SCALAR_ROWS, solve_batch
 from activetrack.solver_results import BatchSolution, SingleSensorSolution
 from activetrack.solver_scalar import solve_scalar
@@ -429,7 +429,7 @@ def case1_critical_points(
     )
     swap = abs(C1) > abs(C2)
     hk = circle_polynomial(L1, L2, A, Bn, C1, C2, swap, SCALAR)
-    ev = np.linalg.eigvals(companion(np.array(sylvester_gammas(*hk))))
+    ev = monic_roots(monic(np.array(sylvester_gammas(*hk)))[None])[0]
     keep = (np.abs(ev.imag) <= im_tol) & (np.abs(ev.real) <= 1.0 + 1e-9)
     pts, roots = [], []
     for v in np.clip(ev.real[keep], -1.0, 1.0).tolist():

@@ -1,0 +1,78 @@
+"""Compiled kernels: numba's ``njit``, deferred until a kernel is first called.
+
+``@kernel`` marks a function written in the subset of Python and NumPy that numba
+compiles. The function itself is the implementation (there is no second NumPy copy):
+with ``NUMBA_DISABLE_JIT=1`` it runs as plain Python, which the test suite uses to check
+the kernels' source line by line. Importing a module with kernels imports nothing from
+numba (``import activetrack`` stays fast); the first call compiles the kernel (and the
+kernels it calls) for its argument types, one thread, and writes the machine code to
+numba's on-disk cache, so the next process loads it instead of compiling.
+
+The cache is numba's own: a ``__pycache__`` folder beside each module when that is
+writable (an editable install, a clone), else numba's user-wide cache folder
+(``~/.cache/numba`` on Linux, following the platform's user cache directory); the
+environment variable ``NUMBA_CACHE_DIR`` moves it anywhere. Deleting the cached files
+(``*.nbi``, ``*.nbc``) only costs a recompile; numba also recompiles by itself when a
+module's source changes.
+
+Kernels call kernels by name as usual: a :class:`Kernel` is typed by numba as the
+dispatcher it wraps (registered with ``numba.extending.typeof_impl`` on first use), so a
+compiled caller calls the compiled callee directly.
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Callable
+from typing import Any, Generic, TypeVar
+
+F = TypeVar("F", bound=Callable[..., Any])
+
+_typed = False  # whether numba knows how to type a Kernel (done once, on first compile)
+
+
+class Kernel(Generic[F]):
+    """A function compiled by numba on its first call (see the module docstring)."""
+
+    def __init__(self, fn: F) -> None:
+        self.py_func = fn
+        self._compiled: Callable[..., Any] | None = None
+        functools.update_wrapper(self, fn)
+
+    @property
+    def dispatcher(self) -> Callable[..., Any]:
+        """Return numba's dispatcher of the function (created now if needed)."""
+        if self._compiled is None:
+            import numba
+
+            _teach_numba()
+            # error_model="numpy": a float division by zero gives inf/NaN instead of raising
+            # (no zero test before every division); kernels guard their divisors, so the
+            # plain-Python run (NUMBA_DISABLE_JIT=1) takes the same branches.
+            self._compiled = numba.njit(cache=True, nogil=True, error_model="numpy")(self.py_func)
+        return self._compiled
+
+    def __call__(self, *args: Any) -> Any:
+        compiled = self._compiled
+        if compiled is None:
+            compiled = self.dispatcher
+        return compiled(*args)
+
+
+def _teach_numba() -> None:
+    """Register the numba type of a :class:`Kernel`: the type of its dispatcher."""
+    global _typed
+    if _typed:
+        return
+    from numba.extending import typeof_impl
+
+    @typeof_impl.register(Kernel)
+    def _typeof_kernel(val: Kernel[Any], c: Any) -> Any:
+        return typeof_impl(val.dispatcher, c)
+
+    _typed = True
+
+
+def kernel(fn: F) -> F:
+    """Return ``fn`` as a :class:`Kernel`: compiled with numba on its first call."""
+    return Kernel(fn)  # type: ignore[return-value]
