@@ -21,11 +21,16 @@ demo: $(STAMP)
 	$(VENV)/bin/activetrack simulate --scenario paper --planner gsr --planner gbes --planner rm \
 		--runs $(DEMO_RUNS) --seed 0 --out results/demo --overwrite
 
-# The kernels are compiled once per clone (numba's cache in __pycache__); the second run
-# checks the same kernels' source as plain Python.
+# The kernels are compiled once per clone (numba's cache in __pycache__). The tests marked
+# `kernels` also run as plain Python (NUMBA_DISABLE_JIT=1: the kernels' source checked line
+# by line), on the second core beside the main run; its output follows the main run's.
 test: $(STAMP)
-	$(PY) -m pytest -q -p no:cacheprovider
-	NUMBA_DISABLE_JIT=1 $(PY) -m pytest -q -p no:cacheprovider -m kernels
+	@NUMBA_DISABLE_JIT=1 $(PY) -m pytest -q -p no:cacheprovider -m kernels \
+		> $(VENV)/kernels-plain.log 2>&1 & plain=$$!; \
+	$(PY) -m pytest -q -p no:cacheprovider; main=$$?; \
+	wait $$plain; kern=$$?; \
+	echo "--- NUMBA_DISABLE_JIT=1 pytest -m kernels"; cat $(VENV)/kernels-plain.log; \
+	test $$main -eq 0 && test $$kern -eq 0
 
 test-fast: $(STAMP)
 	$(PY) -m pytest -q -m "not slow"

@@ -14,9 +14,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numpy as np
-
-from activetrack.baselines.gsr import GSRBatchResult, check_parameters, relax_batch
+from activetrack.baselines.gsr import (
+    GSRBatchResult,
+    check_parameters,
+    relax_batch,
+    warn_warm_roots,
+)
 from activetrack.problem import PlanningProblem
 from activetrack.solver import _solve_batch_unchecked
 from activetrack.validation import FloatArray
@@ -33,19 +36,16 @@ class BatchedGSR:
     Attributes:
         tol: relative improvement per sweep below which a copy stops (>= 0).
         max_sweeps: at most this many sweeps per copy (>= 1).
-        warm_roots: find the roots of f3 from starting points (the sensor's previous
-            solve; in the first sweep other copies'), used only where certified; False:
-            the companion-matrix eigenvalues always.
+        warm_roots: deprecated, no effect (as :class:`activetrack.baselines.GSR`'s).
     """
 
     tol: float = 1e-9
     max_sweeps: int = 100
-    warm_roots: bool = True
+    warm_roots: bool | None = None
 
     def __post_init__(self) -> None:
         check_parameters(self.tol, self.max_sweeps)
-        if not isinstance(self.warm_roots, (bool, np.bool_)):
-            raise ValueError(f"warm_roots must be a bool, got {self.warm_roots!r}")
+        warn_warm_roots(self.warm_roots)
 
     def plan_batch(
         self,
@@ -67,9 +67,7 @@ class BatchedGSR:
             raise ValueError(
                 f"plan_batch takes one batch axis: sensors (B, M, 2), got {problem.sensors.shape}"
             )
-        positions, value, sweeps = relax_batch(
-            problem, self.tol, self.max_sweeps, self.warm_roots, solve=_solve
-        )
+        positions, value, sweeps = relax_batch(problem, self.tol, self.max_sweeps, solve=_solve)
         return BatchedGSRResult(positions, value, sweeps)
 
 

@@ -20,10 +20,7 @@ for a batch:
 
 A batched problem (:attr:`PlanningProblem.batch_shape` not empty) runs one vectorized
 sweep over the copies (:func:`relax_batch`): each step solves sensor ``i`` of every copy
-still running at once with the solver's batch kernel (stacked companion matrices), and
-each copy keeps, per sensor, the roots of f3 (eq. 33) of its last solve as starting
-points for the next (in the first sweep, other copies' roots; used where certified,
-else the companion eigenvalues; see :mod:`activetrack.solver`). A single problem runs
+still running at once with the solver's compiled batch kernel. A single problem runs
 the same rules in scalar form (:class:`Relaxation`, with the scalar solver: on one
 problem the vectorized bookkeeping costs more than the solves); the two share the sensor
 modes, the warm start, the objective and the stopping test.
@@ -36,6 +33,7 @@ optimum; ``GSR(restarts=True)`` also relaxes from other starts and keeps the bes
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -45,7 +43,7 @@ from activetrack.baselines import gsr_restarts
 from activetrack.baselines._common import sensor_modes, sensor_modes_of
 from activetrack.objective import sensor_information
 from activetrack.problem import PlanningProblem
-from activetrack.solver import CircleRoots, _solve_batch_unchecked, solve_single_sensor
+from activetrack.solver import _solve_batch_unchecked, solve_single_sensor
 from activetrack.validation import FloatArray
 
 STARTS = gsr_restarts.STARTS
@@ -93,6 +91,17 @@ class GSRBatchResult:
     sweeps: np.ndarray
 
 
+def warn_warm_roots(warm_roots: object) -> None:
+    """Warn that ``warm_roots`` is deprecated (it has no effect) unless it is None."""
+    if warm_roots is not None:
+        warnings.warn(
+            "warm_roots is deprecated and has no effect: the compiled solver has no warm "
+            "start (issue 17); it will be removed",
+            DeprecationWarning,
+            stacklevel=3,
+        )
+
+
 def check_parameters(tol: object, max_sweeps: object) -> None:
     """Raise ValueError unless ``tol`` is in [0, 1) and ``max_sweeps`` an int >= 1.
 
@@ -124,8 +133,8 @@ class GSR:
             optimum, ``"greedy"``/``"greedy-reversed"`` sequential placement in sensor
             order or reversed.
         accelerate: use Hooke-Jeeves pattern moves (single problems).
-        warm_roots: on a batch, start the root finding of f3 from each copy's previous
-            roots, used only where certified; False: the companion-matrix eigenvalues always.
+        warm_roots: deprecated, no effect (the compiled solver has no warm start: a fresh
+            solve costs what a certified warm one did); passing it warns.
         last_result: the :class:`GSRResult` (single problem) or :class:`GSRBatchResult`
             (batch) of the latest :meth:`plan` call.
     """
@@ -135,7 +144,7 @@ class GSR:
     restarts: bool = False
     starts: tuple[str, ...] = ("grid",)
     accelerate: bool = False
-    warm_roots: bool = True
+    warm_roots: bool | None = None
     last_result: GSRResult | GSRBatchResult | None = field(default=None, init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -144,8 +153,7 @@ class GSR:
         unknown = [k for k in self.starts if k not in STARTS]
         if unknown or not self.starts:
             raise ValueError(f"starts must be a non-empty tuple of {STARTS}, got {self.starts!r}")
-        if not isinstance(self.warm_roots, (bool, np.bool_)):
-            raise ValueError(f"warm_roots must be a bool, got {self.warm_roots!r}")
+        warn_warm_roots(self.warm_roots)
 
     @property
     def last_sweeps(self) -> int:
@@ -236,7 +244,7 @@ class GSR:
                 np.array([r.value for r in results]).reshape(shape),
                 np.array([r.sweeps for r in results], dtype=np.int64).reshape(shape),
             )
-        positions, value, sweeps = relax_batch(problem, self.tol, self.max_sweeps, self.warm_roots)
+        positions, value, sweeps = relax_batch(problem, self.tol, self.max_sweeps)
         return GSRBatchResult(positions, value, sweeps)
 
 
@@ -280,7 +288,6 @@ def relax_batch(
     problem: PlanningProblem,
     tol: float,
     max_sweeps: int,
-    warm_roots: bool = True,
     solve=None,
 ) -> tuple[FloatArray, FloatArray, np.ndarray]:
     """Return GSR's ``(positions, value, sweeps)`` for every copy of a batched problem.
@@ -303,13 +310,10 @@ def relax_batch(
     stale = free.copy()
     active = free.any(axis=1)
     sweeps = np.zeros(B, dtype=np.int64)
-    # Per sensor, each copy's roots of f3 from its last solve (NaN: none yet).
-    roots = np.full((M, B, 10), np.nan, dtype=np.complex128) if warm_roots else None
-    swap = np.zeros((M, B), dtype=bool)
     sweep = _BatchSweep(phi, prior, c, r, rho, sd2, st2, free, solve or _solve_batch_unchecked)
     while active.any():
         f_before = f1.copy()
-        sweep(s, info, f1, stale, active, roots, swap)
+        sweep(s, info, f1, stale, active)
         sweeps += active
         stop = (sweeps >= max_sweeps) | ~stale.any(axis=1) | small_improvement(f_before, f1, tol)
         active &= ~stop
@@ -324,13 +328,8 @@ class _BatchSweep:
         self.phi, self.prior, self.c, self.r, self.rho = phi, prior, c, r, rho
         self.sd2, self.st2, self.free, self.solve = sd2, st2, free, solve
 
-    def __call__(self, s, info, cur, stale, active, roots, swap) -> None:
-        """Sweep the ``active`` copies: update ``s``, ``info``, ``cur``, ``stale`` in place.
-
-        ``roots`` (M, B, 10) and ``swap`` (M, B) are each sensor's roots of f3 from its
-        last solve and their variable, the solver's starting points, updated in place
-        (``roots=None``: none, companion eigenvalues only).
-        """
+    def __call__(self, s, info, cur, stale, active) -> None:
+        """Sweep the ``active`` copies: update ``s``, ``info``, ``cur``, ``stale`` in place."""
         c, r, rho, sd2, st2, free = self.c, self.r, self.rho, self.sd2, self.st2, self.free
         total = self.prior + info.sum(axis=1)  # rebuilt every sweep: no drift
         cur[active] = self.phi(total[active])
@@ -339,15 +338,7 @@ class _BatchSweep:
             if idx.size == 0:
                 continue
             others = total[idx] - info[idx, i]
-            guess = None
-            if roots is not None:
-                guess = CircleRoots(roots[i][idx], swap[i][idx], np.zeros(idx.size, dtype=bool))
-            sol, used = self.solve(
-                others, c[idx, i], r[idx, i], rho[idx, i], sd2[idx, i], st2[idx, i], guess
-            )
-            if roots is not None:
-                roots[i][idx] = used.roots
-                swap[i][idx] = used.swap
+            sol = self.solve(others, c[idx, i], r[idx, i], rho[idx, i], sd2[idx, i], st2[idx, i])
             new_s = sol.s
             stale[idx, i] = False
             new_info = sensor_information(new_s, sd2[idx, i], st2[idx, i])

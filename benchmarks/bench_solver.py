@@ -6,10 +6,7 @@ the geometric cases mixed):
 
 - the median wall time of one scalar ``solve_single_sensor`` call (and with ``check=False``),
 - the time per problem of one ``solve_single_sensor_batch`` call on the whole batch,
-- the time per problem of a re-solve after a small change of every prior (another
-  sensor's move, as between GSR sweeps) started from the first solve's roots of f3 (the
-  batched GSR's certified warm start, private ``_solve_batch_unchecked(..., guess)``),
-  how many rows it certified, and its largest difference from the plain re-solve,
+- the time of the first calls (compiling the kernels, or loading them from numba's cache),
 - the median time of ``scipy.optimize.minimize(method="SLSQP")`` from 8 starts per problem
   (the constraints (23)-(24) as inequality functions), the ratio of the times,
 - how often SLSQP's best feasible value is worse than the analytic one, and by how much.
@@ -28,11 +25,7 @@ import time
 import numpy as np
 from scipy.optimize import minimize
 
-from activetrack.solver import (
-    _solve_batch_unchecked,
-    solve_single_sensor,
-    solve_single_sensor_batch,
-)
+from activetrack.solver import solve_single_sensor, solve_single_sensor_batch
 
 
 def random_problems(rng: np.random.Generator, n: int) -> tuple[np.ndarray, ...]:
@@ -114,30 +107,6 @@ def slsqp(prior, c, r, rho, sd2, st2, n_starts: int = 8) -> float:
     return best
 
 
-def warm_start(rng: np.random.Generator, *problems: np.ndarray) -> None:
-    """Print the plain and the warm-started re-solve times after a small change of priors."""
-    prior = problems[0]
-    rest = tuple(np.asarray(a, dtype=np.float64) for a in problems[1:])
-    _, roots = _solve_batch_unchecked(prior, *rest)
-    u = rng.standard_normal((prior.shape[0], 2))
-    scale = 1e-3 * np.abs(prior).max(axis=(1, 2))[:, None, None]
-    moved = prior + scale * np.einsum("bi,bj->bij", u, u)  # a nearby SPD prior
-    t0 = time.perf_counter()
-    plain, _ = _solve_batch_unchecked(moved, *rest)
-    t1 = time.perf_counter()
-    warm, used = _solve_batch_unchecked(moved, *rest, roots)
-    t2 = time.perf_counter()
-    n = prior.shape[0]
-    circle = np.isfinite(roots.roots).all(axis=1)
-    diff = np.max(np.abs(warm.value - plain.value) / plain.value)
-    print(
-        f"re-solve after a small prior change: plain {(t1 - t0) / n * 1e6:.1f} us/problem, "
-        f"from the previous roots {(t2 - t1) / n * 1e6:.1f} us/problem; certified "
-        f"{used.certified.sum()}/{circle.sum()} speed-circle rows, "
-        f"max |warm - plain| / value = {diff:.1e}"
-    )
-
-
 def main() -> None:
     """Run the benchmark and print the figures."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -150,8 +119,11 @@ def main() -> None:
     prior, c, r, rho, sd2, st2 = random_problems(rng, args.n)
     print(f"load average: {os.getloadavg()}, cpus: {os.cpu_count()}")
 
-    # Warm up (imports, LAPACK workspace).
+    # Warm up: the first calls compile the kernels (or load them from numba's cache).
+    t0 = time.perf_counter()
     solve_single_sensor_batch(prior[:10], c[:10], r[:10], rho[:10], sd2[:10], st2[:10])
+    solve_single_sensor(prior[0], c[0], r[0], rho[0], sd2[0], st2[0])
+    print(f"first calls (compile, or load from the cache): {time.perf_counter() - t0:.2f} s")
 
     # Batched: time of one call on the whole batch, per problem (best and median of 5).
     reps = []
@@ -173,8 +145,6 @@ def main() -> None:
             solve_single_sensor_batch(*sub)
             dt = (time.perf_counter() - t0) / sel.sum()
             print(f"  batched, cases {name} only ({sel.sum()}): {dt * 1e6:.1f} us/problem")
-
-    warm_start(rng, prior, c, r, rho, sd2, st2)
 
     # Scalar: median over single calls.
     m = min(args.n_scalar, args.n)

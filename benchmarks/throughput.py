@@ -122,15 +122,13 @@ def gsr_rates(n: int, episodes: int) -> dict[str, float]:
         env.step(rng.uniform(-1, 1, (n, 6)))
     p = env.params
     batched = BatchedGSR()
+    batched.plan_batch(*problems[0], p.r, p.rho, p.sigma_d2, p.sigma_theta2)  # load kernels
     start = time.perf_counter()
     for P, target, sensors in problems:
         batched.plan_batch(P, target, sensors, p.r, p.rho, p.sigma_d2, p.sigma_theta2)
     batched_rate = n * len(problems) / (time.perf_counter() - start)
 
-    eig_rows = {}
-    for warm in (True, False):  # untimed: where the batched GSR's roots come from
-        rows = _count_root_sources(BatchedGSR(warm_roots=warm), problems, p)
-        eig_rows[warm] = rows
+    solves = _count_solves(batched, problems, p)  # untimed
     from activetrack import PlanningProblem
 
     scalar = GSR()
@@ -140,6 +138,7 @@ def gsr_rates(n: int, episodes: int) -> dict[str, float]:
         PlanningProblem(P[i], target[i], sensors[i], p.r, p.rho, p.sigma_d2, p.sigma_theta2)
         for i in range(count)
     ]
+    scalar.plan(probs[0])  # load the kernels first
     start = time.perf_counter()
     for prob in probs:
         scalar.plan(prob)
@@ -149,31 +148,20 @@ def gsr_rates(n: int, episodes: int) -> dict[str, float]:
         "scalar": scalar_rate,
         "batched": batched_rate,
         "ratio": batched_rate / scalar_rate,
-        "solves_per_plan": eig_rows[True]["rows"] / plans,
-        "certified_per_plan": eig_rows[True]["certified"] / plans,
-        "eigvals_per_plan_warm": (eig_rows[True]["circle"] - eig_rows[True]["certified"]) / plans,
-        "eigvals_per_plan_plain": eig_rows[False]["circle"] / plans,
-        "scalar_kernel_per_plan": eig_rows[True]["scalar"] / plans,
+        "solves_per_plan": solves / plans,
     }
 
 
-def _count_root_sources(planner, problems, p) -> dict[str, int]:
-    """Return solver rows, speed-circle rows with roots, certified rows and rows of tiny
-    calls solved by the scalar kernel, over planning ``problems``."""
+def _count_solves(planner, problems, p) -> int:
+    """Return how many single-sensor problems ``planner`` solves over ``problems``."""
     import activetrack.baselines.batched_gsr as bg
-    from activetrack.solver import _SCALAR_ROWS
 
-    seen = {"rows": 0, "circle": 0, "certified": 0, "scalar": 0}
+    seen = [0]
     solve = bg._solve_batch_unchecked
 
     def counting(*args):
-        sol, roots = solve(*args)
-        seen["rows"] += roots.certified.size
-        seen["circle"] += int(np.count_nonzero(np.isfinite(roots.roots).all(axis=1)))
-        seen["certified"] += int(roots.certified.sum())
-        if args[-1] is not None and roots.certified.size <= _SCALAR_ROWS:
-            seen["scalar"] += roots.certified.size  # solved one by one (no roots returned)
-        return sol, roots
+        seen[0] += args[0].shape[0]
+        return solve(*args)
 
     bg._solve_batch_unchecked = counting
     try:
@@ -181,7 +169,7 @@ def _count_root_sources(planner, problems, p) -> dict[str, int]:
             planner.plan_batch(P, target, sensors, p.r, p.rho, p.sigma_d2, p.sigma_theta2)
     finally:
         bg._solve_batch_unchecked = solve
-    return seen
+    return seen[0]
 
 
 def peak_rss_mb(n: int, steps: int) -> float:
@@ -233,13 +221,7 @@ def main(argv: list[str] | None = None) -> dict:
     print(f"   scalar GSR       {g['scalar']:10.0f} plans/s")
     print(f"   batched GSR      {g['batched']:10.0f} plans/s (N = 1024 per call)")
     print(f"   ratio            {g['ratio']:10.1f}")
-    print(
-        f"   per plan: {g['solves_per_plan']:.2f} single-sensor solves, "
-        f"{g['certified_per_plan']:.2f} from certified warm-started roots, "
-        f"{g['eigvals_per_plan_warm']:.2f} companion eigenvalue solves "
-        f"({g['eigvals_per_plan_plain']:.2f} with warm_roots=False), "
-        f"{g['scalar_kernel_per_plan']:.2f} by the scalar kernel (tiny calls)"
-    )
+    print(f"   per plan: {g['solves_per_plan']:.2f} single-sensor solves")
 
     rss = peak_rss_mb(8192, 100)
     out["peak_rss_mb_N8192"] = rss

@@ -66,7 +66,7 @@ _ROOTS = (
     "LAPACK dgeev (issue 17): the candidates differ in the last bits, so the polished optima "
     "(where f0 is flat the argmin is defined to ~sqrt(eps)) move ~1e-8 relative, and "
     "GSR's sweeps, stopping at a tolerance, move the sensors up to ~1e-5 relative (the "
-    "objective values agree to ~1e-15) and may take one solve more or less"
+    "objective values agree to ~1e-15) and may take one solve or sweep more or less"
 )
 RTOL: dict[str, tuple[float, float, str]] = {
     **dict.fromkeys(
@@ -128,8 +128,9 @@ FLOAT32_TOL = (3e-6, 1e-6)
 
 #: Recorded values that are only comparable bit for bit: skipped where a tolerance applies
 #: (a hash of float32 observations; whether a batched copy equalled a single env bitwise;
-#: how many single-sensor solves GSR took, which a last-bit change can move by one).
-EXACT_ONLY = ("sha256", "equals_single", "n_solves")
+#: how many single-sensor solves and sweeps GSR took, which a last-bit change can move by
+#: one: a copy stops when a re-solve returns its position bit for bit).
+EXACT_ONLY = ("sha256", "equals_single", "n_solves", "sweeps")
 
 
 def _load_tool() -> Any:

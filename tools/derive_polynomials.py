@@ -298,7 +298,7 @@ def emit_program(
 ) -> str:
     """Return the source of a generated function running the straight-line ``prog``."""
     pr = _Printer()
-    lines = [f"def {name}({', '.join(args)}):", f'    """{doc}"""']
+    lines = ["@kernel", f"def {name}({', '.join(args)}):", f'    """{doc}"""']
     for sym, expr in prog.defs:
         lines.append(f"    {sym} = {pr.doprint(expr)}")
     for out, expr in zip(outs, exprs, strict=True):
@@ -314,7 +314,7 @@ def emit_function(
     symbols = sp.numbered_symbols(prefix)
     reps, reduced = sp.cse(exprs, symbols=symbols, optimizations="basic", order="canonical")
     pr = _Printer()
-    lines = [f"def {name}({', '.join(args)}):", f'    """{doc}"""']
+    lines = ["@kernel", f"def {name}({', '.join(args)}):", f'    """{doc}"""']
     for sym, expr in reps:
         lines.append(f"    {sym} = {pr.doprint(expr)}")
     for out, expr in zip(outs, reduced, strict=True):
@@ -355,8 +355,11 @@ derivation script's docstring for the variables: the prior information is diagon
 (``l1``, ``l2``), ``a = 1/sigma_d^2``, and lengths are in units of ``r`` (``b`` is
 ``r^-2/sigma_theta^2``, ``c1, c2`` are ``c / r``); ``X = (x - c1) / r``.
 
-Every function uses only ``+ - *``: arguments may be floats or numpy arrays.
+Every function uses only ``+ - *`` and is a compiled kernel (:mod:`activetrack._jit`):
+arguments may be floats or numpy arrays.
 """
+
+from activetrack._jit import kernel
 
 # The generated body is kept exactly as printed (ruff format must not rewrap it).
 # fmt: off
@@ -390,6 +393,7 @@ Every function uses only ``+ - *``: arguments may be floats or numpy arrays.
     ]
     tail = '''
 
+@kernel
 def f3_coefficients(l1, l2, a, b, c1, c2):
     """Return (gamma0..gamma10) of eq. (33), lowest degree first, in the variable X."""
     return sylvester_gammas(*circle_reduction(*alpha_beta(l1, l2, a, b, c1, c2), c1, c2))

@@ -8,12 +8,16 @@ derivation script's docstring for the variables: the prior information is diagon
 (``l1``, ``l2``), ``a = 1/sigma_d^2``, and lengths are in units of ``r`` (``b`` is
 ``r^-2/sigma_theta^2``, ``c1, c2`` are ``c / r``); ``X = (x - c1) / r``.
 
-Every function uses only ``+ - *``: arguments may be floats or numpy arrays.
+Every function uses only ``+ - *`` and is a compiled kernel (:mod:`activetrack._jit`):
+arguments may be floats or numpy arrays.
 """
+
+from activetrack._jit import kernel
 
 # The generated body is kept exactly as printed (ruff format must not rewrap it).
 # fmt: off
 
+@kernel
 def alpha_beta(l1, l2, a, b, c1, c2):
     """Return (alpha1..alpha8, beta1..beta3) of eq. (32)."""
     t0 = l1 - l2
@@ -40,6 +44,7 @@ def alpha_beta(l1, l2, a, b, c1, c2):
     return (alpha1, alpha2, alpha3, alpha4, alpha5, alpha6, alpha7, alpha8, beta1, beta2, beta3,)
 
 
+@kernel
 def circle_reduction(alpha1, alpha2, alpha3, alpha4, alpha5, alpha6, alpha7, alpha8, beta1, beta2, beta3, c1, c2):
     """Return (h0..h5, k0..k4): f1 on the circle is sum h_i X^i + Y sum k_i X^i."""
     u0 = (c1*c1) + (c2*c2) + 1
@@ -126,6 +131,7 @@ def circle_reduction(alpha1, alpha2, alpha3, alpha4, alpha5, alpha6, alpha7, alp
     return (h0, h1, h2, h3, h4, h5, k0, k1, k2, k3, k4,)
 
 
+@kernel
 def sylvester_gammas(h0, h1, h2, h3, h4, h5, k0, k1, k2, k3, k4):
     """Return (gamma0..gamma10) of eq. (33): f3(X) = g0^2 + (X^2 - 1) g1^2."""
     v0 = (k0*k0)
@@ -160,6 +166,7 @@ def sylvester_gammas(h0, h1, h2, h3, h4, h5, k0, k1, k2, k3, k4):
     return (gamma0, gamma1, gamma2, gamma3, gamma4, gamma5, gamma6, gamma7, gamma8, gamma9, gamma10,)
 
 
+@kernel
 def f3_coefficients(l1, l2, a, b, c1, c2):
     """Return (gamma0..gamma10) of eq. (33), lowest degree first, in the variable X."""
     return sylvester_gammas(*circle_reduction(*alpha_beta(l1, l2, a, b, c1, c2), c1, c2))

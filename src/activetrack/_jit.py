@@ -29,6 +29,7 @@ from typing import Any, Generic, TypeVar
 F = TypeVar("F", bound=Callable[..., Any])
 
 _typed = False  # whether numba knows how to type a Kernel (done once, on first compile)
+KERNELS: list[Kernel[Any]] = []  # every kernel defined so far (activetrack.kernel_cache)
 
 
 class Kernel(Generic[F]):
@@ -38,6 +39,7 @@ class Kernel(Generic[F]):
         self.py_func = fn
         self._compiled: Callable[..., Any] | None = None
         functools.update_wrapper(self, fn)
+        KERNELS.append(self)
 
     @property
     def dispatcher(self) -> Callable[..., Any]:

@@ -42,6 +42,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "activetrack.train.cli",
         "train a policy: imitation of GSR (bc, dagger) or PPO (the [rl] extra)",
     ),
+    "kernels": (
+        "activetrack.kernel_cache",
+        "compile the numba kernels now (or clear their cache) and report time and folder",
+    ),
 }
 
 

@@ -79,9 +79,9 @@ def _companion_into(q: FloatArray, a: FloatArray) -> None:
 
 
 @kernel
-def _roots_into(q: FloatArray, a: FloatArray, wr: FloatArray, wi: FloatArray) -> bool:
+def _roots_into(q: FloatArray, wr: FloatArray, wi: FloatArray) -> bool:
     """Return whether the roots of monic ``q`` (10,) were found (into ``wr + 1j wi``);
-    ``a`` (10, 10) is workspace. NaN roots if ``q`` is not finite or QR fails.
+    NaN roots if ``q`` is not finite or QR fails.
 
     Exact zero roots (``q_0 = ... = q_{z-1} = 0``) are taken out first: QR finds a
     multiple root at 0 only to ~eps^(1/z), and the symmetric problems that give them
@@ -100,9 +100,9 @@ def _roots_into(q: FloatArray, a: FloatArray, wr: FloatArray, wi: FloatArray) ->
     if z == 10:
         return True
     n = 10 - z
-    block = a[:n, :n]
-    _companion_into(q[z:], block)
-    if not hessenberg_eigvals(block, wr[z:], wi[z:]):
+    a = np.empty((n, n))  # contiguous: QR's indexing compiles to fixed strides
+    _companion_into(q[z:], a)
+    if not hessenberg_eigvals(a, wr[z:], wi[z:]):
         wr[:] = np.nan
         wi[:] = np.nan
         return False
@@ -113,12 +113,11 @@ def _roots_into(q: FloatArray, a: FloatArray, wr: FloatArray, wi: FloatArray) ->
 def _roots_rows(q: FloatArray) -> np.ndarray:
     """Return the roots (m, 10) of the monic polynomials ``q`` (m, 10) (NaN rows: none)."""
     m = q.shape[0]
-    a = np.empty((10, 10))
     wr = np.empty(10)
     wi = np.empty(10)
     out = np.empty((m, 10), dtype=np.complex128)
     for i in range(m):
-        _roots_into(q[i], a, wr, wi)
+        _roots_into(q[i], wr, wi)
         for k in range(10):
             out[i, k] = complex(wr[k], wi[k])
     return out
@@ -168,20 +167,18 @@ def accepted_first(v: FloatArray, ok: np.ndarray) -> tuple[FloatArray, np.ndarra
 
 
 @kernel
-def accepted_roots_into(gam: FloatArray, work: FloatArray, out: FloatArray) -> int:
+def accepted_roots_into(gam: FloatArray, out: FloatArray) -> int:
     """Return how many roots of one f3 (coefficients ``gam`` (11,)) are accepted; they go,
     clipped to [-1, 1], to the front of ``out`` (10,) in the order found.
 
-    :func:`monic` + :func:`monic_roots` + :func:`accept_roots` for one polynomial;
-    ``work`` (10, 14) is workspace (the companion matrix, then ``q``, ``wr``, ``wi``).
+    :func:`monic` + :func:`monic_roots` + :func:`accept_roots` for one polynomial.
     """
-    a = work[:, :10]
-    q = work[:, 10]
-    wr = work[:, 11]
-    wi = work[:, 12]
+    q = np.empty(10)
+    wr = np.empty(10)
+    wi = np.empty(10)
     _monic_into(gam, q)
     n = 0
-    if _roots_into(q, a, wr, wi):
+    if _roots_into(q, wr, wi):
         for k in range(10):
             re = wr[k]
             if -IM_TOL <= wi[k] <= IM_TOL and -_RE_BOUND <= re <= _RE_BOUND:
@@ -193,5 +190,5 @@ def accepted_roots_into(gam: FloatArray, work: FloatArray, out: FloatArray) -> i
 def real_roots_scalar(gam: tuple[float, ...]) -> list[float]:
     """Return the accepted roots of one f3 (coefficients ``gam``), clipped to [-1, 1]."""
     out = np.empty(10)
-    n = accepted_roots_into(np.array(gam, dtype=np.float64), np.empty((10, 14)), out)
+    n = accepted_roots_into(np.array(gam, dtype=np.float64), out)
     return out[:n].tolist()

@@ -45,23 +45,6 @@ Deviations from and additions to the paper (deliberate):
   well and the roots of f3 crowd and lose accuracy), also the nearest point D and the arc
   ends A, B. A polished point is kept only if it is feasible and better, so the answer is
   never worse than the best candidate evaluated.
-- Warm-started roots of f3 (the batched solver only, through the private
-  ``_solve_batch_unchecked(..., guess)``, which the batched GSR uses; the public
-  functions never take this path). The companion-matrix eigenvalues stay the method of
-  record: the shortcut replaces them in a row only when its result is *certified* to be
-  the same roots. From a start of 10 approximate roots, Weierstrass (Durand-Kerner)
-  steps run; the row is certified when the Gerschgorin inclusion disks of all 10 roots
-  (rounding included) each lie entirely inside or entirely outside the acceptance region
-  (``|imag| <= 1e-2``, ``|real| <= 1 + 1e-2``), the inside ones are pairwise disjoint (so
-  the region holds exactly one root per inside disk), and each of those roots is pinned
-  to within 1e-10 (units of ``r``) by a Newton inclusion disk lying in its own
-  (:mod:`activetrack.certified_roots`). Then its accepted roots are f3's true accepted
-  roots to 1e-10, which the eigenvalues give to their rounding. The starts: the row's roots from the
-  caller's previous solve of a nearby problem in the same variable (``swap``), e.g. the
-  same sensor one Gauss-Seidel step earlier; for rows without one, when there are at
-  least 256, one in 8 takes the eigenvalues and the others start from the roots of the
-  nearest of those (log-coefficient distance, same variable). A row not certified within
-  6 steps, and every row of a call with fewer than 32 such rows, takes the eigenvalues.
 - Infeasible (``||c|| + r < rho``): returns ``c + r c / ||c||`` (the x axis if ``c = 0``) with
   ``feasible=False``. ``r = 0`` returns ``c`` (feasible iff ``||c|| >= rho``). ``case`` is
   always the geometric case (1-4) of ``(||c||, r, rho)``.
@@ -91,11 +74,10 @@ outside it; ``check=False`` callers must stay inside it):
   of ``f0`` is then at least that ratio times a geometric factor, and its cube (in the
   derivatives that Newton uses) stays a normal number.
 
-The implementation, one job a module: the steps written once for floats and arrays
+The implementation, one job a module, compiled (:mod:`activetrack._jit`): the steps
 (:mod:`activetrack.solver_steps`), the companion matrix and its accepted roots
-(:mod:`activetrack.companion`), the certified warm-started roots
-(:mod:`activetrack.certified_roots`), the one-problem path on Python floats
-(:mod:`activetrack.solver_scalar`), the batched path (:mod:`activetrack.solver_batch`),
+(:mod:`activetrack.companion`, :mod:`activetrack.hessenberg_qr`), the one-problem kernel
+and its loop over a batch (:mod:`activetrack.solver_scalar`, :mod:`activetrack.solver_batch`),
 the result types (:mod:`activetrack.solver_results`). This module is the public API
 and its input checks.
 """
@@ -108,15 +90,12 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from activetrack._coefficients import sylvester_gammas
-from activetrack.certified_roots import CircleRoots
 from activetrack.companion import monic, monic_roots
-from activetrack.solver_batch import SCALAR_ROWS, solve_batch
+from activetrack.solver_batch import solve_batch
 from activetrack.solver_results import BatchSolution, SingleSensorSolution
 from activetrack.solver_scalar import solve_scalar
 from activetrack.solver_steps import (
-    ARRAY,
     RHO_FLOOR,
-    SCALAR,
     SIGN_RATIO,
     circle_derivatives,
     circle_polynomial,
@@ -143,7 +122,6 @@ __all__ = [
     "MIN_SCALE",
     "RHO_FLOOR",
     "BatchSolution",
-    "CircleRoots",
     "SingleSensorSolution",
     "case1_critical_points",
     "solve_single_sensor",
@@ -156,11 +134,10 @@ MAX_DISTANCE_RATIO = 1e5  # largest ||c|| / r accepted
 MAX_PRIOR_CONDITION = 1e8  # largest condition number l1 / l2 of prior_info accepted
 MIN_INFORMATION_RATIO = 1e-30  # of the two largest of l1, 1/sigma_d2, 1/(sigma_theta2 r^2)
 
-# The private kernels under their historical names (the batched GSR, tests and tools use
-# them): _solve_batch_unchecked(P, c, r, rho, sigma_d2, sigma_theta2, guess=None) ->
-# (BatchSolution, CircleRoots) on validated arrays; _SCALAR_ROWS its row-by-row limit.
+# The private batch kernel under its historical name (the batched GSR, tests and tools use
+# it): _solve_batch_unchecked(P, c, r, rho, sigma_d2, sigma_theta2) -> BatchSolution on
+# validated float64 arrays.
 _solve_batch_unchecked = solve_batch
-_SCALAR_ROWS = SCALAR_ROWS
 
 
 # ---------------------------------------------------------------------------------------
@@ -208,7 +185,7 @@ def _check_information(l1, a, b_r2, r) -> None:
     """Raise unless the two largest information scales ``l1``, ``a = 1/sigma_d^2``,
     ``b / r^2 = 1/(sigma_theta^2 r^2)`` are within ``1 / MIN_INFORMATION_RATIO`` (rows
     with ``r > 0``), naming the parameter of the largest (the one that dominates)."""
-    if type(l1) is float:
+    if np.ndim(l1) == 0:  # one problem (a float, or NumPy's with NUMBA_DISABLE_JIT=1)
         scales = (l1, a, b_r2)
         low, mid, top = sorted(scales)
         if mid >= MIN_INFORMATION_RATIO * top:
@@ -250,7 +227,7 @@ def _checked_scalars(prior_info, c, r, rho, sigma_d2, sigma_theta2) -> tuple[flo
     rho = real_scalar("rho", rho, allow_zero=True)
     sigma_d2 = real_scalar("sigma_d2", sigma_d2)
     sigma_theta2 = real_scalar("sigma_theta2", sigma_theta2)
-    l1, l2 = eigenvalues(p11, p12, p22, SCALAR)
+    l1, l2 = eigenvalues(p11, p12, p22)
     nc = math.hypot(c1, c2)
     lo, hi = MIN_SCALE, MAX_SCALE
     # The whole accepted range in one test (every call runs it); _check_scale names what
@@ -344,8 +321,8 @@ def solve_single_sensor_batch(
 ) -> BatchSolution:
     """Return the solutions of ``B`` independent single-sensor problems, vectorized.
 
-    Same mathematics as :func:`solve_single_sensor`; all companion matrices are stacked
-    and their eigenvalues computed in one ``np.linalg.eigvals`` call.
+    Each row is solved exactly as :func:`solve_single_sensor` solves it, by the same
+    compiled kernel looping over the rows.
 
     Args:
         prior_info: (B, 2, 2) prior information matrices (symmetric positive definite).
@@ -367,7 +344,7 @@ def solve_single_sensor_batch(
             np.broadcast_to(_as_array(k, v), (n,)).astype(np.float64)
             for k, v in zip(names, (r, rho, sigma_d2, sigma_theta2), strict=True)
         ]
-        return solve_batch(P, cc, *args)[0]
+        return solve_batch(P, cc, *args)
     if P.ndim != 3 or P.shape[1:] != (2, 2):
         raise ValueError(f"prior_info must have shape (B, 2, 2), got {P.shape}")
     n = P.shape[0]
@@ -378,9 +355,9 @@ def solve_single_sensor_batch(
         for k, v in zip(names, (r, rho, sigma_d2, sigma_theta2), strict=True)
     ]
     p12 = 0.5 * (P[:, 0, 1] + P[:, 1, 0])
-    l1, l2 = eigenvalues(P[:, 0, 0], p12, P[:, 1, 1], ARRAY)
+    l1, l2 = eigenvalues(P[:, 0, 0], p12, P[:, 1, 1])
     _check_scale(l1, l2, np.hypot(cc[:, 0], cc[:, 1]), *args)
-    return solve_batch(P, cc, *args)[0]
+    return solve_batch(P, cc, *args)
 
 
 def _as_array(name: str, value: ArrayLike) -> FloatArray:
@@ -423,12 +400,12 @@ def case1_critical_points(
     )
     if r == 0.0:
         raise ValueError("r must be > 0, got 0.0")
-    cph, sph, l1, l2 = eig_frame(p11, p12, p22, SCALAR)
+    cph, sph, l1, l2 = eig_frame(p11, p12, p22)
     _, L1, L2, A, Bn, C1, C2, _ = normalize(
-        l1, l2, 1.0 / sigma_d2, 1.0 / sigma_theta2, c1, c2, cph, sph, r, 0.0, SCALAR
+        l1, l2, 1.0 / sigma_d2, 1.0 / sigma_theta2, c1, c2, cph, sph, r, 0.0
     )
     swap = abs(C1) > abs(C2)
-    hk = circle_polynomial(L1, L2, A, Bn, C1, C2, swap, SCALAR)
+    hk = circle_polynomial(L1, L2, A, Bn, C1, C2, swap)
     ev = monic_roots(monic(np.array(sylvester_gammas(*hk)))[None])[0]
     keep = (np.abs(ev.imag) <= im_tol) & (np.abs(ev.real) <= 1.0 + 1e-9)
     pts, roots = [], []

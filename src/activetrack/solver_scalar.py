@@ -1,10 +1,11 @@
-"""The single-sensor solver for one problem, on Python floats (Section IV-A).
+"""The single-sensor solver, one problem, compiled (Section IV-A).
 
-The steps of :mod:`activetrack.solver_steps` with the :data:`~activetrack.solver_steps.SCALAR`
-operations: Python floats throughout (a NumPy scalar operation costs ~10x a float one),
-the roots of f3 (eq. 33) from one direct LAPACK call
-(:func:`activetrack.companion.real_roots_scalar`), candidates kept as they come. Inputs are
-validated by the caller (:func:`activetrack.solver.solve_single_sensor`).
+The steps of :mod:`activetrack.solver_steps` on floats, the roots of f3 (eq. 33) from the
+compiled companion-matrix QR (:func:`activetrack.companion.accepted_roots_into`),
+candidates kept as they come. :func:`solve_point` is the kernel; :func:`solve_rows` runs
+it over a batch in compiled code (the batched solver), :func:`solve_scalar` for one
+problem from Python. Inputs are validated by the callers
+(:func:`activetrack.solver.solve_single_sensor` and ``solve_single_sensor_batch``).
 """
 
 from __future__ import annotations
@@ -14,12 +15,12 @@ import math
 import numpy as np
 
 from activetrack._coefficients import sylvester_gammas
-from activetrack.companion import real_roots_scalar
+from activetrack._jit import kernel
+from activetrack.companion import accepted_roots_into
 from activetrack.solver_steps import (
     FEAS_TOL,
     N_POLISH,
     NEWTON_ITERS,
-    SCALAR,
     SHARP,
     STEP_TOL,
     arc_ends,
@@ -39,11 +40,14 @@ from activetrack.solver_steps import (
     to_original,
     value_at,
 )
+from activetrack.validation import FloatArray
 
-Point = tuple[float, float, float]  # (f0, x, y)
+MAX_STARTS = N_POLISH + 3  # Newton starts: the best critical root candidates, D, A, B
+assert N_POLISH == 2, "_two_best picks the polished root candidates"
 
 
-def polish(L1, L2, A, Bn, C1, C2, lo, f, x, y) -> Point:
+@kernel
+def polish(L1, L2, A, Bn, C1, C2, lo, f, x, y):
     """Return ``(f, x, y)`` after damped Newton on df0/dt from the speed-circle point (x, y).
 
     Steps from :func:`~activetrack.solver_steps.newton_step`, halved until they lower
@@ -53,9 +57,10 @@ def polish(L1, L2, A, Bn, C1, C2, lo, f, x, y) -> Point:
     t = math.atan2(y - C2, x - C1)
     for _ in range(NEWTON_ITERS):
         _, d1, d2 = circle_derivatives(L1, L2, A, Bn, C1, C2, math.cos(t), math.sin(t))
-        step, go = newton_step(d1, d2, f, SCALAR)
+        step, go = newton_step(d1, d2, f)
         if not go:  # converged (or NaN)
             break
+        moved = False
         while abs(step) >= STEP_TOL:
             tn = t + step
             xn, yn = C1 + math.cos(tn), C2 + math.sin(tn)
@@ -63,11 +68,140 @@ def polish(L1, L2, A, Bn, C1, C2, lo, f, x, y) -> Point:
                 fn = f0(L1, L2, A, Bn, xn, yn)
                 if fn < f:
                     t, f, x, y = tn, fn, xn, yn
+                    moved = True
                     break
             step *= 0.5
-        else:
+        if not moved:
             break
     return f, x, y
+
+
+@kernel
+def _two_best(fs, xs, ys, n):
+    """Return the indices ``(i, j)`` of the smallest and next smallest ``(f, x, y)`` among
+    the first ``n`` (in that lexicographic order, as a sort of the tuples; -1: none)."""
+    first = -1
+    second = -1
+    for k in range(n):
+        key = (fs[k], xs[k], ys[k])
+        if first < 0 or key < (fs[first], xs[first], ys[first]):
+            second = first
+            first = k
+        elif second < 0 or key < (fs[second], xs[second], ys[second]):
+            second = k
+    return first, second
+
+
+@kernel
+def solve_point(p11, p12, p22, c1, c2, r, rho, sigma_d2, sigma_theta2):
+    """Return ``(sx, sy, value, case, feasible)`` for one validated problem.
+
+    ``p11, p12, p22``: the symmetric prior information; ``c1, c2``: the sensor relative to
+    the target; the rest as in :func:`activetrack.solver.solve_single_sensor`.
+    """
+    cph, sph, l1, l2 = eig_frame(p11, p12, p22)
+    a = 1.0 / sigma_d2
+    b = 1.0 / sigma_theta2
+    nc = math.hypot(c1, c2)
+    case = geometric_case(nc, r, rho)
+
+    if nc + r < rho or r == 0.0:
+        # Infeasible (or nowhere to go): the reachable point farthest from the target.
+        sx, sy = fallback_point(c1, c2, nc, r)
+        ex, ey = to_eigen(sx, sy, cph, sph)
+        return sx, sy, value_at(l1, l2, a, b, ex, ey), case, nc + r >= rho
+
+    kappa, L1, L2, A, Bn, C1, C2, rh = normalize(l1, l2, a, b, c1, c2, cph, sph, r, rho)
+    ncn = nc / r
+    rh2 = rh * rh
+    lo = rh2 * (1.0 - FEAS_TOL)
+
+    best_f = math.inf
+    bx = 0.0
+    by = 0.0
+    # Critical points on the speed circle (f, x, y), then the Newton starts.
+    cf = np.empty(20)
+    cx = np.empty(20)
+    cy = np.empty(20)
+    n_circle = 0
+    sf = np.empty(MAX_STARTS)
+    sx_ = np.empty(MAX_STARTS)
+    sy_ = np.empty(MAX_STARTS)
+    n_starts = 0
+
+    on_speed_circle = ncn > 1.0 and rh2 < ncn * ncn - 1.0
+    sharp = False
+    if on_speed_circle:
+        # Cases I and III: critical points on the speed circle (eq. 30-33).
+        swap = abs(C1) > abs(C2)
+        hk = circle_polynomial(L1, L2, A, Bn, C1, C2, swap)
+        gam = np.array(sylvester_gammas(*hk))
+        roots = np.empty(10)
+        for i in range(accepted_roots_into(gam, roots)):
+            # Both points are candidates; the critical one(s) are also Newton starts.
+            for x, y, crit in root_candidates(hk, roots[i], C1, C2, swap):
+                if x * x + y * y >= lo:
+                    f = f0(L1, L2, A, Bn, x, y)
+                    if f < best_f:
+                        best_f, bx, by = f, x, y
+                    if crit:
+                        cf[n_circle], cx[n_circle], cy[n_circle] = f, x, y
+                        n_circle += 1
+        for k in _two_best(cf, cx, cy, n_circle):  # the N_POLISH = 2 best
+            if k >= 0:
+                sf[n_starts], sx_[n_starts], sy_[n_starts] = cf[k], cx[k], cy[k]
+                n_starts += 1
+        sharp = max(ncn - 1.0, rh) < SHARP
+        if ncn - 1.0 >= rh:  # the nearest point D of the speed circle (case I)
+            x, y = nearest_point(C1, C2, ncn)
+            f = f0(L1, L2, A, Bn, x, y)
+            if f < best_f:
+                best_f, bx, by = f, x, y
+            if sharp:
+                sf[n_starts], sx_[n_starts], sy_[n_starts] = f, x, y
+                n_starts += 1
+
+    if rh >= ncn - 1.0:
+        # Cases II, III and 4: the rho arc inside the speed disk (eq. 36-37) and its ends.
+        for x, y in axis_points(rh):
+            if in_speed_disk(x, y, C1, C2):
+                f = f0(L1, L2, A, Bn, x, y)
+                if f < best_f:
+                    best_f, bx, by = f, x, y
+        if ncn > 0.0 and rh >= abs(ncn - 1.0):
+            for x, y in arc_ends(C1, C2, ncn, rh2):
+                f = f0(L1, L2, A, Bn, x, y)
+                if f < best_f:
+                    best_f, bx, by = f, x, y
+                if on_speed_circle and sharp:  # case III: the speed arcs end at A, B
+                    sf[n_starts], sx_[n_starts], sy_[n_starts] = f, x, y
+                    n_starts += 1
+
+    # Polish on the speed circle: damped Newton on df0/dt (t: circle angle).
+    for k in range(n_starts):
+        f, x, y = polish(L1, L2, A, Bn, C1, C2, lo, sf[k], sx_[k], sy_[k])
+        if f < best_f:
+            best_f, bx, by = f, x, y
+
+    sx, sy = to_original(bx * r, by * r, cph, sph)
+    return sx, sy, best_f / kappa, case, True
+
+
+@kernel
+def solve_rows(P, c, r, rho, sigma_d2, sigma_theta2, s, value, case, feasible):
+    """Solve the validated problems row by row into ``s`` (B, 2), ``value``, ``case``,
+    ``feasible`` (B,); inputs (B, 2, 2), (B, 2) and (B,) x 4 (the prior symmetrized)."""
+    for i in range(P.shape[0]):
+        p12 = 0.5 * (P[i, 0, 1] + P[i, 1, 0])
+        sx, sy, v, k, ok = solve_point(
+            P[i, 0, 0], p12, P[i, 1, 1], c[i, 0], c[i, 1], r[i], rho[i], sigma_d2[i],
+            sigma_theta2[i],
+        )  # fmt: skip
+        s[i, 0] = sx
+        s[i, 1] = sy
+        value[i] = v
+        case[i] = k
+        feasible[i] = ok
 
 
 def solve_scalar(
@@ -80,80 +214,7 @@ def solve_scalar(
     rho: float,
     sigma_d2: float,
     sigma_theta2: float,
-) -> tuple[np.ndarray, float, int, bool]:
-    """Return ``(s, value, case, feasible)`` for validated float inputs.
-
-    ``p11, p12, p22``: the symmetric prior information; ``c1, c2``: the sensor relative to
-    the target; the rest as in :func:`activetrack.solver.solve_single_sensor`.
-    """
-    cph, sph, l1, l2 = eig_frame(p11, p12, p22, SCALAR)
-    a = 1.0 / sigma_d2
-    b = 1.0 / sigma_theta2
-    nc = math.hypot(c1, c2)
-    case = geometric_case(nc, r, rho)
-
-    if nc + r < rho or r == 0.0:
-        # Infeasible (or nowhere to go): the reachable point farthest from the target.
-        sx, sy = fallback_point(c1, c2, nc, r, SCALAR)
-        ex, ey = to_eigen(sx, sy, cph, sph)
-        return np.array([sx, sy]), value_at(l1, l2, a, b, ex, ey, SCALAR), case, nc + r >= rho
-
-    kappa, L1, L2, A, Bn, C1, C2, rh = normalize(l1, l2, a, b, c1, c2, cph, sph, r, rho, SCALAR)
-    ncn = nc / r
-    rh2 = rh * rh
-    lo = rh2 * (1.0 - FEAS_TOL)
-
-    best_f = math.inf
-    best = (0.0, 0.0)
-    circle: list[Point] = []  # critical points on the speed circle
-    starts: list[Point] = []  # where to polish on the speed circle
-
-    on_speed_circle = ncn > 1.0 and rh2 < ncn * ncn - 1.0
-    sharp = False
-    if on_speed_circle:
-        # Cases I and III: critical points on the speed circle (eq. 30-33).
-        swap = abs(C1) > abs(C2)
-        hk = circle_polynomial(L1, L2, A, Bn, C1, C2, swap, SCALAR)
-        for v in real_roots_scalar(sylvester_gammas(*hk)):
-            # Both points are candidates; the critical one(s) are also Newton starts.
-            for x, y, crit in root_candidates(hk, v, C1, C2, swap, SCALAR):
-                if x * x + y * y >= lo:
-                    f = f0(L1, L2, A, Bn, x, y)
-                    if f < best_f:
-                        best_f, best = f, (x, y)
-                    if crit:
-                        circle.append((f, x, y))
-        circle.sort()
-        starts = circle[:N_POLISH]
-        sharp = max(ncn - 1.0, rh) < SHARP
-        if ncn - 1.0 >= rh:  # the nearest point D of the speed circle (case I)
-            x, y = nearest_point(C1, C2, ncn)
-            f = f0(L1, L2, A, Bn, x, y)
-            if f < best_f:
-                best_f, best = f, (x, y)
-            if sharp:
-                starts.append((f, x, y))
-
-    if rh >= ncn - 1.0:
-        # Cases II, III and 4: the rho arc inside the speed disk (eq. 36-37) and its ends.
-        for x, y in axis_points(rh):
-            if in_speed_disk(x, y, C1, C2):
-                f = f0(L1, L2, A, Bn, x, y)
-                if f < best_f:
-                    best_f, best = f, (x, y)
-        if ncn > 0.0 and rh >= abs(ncn - 1.0):
-            for x, y in arc_ends(C1, C2, ncn, rh2, SCALAR):
-                f = f0(L1, L2, A, Bn, x, y)
-                if f < best_f:
-                    best_f, best = f, (x, y)
-                if on_speed_circle and sharp:  # case III: the speed arcs end at A, B
-                    starts.append((f, x, y))
-
-    # Polish on the speed circle: damped Newton on df0/dt (t: circle angle).
-    for f, x, y in starts:
-        f, x, y = polish(L1, L2, A, Bn, C1, C2, lo, f, x, y)
-        if f < best_f:
-            best_f, best = f, (x, y)
-
-    sx, sy = to_original(best[0] * r, best[1] * r, cph, sph)
-    return np.array([sx, sy]), best_f / kappa, case, True
+) -> tuple[FloatArray, float, int, bool]:
+    """Return ``(s, value, case, feasible)`` for validated float inputs (:func:`solve_point`)."""
+    sx, sy, value, case, ok = solve_point(p11, p12, p22, c1, c2, r, rho, sigma_d2, sigma_theta2)
+    return np.array([sx, sy]), value, case, ok

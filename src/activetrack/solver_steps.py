@@ -1,14 +1,9 @@
-"""The steps of the single-sensor solver (Section IV-A), written once for floats and arrays.
+"""The steps of the single-sensor solver (Section IV-A), as compiled scalar kernels.
 
-Every function here works on Python floats (the scalar path, one problem) and on NumPy
-arrays (the batched path, one problem a row) alike, with the same operations in the same
-order on both, so each path gives the results it gave as its own code. The arithmetic is
-``+ - * /``, ``abs`` and comparisons; the few operations whose float and array forms
-differ come from an ``ops`` namespace, :data:`SCALAR` (``math``, builtins, conditional
-expressions) or :data:`ARRAY` (NumPy): ``atan2``, ``hypot``, ``cos``, ``sin``, ``sqrt``,
-``maximum``, ``minimum``, ``copysign``, ``where(cond, x, y)`` and
-``swap2(cond, x, y)`` (``(y, x)`` where ``cond``, else ``(x, y)``). The scalar forms
-evaluate both branches, so callers keep both finite (e.g. a safe divisor).
+Every function here is an :func:`activetrack._jit.kernel` on floats: the solver
+(:mod:`activetrack.solver_scalar`) runs them compiled, one problem at a time, and the
+batched solver loops over problems in compiled code, so one copy of each step serves
+both.
 
 The steps, in the order the solver uses them:
 
@@ -33,36 +28,11 @@ The steps, in the order the solver uses them:
 from __future__ import annotations
 
 import math
-from types import SimpleNamespace
 
 import numpy as np
 
 from activetrack._coefficients import alpha_beta, circle_reduction
-
-SCALAR = SimpleNamespace(
-    atan2=math.atan2,
-    hypot=math.hypot,
-    cos=math.cos,
-    sin=math.sin,
-    sqrt=math.sqrt,
-    maximum=max,
-    minimum=min,
-    where=lambda cond, x, y: x if cond else y,
-    swap2=lambda cond, x, y: (y, x) if cond else (x, y),
-    copysign=math.copysign,
-)
-ARRAY = SimpleNamespace(
-    atan2=np.arctan2,
-    hypot=np.hypot,
-    cos=np.cos,
-    sin=np.sin,
-    sqrt=np.sqrt,
-    maximum=np.maximum,
-    minimum=np.minimum,
-    where=np.where,
-    swap2=lambda cond, x, y: (np.where(cond, y, x), np.where(cond, x, y)),
-    copysign=np.copysign,
-)
+from activetrack._jit import kernel
 
 RHO_FLOOR = 1e-9  # minimum rho / r used internally (see the solver's module docstring)
 FEAS_TOL = 1e-12  # relative slack of the feasibility tests of candidates
@@ -80,31 +50,37 @@ STEP_TOL = 1e-13  # Newton steps below this (radians) are converged
 SHARP = 0.25
 
 
-def eigenvalues(p11, p12, p22, ops):
+@kernel
+def eigenvalues(p11, p12, p22):
     """Return ``(l1, l2)``, the eigenvalues of ``[[p11, p12], [p12, p22]]`` (``l1 >= l2``)."""
-    l1 = 0.5 * (p11 + p22) + ops.hypot(0.5 * (p11 - p22), p12)
+    # np.hypot: also on arrays (the batched input check calls this kernel on columns).
+    l1 = 0.5 * (p11 + p22) + np.hypot(0.5 * (p11 - p22), p12)
     # det / l1 is positive whenever the matrix is (validated) positive definite.
     return l1, (p11 * p22 - p12 * p12) / l1
 
 
-def eig_frame(p11, p12, p22, ops):
+@kernel
+def eig_frame(p11, p12, p22):
     """Return ``(cos phi0, sin phi0, l1, l2)`` of Lemma 2 (``l1 >= l2 > 0``), closed form."""
-    phi0 = 0.5 * ops.atan2(2.0 * p12, p11 - p22)
-    l1, l2 = eigenvalues(p11, p12, p22, ops)
-    return ops.cos(phi0), ops.sin(phi0), l1, l2
+    phi0 = 0.5 * math.atan2(2.0 * p12, p11 - p22)
+    l1, l2 = eigenvalues(p11, p12, p22)
+    return math.cos(phi0), math.sin(phi0), l1, l2
 
 
+@kernel
 def to_eigen(x, y, cph, sph):
     """Return ``C(-phi0) (x, y)``: a point of the original frame in the eigenframe."""
     return cph * x + sph * y, -sph * x + cph * y
 
 
+@kernel
 def to_original(x, y, cph, sph):
     """Return ``C(phi0) (x, y)``: an eigenframe point in the original frame."""
     return cph * x - sph * y, sph * x + cph * y
 
 
-def normalize(l1, l2, a, b, c1, c2, cph, sph, r, rho, ops):
+@kernel
+def normalize(l1, l2, a, b, c1, c2, cph, sph, r, rho):
     """Return ``(kappa, L1, L2, A, Bn, C1, C2, rh)``: the problem in normalized units.
 
     Lengths in units of ``r > 0`` and information in units of
@@ -112,7 +88,7 @@ def normalize(l1, l2, a, b, c1, c2, cph, sph, r, rho, ops):
     largest of ``L1, A, Bn`` is 1; ``(C1, C2)`` is ``c / r`` in the eigenframe and
     ``rh = max(rho / r, RHO_FLOOR)``. ``f0`` in these units is ``kappa f0``.
     """
-    kappa = ops.maximum(ops.maximum(l1, a), b / (r * r))
+    kappa = max(max(l1, a), b / (r * r))
     big_c1, big_c2 = to_eigen(c1, c2, cph, sph)
     return (
         kappa,
@@ -122,21 +98,21 @@ def normalize(l1, l2, a, b, c1, c2, cph, sph, r, rho, ops):
         b / (r * r * kappa),
         big_c1 / r,
         big_c2 / r,
-        ops.maximum(rho / r, RHO_FLOOR),
+        max(rho / r, RHO_FLOOR),
     )
 
 
+@kernel
 def geometric_case(nc, r, rho):
-    """Return the geometric case (1-4) of Fig. 3 for ``||c|| = nc`` (4: ``||c|| <= r``).
-
-    ``4 if nc <= r else 1 if rho <= nc - r else 2 if rho^2 >= nc^2 - r^2 else 3``, by
-    arithmetic on the three tests (bools or bool arrays; the result int or int array).
-    """
-    case = 3 - (rho * rho >= nc * nc - r * r)
-    case = case - (case - 1) * (rho <= nc - r)
-    return case + (4 - case) * (nc <= r)
+    """Return the geometric case (1-4) of Fig. 3 for ``||c|| = nc`` (4: ``||c|| <= r``)."""
+    if nc <= r:
+        return 4
+    if rho <= nc - r:
+        return 1
+    return 2 if rho * rho >= nc * nc - r * r else 3
 
 
+@kernel
 def f0(l1, l2, a, b, x, y):
     """Return f0 of eq. (22) for diagonal prior ``diag(l1, l2)``: ``tr(M) / det(M)``.
 
@@ -152,6 +128,7 @@ def f0(l1, l2, a, b, x, y):
     )
 
 
+@kernel
 def circle_derivatives(l1, l2, a, b, c1, c2, co, si):
     """Return ``(f0, df0/dt, d2f0/dt2)`` at ``s = c + (cos t, sin t)`` (unit circle, eq. 30)."""
     x = c1 + co
@@ -181,7 +158,8 @@ def circle_derivatives(l1, l2, a, b, c1, c2, co, si):
     return f, f1, f2
 
 
-def circle_polynomial(L1, L2, A, Bn, C1, C2, swap, ops):
+@kernel
+def circle_polynomial(L1, L2, A, Bn, C1, C2, swap):
     """Return ``(h0..h5, k0..k4)``: f1 (eq. 32) on the speed circle is ``g0(v) + g1(v) w``.
 
     ``g0 = sum h_i v^i``, ``g1 = sum k_i v^i``; ``v`` is the offset from ``c`` (units of
@@ -190,83 +168,89 @@ def circle_polynomial(L1, L2, A, Bn, C1, C2, swap, ops):
     ``g0 + g1 w`` and the circle (eq. 30) is f3 (eq. 33):
     :func:`activetrack._coefficients.sylvester_gammas` of these.
     """
-    m1, m2 = ops.swap2(swap, L1, L2)
-    q1, q2 = ops.swap2(swap, C1, C2)
+    m1, m2, q1, q2 = (L2, L1, C2, C1) if swap else (L1, L2, C1, C2)
     return circle_reduction(*alpha_beta(m1, m2, A, Bn, q1, q2), q1, q2)
 
 
-def root_candidates(hk, v, C1, C2, swap, ops):
+@kernel
+def root_candidates(hk, v, C1, C2, swap):
     """Return ``((x+, y+, crit+), (x-, y-, crit-))``: the speed-circle points of roots ``v``.
 
     A root ``v`` in [-1, 1] of f3 (eq. 33) is the offset from ``c / r`` along x (along y
     where ``swap``); the other offset is ``+-w``, ``w = sqrt(1 - v^2)``. f1 (eq. 32) on the
-    circle is ``g0(v) + g1(v) (+-w)`` (``hk`` from :func:`circle_polynomial`, entries
-    broadcasting with ``v``; Horner's rule); a sign is critical (a Newton start) unless f1
+    circle is ``g0(v) + g1(v) (+-w)`` (``hk`` from :func:`circle_polynomial`; Horner's
+    rule); a sign is critical (a Newton start) unless f1
     there is ``SIGN_RATIO`` times that at the other. Both points are candidates.
     """
-    w = ops.sqrt(ops.maximum(0.0, 1.0 - v * v))
+    w = math.sqrt(max(0.0, 1.0 - v * v))
     g0 = ((((hk[5] * v + hk[4]) * v + hk[3]) * v + hk[2]) * v + hk[1]) * v + hk[0]
     g1w = ((((hk[10] * v + hk[9]) * v + hk[8]) * v + hk[7]) * v + hk[6]) * w
     ep, em = abs(g0 + g1w), abs(g0 - g1w)
-    (dxp, dxm), (dyp, dym) = ops.swap2(swap, (v, v), (w, -w))
+    dxp, dxm, dyp, dym = (w, -w, v, v) if swap else (v, v, w, -w)
     return (
         (C1 + dxp, C2 + dyp, ep <= SIGN_RATIO * em),
         (C1 + dxm, C2 + dym, em <= SIGN_RATIO * ep),
     )
 
 
+@kernel
 def nearest_point(C1, C2, ncn):
     """Return D, the speed circle's point nearest the target (``ncn = ||c|| / r > 0``)."""
     t = 1.0 - 1.0 / ncn
     return C1 * t, C2 * t
 
 
+@kernel
 def axis_points(rh):
     """Return the four candidates ``(+-rh, 0), (0, +-rh)`` of the ``rho`` arc (eq. 36-37)."""
     return ((rh, 0.0), (-rh, 0.0), (0.0, rh), (0.0, -rh))
 
 
+@kernel
 def in_speed_disk(x, y, C1, C2):
     """Return whether ``(x, y)`` lies in the speed disk ``|(x, y) - c / r| <= 1`` (with slack)."""
     return (x - C1) ** 2 + (y - C2) ** 2 <= 1.0 + FEAS_TOL
 
 
-def arc_ends(C1, C2, ncn, rh2, ops):
+@kernel
+def arc_ends(C1, C2, ncn, rh2):
     """Return the arc ends A, B ``((xa, ya), (xb, yb))``: where the two circles meet.
 
     ``ncn = ||c|| / r > 0`` (callers pass a safe value where it is 0), ``rh2 = (rho/r)^2``.
     """
     along = (rh2 - 1.0 + ncn * ncn) / (2.0 * ncn)
-    h = ops.sqrt(ops.maximum(0.0, rh2 - along * along))
+    h = math.sqrt(max(0.0, rh2 - along * along))
     ux, uy = C1 / ncn, C2 / ncn
     return (along * ux - h * uy, along * uy + h * ux), (along * ux + h * uy, along * uy - h * ux)
 
 
-def newton_step(d1, d2, f, ops):
+@kernel
+def newton_step(d1, d2, f):
     """Return ``(step, go)``: the damped Newton step on ``d f0 / d theta`` and whether to
     take it (the step and its predicted gain ``|f' step|`` exceed rounding; NaN: not).
 
     The step is ``-f'/|f''|`` (a descent direction even where f0 is concave) clipped to
-    ``+-MAX_STEP``. Where ``f'' = 0`` the divisor is the smallest subnormal instead, so
-    ``-f'/divisor`` is beyond ``MAX_STEP`` (or infinite) for every ``f' != 0``: the full
-    ``MAX_STEP`` downhill (arrays: the caller ignores the overflow).
+    ``+-MAX_STEP``. Where ``f'' = 0`` it is the full ``MAX_STEP`` downhill.
     """
-    step = -d1 / (abs(d2) + (d2 == 0.0) * 5e-324)
-    step = ops.maximum(-MAX_STEP, ops.minimum(MAX_STEP, step))
-    return step, (abs(step) >= STEP_TOL) & (abs(d1 * step) > GAIN_TOL * f)
+    if d2 == 0.0:
+        step = -MAX_STEP if d1 > 0.0 else (MAX_STEP if d1 < 0.0 else 0.0)
+    else:
+        step = max(-MAX_STEP, min(MAX_STEP, -d1 / abs(d2)))
+    return step, abs(step) >= STEP_TOL and abs(d1 * step) > GAIN_TOL * f
 
 
-def fallback_point(c1, c2, nc, r, ops):
+@kernel
+def fallback_point(c1, c2, nc, r):
     """Return ``c + r c / ||c||`` (the x axis if ``c = 0``): the reachable point farthest
     from the target, the answer when infeasible (``||c|| + r < rho``) or ``r = 0``."""
-    away = nc > 0.0
-    safe = ops.where(away, nc, 1.0)
-    ux = ops.where(away, c1 / safe, 1.0)
-    uy = ops.where(away, c2 / safe, 0.0)
-    return c1 + r * ux, c2 + r * uy
+    if nc > 0.0:
+        return c1 + r * (c1 / nc), c2 + r * (c2 / nc)
+    return c1 + r, c2
 
 
-def value_at(l1, l2, a, b, x, y, ops):
+@kernel
+def value_at(l1, l2, a, b, x, y):
     """Return f0 at eigenframe point (x, y); at ``s = 0`` its infimum ``1 / (l1 + a)``."""
-    origin = (x == 0.0) & (y == 0.0)
-    return ops.where(origin, 1.0 / (l1 + a), f0(l1, l2, a, b, ops.where(origin, 1.0, x), y))
+    if x == 0.0 and y == 0.0:
+        return 1.0 / (l1 + a)
+    return f0(l1, l2, a, b, x, y)

@@ -58,77 +58,16 @@ def test_parameter_errors():
         BatchedGSR(max_sweeps=0)
 
 
-def count_certified(monkeypatch):
-    """Count the solver rows the batched GSR takes from certified warm starts."""
-    import activetrack.baselines.batched_gsr as bg
-
-    seen = {"certified": 0, "rows": 0}
-    solve = bg._solve_batch_unchecked
-
-    def counting(*args):
-        sol, roots = solve(*args)
-        seen["certified"] += int(roots.certified.sum())
-        seen["rows"] += roots.certified.size
-        return sol, roots
-
-    monkeypatch.setattr(bg, "_solve_batch_unchecked", counting)
-    return seen
-
-
-def env_problems(n, steps, seed):
-    """Return batched GSR inputs along random-action episodes (as benchmarks/throughput.py)."""
-    env = BatchedActiveTracking(n, scenario="paper")
-    env.reset(seed=seed)
-    rng = np.random.default_rng(seed)
-    p = env.params
-    out = []
-    for _ in range(steps):
-        out.append(
-            (env.P_pred[:, :2, :2].copy(), env.x_pred[:, :2].copy(), env.sensors.copy())
-            + (p.r, p.rho, p.sigma_d2, p.sigma_theta2)
-        )
-        env.step(rng.uniform(-1, 1, (n, 6)))
-    return out
-
-
-def assert_same_plans(warm, cold):
-    """Warm-started and plain batched GSR agree: values to rounding, sweeps nearly always.
-
-    A copy stops when no sensor is left to re-solve, i.e. when a re-solve returns its
-    position bit for bit; a last-bit difference in where Newton polishing stops can then
-    cost or save one confirming sweep (the plain batched GSR and the scalar GSR differ
-    in the same way on a few copies).
-    """
-    np.testing.assert_allclose(warm.value, cold.value, rtol=1e-10)
-    np.testing.assert_allclose(warm.positions, cold.positions, atol=1e-6)
-    assert np.all(np.abs(warm.sweeps - cold.sweeps) <= 1)
-    assert np.mean(warm.sweeps != cold.sweeps) <= 0.02
-
-
-@pytest.mark.parametrize("distance", [(3.5, 12.0), (0.5, 6.0)])
-def test_warm_started_roots_give_the_plain_companion_path(monkeypatch, distance):
-    # Mostly case I (the speed circle, where the roots of f3 are used), then mixed cases.
+def test_warm_roots_is_deprecated_and_changes_nothing():
     rng = np.random.default_rng(17)
-    args = stack([random_problem(rng, 3, distance=distance) for _ in range(600)])
-    seen = count_certified(monkeypatch)
-    warm = BatchedGSR().plan_batch(*args)
-    if distance[0] > 3.0:
-        assert seen["certified"] >= 0.4 * seen["rows"]  # the shortcut is exercised
-    assert_same_plans(warm, BatchedGSR(warm_roots=False).plan_batch(*args))
-
-
-def test_warm_started_roots_on_environment_problems(monkeypatch):
-    for args in env_problems(256, 3, seed=4):
-        seen = count_certified(monkeypatch)
-        warm = BatchedGSR().plan_batch(*args)
-        assert seen["certified"] >= 0.5 * seen["rows"]
-        monkeypatch.undo()
-        assert_same_plans(warm, BatchedGSR(warm_roots=False).plan_batch(*args))
-
-
-def test_warm_roots_must_be_a_bool():
-    with pytest.raises(ValueError, match="warm_roots"):
-        BatchedGSR(warm_roots="yes")
+    args = stack([random_problem(rng, 3, distance=(3.5, 12.0)) for _ in range(50)])
+    plain = BatchedGSR().plan_batch(*args)
+    for cls in (BatchedGSR, GSR):
+        with pytest.warns(DeprecationWarning, match="warm_roots"):
+            cls(warm_roots=False)
+    with pytest.warns(DeprecationWarning):
+        old = BatchedGSR(warm_roots=True).plan_batch(*args)
+    np.testing.assert_array_equal(old.positions, plain.positions)
 
 
 def test_batched_gsr_rejects_a_fixed_sensor_on_the_target_and_names_the_copy():

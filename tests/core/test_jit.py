@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import os
 import subprocess
 import sys
@@ -35,30 +34,23 @@ def test_kernels_call_kernels_and_keep_the_python_function() -> None:
     assert _sum_of_squares.__name__ == "_sum_of_squares"
 
 
-_PROBE = """
-import json, sys
-import numpy as np
-import activetrack
-assert "numba" not in sys.modules  # importing the library compiles nothing
-from activetrack.companion import monic_roots, _roots_rows
-monic_roots(np.ones((2, 10)))
-stats = _roots_rows.dispatcher.stats
-print(json.dumps({"hits": sum(stats.cache_hits.values()),
-                  "misses": sum(stats.cache_misses.values())}))
-"""
+def test_the_kernels_command_compiles_caches_and_clears(tmp_path) -> None:
+    """``activetrack kernels``: compiles into the cache, a second process loads, --clear.
 
-
-def test_a_second_process_loads_the_kernels_from_the_cache(tmp_path) -> None:
-    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
+    (``import activetrack`` imports no numba: ``tests/test_layers.py``.)"""
+    cache = tmp_path / "cache"
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(cache)}
     env.pop("NUMBA_DISABLE_JIT", None)
 
-    def run() -> dict[str, int]:
-        out = subprocess.run(
-            [sys.executable, "-c", _PROBE], env=env, capture_output=True, text=True, check=True
-        )
-        return json.loads(out.stdout.strip().splitlines()[-1])
+    def run(*args: str) -> str:
+        cmd = [sys.executable, "-m", "activetrack.cli", "kernels", *args]
+        return subprocess.run(cmd, env=env, capture_output=True, text=True, check=True).stdout
 
-    first, second = run(), run()
-    assert first == {"hits": 0, "misses": 1}  # compiled and written to the new cache
-    assert second == {"hits": 1, "misses": 0}  # loaded, not compiled
-    assert any(p.suffix == ".nbi" for p in (tmp_path / "cache").rglob("*"))
+    first = run()
+    assert "loaded from the cache" in first and " 0 compiled" not in first
+    assert f"cache: {cache}" in first
+    second = run()
+    assert " 0 compiled" in second
+    cleared = run("--clear")
+    removed = int(cleared.split()[1])
+    assert removed > 0 and not list(cache.rglob("*.nbi"))

@@ -10,6 +10,7 @@ Nothing here calls the solver's own objective, candidates or geometry.
 """
 
 import math
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -227,37 +228,43 @@ def check_against_brute_force(prior, c, r, rho, sd2, st2):
 
 
 PROPERTY_SETTINGS = settings(
-    max_examples=500,
+    # As plain Python (NUMBA_DISABLE_JIT=1, the kernels' source check) a fifth of them.
+    max_examples=100 if os.environ.get("NUMBA_DISABLE_JIT") == "1" else 500,
     deadline=None,
     derandomize=True,
     suppress_health_check=[HealthCheck.filter_too_much, HealthCheck.too_slow],
 )
 
 
+@pytest.mark.kernels
 @PROPERTY_SETTINGS
 @given(problems(1))
 def test_case1_matches_dense_search(p):
     assert check_against_brute_force(*p).case == 1
 
 
+@pytest.mark.kernels
 @PROPERTY_SETTINGS
 @given(problems(2))
 def test_case2_matches_dense_search(p):
     assert check_against_brute_force(*p).case == 2
 
 
+@pytest.mark.kernels
 @PROPERTY_SETTINGS
 @given(problems(3))
 def test_case3_matches_dense_search(p):
     assert check_against_brute_force(*p).case == 3
 
 
+@pytest.mark.kernels
 @PROPERTY_SETTINGS
 @given(problems(4))
 def test_case4_target_within_reach_matches_dense_search(p):
     assert check_against_brute_force(*p).case == 4
 
 
+@pytest.mark.kernels
 @pytest.mark.parametrize("seed", range(100))
 def test_hard_instances_close_to_the_target(seed):
     """Speed circle passing very near the target: f0 varies fast and roots crowd."""
@@ -328,6 +335,7 @@ def test_companion_roots_are_kkt_points_on_the_speed_circle(seed):
 # -------------------------------------------------------------------- degenerate inputs
 
 
+@pytest.mark.kernels
 def test_infeasible_returns_farthest_reachable_point():
     prior = np.diag([2.0, 0.5])
     c = np.array([0.3, 0.4])  # ||c|| = 0.5
@@ -343,6 +351,7 @@ def test_infeasible_at_the_target_picks_the_x_axis():
     np.testing.assert_allclose(sol.s, [0.5, 0.0])
 
 
+@pytest.mark.kernels
 @pytest.mark.parametrize(
     ("c", "rho", "feasible"),
     [([3.0, -4.0], 1.0, True), ([3.0, -4.0], 5.0, True), ([0.3, 0.4], 1.0, False)],
@@ -355,6 +364,7 @@ def test_zero_reach_stays_put(c, rho, feasible):
     assert sol.value == pytest.approx(ref_f0(prior, c, 0.2, 0.05)[0], rel=1e-12)
 
 
+@pytest.mark.kernels
 def test_target_reachable_with_zero_rho_approaches_the_infimum():
     """rho = 0, ||c|| <= r: f0 -> 1 / (l1 + 1/sigma_d^2) along the major eigen-axis."""
     phi = 0.7
@@ -411,6 +421,7 @@ def random_batch(rng, n):
     return prior, c, r, rho, 10 ** rng.uniform(-3, 1, n), 10 ** rng.uniform(-3, 1, n)
 
 
+@pytest.mark.kernels
 def test_batch_matches_scalar():
     rng = np.random.default_rng(11)
     prior, c, r, rho, sd2, st2 = random_batch(rng, 400)

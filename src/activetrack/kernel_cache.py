@@ -1,0 +1,116 @@
+"""The compiled kernels' disk cache: compile everything now, say where it went, clear it.
+
+``activetrack kernels`` (this module's command) compiles every kernel the library's entry
+points use, through those entry points, and reports the time and numba's cache folders;
+``activetrack kernels --clear`` deletes the cached machine code of the library's kernels
+instead (numba then compiles again on first use). Useful before timing anything, in a
+container image build, or after changing numba or the CPU. See :mod:`activetrack._jit` for
+how the cache works.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from activetrack._jit import KERNELS
+
+#: The modules whose kernels :func:`compile_all` reaches (importing them defines them all).
+KERNEL_MODULES = (
+    "activetrack.hessenberg_qr",
+    "activetrack.companion",
+    "activetrack._coefficients",
+    "activetrack.solver_steps",
+    "activetrack.solver_scalar",
+)
+
+
+def compile_all() -> dict[str, Any]:
+    """Return ``{"seconds", "kernels", "signatures", "cache_hits", "cache_misses"}`` after
+    calling every entry point that runs kernels once (compiling or loading from the cache)."""
+    for name in KERNEL_MODULES:
+        importlib.import_module(name)
+    from activetrack.companion import monic_roots, real_roots_scalar
+    from activetrack.solver import (
+        case1_critical_points,
+        solve_single_sensor,
+        solve_single_sensor_batch,
+    )
+
+    start = time.perf_counter()
+    prior = np.array([[2.0, 0.3], [0.3, 1.0]])
+    for check in (True, False):
+        solve_single_sensor(prior, np.array([5.0, 1.0]), 1.0, 0.5, 0.1, 0.01, check=check)
+        solve_single_sensor_batch(
+            prior[None], np.array([[5.0, 1.0]]), 1.0, 0.5, 0.1, 0.01, check=check
+        )
+    case1_critical_points(prior, np.array([5.0, 1.0]), 1.0, 0.1, 0.01)
+    monic_roots(np.ones((1, 10)))
+    real_roots_scalar(tuple(float(k) for k in range(11)))
+    seconds = time.perf_counter() - start
+    used = [k for k in KERNELS if k._compiled is not None]
+    stats = [k.dispatcher.stats for k in used if hasattr(k.dispatcher, "stats")]
+    return {
+        "seconds": seconds,
+        "kernels": len(used),
+        "signatures": sum(len(k.dispatcher.signatures) for k in used),
+        "cache_hits": sum(sum(s.cache_hits.values()) for s in stats),
+        "cache_misses": sum(sum(s.cache_misses.values()) for s in stats),
+    }
+
+
+def cache_folders() -> list[Path]:
+    """Return the folders where numba caches the library's kernels (one per source folder)."""
+    for name in KERNEL_MODULES:
+        importlib.import_module(name)
+    folders = set()
+    for k in KERNELS:
+        cache = getattr(k.dispatcher, "_cache", None)  # numba's FunctionCache
+        path = getattr(cache, "cache_path", None)
+        if path:
+            folders.add(Path(path))
+    return sorted(folders)
+
+
+def clear_cache() -> int:
+    """Delete the cached machine code of the library's kernels; return how many files."""
+    stems = {Path(k.py_func.__code__.co_filename).stem for k in KERNELS}
+    removed = 0
+    for folder in cache_folders():
+        for path in folder.glob("*.nb[ic]"):
+            if path.name.split(".", 1)[0] in stems:
+                path.unlink(missing_ok=True)
+                removed += 1
+    return removed
+
+
+def add_parsers(sub: argparse._SubParsersAction) -> None:
+    """Add the ``kernels`` command."""
+    parser = sub.add_parser(
+        "kernels",
+        help="compile the numba kernels now (or clear their cache) and report time and folder",
+        description=__doc__.splitlines()[0],
+    )
+    parser.add_argument(
+        "--clear", action="store_true", help="delete the cached kernels instead of compiling"
+    )
+    parser.set_defaults(func=_run, parser=parser)
+
+
+def _run(args: argparse.Namespace) -> int:
+    if args.clear:
+        print(f"removed {clear_cache()} cached files")
+        return 0
+    report = compile_all()
+    print(
+        f"kernels ready in {report['seconds']:.1f} s: {report['cache_misses']} compiled, "
+        f"{report['cache_hits']} loaded from the cache"
+    )
+    for folder in cache_folders():
+        print(f"cache: {folder}")
+    return 0
