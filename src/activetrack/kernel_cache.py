@@ -58,7 +58,7 @@ def compile_all() -> dict[str, Any]:
     return {
         "seconds": seconds,
         "kernels": len(used),
-        "signatures": sum(len(k.dispatcher.signatures) for k in used),
+        "signatures": sum(len(getattr(k.dispatcher, "signatures", ())) for k in used),
         "cache_hits": sum(sum(s.cache_hits.values()) for s in stats),
         "cache_misses": sum(sum(s.cache_misses.values()) for s in stats),
     }

@@ -138,12 +138,18 @@ def test_world_get_targets_axis_and_per_target_fields():
 
 
 def _nees_runs(name: str, **overrides) -> np.ndarray:
-    """Return the position NEES (steps, runs, K) of RUNS GSR-driven episodes of a task."""
+    """Return the position NEES (steps, runs, K) of RUNS GSR-driven episodes of a task.
+
+    GSR stops after 3 sweeps: the sensors go where GSR sends them (close to rho, where the
+    measurements are most nonlinear), and the filter, not the plan's last digits, is what
+    these runs test (range_only's mean NEES is 2.0296 with 3 sweeps, 2.0294 converged;
+    two_targets' 2.0435/2.0329 and 2.0406/2.0328), in a fraction of the time.
+    """
     from activetrack.baselines import GSR
 
     w = World(name, RUNS, **overrides)
     w.reset(seeds=list(range(20_000, 20_000 + RUNS)))
-    planner, out = GSR(), []
+    planner, out = GSR(max_sweeps=3), []
     while not w.truncated.all():
         w.step(planner.plan(w.planning_problem()))
         out.append(w.position_nees(per_target=True))
