@@ -43,7 +43,8 @@ from activetrack.baselines import gsr_restarts
 from activetrack.baselines._common import sensor_modes, sensor_modes_of
 from activetrack.objective import sensor_information
 from activetrack.problem import PlanningProblem
-from activetrack.solver import _solve_batch_unchecked, solve_single_sensor
+from activetrack.solver import _solve_batch_unchecked
+from activetrack.solver_scalar import solve_point
 from activetrack.validation import FloatArray
 
 STARTS = gsr_restarts.STARTS
@@ -370,6 +371,7 @@ class Relaxation:
         self.c = problem.rel_sensors
         self.r, self.rho = problem.r.tolist(), problem.rho.tolist()
         self.sd2, self.st2 = problem.sigma_d2, problem.sigma_theta2
+        self._c, self._sd2, self._st2 = self.c.tolist(), self.sd2.tolist(), self.st2.tolist()
         self.prior = problem.prior_info
         self.objective = problem.objective
         self.phi = problem.objective.of_information
@@ -379,12 +381,18 @@ class Relaxation:
         self.start_value = math.nan
 
     def solve(self, others: FloatArray, i: int) -> FloatArray:
-        """Return sensor ``i``'s optimum given the information ``others`` (eq. 38), (2,)."""
+        """Return sensor ``i``'s optimum given the information ``others`` (eq. 38), (2,).
+
+        The solver's kernel on floats (what ``solve_single_sensor(..., check=False)``
+        runs, without its wrapping: GSR calls it ~10 times a plan).
+        """
         self.n_solves += 1
-        sol = solve_single_sensor(
-            others, self.c[i], self.r[i], self.rho[i], self.sd2[i], self.st2[i], check=False
+        p11, p12, _, p22 = others.ravel().tolist()
+        c1, c2 = self._c[i]
+        sx, sy, _, _, _ = solve_point(
+            p11, p12, p22, c1, c2, self.r[i], self.rho[i], self._sd2[i], self._st2[i]
         )
-        return np.asarray(sol.s, dtype=np.float64)
+        return np.array([sx, sy])
 
     def info(self, s: FloatArray, i: int) -> FloatArray:
         """Return sensor ``i``'s information at relative position ``s`` (eq. 17), (2, 2)."""
