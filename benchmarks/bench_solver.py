@@ -7,6 +7,10 @@ the geometric cases mixed):
 - the median wall time of one scalar ``solve_single_sensor`` call (and with ``check=False``),
 - the time per problem of one ``solve_single_sensor_batch`` call on the whole batch,
 - the time of the first calls (compiling the kernels, or loading them from numba's cache),
+- the eigenvalues of f3's companion matrices of the speed-circle problems, per matrix:
+  the compiled QR (:func:`activetrack.companion.monic_roots`, one call on the stack)
+  beside LAPACK through NumPy (``np.linalg.eigvals`` on the same stack) and through
+  SciPy's ``dgeev`` one matrix per call, in the same run,
 - the median time of ``scipy.optimize.minimize(method="SLSQP")`` from 8 starts per problem
   (the constraints (23)-(24) as inequality functions), the ratio of the times,
 - how often SLSQP's best feasible value is worse than the analytic one, and by how much.
@@ -107,6 +111,46 @@ def slsqp(prior, c, r, rho, sd2, st2, n_starts: int = 8) -> float:
     return best
 
 
+def companion_peers(prior, c, r, sd2, st2) -> None:
+    """Print the compiled QR's time per companion matrix beside LAPACK's, same matrices."""
+    from scipy.linalg import lapack
+
+    from activetrack._coefficients import sylvester_gammas
+    from activetrack.companion import monic, monic_roots
+    from activetrack.solver_steps import circle_polynomial, eig_frame, normalize
+
+    qs = []
+    for i in range(prior.shape[0]):
+        cph, sph, l1, l2 = eig_frame(prior[i, 0, 0], prior[i, 0, 1], prior[i, 1, 1])
+        _, L1, L2, A, Bn, C1, C2, _ = normalize(
+            l1, l2, 1 / sd2[i], 1 / st2[i], c[i, 0], c[i, 1], cph, sph, r[i], 0.0
+        )
+        hk = circle_polynomial(L1, L2, A, Bn, C1, C2, abs(C1) > abs(C2))
+        qs.append(monic(np.array(sylvester_gammas(*hk))))
+    q = np.array(qs)
+    comp = np.zeros((len(q), 10, 10))
+    comp[:, np.arange(1, 10), np.arange(9)] = 1.0
+    comp[:, 0, :] = -q[:, ::-1]
+    monic_roots(q[:2])
+    t0 = time.perf_counter()
+    monic_roots(q)
+    ours = (time.perf_counter() - t0) / len(q)
+    t0 = time.perf_counter()
+    np.linalg.eigvals(comp)
+    numpy_stack = (time.perf_counter() - t0) / len(q)
+    mats = [np.asfortranarray(m) for m in comp[:2000]]  # dgeev overwrites its input
+    t0 = time.perf_counter()
+    for m in mats:
+        lapack.dgeev(m, 0, 0, 40, 1)
+    dgeev = (time.perf_counter() - t0) / len(mats)
+    print(
+        f"companion eigenvalues ({len(q)} speed-circle polynomials), per matrix: compiled QR "
+        f"{ours * 1e6:.1f} us, LAPACK via np.linalg.eigvals on the stack "
+        f"{numpy_stack * 1e6:.1f} us ({numpy_stack / ours:.2f}x), scipy dgeev per call "
+        f"{dgeev * 1e6:.1f} us ({dgeev / ours:.2f}x)"
+    )
+
+
 def main() -> None:
     """Run the benchmark and print the figures."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -145,6 +189,9 @@ def main() -> None:
             solve_single_sensor_batch(*sub)
             dt = (time.perf_counter() - t0) / sel.sum()
             print(f"  batched, cases {name} only ({sel.sum()}): {dt * 1e6:.1f} us/problem")
+
+    if circle_rows.any():
+        companion_peers(*(a[circle_rows] for a in (prior, c, r, sd2, st2)))
 
     # Scalar: median over single calls.
     m = min(args.n_scalar, args.n)
