@@ -275,3 +275,23 @@ def test_gsr_plans_other_objectives_numerically_never_worse_than_its_start():
             assert res.value <= float(q.score(p.sensors)) + 1e-12 or np.any(
                 p.violation(p.sensors) > 0
             )
+
+
+def test_the_sweeps_solver_call_is_the_public_solver():
+    """Relaxation.solve calls the solver's kernel directly: the same point as the public
+    ``solve_single_sensor`` (unchecked and checked) on GSR's own subproblems, bit for bit."""
+    from activetrack.objective import sensor_information
+    from activetrack.solver import solve_single_sensor
+
+    rng = np.random.default_rng(5)
+    for _ in range(40):
+        problem = random_problem(rng, 3, distance=(0.5, 6.0))
+        run = Relaxation(problem, 1e-9, 100)
+        info = sensor_information(problem.rel_sensors, problem.sigma_d2, problem.sigma_theta2)
+        for i in range(3):
+            others = problem.prior_info + info.sum(axis=0) - info[i]
+            args = (others, problem.rel_sensors[i], problem.r[i], problem.rho[i],
+                    problem.sigma_d2[i], problem.sigma_theta2[i])  # fmt: skip
+            want = solve_single_sensor(*args, check=False).s
+            np.testing.assert_array_equal(run.solve(others, i), want)
+            np.testing.assert_allclose(solve_single_sensor(*args).s, want, rtol=0, atol=1e-12)
