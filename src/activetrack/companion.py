@@ -133,45 +133,13 @@ def monic_roots(q: FloatArray) -> np.ndarray:
     return _roots_rows(np.ascontiguousarray(q, dtype=np.float64))
 
 
-def accept(re, im):
-    """Return whether roots with real parts ``re`` and imaginary parts ``im`` are accepted.
-
-    Floats or arrays alike; NaN fails.
-    """
-    return (abs(im) <= IM_TOL) & (abs(re) <= _RE_BOUND)
-
-
-def accept_roots(ev: np.ndarray) -> tuple[FloatArray, np.ndarray]:
-    """Return ``(x, ok)``: real parts clipped to [-1, 1] and which eigenvalues qualify."""
-    re = ev.real
-    ok = accept(re, ev.imag) & np.isfinite(re)
-    return np.clip(re, -1.0, 1.0), ok
-
-
-def accepted_first(v: FloatArray, ok: np.ndarray) -> tuple[FloatArray, np.ndarray]:
-    """Return ``(v, ok)`` cut to the accepted entries of each row, in order, (m, kmax).
-
-    ``kmax`` is the most any row accepts; shorter rows are padded with ``ok = False``.
-    """
-    rows = np.arange(v.shape[0])
-    rest = ok.copy()
-    kmax = int(np.max(np.count_nonzero(ok, axis=1)))
-    out_v = np.empty((v.shape[0], kmax))
-    out_ok = np.empty((v.shape[0], kmax), dtype=bool)
-    for j in range(kmax):
-        first = np.argmax(rest, axis=1)  # the first accepted entry left (0 if none)
-        out_v[:, j] = v[rows, first]
-        out_ok[:, j] = rest[rows, first]
-        rest[rows, first] = False
-    return out_v, out_ok
-
-
 @kernel
 def accepted_roots_into(gam: FloatArray, out: FloatArray) -> int:
     """Return how many roots of one f3 (coefficients ``gam`` (11,)) are accepted; they go,
     clipped to [-1, 1], to the front of ``out`` (10,) in the order found.
 
-    :func:`monic` + :func:`monic_roots` + :func:`accept_roots` for one polynomial.
+    :func:`monic` + :func:`monic_roots` for one polynomial, then the acceptance rule of
+    the module docstring (NaN fails it).
     """
     q = np.empty(10)
     wr = np.empty(10)

@@ -277,21 +277,49 @@ def test_gsr_plans_other_objectives_numerically_never_worse_than_its_start():
             )
 
 
-def test_the_sweeps_solver_call_is_the_public_solver():
-    """Relaxation.solve calls the solver's kernel directly: the same point as the public
-    ``solve_single_sensor`` (unchecked and checked) on GSR's own subproblems, bit for bit."""
+def _dense_min(others, c, r, rho, sd2, st2):
+    """Return the least ``tr((others + info(s))^-1)`` over a dense sampling of the feasible
+    set ``|s - c| <= r``, ``|s| >= rho`` (speed circle, rho circle and a 300x300 grid)."""
+    t = np.linspace(-np.pi, np.pi, 20_001)
+    ring = np.stack([np.cos(t), np.sin(t)], -1)
+    g = np.linspace(-1.0, 1.0, 300)
+    grid = np.stack(np.meshgrid(g, g), -1).reshape(-1, 2)
+    pts = np.concatenate([c + r * ring, rho * ring, c + r * grid])
+    pts = pts[(np.linalg.norm(pts - c, axis=1) <= r) & (np.linalg.norm(pts, axis=1) >= rho)]
+    x, y = pts[:, 0], pts[:, 1]
+    d = x * x + y * y
+    a, b = 1.0 / (sd2 * d), 1.0 / (st2 * d * d)  # range and bearing information (eq. 17)
+    m11 = others[0, 0] + a * x * x + b * y * y
+    m22 = others[1, 1] + a * y * y + b * x * x
+    m12 = others[0, 1] + (a - b) * x * y
+    return float(np.min((m11 + m22) / (m11 * m22 - m12 * m12)))
+
+
+def test_the_sweeps_solver_call_is_the_global_optimum_of_the_subproblem():
+    """Relaxation.solve calls the solver's kernel directly: on GSR's own subproblems its
+    point is feasible and no worse than a dense search of the feasible set (eq. 38)."""
     from activetrack.objective import sensor_information
-    from activetrack.solver import solve_single_sensor
 
     rng = np.random.default_rng(5)
-    for _ in range(40):
+    for _ in range(10):
         problem = random_problem(rng, 3, distance=(0.5, 6.0))
         run = Relaxation(problem, 1e-9, 100)
         info = sensor_information(problem.rel_sensors, problem.sigma_d2, problem.sigma_theta2)
         for i in range(3):
             others = problem.prior_info + info.sum(axis=0) - info[i]
-            args = (others, problem.rel_sensors[i], problem.r[i], problem.rho[i],
-                    problem.sigma_d2[i], problem.sigma_theta2[i])  # fmt: skip
-            want = solve_single_sensor(*args, check=False).s
-            np.testing.assert_array_equal(run.solve(others, i), want)
-            np.testing.assert_allclose(solve_single_sensor(*args).s, want, rtol=0, atol=1e-12)
+            c, r, rho = problem.rel_sensors[i], problem.r[i], problem.rho[i]
+            sd2, st2 = problem.sigma_d2[i], problem.sigma_theta2[i]
+            s = run.solve(others, i)
+            if np.linalg.norm(c) + r < rho:
+                continue  # infeasible: nothing to compare
+            assert np.linalg.norm(s - c) <= r * (1 + 1e-9)
+            assert np.linalg.norm(s) >= rho * (1 - 1e-9)
+            x, y = s
+            d = x * x + y * y
+            m = (
+                others
+                + np.array([[x * x, x * y], [x * y, y * y]]) / (sd2 * d)
+                + np.array([[y * y, -x * y], [-x * y, x * x]]) / (st2 * d * d)
+            )
+            value = np.trace(np.linalg.inv(m))
+            assert value <= _dense_min(others, c, r, rho, sd2, st2) * (1 + 1e-9)

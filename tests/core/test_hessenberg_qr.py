@@ -20,7 +20,6 @@ import pytest
 from activetrack.companion import (
     IM_TOL,
     RE_TOL,
-    accept_roots,
     monic,
     monic_roots,
     real_roots_scalar,
@@ -158,5 +157,3 @@ def test_scalar_accepted_roots_are_the_real_roots_in_the_interval() -> None:
         want = sorted(min(1.0, max(-1.0, z.real)) for z in near)
         assert len(got) == len(want)
         assert all(math.isclose(g, w, abs_tol=1e-8) for g, w in zip(got, want, strict=True))
-        x, ok = accept_roots(monic_roots(monic(gam)[None])[0])
-        assert sorted(x[ok].tolist()) == got

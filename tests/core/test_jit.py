@@ -54,3 +54,12 @@ def test_the_kernels_command_compiles_caches_and_clears(tmp_path) -> None:
     cleared = run("--clear")
     removed = int(cleared.split()[1])
     assert removed > 0 and not list(cache.rglob("*.nbi"))
+
+
+def test_the_kernels_command_rejects_an_unknown_option(capsys) -> None:
+    from activetrack.cli import main
+
+    with pytest.raises(SystemExit) as exc:
+        main(["kernels", "--clean"])
+    assert exc.value.code == 2
+    assert "unrecognized arguments: --clean" in capsys.readouterr().err
