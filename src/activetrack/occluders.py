@@ -4,9 +4,10 @@ The geometric kernel of occluders (issue 13, beyond the paper: its closing sente
 visibility and motion constraints from obstacles as future work). An :class:`Occluders` is
 a fixed set of simple polygons (either orientation, convex or not, possibly touching or
 overlapping each other). The *occluded region* ``U`` is the union of the polygons' open
-interiors. Every kernel broadcasts over leading axes, is float64, and is vectorized over
-points and edges at once (``(..., E)`` arrays); with no polygons each returns the trivial
-answer without touching the batch.
+interiors. Every function broadcasts over leading axes and is float64; the computation is
+compiled, one point, segment or ray at a time (:mod:`activetrack.occluder_kernels`,
+numba), so one sensor and a batch of thousands cost the same per point; with no polygons
+each returns the trivial answer.
 
 Tolerance. All tests use one absolute tolerance ``occ.eps = TOL * occ.scale``, with
 ``scale = max(1, max |vertex coordinate|)``: a point within ``eps`` of a polygon's boundary
@@ -64,9 +65,8 @@ set of ``N`` layouts with the same number of polygons and vertices per polygon; 
 kernel then reads the first axis of its points (of their broadcast shape, without the
 coordinate axis) as the layout axis, of length ``N``: point ``[i, ...]`` is tested against
 layout ``i`` with layout ``i``'s own ``eps`` and ``scale``, bit for bit as the unbatched
-kernel on ``occ[i]`` and the points ``[i]``. The flat kernels see one geometry per row
-(:class:`_Rows`: the shared layout, or each row's layout gathered by index), so both cases
-run the same vectorized code.
+kernel on ``occ[i]`` and the points ``[i]``. The kernels take each row's layout index (all
+0 for a shared layout), so both cases run the same code.
 
 Only :meth:`Occluders.from_polygons`, :meth:`Occluders.stack`, :meth:`Occluders.replaced`
 and :func:`random_layout` validate their input; the kernels are unchecked (finite float
@@ -81,14 +81,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from activetrack import occluder_kernels as ok
+from activetrack.occluder_kernels import REACH_TOL, TOL
 from activetrack.validation import FloatArray, real_array
 
-#: Relative tolerance of boundary membership (times ``occ.scale``: ``occ.eps``).
-TOL = 1e-10
-#: Relative tolerance of the reach disk in :func:`project_move`.
-REACH_TOL = 1e-10
-#: Margin of the cuts of :func:`blocked` (edge parameter; vertex offset from the line).
-_CUT = 1e-9
+__all__ = [
+    "REACH_TOL", "TOL", "Occluders", "blocked", "inside", "line_of_sight", "project_move",
+    "random_layout", "ray_distances",
+]  # fmt: skip
 
 
 def _frozen(a: np.ndarray) -> np.ndarray:
@@ -157,14 +157,23 @@ class Occluders:
     __iter__ = None
 
     def __post_init__(self) -> None:
-        # The flat kernels' view (:class:`_Rows`), built once: a shared layout's own arrays
-        # and floats; a batched set's arrays with eps and scale as (N, 1) columns.
-        geo = (self.edges_a, self.edges_b, self.bbox, self.crossings, self.eps, self.scale)
-        if self.edges_a.ndim == 3:
-            geo = geo[:4] + (np.reshape(self.eps, (-1, 1)), np.reshape(self.scale, (-1, 1)))
-        shared = None if self.edges_a.ndim == 3 else _Rows(geo, self.starts, None)
-        object.__setattr__(self, "_geo", geo)
-        object.__setattr__(self, "_shared", shared)
+        # The compiled kernels' view (activetrack.occluder_kernels), built once: every
+        # array with a leading layout axis (1 for one shared layout), C-contiguous and
+        # writable (one numba signature for every set).
+        lead = (lambda a: a) if self.edges_a.ndim == 3 else (lambda a: np.asarray(a)[None])
+        n = len(self.starts)
+        ends = np.append(self.starts[1:], self.edges_a.shape[-2]) if n else self.starts
+        arrays = (
+            np.array(lead(self.edges_a), np.float64),
+            np.array(lead(self.edges_b), np.float64),
+            np.array(self.starts, np.intp),
+            np.array(ends, np.intp),
+            np.array(lead(self.bbox), np.float64),
+            np.array(lead(self.crossings), np.float64),
+            np.array(np.reshape(self.eps, -1), np.float64),
+            np.array(np.reshape(self.scale, -1), np.float64),
+        )
+        object.__setattr__(self, "_kernel_args", arrays)
 
     @property
     def batched(self) -> bool:
@@ -359,10 +368,16 @@ class Occluders:
             if not np.all(np.isfinite(arr)):
                 raise ValueError(f"{name} must be finite (no NaN or inf)")
             polys.append(arr)
-        scale = max([1.0] + [float(np.max(np.abs(p))) for p in polys])
-        eps = TOL * scale
+        eps = TOL * _scale(polys)
         for i, p in enumerate(polys):
             _check_simple(f"polygons[{i}]", p, eps)
+        return cls._of_simple(polys)
+
+    @classmethod
+    def _of_simple(cls, polys: list[np.ndarray]) -> Occluders:
+        """Return the occluders of float64 polygons known to be simple (not checked)."""
+        scale = _scale(polys)
+        eps = TOL * scale
         n = np.array([len(p) for p in polys], dtype=np.intp)
         starts = np.concatenate([[0], np.cumsum(n)[:-1]]).astype(np.intp) if polys else n
         if polys:
@@ -370,8 +385,11 @@ class Occluders:
             b = np.concatenate([np.roll(p, -1, axis=0) for p in polys])
             ep = np.repeat(np.arange(len(polys)), n)
             bbox = np.array([[*p.min(0), *p.max(0)] for p in polys])
+            crossings = np.empty((len(a) * (len(a) - 1) // 2, 2))
+            found = ok.crossings_into(a, b, ep, crossings)
+            crossings = np.unique(crossings[:found], axis=0)
         else:
-            a = b = np.empty((0, 2))
+            a = b = crossings = np.empty((0, 2))
             ep = np.empty(0, np.intp)
             bbox = np.empty((0, 4))
         return cls(
@@ -381,10 +399,15 @@ class Occluders:
             edge_polygon=_frozen(ep),
             starts=_frozen(starts),
             bbox=_frozen(bbox),
-            crossings=_frozen(_crossings(a, b, ep, eps)),
+            crossings=_frozen(crossings),
             scale=scale,
             eps=eps,
         )
+
+
+def _scale(polys: list[np.ndarray]) -> float:
+    """Return ``max(1, max |vertex coordinate|)``: the scale of the tolerances."""
+    return max([1.0] + [float(np.max(np.abs(p))) for p in polys])
 
 
 def _trimmed(crossings: np.ndarray) -> np.ndarray:
@@ -393,61 +416,30 @@ def _trimmed(crossings: np.ndarray) -> np.ndarray:
     return crossings[:, :x]
 
 
-#: The fields of an :class:`Occluders`' ``_geo`` (and of :class:`_Rows`), in order.
-_GEO = ("edges_a", "edges_b", "bbox", "crossings", "eps", "scale")
-
-
-class _Rows:
-    """The geometry the flat kernels' rows (M points) are tested against.
-
-    Shared layout (``lay`` None): the attributes are the layout's own ``edges_a``,
-    ``edges_b`` (E, 2), ``bbox`` (P, 4), ``crossings`` (X, 2), floats ``eps`` and ``scale``,
-    and every row broadcasts against them. Batched set (``lay`` (M,) each row's layout):
-    an attribute gathers one layout per row on first use, ``edges_a``, ``edges_b``
-    (M, E, 2), ``bbox`` (M, P, 4), ``crossings`` (M, X, 2), ``eps`` and ``scale`` (M, 1).
-    The kernels index them from the end (``[..., 0]``), so both broadcast as ``(M, E)``
-    with elementwise the same arithmetic: a row's result does not depend on the case.
-    """
-
-    __slots__ = ("geo", "lay", "starts", *_GEO)
-
-    def __init__(self, geo: tuple, starts: np.ndarray, lay: np.ndarray | None) -> None:
-        self.geo, self.starts, self.lay = geo, starts, lay
-        if lay is None:
-            for name, arr in zip(_GEO, geo, strict=True):
-                setattr(self, name, arr)
-
-    def __getattr__(self, name: str) -> np.ndarray:
-        # Reached only for an unset geometry slot of a batched set: gather it once.
-        if name not in _GEO:
-            raise AttributeError(name)
-        arr = self.geo[_GEO.index(name)][self.lay]
-        setattr(self, name, arr)
-        return arr
-
-    def take(self, sel: np.ndarray) -> _Rows:
-        """Return the rows ``sel`` (a mask or indices into the M rows)."""
-        return self if self.lay is None else _Rows(self.geo, self.starts, self.lay[sel])
-
-    def repeat(self, k: int) -> _Rows:
-        """Return each row repeated ``k`` times (as ``np.repeat(points, k, axis=0)``)."""
-        if self.lay is None:
-            return self
-        return _Rows(self.geo, self.starts, np.repeat(self.lay, k))
-
-
-def _rows(occ: Occluders, shape: tuple[int, ...], name: str) -> _Rows:
-    """Return the rows' geometry for points of broadcast ``shape`` (without the coordinate
-    axis), flattened; for a batched set, ``shape[0]`` must be its number of layouts."""
-    if occ._shared is not None:
-        return occ._shared
+def _layouts(occ: Occluders, shape: tuple[int, ...], name: str) -> np.ndarray:
+    """Return the layout of each of the points of broadcast ``shape`` (without the
+    coordinate axis), flattened: all 0 for one shared layout; for a batched set,
+    ``shape[0]`` must be its number of layouts (the leading axis is the layout axis)."""
+    size = math.prod(shape)
+    if not occ.batched:
+        return np.zeros(size, np.intp)
     n = occ.n_layouts
     if len(shape) == 0 or shape[0] != n:
         raise ValueError(
             f"{name}: a batched Occluders of {n} layouts needs the points' leading axis to "
             f"be the layout axis, of length {n}, got points of shape {shape}"
         )
-    return _Rows(occ._geo, occ.starts, np.repeat(np.arange(n), math.prod(shape[1:])))
+    return np.repeat(np.arange(n, dtype=np.intp), size // n)
+
+
+def _flat(a: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
+    """Return ``a`` broadcast to ``shape + (2,)`` as a C-contiguous writable (size, 2) array."""
+    if a.shape[:-1] != shape:
+        a = np.broadcast_to(a, shape + (2,))
+    a = a.reshape(-1, 2)
+    if not (a.flags.c_contiguous and a.flags.writeable):
+        a = a.copy()
+    return a
 
 
 def _check_simple(name: str, p: np.ndarray, eps: float) -> None:
@@ -475,64 +467,6 @@ def _check_simple(name: str, p: np.ndarray, eps: float) -> None:
         raise ValueError(f"{name} must have non-zero area, got area {area!r}")
 
 
-def _crossings(a: np.ndarray, b: np.ndarray, ep: np.ndarray, eps: float) -> np.ndarray:
-    """Return the points (X, 2) where edges of different polygons cross or touch."""
-    if len(a) == 0:
-        return np.empty((0, 2))
-    i, j = np.triu_indices(len(a), k=1)
-    keep = ep[i] != ep[j]
-    i, j = i[keep], j[keep]
-    d1, d2 = b[i] - a[i], b[j] - a[j]
-    den = _cross(d1, d2)
-    w = a[j] - a[i]
-    ok = den != 0
-    sden = np.where(ok, den, 1.0)
-    t, s = _cross(w, d2) / sden, _cross(w, d1) / sden
-    ok &= (t >= 0) & (t <= 1) & (s >= 0) & (s <= 1)
-    pts = a[i] + t[:, None] * d1
-    return np.unique(pts[ok], axis=0) if np.any(ok) else np.empty((0, 2))
-
-
-def _point_edge_dist2(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Return squared distances (..., E) from points ``p`` (..., 2) to edges ``[a, b]``
-    ((E, 2), or (..., E, 2) broadcasting with the points' leading axes)."""
-    d = b - a
-    dd = np.sum(d * d, -1)
-    px, py = p[..., 0, None] - a[..., 0], p[..., 1, None] - a[..., 1]
-    t = np.clip((px * d[..., 0] + py * d[..., 1]) / dd, 0.0, 1.0)
-    ex, ey = px - t * d[..., 0], py - t * d[..., 1]
-    return ex * ex + ey * ey
-
-
-def _inside_flat(p: np.ndarray, g: _Rows) -> np.ndarray:
-    """Return :func:`inside` for points ``p`` (M, 2), computed only near some polygon."""
-    bb = g.bbox
-    x, y = p[:, 0, None], p[:, 1, None]
-    near = np.any(
-        (x > bb[..., 0]) & (x < bb[..., 2]) & (y > bb[..., 1]) & (y < bb[..., 3]), axis=-1
-    )
-    out = np.zeros(len(p), bool)
-    if not np.any(near):
-        return out
-    q = p[near]
-    g = g.take(near)
-    a, b = g.edges_a, g.edges_b
-    qx, qy = q[:, 0, None], q[:, 1, None]
-    up = (a[..., 1] > qy) != (b[..., 1] > qy)
-    dy = b[..., 1] - a[..., 1]
-    slope = (b[..., 0] - a[..., 0]) / np.where(dy != 0, dy, 1.0)
-    cross = up & (qx < a[..., 0] + (qy - a[..., 1]) * slope)
-    odd = np.logical_xor.reduceat(cross, g.starts, axis=-1)
-    # The boundary test only where the parity says inside some polygon.
-    some = np.any(odd, axis=-1)
-    gs = g.take(some)
-    a, b, eps = gs.edges_a, gs.edges_b, gs.eps
-    onb = np.logical_or.reduceat(_point_edge_dist2(q[some], a, b) <= eps * eps, g.starts, axis=-1)
-    idx = np.flatnonzero(near)[some]
-    out[idx] = np.any(odd[some] & ~onb, axis=-1)
-    return out
-
-
 def inside(points: FloatArray, occ: Occluders) -> np.ndarray:
     """Return whether each point (..., 2) lies in ``U`` (module docstring), bool (...).
 
@@ -540,56 +474,13 @@ def inside(points: FloatArray, occ: Occluders) -> np.ndarray:
     is not inside that polygon.
     """
     p = np.asarray(points, np.float64)
-    g = _rows(occ, p.shape[:-1], "inside")
-    if occ.n_edges == 0:
-        return np.zeros(p.shape[:-1], bool)
-    return _inside_flat(p.reshape(-1, 2), g).reshape(p.shape[:-1])
-
-
-def _blocked_flat(a: np.ndarray, b: np.ndarray, g: _Rows) -> np.ndarray:
-    """Return :func:`blocked` for segments ``a``, ``b`` (M, 2)."""
-    bb, e = g.bbox, g.eps
-    lo, hi = np.minimum(a, b), np.maximum(a, b)
-    near = np.any(
-        (hi[:, 0, None] > bb[..., 0] + e)
-        & (lo[:, 0, None] < bb[..., 2] - e)
-        & (hi[:, 1, None] > bb[..., 1] + e)
-        & (lo[:, 1, None] < bb[..., 3] - e),
-        axis=-1,
-    )
-    out = np.zeros(len(a), bool)
-    if not np.any(near):
-        return out
-    a, b = a[near], b[near]
-    g = g.take(near)
-    d = b - a
-    c, cb = g.edges_a, g.edges_b
-    f = cb - c
-    den = d[:, 0, None] * f[..., 1] - d[:, 1, None] * f[..., 0]
-    wx, wy = c[..., 0] - a[:, 0, None], c[..., 1] - a[:, 1, None]
-    ok = den != 0
-    sden = np.where(ok, den, 1.0)
-    t = (wx * f[..., 1] - wy * f[..., 0]) / sden
-    s = (wx * d[:, 1, None] - wy * d[:, 0, None]) / sden
-    # Crossings (with a margin in s, so that a crossing at a vertex is never lost between
-    # its two edges; surplus cuts are harmless, they only split an interval).
-    t = np.where(ok & (s >= -_CUT) & (s <= 1 + _CUT) & (t > 0) & (t < 1), t, -1.0)
-    # Vertices close to the segment's line: the ends of edges collinear with it.
-    dd = np.sum(d * d, -1)[:, None]
-    tv = (wx * d[:, 0, None] + wy * d[:, 1, None]) / np.where(dd > 0, dd, 1.0)
-    off = np.abs(wx * d[:, 1, None] - wy * d[:, 0, None])
-    tv = np.where((off <= _CUT * g.scale * np.sqrt(dd)) & (tv > 0) & (tv < 1), tv, -1.0)
-    cuts = np.sort(np.concatenate([t, tv], axis=-1), axis=-1)
-    k = int(np.max(np.sum(cuts >= 0, axis=-1)))  # the valid cuts are the last k columns
-    m = len(a)
-    ts = np.concatenate(
-        [np.zeros((m, 1)), np.maximum(cuts[:, cuts.shape[1] - k :], 0.0), np.ones((m, 1))], -1
-    )
-    mid = 0.5 * (ts[:, 1:] + ts[:, :-1])
-    pts = a[:, None, :] + mid[..., None] * d[:, None, :]
-    inner = _inside_flat(pts.reshape(-1, 2), g.repeat(mid.shape[1]))
-    out[near] = np.any(inner.reshape(mid.shape), axis=-1)
-    return out
+    shape = p.shape[:-1]
+    lay = _layouts(occ, shape, "inside")
+    out = np.zeros(math.prod(shape), bool)
+    if occ.n_edges:
+        ea, eb, starts, ends, bbox, _, eps, _ = occ._kernel_args
+        ok.inside_rows(_flat(p, shape), lay, ea, eb, starts, ends, bbox, eps, out)
+    return out.reshape(shape)
 
 
 def blocked(a: FloatArray, b: FloatArray, occ: Occluders) -> np.ndarray:
@@ -607,75 +498,13 @@ def _blocked(a: FloatArray, b: FloatArray, occ: Occluders, name: str) -> np.ndar
     """Return :func:`blocked` (``name`` the public function, for the layout-axis error)."""
     a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
     shape = np.broadcast_shapes(a.shape, b.shape)[:-1]
-    g = _rows(occ, shape, name)
-    if occ.n_edges == 0:
-        return np.zeros(shape, bool)
-    a = np.broadcast_to(a, shape + (2,)).reshape(-1, 2)
-    b = np.broadcast_to(b, shape + (2,)).reshape(-1, 2)
-    return _blocked_flat(a, b, g).reshape(shape)
-
-
-def _candidates(o: np.ndarray, q: np.ndarray, r: np.ndarray, gr: _Rows) -> np.ndarray:
-    """Return the candidates (M, C, 2) of :func:`project_move` (NaN where one does not exist).
-
-    ``o`` start, ``q`` desired (M, 2), ``r`` reach (M,); the list of the module docstring.
-    """
-    m = len(o)
-    c, cb = gr.edges_a, gr.edges_b  # ([M,] E, 2)
-    f, v = cb - c, c
-    ff = np.sum(f * f, -1)
-    # q projected onto every edge.
-    u = np.clip(np.sum((q[:, None, :] - c) * f, -1) / ff, 0.0, 1.0)
-    on_edge = c + u[..., None] * f
-    verts = np.broadcast_to(v, (m,) + v.shape[-2:])
-    # Shadow rays o + s g, s >= 1, g = v - o: q's projection, the reach point, the first hit.
-    g = v - o[:, None, :]
-    gg = np.sum(g * g, -1)
-    has = gg > 0
-    sgg = np.where(has, gg, 1.0)
-    s = np.maximum(1.0, np.sum((q - o)[:, None, :] * g, -1) / sgg)
-    shadow = o[:, None, :] + s[..., None] * g
-    glen = np.sqrt(gg)
-    reach = np.where(
-        (has & (glen <= r[:, None]))[..., None],
-        o[:, None, :] + (r[:, None] / np.where(has, glen, 1.0))[..., None] * g,
-        np.nan,
-    )
-    w = c[..., None, :, :] - o[:, None, None, :]  # (M, 1, E, 2)
-    fx, fy = f[..., None, :, 0], f[..., None, :, 1]  # ([M,] 1, E)
-    den = g[..., None, 0] * fy - g[..., None, 1] * fx  # (M, V, E)
-    okd = den != 0
-    sden = np.where(okd, den, 1.0)
-    sh = (w[..., 0] * fy - w[..., 1] * fx) / sden
-    uh = (w[..., 0] * g[..., None, 1] - w[..., 1] * g[..., None, 0]) / sden
-    tol = 1e-9
-    hit = okd & (uh >= -tol) & (uh <= 1 + tol) & (sh > 1 + tol) & has[..., None]
-    smin = np.min(np.where(hit, sh, np.inf), axis=-1)
-    first = np.where(
-        np.isfinite(smin)[..., None],
-        o[:, None, :] + np.where(np.isfinite(smin), smin, 0)[..., None] * g,
-        np.nan,
-    )
-    # Reach circle with edges: |c - o + u f| = r.
-    co = c - o[:, None, :]
-    bq = np.sum(co * f, -1)
-    cq = np.sum(co * co, -1) - (r * r)[:, None]
-    disc = bq * bq - ff * cq
-    sq = np.sqrt(np.maximum(disc, 0.0))
-    circ = []
-    for root in ((-bq - sq) / ff, (-bq + sq) / ff):
-        okr = (disc >= 0) & (root >= 0) & (root <= 1)
-        circ.append(np.where(okr[..., None], c + root[..., None] * f, np.nan))
-    # q's radial projection onto the reach circle, and the start.
-    dq = q - o
-    nq = np.hypot(dq[:, 0], dq[:, 1])
-    radial = np.where((nq > 0)[:, None], o + (r / np.where(nq > 0, nq, 1.0))[:, None] * dq, np.nan)
-    cr = gr.crossings
-    cross = np.broadcast_to(cr, (m,) + cr.shape[-2:])
-    return np.concatenate(
-        [on_edge, verts, shadow, reach, first, *circ, cross, radial[:, None], o[:, None]],
-        axis=1,
-    )
+    lay = _layouts(occ, shape, name)
+    out = np.zeros(math.prod(shape), bool)
+    if occ.n_edges:
+        ea, eb, starts, ends, bbox, _, eps, scale = occ._kernel_args
+        a, b = _flat(a, shape), _flat(b, shape)
+        ok.blocked_rows(a, b, lay, ea, eb, starts, ends, bbox, eps, scale, out)
+    return out.reshape(shape)
 
 
 def project_move(
@@ -693,64 +522,40 @@ def project_move(
     """
     o, q = np.asarray(start, np.float64), np.asarray(desired, np.float64)
     r = np.asarray(r, np.float64)
-    shape = np.broadcast_shapes(o.shape[:-1], q.shape[:-1], r.shape)
-    g = _rows(occ, shape, "project_move")
-    o = np.broadcast_to(o, shape + (2,)).reshape(-1, 2)
-    rf = np.broadcast_to(r, shape).reshape(-1)
-    out = np.broadcast_to(q, shape + (2,)).reshape(-1, 2).copy()
-    d = out - o
-    lim = rf * (1.0 + REACH_TOL)
-    need = d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] > lim * lim
-    if occ.n_edges == 0:
-        if np.any(need):  # the reach disk only
-            n = np.hypot(d[need, 0], d[need, 1])
-            out[need] = o[need] + (rf[need] / n)[:, None] * d[need]
-    else:
-        need |= _blocked_flat(o, out, g)
-        if np.any(need):
-            out[need] = _nearest_reachable(o[need], out[need], rf[need], g.take(need))
-    return out.reshape(shape + (2,)), need.reshape(shape)
-
-
-def _nearest_reachable(o: np.ndarray, q: np.ndarray, r: np.ndarray, g: _Rows) -> np.ndarray:
-    """Return the nearest point of ``R`` to ``q`` (M, 2); ``o`` where ``R`` is empty."""
-    cand = _candidates(o, q, r, g)
-    d = cand - o[:, None, :]
-    lim = (r * (1.0 + REACH_TOL))[:, None]
-    okr = np.sum(d * d, -1) <= lim * lim  # False for NaN candidates
-    e = cand - q[:, None, :]
-    dist = np.where(okr, np.sum(e * e, -1), np.inf)
-    order = np.argsort(dist, axis=-1, kind="stable")
-    rows = np.arange(len(o))
-    out = o.copy()
-    todo = rows
-    k, chunk = 0, 4
-    while len(todo) and k < order.shape[1]:
-        idx = order[todo, k : k + chunk]  # (T, chunk)
-        pts = cand[todo[:, None], idx]
-        fin = np.isfinite(dist[todo[:, None], idx])
-        ok = fin & ~_blocked_flat(
-            np.repeat(o[todo], idx.shape[1], axis=0),
-            pts.reshape(-1, 2),
-            g.take(todo).repeat(idx.shape[1]),
-        ).reshape(idx.shape)
-        found = np.any(ok, axis=-1)
-        first = np.argmax(ok, axis=-1)
-        out[todo[found]] = pts[found, first[found]]
-        k += chunk
-        if k >= order.shape[1]:
-            break
-        # Rows whose remaining candidates are all infinite have nothing reachable left.
-        todo = todo[~found & np.isfinite(dist[todo, order[todo, k]])]
-    return out
+    shape = o.shape[:-1]  # the world's case: start and desired alike (no broadcast)
+    if q.shape != o.shape or r.shape != shape[len(shape) - r.ndim :]:
+        shape = np.broadcast_shapes(o.shape[:-1], q.shape[:-1], r.shape)
+    lay = _layouts(occ, shape, "project_move")
+    rf = r if r.shape == shape else np.broadcast_to(r, shape)
+    rf = rf.reshape(-1)
+    if not (rf.flags.c_contiguous and rf.flags.writeable):
+        rf = rf.copy()
+    out = np.empty(shape + (2,))
+    projected = np.empty(shape, bool)
+    ok.project_rows(
+        _flat(o, shape), _flat(q, shape), rf, lay, *occ._kernel_args,
+        out.reshape(-1, 2), projected.reshape(-1),
+    )  # fmt: skip
+    return out, projected
 
 
 def line_of_sight(sensors: FloatArray, targets: FloatArray, occ: Occluders) -> np.ndarray:
     """Return whether each sensor (..., M, 2) sees each target (..., K, 2): (..., K, M),
     the segment between them not :func:`blocked` (batched ``occ``: the first of the
     leading axes ``...`` is the layout axis)."""
-    sensors, targets = np.asarray(sensors, np.float64), np.asarray(targets, np.float64)
-    return ~_blocked(sensors[..., None, :, :], targets[..., :, None, :], occ, "line_of_sight")
+    s, t = np.asarray(sensors, np.float64), np.asarray(targets, np.float64)
+    lead = s.shape[:-2]
+    if t.shape[:-2] != lead:
+        lead = np.broadcast_shapes(lead, t.shape[:-2])
+    m, k = s.shape[-2], t.shape[-2]
+    lay = _layouts(occ, lead + (k, m), "line_of_sight")[:: k * m]  # each row's
+    out = np.ones(lead + (k, m), bool)
+    if occ.n_edges:
+        ea, eb, starts, ends, bbox, _, eps, scale = occ._kernel_args
+        ok.sight_rows(_flat(s, lead + (m,)).reshape(-1, m, 2),
+                      _flat(t, lead + (k,)).reshape(-1, k, 2), lay, ea, eb, starts, ends, bbox,
+                      eps, scale, out.reshape(-1, k, m))  # fmt: skip
+    return out
 
 
 def ray_distances(
@@ -765,24 +570,18 @@ def ray_distances(
     is the layout axis.
     """
     o = np.asarray(origins, np.float64)
-    dirs = np.asarray(directions, np.float64)
-    out = np.full(o.shape[:-1] + (dirs.shape[0],), float(max_distance))
-    c, eps = occ.edges_a, occ.eps
-    f = occ.edges_b - c
-    if occ.batched:  # one layout per leading row: origins (N, K, 2), edges (N, 1, E, 2)
-        _rows(occ, o.shape[:-1], "ray_distances")  # checks the layout axis
-        o = o.reshape(len(c), -1, 2)
-        c, f, eps = c[:, None], f[:, None], eps[:, None, None, None]
-    if occ.n_edges == 0:
-        return out
-    gx, gy = dirs[:, 0, None], dirs[:, 1, None]  # (R, 1)
-    den = gx * f[..., 1] - gy * f[..., 0]  # ([N,] R, E); parallel edges never hit (inv = 0)
-    inv = np.divide(1.0, den, out=np.zeros_like(den), where=den != 0)[..., None, :, :]
-    wx, wy = c[..., 0] - o[..., 0, None], c[..., 1] - o[..., 1, None]  # (..., E)
-    s = (wx * f[..., 1] - wy * f[..., 0])[..., None, :] * inv  # (..., R, E)
-    u = (wx[..., None, :] * gy - wy[..., None, :] * gx) * inv
-    hit = (u >= 0) & (u <= 1) & (s > eps)
-    return np.minimum(out, np.min(np.where(hit, s, np.inf), axis=-1).reshape(out.shape))
+    dirs = _flat(np.asarray(directions, np.float64), (len(directions),))
+    shape = o.shape[:-1]
+    lay = _layouts(occ, shape, "ray_distances")
+    out = np.empty((math.prod(shape), len(dirs)))
+    ea, eb, starts, ends, bbox, _, eps, _ = occ._kernel_args
+    ok.ray_rows(_flat(o, shape), dirs, lay, ea, eb, starts, ends, bbox, eps,
+                float(max_distance), out)  # fmt: skip
+    return out.reshape(shape + (len(dirs),))
+
+
+#: The smallest side of a random rectangle, relative to the bounds' scale.
+_MIN_SIDE = 1e-6
 
 
 def _rectangle(center: np.ndarray, w: float, h: float, angle: float) -> np.ndarray:
@@ -822,11 +621,25 @@ def random_layout(
     sz = np.asarray(size_range, np.float64)
     if sz.shape != (2,) or not np.all(np.isfinite(sz)) or not 0 < sz[0] <= sz[1]:
         raise ValueError(f"size_range must be (lo, hi) with 0 < lo <= hi, got {size_range!r}")
+    least = _MIN_SIDE * max(1.0, float(np.max(np.abs(bx))))
+    if sz[0] < least:  # else a rectangle could be degenerate at the occluders' tolerance
+        raise ValueError(
+            f"size_range must be (lo, hi) with lo >= {least:g} ({_MIN_SIDE:g} times the "
+            f"bounds' scale), got {size_range!r}"
+        )
     if not np.isfinite(clearance) or clearance < 0:
         raise ValueError(f"clearance must be finite and >= 0, got {clearance!r}")
     pts = np.empty((0, 2)) if clear is None else np.asarray(clear, np.float64).reshape(-1, 2)
     if not np.all(np.isfinite(pts)):
         raise ValueError("clear must be finite (no NaN or inf)")
+    return Occluders._of_simple(_rectangles(rng, n, bx, sz, pts, clearance, rotate, max_tries))
+
+
+def _rectangles(
+    rng: np.random.Generator, n: int, bx: FloatArray, sz: FloatArray, pts: FloatArray,
+    clearance: float, rotate: bool, max_tries: int,
+) -> list[np.ndarray]:  # fmt: skip
+    """Return :func:`random_layout`'s rectangles (its arguments checked), (4, 2) each."""
     polys: list[np.ndarray] = []
     for k in range(n):
         for _ in range(max_tries):
@@ -841,11 +654,8 @@ def random_layout(
             if np.any(lo > hi):
                 continue
             poly = _rectangle(rng.uniform(lo, hi), w, h, ang)
-            if len(pts):
-                one = Occluders.from_polygons([poly])
-                d2 = np.min(_point_edge_dist2(pts, one.edges_a, one.edges_b), axis=-1)
-                if np.any(inside(pts, one)) or np.any(d2 < clearance * clearance):
-                    continue
+            if len(pts) and _too_close(pts, poly, clearance):
+                continue
             polys.append(poly)
             break
         else:
@@ -853,4 +663,22 @@ def random_layout(
                 f"could not place rectangle {k} in {max_tries} tries (max_tries, bounds, "
                 "size_range or clearance too tight)"
             )
-    return Occluders.from_polygons(polys)
+    return polys  # rectangles of sides >= size_range[0]: simple
+
+
+def _too_close(points: FloatArray, poly: np.ndarray, clearance: float) -> bool:
+    """Return whether a point (k, 2) is inside the polygon or nearer than ``clearance``."""
+    pts = _flat(points, (len(points),))
+    n = len(poly)
+    ea = np.ascontiguousarray(poly)[None]
+    eb = np.concatenate([poly[1:], poly[:1]])[None]
+    bbox = np.concatenate([poly.min(0), poly.max(0)])[None, None]
+    eps = np.array([TOL * _scale([poly])])
+    within = np.empty(len(pts), bool)
+    bounds = np.array([0], np.intp), np.array([n], np.intp)
+    ok.inside_rows(pts, np.zeros(len(pts), np.intp), ea, eb, *bounds, bbox, eps, within)
+    if np.any(within):
+        return True
+    d2 = np.empty((len(pts), n))
+    ok.edge_dist2_rows(pts, ea[0], eb[0], d2)
+    return bool(np.any(d2 < clearance * clearance))

@@ -301,6 +301,12 @@ class Scenario:
         size = _vector("occluder_size", self.occluder_size, 2, 1e-6, LENGTH_MAX, zero=False)
         if size[0] > size[1]:
             raise ValueError(f"occluder_size must be (lo, hi) with lo <= hi, got {size!r}")
+        least = 1e-6 * max(1.0, max(abs(v) for v in b))  # random_layout's smallest side
+        if size[0] < least:
+            raise ValueError(
+                f"occluder_size must be (lo, hi) with lo >= {least:g} (1e-06 times the "
+                f"occluder_bounds' scale), got {size!r}"
+            )
         put("occluder_size", size)
 
     def draw_occluders(self, rng: np.random.Generator):  # -> activetrack.occluders.Occluders
@@ -309,15 +315,15 @@ class Scenario:
 
         Raises ``ValueError`` naming the fields when the rectangles cannot be placed.
         """
-        from activetrack.occluders import Occluders, random_layout  # noqa: PLC0415
+        from activetrack.occluders import Occluders, _rectangles  # noqa: PLC0415
 
         clear = np.array(
             [self.sensor_center, *(x[:2] for x in self.target_states("x0_hat"))], np.float64
         )
         try:
-            drawn = random_layout(
-                rng, self.random_occluders, self.occluder_bounds, self.occluder_size,
-                clear=clear, clearance=self.sensor_radius,
+            drawn = _rectangles(  # random_layout's rectangles (the fields are checked)
+                rng, self.random_occluders, np.asarray(self.occluder_bounds, np.float64),
+                np.asarray(self.occluder_size, np.float64), clear, self.sensor_radius, True, 1000,
             )  # fmt: skip
         except ValueError:
             raise ValueError(
@@ -327,7 +333,9 @@ class Scenario:
                 f"{self.sensor_radius:g}; widen occluder_bounds or lower random_occluders, "
                 "occluder_size or sensor_radius"
             ) from None
-        return Occluders.from_polygons([*self.occluders, *drawn.polygons])
+        # Both sets are simple polygons already (the fixed ones checked with the scenario).
+        fixed = [np.asarray(poly, np.float64) for poly in self.occluders]
+        return Occluders._of_simple([*fixed, *drawn])
 
     def _converted_motion(self, kk: int) -> Any:
         """Return ``motion`` checked: one model, or (K > 1) a tuple of K models."""

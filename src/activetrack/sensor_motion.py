@@ -67,10 +67,15 @@ def keep_distance(
     q = new - target_pred[..., None, :]
     inside = np.abs(as_complex(q)) < np.asarray(rho, dtype=np.float64) * _INSIDE
     if np.count_nonzero(inside):
-        inside &= np.asarray(r) > 0.0  # a sensor that cannot move (r = 0) stays, even inside
-        c = sensors - target_pred[..., None, :]
-        fixed = project_feasible(q, c, r, rho) + target_pred[..., None, :]
-        new = np.where(inside[..., None], fixed, new)
+        r = np.broadcast_to(np.asarray(r, dtype=np.float64), inside.shape)
+        inside &= r > 0.0  # a sensor that cannot move (r = 0) stays, even inside
+        # Only the moves that ended inside are projected (elementwise: the same values as
+        # projecting all, at a fraction of the cost in a large batch).
+        rho = np.broadcast_to(np.asarray(rho, dtype=np.float64), inside.shape)
+        pred = np.broadcast_to(target_pred[..., None, :], new.shape)
+        c = sensors - pred
+        new = np.array(new)  # a copy: the caller's array stays as it was
+        new[inside] = project_feasible(q[inside], c[inside], r[inside], rho[inside]) + pred[inside]
     return new, inside
 
 

@@ -11,6 +11,9 @@ from activetrack import ekf, measurement, motion
 from tests.core.helpers import random_spd, textbook_h, textbook_update
 from tests.envs.reference import ekf_update as reference_ekf_update
 
+# The EKF is compiled (activetrack.ekf_kernels): make test also runs these as plain Python.
+pytestmark = pytest.mark.kernels
+
 
 @pytest.mark.parametrize(
     "model", [at.constant_velocity(10.0, 0.1), at.constant_acceleration(2.0, 0.1)]

@@ -14,6 +14,9 @@ from activetrack import ekf
 from activetrack.scenarios import make_scenario
 from activetrack.world import World
 
+# The EKF is compiled (activetrack.ekf_kernels): make test also runs these as plain Python.
+pytestmark = pytest.mark.kernels
+
 USES = {0: (1.0, 1.0), 1: (1.0, 0.0), 2: (0.0, 1.0)}  # range-and-bearing, range, bearing
 
 

@@ -122,6 +122,7 @@ def test_bad_second_polygon_is_named():
         oc.Occluders.from_polygons([SQUARE, [[0, 0], [1, 1]]])
 
 
+@pytest.mark.kernels
 def test_empty_set_is_trivial():
     occ = oc.Occluders.empty()
     rng = np.random.default_rng(0)
@@ -142,6 +143,7 @@ def test_empty_set_is_trivial():
     np.testing.assert_array_equal(d, np.full((5, 3, 1), 7.0))
 
 
+@pytest.mark.kernels
 def test_crossings_of_overlapping_squares():
     occ = oc.Occluders.from_polygons([SQUARE, SQUARE + [0.5, 0.5]])
     got = sorted(map(tuple, occ.crossings))
@@ -151,6 +153,7 @@ def test_crossings_of_overlapping_squares():
 # ---------------------------------------------------------------- inside
 
 
+@pytest.mark.kernels
 def test_inside_matches_matplotlib_and_winding_numbers():
     rng = np.random.default_rng(1)
     for _ in range(10):
@@ -170,6 +173,7 @@ def test_inside_matches_matplotlib_and_winding_numbers():
         assert got.mean() > 0.05  # the test exercises insides
 
 
+@pytest.mark.kernels
 def test_boundary_points_are_not_inside():
     rng = np.random.default_rng(2)
     polys = mixed_layout(rng, 6)
@@ -194,6 +198,7 @@ def test_boundary_points_are_not_inside():
 # ---------------------------------------------------------------- blocked
 
 
+@pytest.mark.kernels
 @pytest.mark.parametrize(
     "polys, a, b, want",
     [
@@ -241,6 +246,26 @@ def test_blocked_matches_dense_sampling_on_random_segments():
     assert 50 < n_blocked < 330
 
 
+@pytest.mark.kernels
+def test_line_of_sight_matches_dense_sampling():
+    """Every sensor (copies, M, 2) against every target (copies, K, 2): (copies, K, M)."""
+    rng = np.random.default_rng(11)
+    polys = mixed_layout(rng)
+    occ = oc.Occluders.from_polygons(polys)
+    sensors = rng.uniform(-3.5, 3.5, (4, 3, 2))
+    targets = rng.uniform(-3.5, 3.5, (4, 2, 2))
+    got = oc.line_of_sight(sensors, targets, occ)
+    assert got.shape == (4, 2, 3)
+    for c in range(4):
+        for k in range(2):
+            want = ~sampled_blocked(sensors[c], np.repeat(targets[c, k][None], 3, 0), polys)
+            np.testing.assert_array_equal(got[c, k], want)
+    assert 0 < got.sum() < got.size
+    # One copy without a leading axis, targets broadcast against a batch of sensors.
+    np.testing.assert_array_equal(oc.line_of_sight(sensors[1], targets[1], occ), got[1])
+    np.testing.assert_array_equal(oc.line_of_sight(sensors, targets[1], occ)[1], got[1])
+
+
 def adversarial_segments(rng, polys, n):
     """Return segments through vertices, along edges, and from points on edges."""
     verts = np.concatenate(polys)
@@ -267,6 +292,7 @@ def adversarial_segments(rng, polys, n):
     return np.array(out_a), np.array(out_b)
 
 
+@pytest.mark.kernels
 def test_blocked_matches_dense_sampling_on_adversarial_segments():
     rng = np.random.default_rng(4)
     n_blocked = 0
@@ -333,6 +359,7 @@ def pick(kinds, mask, per_kind):
     return [i for k in range(4) for i in np.flatnonzero(mask & (kinds == k))[:per_kind]]
 
 
+@pytest.mark.kernels
 def test_project_move_hand_cases():
     occ = oc.Occluders.from_polygons([SQUARE])
     # Onto the facing edge.
@@ -415,6 +442,7 @@ def random_steps(rng, polys, n, r_lo=0.2, r_hi=2.0, beyond=1.0):
     return o, o + rad[:, None] * np.stack([np.cos(ang), np.sin(ang)], -1), r
 
 
+@pytest.mark.kernels
 @pytest.mark.parametrize("beyond", [1.0, 1.5])
 def test_project_move_is_the_nearest_reachable_point_by_brute_force(beyond):
     """Desired points in the reach disk, and beyond it (the reach circle's candidates)."""
@@ -437,6 +465,7 @@ def test_project_move_is_the_nearest_reachable_point_by_brute_force(beyond):
     assert bool(seen[2] and seen[3]) is (beyond > 1)
 
 
+@pytest.mark.kernels
 def test_project_move_behind_corners_by_brute_force():
     """Desired points hidden behind a square from a start near it: shadow-ray answers."""
     rng = np.random.default_rng(7)
@@ -479,6 +508,7 @@ def test_ten_thousand_random_steps_never_enter_and_are_nearest():
 # ---------------------------------------------------------------- ray_distances
 
 
+@pytest.mark.kernels
 def test_ray_distances_match_sampling_along_rays():
     rng = np.random.default_rng(9)
     polys = mixed_layout(rng)
@@ -503,6 +533,7 @@ def test_ray_distances_match_sampling_along_rays():
 # ---------------------------------------------------------------- random_layout
 
 
+@pytest.mark.kernels
 def test_random_layout_is_seeded_inside_bounds_and_keeps_points_clear():
     clear = np.array([[0.0, 0.0], [2.0, 1.0]])
     a = oc.random_layout(
@@ -538,3 +569,6 @@ def test_random_layout_bad_input():
         oc.random_layout(rng, 1, (0, 0, 1, 1), (0.1, 0.2), clearance=-1.0)
     with pytest.raises(ValueError, match="max_tries"):
         oc.random_layout(rng, 1, (0, 0, 1, 1), (0.5, 0.6), clear=[[0.5, 0.5]], clearance=1.0)
+    # Sides below 1e-6 of the bounds' scale would be degenerate at the boundary tolerance.
+    with pytest.raises(ValueError, match=r"size_range .* lo >= 0\.0001 "):
+        oc.random_layout(rng, 1, (0, 0, 100, 1), (1e-5, 1.0))

@@ -210,6 +210,7 @@ def batch_points(rng, lays, k_random, k_edge, k_inner):
     )
 
 
+@pytest.mark.kernels
 @pytest.mark.parametrize("seed", [30, 31, 32])
 def test_inside_blocked_line_of_sight_equal_the_layouts_kernels(seed):
     rng = np.random.default_rng(seed)
@@ -274,6 +275,7 @@ def test_project_move_equals_the_layouts_kernel_bit_for_bit(seed):
         np.testing.assert_array_equal(proj[i], wproj)
 
 
+@pytest.mark.kernels
 def test_project_move_onto_crossings_of_some_copies():
     """Closed forms: the reflex corner where two overlapping squares' edges cross (a
     crossing candidate) in copies 0 and 2; in copy 1 (disjoint squares, no crossing, NaN
@@ -294,6 +296,7 @@ def test_project_move_onto_crossings_of_some_copies():
     np.testing.assert_allclose(out, want, rtol=0, atol=1e-15)
 
 
+@pytest.mark.kernels
 def test_ray_distances_equal_the_layouts_kernel_bit_for_bit():
     rng = np.random.default_rng(50)
     lays = layouts(rng, 9)

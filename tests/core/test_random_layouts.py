@@ -139,6 +139,7 @@ def test_planners_see_each_copys_own_layout():
         ({"occluder_size": (0.0, 2.0)}, "occluder_size must lie in"),
         ({"occluder_size": "big"}, "occluder_size"),
         ({"occluder_size": (30.0, 40.0)}, "do not fit in occluder_bounds"),
+        ({"occluder_size": (2e-5, 2.0)}, r"lo >= 2.4e-05 \(1e-06 times the occluder_bounds"),
     ],
 )
 def test_bad_random_layout_fields_name_the_field(overrides, match):

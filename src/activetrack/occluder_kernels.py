@@ -1,0 +1,375 @@
+"""Compiled geometry of polygonal occluders, one point, segment or ray at a time.
+
+The kernels behind :mod:`activetrack.occluders` (its module docstring states the
+definitions, the tolerances and why :func:`project_point`'s candidates contain the nearest
+reachable point). Each ``*_rows`` kernel loops its per-row kernel over a flat batch in
+compiled code, so one call serves one sensor or thousands of copies alike.
+
+Geometry arguments (``Occluders._kernel_args``), for ``L`` layouts of ``P`` polygons and
+``E`` edges each: ``ea``, ``eb`` (L, E, 2) the edges' ends, ``starts``, ``ends`` (P,) each
+polygon's block of edges, ``bbox`` (L, P, 4) ``(xmin, ymin, xmax, ymax)``, ``cross``
+(L, X, 2) the crossings of different polygons' edges (NaN rows pad), ``eps`` and ``scale``
+(L,); ``lay`` (M,) is the layout of each row (all 0 for one shared layout).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from activetrack._jit import kernel
+
+#: Relative tolerance of boundary membership (times ``occ.scale``: ``occ.eps``).
+TOL = 1e-10
+#: Relative tolerance of the reach disk in :func:`project_point`.
+REACH_TOL = 1e-10
+#: Margin of the cuts of :func:`blocked_segment` (edge parameter; vertex offset from the line).
+CUT = 1e-9
+#: Margin of the shadow rays' first hits in :func:`project_point` (edge and ray parameters).
+SHADOW_TOL = 1e-9
+
+
+@kernel
+def edge_dist2(px, py, ax, ay, bx, by):
+    """Return the squared distance from point (px, py) to the segment [(ax, ay), (bx, by)]."""
+    dx, dy = bx - ax, by - ay
+    qx, qy = px - ax, py - ay
+    t = (qx * dx + qy * dy) / (dx * dx + dy * dy)
+    t = min(max(t, 0.0), 1.0)
+    ex, ey = qx - t * dx, qy - t * dy
+    return ex * ex + ey * ey
+
+
+@kernel
+def inside_point(px, py, lay, ea, eb, starts, ends, bbox, eps):
+    """Return whether (px, py) lies in the open interior of a polygon of layout ``lay``,
+    farther than its ``eps`` from that polygon's boundary (even-odd crossing rule)."""
+    e2 = eps[lay] * eps[lay]
+    for p in range(starts.shape[0]):
+        if not (
+            px > bbox[lay, p, 0] and px < bbox[lay, p, 2]
+            and py > bbox[lay, p, 1] and py < bbox[lay, p, 3]
+        ):  # fmt: skip
+            continue  # outside its box: outside the polygon, or within eps of its boundary
+        odd = False
+        for j in range(starts[p], ends[p]):
+            ax, ay, bx, by = ea[lay, j, 0], ea[lay, j, 1], eb[lay, j, 0], eb[lay, j, 1]
+            if (ay > py) != (by > py):  # the edge spans the point's height: dy != 0
+                if px < ax + (py - ay) * ((bx - ax) / (by - ay)):
+                    odd = not odd
+        if odd:
+            on_boundary = False
+            for j in range(starts[p], ends[p]):
+                d2 = edge_dist2(px, py, ea[lay, j, 0], ea[lay, j, 1], eb[lay, j, 0], eb[lay, j, 1])
+                if d2 <= e2:
+                    on_boundary = True
+                    break
+            if not on_boundary:
+                return True
+    return False
+
+
+@kernel
+def blocked_segment(ax, ay, bx, by, lay, ea, eb, starts, ends, bbox, eps, scale, cuts):
+    """Return whether a sub-interval of positive length of [a, b] lies in an occluder.
+
+    The parameters where [a, b] crosses an edge (a margin :data:`CUT` in the edge's
+    parameter) and those of vertices on its line (within ``CUT * scale``) cut [0, 1];
+    the segment is blocked iff the midpoint of a piece is :func:`inside_point`. ``cuts``
+    is scratch space of at least ``2E`` floats.
+    """
+    e = eps[lay]
+    lox, hix, loy, hiy = min(ax, bx), max(ax, bx), min(ay, by), max(ay, by)
+    dx, dy = bx - ax, by - ay
+    dd = dx * dx + dy * dy
+    sdd = dd if dd > 0.0 else 1.0
+    off_max = CUT * scale[lay] * math.sqrt(dd)
+    near = False
+    n = 0
+    for p in range(starts.shape[0]):
+        if not (
+            hix > bbox[lay, p, 0] + e and lox < bbox[lay, p, 2] - e
+            and hiy > bbox[lay, p, 1] + e and loy < bbox[lay, p, 3] - e
+        ):  # fmt: skip
+            continue  # the segment stays out of this polygon (farther in than eps)
+        near = True
+        for j in range(starts[p], ends[p]):
+            cx, cy = ea[lay, j, 0], ea[lay, j, 1]
+            fx, fy = eb[lay, j, 0] - cx, eb[lay, j, 1] - cy
+            wx, wy = cx - ax, cy - ay
+            den = dx * fy - dy * fx
+            if den != 0.0:
+                t = (wx * fy - wy * fx) / den
+                s = (wx * dy - wy * dx) / den
+                if s >= -CUT and s <= 1.0 + CUT and t > 0.0 and t < 1.0:
+                    cuts[n] = t
+                    n += 1
+            tv = (wx * dx + wy * dy) / sdd
+            if abs(wx * dy - wy * dx) <= off_max and tv > 0.0 and tv < 1.0:
+                cuts[n] = tv
+                n += 1
+    if not near:
+        return False
+    for i in range(1, n):  # insertion sort: a few cuts
+        v = cuts[i]
+        k = i - 1
+        while k >= 0 and cuts[k] > v:
+            cuts[k + 1] = cuts[k]
+            k -= 1
+        cuts[k + 1] = v
+    prev = 0.0
+    for i in range(n + 1):
+        nxt = cuts[i] if i < n else 1.0
+        mid = 0.5 * (nxt + prev)
+        if inside_point(ax + mid * dx, ay + mid * dy, lay, ea, eb, starts, ends, bbox, eps):
+            return True
+        prev = nxt
+    return False
+
+
+@kernel
+def inside_rows(points, lay, ea, eb, starts, ends, bbox, eps, out):
+    """Fill ``out`` (M,) with :func:`inside_point` of each row of ``points`` (M, 2)."""
+    for i in range(points.shape[0]):
+        out[i] = inside_point(points[i, 0], points[i, 1], lay[i], ea, eb, starts, ends, bbox, eps)
+
+
+@kernel
+def blocked_rows(a, b, lay, ea, eb, starts, ends, bbox, eps, scale, out):
+    """Fill ``out`` (M,) with :func:`blocked_segment` of the rows of ``a``, ``b`` (M, 2)."""
+    cuts = np.empty(2 * ea.shape[1])
+    for i in range(a.shape[0]):
+        out[i] = blocked_segment(
+            a[i, 0], a[i, 1], b[i, 0], b[i, 1], lay[i], ea, eb, starts, ends, bbox, eps, scale,
+            cuts,
+        )  # fmt: skip
+
+
+@kernel
+def sight_rows(sensors, targets, lay, ea, eb, starts, ends, bbox, eps, scale, out):
+    """Fill ``out`` (B, K, M) with whether sensor ``m`` sees target ``k`` in row ``b``
+    (``sensors`` (B, M, 2), ``targets`` (B, K, 2)): the segment from the sensor to the
+    target not :func:`blocked_segment`."""
+    cuts = np.empty(2 * ea.shape[1])
+    for b in range(sensors.shape[0]):
+        for k in range(targets.shape[1]):
+            for m in range(sensors.shape[1]):
+                out[b, k, m] = not blocked_segment(
+                    sensors[b, m, 0], sensors[b, m, 1], targets[b, k, 0], targets[b, k, 1],
+                    lay[b], ea, eb, starts, ends, bbox, eps, scale, cuts,
+                )  # fmt: skip
+
+
+@kernel
+def _put(cand, k, x, y):
+    """Store candidate ``k``."""
+    cand[k, 0] = x
+    cand[k, 1] = y
+
+
+@kernel
+def candidates(ox, oy, qx, qy, r, lay, ea, eb, cross, cand):
+    """Fill ``cand`` (7E + X + 2, 2) with the candidates of the nearest reachable point to
+    ``q`` from ``o`` (NaN where one does not exist), in this order: ``q`` projected onto
+    each edge, the vertices, ``q`` projected onto each vertex's shadow ray, the reach
+    circle on each shadow ray, each shadow ray's first edge hit, the reach circle on each
+    edge (two roots), the crossings, ``q``'s radial projection onto the circle, ``o``."""
+    nan = math.nan
+    E = ea.shape[1]
+    X = cross.shape[1]
+    for j in range(E):
+        cx, cy = ea[lay, j, 0], ea[lay, j, 1]
+        fx, fy = eb[lay, j, 0] - cx, eb[lay, j, 1] - cy
+        ff = fx * fx + fy * fy
+        u = min(max(((qx - cx) * fx + (qy - cy) * fy) / ff, 0.0), 1.0)
+        _put(cand, j, cx + u * fx, cy + u * fy)
+        _put(cand, E + j, cx, cy)
+        # The shadow ray o + s g, s >= 1, through this vertex.
+        gx, gy = cx - ox, cy - oy
+        gg = gx * gx + gy * gy
+        has = gg > 0.0
+        s = max(1.0, ((qx - ox) * gx + (qy - oy) * gy) / (gg if has else 1.0))
+        _put(cand, 2 * E + j, ox + s * gx, oy + s * gy)
+        glen = math.sqrt(gg)
+        if has and glen <= r:
+            _put(cand, 3 * E + j, ox + (r / glen) * gx, oy + (r / glen) * gy)
+        else:
+            _put(cand, 3 * E + j, nan, nan)
+        smin = math.inf
+        # A first hit lies beyond the vertex (s > 1): out of reach when the vertex is, so
+        # it cannot be the answer (its distance would be inf) and is not computed.
+        if has and glen <= r * (1.0 + REACH_TOL):
+            for h in range(E):
+                hx, hy = ea[lay, h, 0], ea[lay, h, 1]
+                kx, ky = eb[lay, h, 0] - hx, eb[lay, h, 1] - hy
+                wx, wy = hx - ox, hy - oy
+                den = gx * ky - gy * kx
+                if den != 0.0:
+                    sh = (wx * ky - wy * kx) / den
+                    uh = (wx * gy - wy * gx) / den
+                    if uh >= -SHADOW_TOL and uh <= 1.0 + SHADOW_TOL and sh > 1.0 + SHADOW_TOL:
+                        smin = min(smin, sh)
+        if smin < math.inf:
+            _put(cand, 4 * E + j, ox + smin * gx, oy + smin * gy)
+        else:
+            _put(cand, 4 * E + j, nan, nan)
+        # The reach circle |c - o + u f| = r on this edge.
+        cox, coy = cx - ox, cy - oy
+        bq = cox * fx + coy * fy
+        cq = (cox * cox + coy * coy) - r * r
+        disc = bq * bq - ff * cq
+        sq = math.sqrt(max(disc, 0.0))
+        for i, root in enumerate(((-bq - sq) / ff, (-bq + sq) / ff)):
+            if disc >= 0.0 and root >= 0.0 and root <= 1.0:
+                _put(cand, (5 + i) * E + j, cx + root * fx, cy + root * fy)
+            else:
+                _put(cand, (5 + i) * E + j, nan, nan)
+    for j in range(X):
+        _put(cand, 7 * E + j, cross[lay, j, 0], cross[lay, j, 1])
+    dqx, dqy = qx - ox, qy - oy
+    nq = math.hypot(dqx, dqy)
+    if nq > 0.0:
+        _put(cand, 7 * E + X, ox + (r / nq) * dqx, oy + (r / nq) * dqy)
+    else:
+        _put(cand, 7 * E + X, nan, nan)
+    _put(cand, 7 * E + X + 1, ox, oy)
+
+
+@kernel
+def project_point(ox, oy, qx, qy, r, lay, ea, eb, starts, ends, bbox, cross, eps, scale, work):
+    """Return ``(x, y, projected)``: ``q`` if its straight move from ``o`` is within reach
+    ``r`` (to :data:`REACH_TOL`) and not blocked, else the nearest point of the reachable
+    set (``o`` if it is empty). ``work`` (7E + X + 2 + 2E, 3) is scratch space."""
+    dx, dy = qx - ox, qy - oy
+    lim = r * (1.0 + REACH_TOL)
+    need = dx * dx + dy * dy > lim * lim
+    E = ea.shape[1]
+    if E == 0:
+        if need:  # the reach disk only
+            n = math.hypot(dx, dy)
+            return ox + (r / n) * dx, oy + (r / n) * dy, True
+        return qx, qy, False
+    C = 7 * E + cross.shape[1] + 2
+    cuts = work[C:, 0]
+    if not need and not blocked_segment(
+        ox, oy, qx, qy, lay, ea, eb, starts, ends, bbox, eps, scale, cuts
+    ):
+        return qx, qy, False
+    cand = work[:C, :2]
+    dist = work[:C, 2]
+    candidates(ox, oy, qx, qy, r, lay, ea, eb, cross, cand)
+    for k in range(C):
+        ex, ey = cand[k, 0] - ox, cand[k, 1] - oy
+        if ex * ex + ey * ey <= lim * lim:  # False for NaN
+            ex, ey = cand[k, 0] - qx, cand[k, 1] - qy
+            dist[k] = ex * ex + ey * ey
+        else:
+            dist[k] = math.inf
+    # In order of distance (ties: the candidates' order), the first unblocked one; by
+    # selection, since the first or second is the answer almost always.
+    for _ in range(C):
+        best = -1
+        best_d = math.inf
+        for k in range(C):
+            if dist[k] < best_d:
+                best, best_d = k, dist[k]
+        if best < 0:
+            break
+        px, py = cand[best, 0], cand[best, 1]
+        if not blocked_segment(ox, oy, px, py, lay, ea, eb, starts, ends, bbox, eps, scale, cuts):
+            return px, py, True
+        dist[best] = math.inf
+    return ox, oy, True
+
+
+@kernel
+def project_rows(o, q, r, lay, ea, eb, starts, ends, bbox, cross, eps, scale, out, projected):
+    """Fill ``out`` (M, 2) and ``projected`` (M,) with :func:`project_point` of each row."""
+    E = ea.shape[1]
+    work = np.empty((9 * E + cross.shape[1] + 2, 3))
+    for i in range(o.shape[0]):
+        x, y, hit = project_point(
+            o[i, 0], o[i, 1], q[i, 0], q[i, 1], r[i], lay[i], ea, eb, starts, ends, bbox,
+            cross, eps, scale, work,
+        )  # fmt: skip
+        out[i, 0] = x
+        out[i, 1] = y
+        projected[i] = hit
+
+
+@kernel
+def ray_rows(origins, directions, lay, ea, eb, starts, ends, bbox, eps, max_distance, out):
+    """Fill ``out`` (M, R) with the distance along each ray from each origin to the first
+    edge (the smallest ``s > eps``), or ``max_distance`` if none is nearer.
+
+    Polygons whose bounding box is farther than ``max_distance`` from the origin are
+    skipped (no hit of theirs could be nearer: a culling that changes no result).
+    """
+    R = directions.shape[0]
+    reach2 = (max_distance * (1.0 + 1e-9)) ** 2
+    inv = np.empty((ea.shape[1], R))  # 1 / (g x f) of each edge and direction (0: parallel)
+    current = -1
+    for i in range(origins.shape[0]):
+        ox, oy, la = origins[i, 0], origins[i, 1], lay[i]
+        if la != current:  # rows of a layout come together: its table once
+            current = la
+            for j in range(ea.shape[1]):
+                fx, fy = eb[la, j, 0] - ea[la, j, 0], eb[la, j, 1] - ea[la, j, 1]
+                for k in range(R):
+                    den = directions[k, 0] * fy - directions[k, 1] * fx
+                    inv[j, k] = 1.0 / den if den != 0.0 else 0.0
+        e = eps[la]
+        for k in range(R):
+            out[i, k] = max_distance
+        for p in range(starts.shape[0]):
+            gx = max(bbox[la, p, 0] - ox, 0.0, ox - bbox[la, p, 2])
+            gy = max(bbox[la, p, 1] - oy, 0.0, oy - bbox[la, p, 3])
+            if gx * gx + gy * gy > reach2:
+                continue
+            for j in range(starts[p], ends[p]):
+                cx, cy = ea[la, j, 0], ea[la, j, 1]
+                fx, fy = eb[la, j, 0] - cx, eb[la, j, 1] - cy
+                wx, wy = cx - ox, cy - oy
+                cwf = wx * fy - wy * fx
+                for k in range(R):
+                    s = cwf * inv[j, k]  # 0 for a parallel edge: never a hit (s > eps)
+                    u = (wx * directions[k, 1] - wy * directions[k, 0]) * inv[j, k]
+                    if u >= 0.0 and u <= 1.0 and s > e and s < out[i, k]:
+                        out[i, k] = s
+
+
+@kernel
+def edge_dist2_rows(points, ea, eb, out):
+    """Fill ``out`` (M, E) with the squared distance of each point to each edge of
+    one layout (``ea``, ``eb`` (E, 2))."""
+    for i in range(points.shape[0]):
+        for j in range(ea.shape[0]):
+            out[i, j] = edge_dist2(
+                points[i, 0], points[i, 1], ea[j, 0], ea[j, 1], eb[j, 0], eb[j, 1]
+            )
+
+
+@kernel
+def crossings_into(a, b, polygon, out):
+    """Fill the first rows of ``out`` with the points where edges [a, b] (E, 2) of
+    different polygons (``polygon`` (E,) each edge's) cross or touch; return their count."""
+    n = 0
+    E = a.shape[0]
+    for i in range(E):
+        d1x, d1y = b[i, 0] - a[i, 0], b[i, 1] - a[i, 1]
+        for j in range(i + 1, E):
+            if polygon[i] == polygon[j]:
+                continue
+            d2x, d2y = b[j, 0] - a[j, 0], b[j, 1] - a[j, 1]
+            den = d1x * d2y - d1y * d2x
+            if den == 0.0:
+                continue
+            wx, wy = a[j, 0] - a[i, 0], a[j, 1] - a[i, 1]
+            t = (wx * d2y - wy * d2x) / den
+            s = (wx * d1y - wy * d1x) / den
+            if t >= 0.0 and t <= 1.0 and s >= 0.0 and s <= 1.0:
+                out[n, 0] = a[i, 0] + t * d1x
+                out[n, 1] = a[i, 1] + t * d1y
+                n += 1
+    return n
