@@ -84,6 +84,12 @@ def vmas_env(n: int, steps: int) -> float:
 
 def vmas_env_agents(n: int, steps: int, agents: int) -> float:
     """Return env-steps/s of VMAS simple_spread with ``agents`` agents (CPU) at ``n`` copies."""
+    return n * steps / _time_steps(vmas_stepper(n, agents), steps)
+
+
+def vmas_stepper(n: int, agents: int):
+    """Return ``step(k)`` of VMAS simple_spread with ``agents`` agents (CPU) at ``n`` copies,
+    random actions from a pool of 8."""
     import torch
     import vmas
 
@@ -102,7 +108,7 @@ def vmas_env_agents(n: int, steps: int, agents: int) -> float:
     def step(k: int) -> None:  # no episode ends: VMAS's step alone, a generous comparison
         env.step(pool[k % 8])
 
-    return n * steps / _time_steps(step, steps)
+    return step
 
 
 def gsr_rates(n: int, episodes: int) -> dict[str, float]:

@@ -78,3 +78,16 @@ def _teach_numba() -> None:
 def kernel(fn: F) -> F:
     """Return ``fn`` as a :class:`Kernel`: compiled with numba on its first call."""
     return Kernel(fn)  # type: ignore[return-value]
+
+
+def as_rows(a: Any, shape: tuple[int, ...], tail: tuple[int, ...] = (), dtype: Any = None) -> Any:
+    """Return ``a`` broadcast to ``shape + tail`` as C-contiguous, writable rows
+    ``(prod(shape), *tail)``: what the kernels take (one numba signature per dtype), copied
+    only when needed."""
+    import numpy as np
+
+    a = np.asarray(a, dtype=np.float64 if dtype is None else dtype)
+    if a.shape != shape + tail:
+        a = np.broadcast_to(a, shape + tail)
+    a = a.reshape((-1, *tail))
+    return a if a.flags.c_contiguous and a.flags.writeable else a.copy()

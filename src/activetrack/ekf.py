@@ -53,6 +53,7 @@ from numpy.typing import ArrayLike
 
 from activetrack import ekf_kernels as ek
 from activetrack import sensor_models
+from activetrack._jit import as_rows
 from activetrack.ekf_kernels import ITERATION_TOL as ITERATION_TOL  # re-exported
 from activetrack.linalg2 import inv2
 from activetrack.motion import LinearMotionModel
@@ -100,8 +101,8 @@ def update(
     n, m = x.shape[-1], sensor_pos.shape[-2]
     batch = np.broadcast_shapes(x.shape[:-1], P.shape[:-2], z.shape[:-2], sensor_pos.shape[:-2])
     wd, wt = weights if weights is not None else (1.0 / sigma_d2, 1.0 / sigma_theta2)
-    xf, Pf = _rows(x, batch, (n,)), _rows(P, batch, (n, n))
-    zf, sf = _rows(z, batch, (m, 2)), _rows(sensor_pos, batch, (m, 2))
+    xf, Pf = as_rows(x, batch, (n,)), as_rows(P, batch, (n, n))
+    zf, sf = as_rows(z, batch, (m, 2)), as_rows(sensor_pos, batch, (m, 2))
     per = [_per_sensor(v, batch, m, np.float64) for v in (wd, wt, orientation)]
     per.append(np.ones((1, m), bool) if mask is None else _per_sensor(mask, batch, m, np.bool_))
     x_out, P_out = np.empty(xf.shape), np.empty(Pf.shape)
@@ -114,22 +115,10 @@ def update(
     return x_out.reshape(batch + (n,)), P_out.reshape(batch + (n, n))
 
 
-def _rows(a: np.ndarray, batch: tuple[int, ...], tail: tuple[int, ...]) -> np.ndarray:
-    """Return ``a`` broadcast to ``batch + tail`` as C-contiguous writable rows (B, *tail)."""
-    if a.shape[: a.ndim - len(tail)] != batch:
-        a = np.broadcast_to(a, batch + tail)
-    a = a.reshape((-1, *tail))
-    return a if a.flags.c_contiguous and a.flags.writeable else a.copy()
-
-
 def _per_sensor(v: Any, batch: tuple[int, ...], m: int, dtype: type) -> np.ndarray:
-    """Return a per-sensor value as C-contiguous writable rows (1, M) (shared by the
-    batch) or (B, M)."""
+    """Return a per-sensor value as kernel rows (1, M) (shared by the batch) or (B, M)."""
     a = np.asarray(v, dtype)
-    if a.shape != (m,):  # (M,) is the common case: no broadcast
-        a = np.broadcast_to(a, (m,) if a.ndim <= 1 else batch + (m,))
-    a = a.reshape(-1, m)
-    return a if a.flags.c_contiguous and a.flags.writeable else a.copy()
+    return as_rows(a, () if a.ndim <= 1 else batch, (m,), dtype)
 
 
 def _update_with_poses(
@@ -141,19 +130,28 @@ def _update_with_poses(
     :func:`activetrack.sensor_models.update_terms`, the kernels' posterior), each filter
     relinearized until its position settles, at most ``iterations`` linearizations."""
     wd, wt = wd * mask, wt * mask
+    every = np.arange(x.shape[0])
 
     def terms(rows: np.ndarray, lin: FloatArray) -> FloatArray:
-        def take(a: np.ndarray) -> np.ndarray:
-            return a if a.shape[0] == 1 else a[rows]
+        def take(a: np.ndarray) -> np.ndarray:  # all rows: no copy; one filter: unbatched
+            if every.size == 1:
+                return a[0]
+            return a if a.shape[0] == 1 or rows.size == every.size else a[rows]
+
+        if every.size == 1:  # one filter: unbatched arrays (cheaper NumPy calls)
+            lin = lin[0]
 
         Yi, bi = sensor_models.update_terms(
-            z[rows], lin, sensors[rows], take(codes), take(wd), take(wt), take(orientation),
-            pose_cov[rows],
+            take(z), lin, take(sensors), take(codes), take(wd), take(wt), take(orientation),
+            take(pose_cov),
         )  # fmt: skip
         Y, b = Yi.sum(axis=-3), bi.sum(axis=-2)
-        return np.stack([Y[:, 0, 0], Y[:, 0, 1], Y[:, 1, 1], b[:, 0], b[:, 1]], -1)
+        out = np.empty((rows.size, 5))
+        out[:, 0], out[:, 1], out[:, 2] = Y[..., 0, 0], Y[..., 0, 1], Y[..., 1, 1]
+        out[:, 3:] = b
+        return out
 
-    active = np.arange(x.shape[0])
+    active = every
     ek.posterior_rows(x, P, terms(active, x[:, :2]), active, False, x_out, P_out)
     for _ in range(iterations - 1):
         moving = ek.posterior_rows(

@@ -20,6 +20,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from activetrack import motion_kernels as mk
+from activetrack._jit import as_rows
 from activetrack.validation import FloatArray
 
 
@@ -111,11 +113,13 @@ def sample_uniform(arcs: list[Arc], rng: np.random.Generator) -> FloatArray:
 
 
 def unreachable_fallback(c: FloatArray, r: FloatArray) -> FloatArray:
-    """Return ``c + r c / ||c||``: the reachable point farthest from the target (batched)."""
-    nc = np.hypot(c[..., 0], c[..., 1])[..., None]
-    safe = np.where(nc > 0.0, nc, 1.0)
-    direction = np.where(nc > 0.0, c / safe, np.array([1.0, 0.0]))
-    return c + np.asarray(r)[..., None] * direction
+    """Return ``c + r c / ||c||``: the reachable point farthest from the target (batched;
+    the x axis where ``c`` is zero)."""
+    c = np.asarray(c, np.float64)
+    shape = np.broadcast_shapes(c.shape[:-1], np.shape(r))
+    out = np.empty(shape + (2,))
+    mk.fallback_rows(as_rows(c, shape, (2,)), as_rows(r, shape), out.reshape(-1, 2))
+    return out
 
 
 def project_feasible(q: FloatArray, c: FloatArray, r: FloatArray, rho: FloatArray) -> FloatArray:
@@ -124,51 +128,13 @@ def project_feasible(q: FloatArray, c: FloatArray, r: FloatArray, rho: FloatArra
     ``q`` must already lie in the speed disk around ``c``. A ``q`` inside the ``rho`` disk
     goes radially onto the ``rho`` circle; if that leaves the speed disk, to the nearer of
     the two circle intersections A, B; if the circles do not meet (``||c|| + r < rho``), to
-    :func:`unreachable_fallback`.
+    :func:`unreachable_fallback` (:func:`activetrack.motion_kernels.project_feasible_point`).
     """
-    q, c = np.asarray(q, float), np.asarray(c, float)
-    r, rho = np.broadcast_to(r, q.shape[:-1]), np.broadcast_to(rho, q.shape[:-1])
-    nq = np.hypot(q[..., 0], q[..., 1])
-    inside = nq < rho
-    if not np.any(inside):
-        return q
-    out = q.copy()
-    dirq = np.where(nq[..., None] > 0, q / np.where(nq > 0, nq, 1.0)[..., None], unit(c))
-    radial = rho[..., None] * dirq
-    ok = np.hypot(*np.moveaxis(radial - c, -1, 0)) <= r * (1 + 1e-12)
-    A, B, meet = circle_intersections(c, r, rho)
-    dA = np.hypot(*np.moveaxis(A - q, -1, 0))
-    dB = np.hypot(*np.moveaxis(B - q, -1, 0))
-    nearest = np.where((dA <= dB)[..., None], A, B)
-    fallback = unreachable_fallback(c, r)
-    proj = np.where(ok[..., None], radial, np.where(meet[..., None], nearest, fallback))
-    out[inside] = proj[inside]
+    q, c = np.asarray(q, np.float64), np.asarray(c, np.float64)
+    shape = np.broadcast_shapes(q.shape[:-1], c.shape[:-1], np.shape(r), np.shape(rho))
+    out = np.empty(shape + (2,))
+    mk.project_feasible_rows(
+        as_rows(q, shape, (2,)), as_rows(c, shape, (2,)), as_rows(r, shape),
+        as_rows(rho, shape), out.reshape(-1, 2),
+    )  # fmt: skip
     return out
-
-
-def unit(c: FloatArray) -> FloatArray:
-    """Return ``c / ||c||`` (x axis where ``c`` is zero), batched."""
-    n = np.hypot(c[..., 0], c[..., 1])[..., None]
-    return np.where(n > 0, c / np.where(n > 0, n, 1.0), np.array([1.0, 0.0]))
-
-
-def circle_intersections(
-    c: FloatArray, r: FloatArray, rho: FloatArray
-) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Return ``(A, B, meet)``: intersections of ``||s - c|| = r`` and ``||s|| = rho`` (batched).
-
-    Where the circles do not meet, ``A`` and ``B`` are the point of the ``rho`` circle
-    nearest to the speed circle and ``meet`` is False.
-    """
-    c = np.asarray(c, float)
-    nc = np.hypot(c[..., 0], c[..., 1])
-    u = unit(c)
-    perp = np.stack([-u[..., 1], u[..., 0]], -1)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        cos_g = (rho**2 + nc**2 - r**2) / (2.0 * rho * nc)
-    meet = np.abs(cos_g) <= 1.0
-    cos_g = np.clip(np.nan_to_num(cos_g, nan=1.0), -1.0, 1.0)
-    sin_g = np.sqrt(1.0 - cos_g**2)
-    base = (rho * cos_g)[..., None] * u
-    off = (rho * sin_g)[..., None] * perp
-    return base + off, base - off, meet

@@ -296,15 +296,14 @@ def observations(
     (..., M, R) each agent's own rays last."""
     m, td, sd = sensor.shape[-2], target.shape[-1], sensor.shape[-1]
     nr = 0 if rays is None else rays.shape[-1]
-    out = np.empty(sensor.shape[:-2] + (m, td + sd * m + nr), dtype=np.float32)
+    full = np.empty(sensor.shape[:-2] + (m, td + sd * m + nr), dtype=np.float32)
     if nr:
-        out[..., td + sd * m :] = rays
-        out[..., : td + sd * m] = observations(target, sensor, order)
-        return out
+        full[..., td + sd * m :] = rays
+    out = full[..., : td + sd * m]  # the team's part (a view: no second copy)
     if sensor.ndim == 2:  # one copy: a single gather
         out[:, :td] = target
         out[:, td:] = sensor[order].reshape(m, m * sd)
-        return out
+        return full
     # Cast once, then copy float32 (a cast in every strided copy below costs more).
     out[..., :td] = target.astype(np.float32)[..., None, :]
     # Agent i sees sensors i, i+1, ... (mod M): a contiguous window of the doubled list.
@@ -313,7 +312,7 @@ def observations(
     shape = sensor.shape[:-2] + (m * sd,)
     for i, start in enumerate(order[:, 0].tolist()):
         out[..., i, td:] = doubled[..., start : start + m, :].reshape(shape)
-    return out
+    return full
 
 
 def global_state(
@@ -341,7 +340,8 @@ def ray_readings(positions: FloatArray, occ: object) -> FloatArray:
     (:func:`activetrack.occluders.ray_distances` over :data:`RAY_MAX`)."""
     from activetrack import occluders  # noqa: PLC0415 (occluded scenarios only)
 
-    return occluders.ray_distances(positions, RAY_DIRECTIONS, occ, RAY_MAX) / RAY_MAX
+    d = occluders.ray_distances(positions, RAY_DIRECTIONS, occ, RAY_MAX)
+    return np.divide(d, RAY_MAX, out=d)  # in place: no second large temporary
 
 
 def observation_bounds(n_sensors: int) -> tuple[np.ndarray, np.ndarray]:

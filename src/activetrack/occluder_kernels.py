@@ -169,62 +169,91 @@ def _put(cand, k, x, y):
 
 
 @kernel
-def candidates(ox, oy, qx, qy, r, lay, ea, eb, cross, cand):
+def _far(ox, oy, bbox, lay, p, reach2):
+    """Return whether polygon ``p``'s box is farther than ``sqrt(reach2)`` from (ox, oy)."""
+    gx = max(bbox[lay, p, 0] - ox, 0.0, ox - bbox[lay, p, 2])
+    gy = max(bbox[lay, p, 1] - oy, 0.0, oy - bbox[lay, p, 3])
+    return gx * gx + gy * gy > reach2
+
+
+@kernel
+def candidates(ox, oy, qx, qy, r, lay, ea, eb, starts, ends, bbox, cross, cand):
     """Fill ``cand`` (7E + X + 2, 2) with the candidates of the nearest reachable point to
     ``q`` from ``o`` (NaN where one does not exist), in this order: ``q`` projected onto
     each edge, the vertices, ``q`` projected onto each vertex's shadow ray, the reach
     circle on each shadow ray, each shadow ray's first edge hit, the reach circle on each
-    edge (two roots), the crossings, ``q``'s radial projection onto the circle, ``o``."""
+    edge (two roots), the crossings, ``q``'s radial projection onto the circle, ``o``.
+
+    A polygon whose box is out of reach (with a margin far above rounding) gives NaN for
+    all its candidates without computing them: each lies on its edges or beyond its
+    vertices as seen from ``o``, so out of reach, never the answer.
+    """
     nan = math.nan
     E = ea.shape[1]
     X = cross.shape[1]
-    for j in range(E):
-        cx, cy = ea[lay, j, 0], ea[lay, j, 1]
-        fx, fy = eb[lay, j, 0] - cx, eb[lay, j, 1] - cy
-        ff = fx * fx + fy * fy
-        u = min(max(((qx - cx) * fx + (qy - cy) * fy) / ff, 0.0), 1.0)
-        _put(cand, j, cx + u * fx, cy + u * fy)
-        _put(cand, E + j, cx, cy)
-        # The shadow ray o + s g, s >= 1, through this vertex.
-        gx, gy = cx - ox, cy - oy
-        gg = gx * gx + gy * gy
-        has = gg > 0.0
-        s = max(1.0, ((qx - ox) * gx + (qy - oy) * gy) / (gg if has else 1.0))
-        _put(cand, 2 * E + j, ox + s * gx, oy + s * gy)
-        glen = math.sqrt(gg)
-        if has and glen <= r:
-            _put(cand, 3 * E + j, ox + (r / glen) * gx, oy + (r / glen) * gy)
-        else:
-            _put(cand, 3 * E + j, nan, nan)
-        smin = math.inf
-        # A first hit lies beyond the vertex (s > 1): out of reach when the vertex is, so
-        # it cannot be the answer (its distance would be inf) and is not computed.
-        if has and glen <= r * (1.0 + REACH_TOL):
-            for h in range(E):
-                hx, hy = ea[lay, h, 0], ea[lay, h, 1]
-                kx, ky = eb[lay, h, 0] - hx, eb[lay, h, 1] - hy
-                wx, wy = hx - ox, hy - oy
-                den = gx * ky - gy * kx
-                if den != 0.0:
-                    sh = (wx * ky - wy * kx) / den
-                    uh = (wx * gy - wy * gx) / den
-                    if uh >= -SHADOW_TOL and uh <= 1.0 + SHADOW_TOL and sh > 1.0 + SHADOW_TOL:
-                        smin = min(smin, sh)
-        if smin < math.inf:
-            _put(cand, 4 * E + j, ox + smin * gx, oy + smin * gy)
-        else:
-            _put(cand, 4 * E + j, nan, nan)
-        # The reach circle |c - o + u f| = r on this edge.
-        cox, coy = cx - ox, cy - oy
-        bq = cox * fx + coy * fy
-        cq = (cox * cox + coy * coy) - r * r
-        disc = bq * bq - ff * cq
-        sq = math.sqrt(max(disc, 0.0))
-        for i, root in enumerate(((-bq - sq) / ff, (-bq + sq) / ff)):
-            if disc >= 0.0 and root >= 0.0 and root <= 1.0:
-                _put(cand, (5 + i) * E + j, cx + root * fx, cy + root * fy)
+    reach2 = (r * (1.0 + REACH_TOL) * (1.0 + 1e-9)) ** 2
+    for p in range(starts.shape[0]):
+        far = _far(ox, oy, bbox, lay, p, reach2)
+        for j in range(starts[p], ends[p]):
+            if far:
+                for k in range(7):
+                    _put(cand, k * E + j, nan, nan)
+                continue
+            cx, cy = ea[lay, j, 0], ea[lay, j, 1]
+            fx, fy = eb[lay, j, 0] - cx, eb[lay, j, 1] - cy
+            ff = fx * fx + fy * fy
+            u = min(max(((qx - cx) * fx + (qy - cy) * fy) / ff, 0.0), 1.0)
+            _put(cand, j, cx + u * fx, cy + u * fy)
+            _put(cand, E + j, cx, cy)
+            # The shadow ray o + s g, s >= 1, through this vertex.
+            gx, gy = cx - ox, cy - oy
+            gg = gx * gx + gy * gy
+            has = gg > 0.0
+            s = max(1.0, ((qx - ox) * gx + (qy - oy) * gy) / (gg if has else 1.0))
+            _put(cand, 2 * E + j, ox + s * gx, oy + s * gy)
+            glen = math.sqrt(gg)
+            if has and glen <= r:
+                _put(cand, 3 * E + j, ox + (r / glen) * gx, oy + (r / glen) * gy)
             else:
-                _put(cand, (5 + i) * E + j, nan, nan)
+                _put(cand, 3 * E + j, nan, nan)
+            # The first edge the shadow ray hits beyond the vertex (s > 1): out of reach
+            # when the vertex is, and a hit on an out-of-reach polygon is out of reach too
+            # (any nearer hit is found among the others), so those are not computed.
+            smin = math.inf
+            if has and glen <= r * (1.0 + REACH_TOL):
+                for q in range(starts.shape[0]):
+                    if _far(ox, oy, bbox, lay, q, reach2):
+                        continue
+                    for h in range(starts[q], ends[q]):
+                        hx, hy = ea[lay, h, 0], ea[lay, h, 1]
+                        kx, ky = eb[lay, h, 0] - hx, eb[lay, h, 1] - hy
+                        wx, wy = hx - ox, hy - oy
+                        den = gx * ky - gy * kx
+                        if den != 0.0:
+                            sh = (wx * ky - wy * kx) / den
+                            uh = (wx * gy - wy * gx) / den
+                            if uh >= -SHADOW_TOL and uh <= 1.0 + SHADOW_TOL:
+                                if sh > 1.0 + SHADOW_TOL:
+                                    smin = min(smin, sh)
+            if smin < math.inf:
+                _put(cand, 4 * E + j, ox + smin * gx, oy + smin * gy)
+            else:
+                _put(cand, 4 * E + j, nan, nan)
+            # The reach circle |c - o + u f| = r on this edge.
+            cox, coy = cx - ox, cy - oy
+            bq = cox * fx + coy * fy
+            cq = (cox * cox + coy * coy) - r * r
+            disc = bq * bq - ff * cq
+            sq = math.sqrt(max(disc, 0.0))
+            lo, hi = (-bq - sq) / ff, (-bq + sq) / ff
+            if disc >= 0.0 and lo >= 0.0 and lo <= 1.0:
+                _put(cand, 5 * E + j, cx + lo * fx, cy + lo * fy)
+            else:
+                _put(cand, 5 * E + j, nan, nan)
+            if disc >= 0.0 and hi >= 0.0 and hi <= 1.0:
+                _put(cand, 6 * E + j, cx + hi * fx, cy + hi * fy)
+            else:
+                _put(cand, 6 * E + j, nan, nan)
     for j in range(X):
         _put(cand, 7 * E + j, cross[lay, j, 0], cross[lay, j, 1])
     dqx, dqy = qx - ox, qy - oy
@@ -258,7 +287,7 @@ def project_point(ox, oy, qx, qy, r, lay, ea, eb, starts, ends, bbox, cross, eps
         return qx, qy, False
     cand = work[:C, :2]
     dist = work[:C, 2]
-    candidates(ox, oy, qx, qy, r, lay, ea, eb, cross, cand)
+    candidates(ox, oy, qx, qy, r, lay, ea, eb, starts, ends, bbox, cross, cand)
     for k in range(C):
         ex, ey = cand[k, 0] - ox, cand[k, 1] - oy
         if ex * ex + ey * ey <= lim * lim:  # False for NaN
@@ -309,6 +338,8 @@ def ray_rows(origins, directions, lay, ea, eb, starts, ends, bbox, eps, max_dist
     R = directions.shape[0]
     reach2 = (max_distance * (1.0 + 1e-9)) ** 2
     inv = np.empty((ea.shape[1], R))  # 1 / (g x f) of each edge and direction (0: parallel)
+    dxs, dys = directions[:, 0].copy(), directions[:, 1].copy()
+    best = np.empty(R)
     current = -1
     for i in range(origins.shape[0]):
         ox, oy, la = origins[i, 0], origins[i, 1], lay[i]
@@ -320,23 +351,23 @@ def ray_rows(origins, directions, lay, ea, eb, starts, ends, bbox, eps, max_dist
                     den = directions[k, 0] * fy - directions[k, 1] * fx
                     inv[j, k] = 1.0 / den if den != 0.0 else 0.0
         e = eps[la]
-        for k in range(R):
-            out[i, k] = max_distance
+        best[:] = math.inf
         for p in range(starts.shape[0]):
-            gx = max(bbox[la, p, 0] - ox, 0.0, ox - bbox[la, p, 2])
-            gy = max(bbox[la, p, 1] - oy, 0.0, oy - bbox[la, p, 3])
-            if gx * gx + gy * gy > reach2:
+            if _far(ox, oy, bbox, la, p, reach2):
                 continue
             for j in range(starts[p], ends[p]):
                 cx, cy = ea[la, j, 0], ea[la, j, 1]
                 fx, fy = eb[la, j, 0] - cx, eb[la, j, 1] - cy
                 wx, wy = cx - ox, cy - oy
                 cwf = wx * fy - wy * fx
-                for k in range(R):
-                    s = cwf * inv[j, k]  # 0 for a parallel edge: never a hit (s > eps)
-                    u = (wx * directions[k, 1] - wy * directions[k, 0]) * inv[j, k]
-                    if u >= 0.0 and u <= 1.0 and s > e and s < out[i, k]:
-                        out[i, k] = s
+                row = inv[j]
+                for k in range(R):  # branch-free, so that it vectorizes over the rays
+                    s = cwf * row[k]  # 0 for a parallel edge: never a hit (s > eps)
+                    u = (wx * dys[k] - wy * dxs[k]) * row[k]
+                    hit = (u >= 0.0) & (u <= 1.0) & (s > e)
+                    best[k] = min(best[k], s if hit else math.inf)
+        for k in range(R):
+            out[i, k] = min(max_distance, best[k])
 
 
 @kernel

@@ -82,6 +82,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from activetrack import occluder_kernels as ok
+from activetrack._jit import as_rows
 from activetrack.occluder_kernels import REACH_TOL, TOL
 from activetrack.validation import FloatArray, real_array
 
@@ -433,13 +434,8 @@ def _layouts(occ: Occluders, shape: tuple[int, ...], name: str) -> np.ndarray:
 
 
 def _flat(a: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
-    """Return ``a`` broadcast to ``shape + (2,)`` as a C-contiguous writable (size, 2) array."""
-    if a.shape[:-1] != shape:
-        a = np.broadcast_to(a, shape + (2,))
-    a = a.reshape(-1, 2)
-    if not (a.flags.c_contiguous and a.flags.writeable):
-        a = a.copy()
-    return a
+    """Return points ``a`` broadcast to ``shape + (2,)`` as kernel rows (size, 2)."""
+    return as_rows(a, shape, (2,))
 
 
 def _check_simple(name: str, p: np.ndarray, eps: float) -> None:

@@ -18,38 +18,23 @@ Both tests carry a relative tolerance of 1e-12, so that a planner's exact bounda
 :func:`actions_to_reach` is the inverse of :func:`apply_actions`, for users who need the
 actions behind a planner's positions (for example imitation labels).
 
-The functions are pure and broadcast over leading batch axes (sensor axis second to last).
+The functions are pure and broadcast over leading batch axes (sensor axis second to last);
+the arithmetic is compiled, one sensor at a time (:mod:`activetrack.motion_kernels`).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from activetrack.geometry import project_feasible
+from activetrack import motion_kernels as mk
+from activetrack._jit import as_rows
 from activetrack.linalg2 import as_complex
 from activetrack.validation import FloatArray
 
 #: Relative tolerance of the unit-disk and minimum-distance tests.
-TOL = 1e-12
+TOL = mk.TOL
 _LONG = 1.0 + TOL
 _INSIDE = 1.0 - TOL
-
-
-def _unit_disk(a: FloatArray) -> FloatArray:
-    """Return vectors ``a`` (..., 2) with those longer than ``1 + TOL`` scaled to length 1."""
-    norm = np.abs(as_complex(a))
-    long = norm > _LONG
-    return _to_unit(a, norm, long) if np.count_nonzero(long) else a
-
-
-def _to_unit(a: FloatArray, norm: FloatArray, long: np.ndarray) -> FloatArray:
-    """Return ``a`` with the vectors marked ``long`` (norms ``norm``) scaled to length 1."""
-    huge = np.isinf(norm)
-    if np.count_nonzero(huge):  # |a| overflowed: divide by the larger component first
-        big = np.maximum(np.abs(a[..., 0]), np.abs(a[..., 1]))
-        a = a / np.where(huge, big, 1.0)[..., None]
-        norm = np.where(huge, np.abs(as_complex(np.ascontiguousarray(a))), norm)
-    return a / np.where(long, norm, 1.0)[..., None]
 
 
 def keep_distance(
@@ -62,21 +47,36 @@ def keep_distance(
     ``target_pred`` is one predicted target (..., 2), or K of them (..., K, 2): then a sensor
     keeps ``rho`` from every one (:func:`activetrack.feasible_set.project`).
     """
+    new = np.asarray(new, np.float64)
     if target_pred.ndim == new.ndim:
         return _keep_distances(new, sensors, target_pred, r, rho)
-    q = new - target_pred[..., None, :]
-    inside = np.abs(as_complex(q)) < np.asarray(rho, dtype=np.float64) * _INSIDE
-    if np.count_nonzero(inside):
-        r = np.broadcast_to(np.asarray(r, dtype=np.float64), inside.shape)
-        inside &= r > 0.0  # a sensor that cannot move (r = 0) stays, even inside
-        # Only the moves that ended inside are projected (elementwise: the same values as
-        # projecting all, at a fraction of the cost in a large batch).
-        rho = np.broadcast_to(np.asarray(rho, dtype=np.float64), inside.shape)
-        pred = np.broadcast_to(target_pred[..., None, :], new.shape)
-        c = sensors - pred
-        new = np.array(new)  # a copy: the caller's array stays as it was
-        new[inside] = project_feasible(q[inside], c[inside], r[inside], rho[inside]) + pred[inside]
-    return new, inside
+    batch, m = new.shape[:-2], new.shape[-2]
+    out = np.empty(new.shape)
+    inside = np.empty(new.shape[:-1], bool)
+    mk.keep_rows(
+        as_rows(new, batch, (m, 2)), as_rows(sensors, batch, (m, 2)),
+        as_rows(target_pred, batch, (2,)), _per_sensor(r, batch, m), _per_sensor(rho, batch, m),
+        out.reshape(-1, m, 2), inside.reshape(-1, m),
+    )  # fmt: skip
+    return out, inside
+
+
+def _per_sensor(v: FloatArray, batch: tuple[int, ...], m: int) -> np.ndarray:
+    """Return a per-sensor value as kernel rows (1, M) (shared) or (B, M)."""
+    v = np.asarray(v, np.float64)
+    return as_rows(v, () if v.ndim <= 1 else batch, (m,))
+
+
+def _moves(x: FloatArray, sensors: FloatArray, r: FloatArray, absolute: bool) -> FloatArray:
+    """Return positions within reach (:func:`activetrack.motion_kernels.moves_rows`)."""
+    x = np.asarray(x, np.float64)
+    batch, m = x.shape[:-2], x.shape[-2]
+    out = np.empty(x.shape)
+    mk.moves_rows(
+        as_rows(x, batch, (m, 2)), as_rows(sensors, batch, (m, 2)), _per_sensor(r, batch, m),
+        absolute, out.reshape(-1, m, 2),
+    )  # fmt: skip
+    return out
 
 
 def _keep_distances(
@@ -119,13 +119,7 @@ def apply_actions(
     ``rho`` broadcastable to (..., M). ``projected`` (..., M) marks the moves that were
     moved out of the ``rho`` disk. Inputs are not validated (finite values assumed).
     """
-    a = np.asarray(actions, dtype=np.float64)
-    norm = np.abs(as_complex(a))  # _unit_disk inline: one call fewer per env step
-    long = norm > _LONG
-    if np.count_nonzero(long):
-        a = _to_unit(a, norm, long)
-    r = np.asarray(r, dtype=np.float64)
-    return keep_distance(sensors + a * r[..., None], sensors, target_pred, r, rho)
+    return keep_distance(_moves(actions, sensors, r, False), sensors, target_pred, r, rho)
 
 
 def move_to(
@@ -141,17 +135,7 @@ def move_to(
     ``rho`` rule applies; feasible positions (a planner's) come back unchanged. Shapes as
     in :func:`apply_actions`; inputs are not validated.
     """
-    p = np.array(positions, dtype=np.float64)  # a copy: the caller may reuse its array
-    r = np.asarray(r, dtype=np.float64)
-    d = p - sensors
-    far = np.abs(as_complex(np.ascontiguousarray(d))) > r * _LONG
-    if np.count_nonzero(far):
-        rr = np.broadcast_to(r, far.shape)
-        safe = np.where(rr > 0.0, rr, 1.0)[..., None]
-        # d / r on the unit disk, then back: also keeps sensors with r = 0 where they are.
-        step = _unit_disk(np.where(far[..., None], d / safe, 0.0)) * rr[..., None]
-        p = np.where(far[..., None], sensors + step, p)
-    return keep_distance(p, sensors, target_pred, r, rho)
+    return keep_distance(_moves(positions, sensors, r, True), sensors, target_pred, r, rho)
 
 
 def actions_to_reach(next_positions: FloatArray, sensors: FloatArray, r: FloatArray) -> FloatArray:

@@ -455,7 +455,12 @@ class World:
         from activetrack import occluders  # noqa: PLC0415 (occluded scenarios only)
 
         batch = sensors[None] if one else sensors
-        for j, i in enumerate(rows.tolist()):
+        # One vectorized test of every start, then the copies with a start inside draw
+        # again, each from its own generator (as a loop over all copies would).
+        layouts = self._occ if one or not self._occ.batched else self._occ[rows]
+        bad_copies = np.flatnonzero(np.any(occluders.inside(batch, layouts), axis=-1))
+        for j in bad_copies.tolist():
+            i = int(rows[j])
             occ = self._occ if one else self._occ[i]
             for _ in range(1000):
                 bad = occluders.inside(batch[j], occ)

@@ -7,6 +7,9 @@ from hypothesis import strategies as st
 
 from activetrack import geometry
 
+# The moves are compiled (activetrack.motion_kernels): make test also runs these as plain Python.
+pytestmark = pytest.mark.kernels
+
 
 def feasible(s, c, r, rho, tol=1e-9):
     return (np.linalg.norm(s - c, axis=-1) <= r + tol) & (np.linalg.norm(s, axis=-1) >= rho - tol)

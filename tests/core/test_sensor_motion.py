@@ -5,6 +5,9 @@ import pytest
 
 from activetrack.sensor_motion import actions_to_reach, apply_actions, move_to
 
+# The moves are compiled (activetrack.motion_kernels): make test also runs these as plain Python.
+pytestmark = pytest.mark.kernels
+
 
 def _brute_nearest_feasible(q, c, r, rho, n=400):
     """Return the feasible point nearest to q from a dense polar grid of the speed disk."""

@@ -1,0 +1,135 @@
+"""Compiled sensor moves, eq. (13)-(16), one sensor at a time.
+
+The kernels behind :mod:`activetrack.sensor_motion` and
+:func:`activetrack.geometry.project_feasible` (their docstrings state the rules):
+:func:`moves_rows` turns actions (in units of the reach) or absolute positions into
+positions within reach, :func:`keep_rows` pushes the moves that end inside a ``rho`` disk
+to the nearest feasible point (:func:`project_feasible_point`). Arrays are C-contiguous
+float64 rows: positions (B, M, 2), the predicted target (B, 2), per-sensor values (B', M)
+with B' = 1 (shared) or B.
+"""
+
+from __future__ import annotations
+
+import math
+
+from activetrack._jit import kernel
+
+#: Relative tolerance of the unit-disk and minimum-distance tests.
+TOL = 1e-12
+_LONG = 1.0 + TOL
+_INSIDE = 1.0 - TOL
+
+
+@kernel
+def fallback_point(cx, cy, r):
+    """Return ``c + r c / ||c||`` (x axis where ``c`` is zero): the reachable point
+    farthest from the target, for a sensor that cannot leave the ``rho`` disk."""
+    nc = math.hypot(cx, cy)
+    if nc > 0.0:
+        return cx + r * (cx / nc), cy + r * (cy / nc)
+    return cx + r * 1.0, cy + r * 0.0
+
+
+@kernel
+def project_feasible_point(qx, qy, cx, cy, r, rho):
+    """Return the feasible point nearest to ``q`` (all relative to the target).
+
+    ``q`` must lie in the speed disk around ``c``. A ``q`` inside the ``rho`` disk goes
+    radially onto the ``rho`` circle; if that leaves the speed disk, to the nearer of the
+    two circle intersections; if the circles do not meet, to :func:`fallback_point`.
+    """
+    nq = math.hypot(qx, qy)
+    if not nq < rho:
+        return qx, qy
+    nc = math.hypot(cx, cy)
+    ux, uy = (cx / nc, cy / nc) if nc > 0.0 else (1.0, 0.0)
+    dx, dy = (qx / nq, qy / nq) if nq > 0.0 else (ux, uy)
+    radx, rady = rho * dx, rho * dy
+    if math.hypot(radx - cx, rady - cy) <= r * (1.0 + 1e-12):
+        return radx, rady
+    # The intersections of ||s - c|| = r and ||s|| = rho (angle g from c's direction).
+    cos_g = (rho * rho + nc * nc - r * r) / (2.0 * rho * nc)
+    if not abs(cos_g) <= 1.0:  # the circles do not meet (or c = 0)
+        return fallback_point(cx, cy, r)
+    sin_g = math.sqrt(1.0 - cos_g * cos_g)
+    bx, by = (rho * cos_g) * ux, (rho * cos_g) * uy
+    ox, oy = (rho * sin_g) * -uy, (rho * sin_g) * ux
+    ax, ay, qbx, qby = bx + ox, by + oy, bx - ox, by - oy
+    if math.hypot(ax - qx, ay - qy) <= math.hypot(qbx - qx, qby - qy):
+        return ax, ay
+    return qbx, qby
+
+
+@kernel
+def unit_disk(ax, ay):
+    """Return ``(ax, ay)`` scaled to length 1 if longer than ``1 + TOL`` (no overflow)."""
+    norm = math.hypot(ax, ay)
+    if not norm > _LONG:
+        return ax, ay
+    if math.isinf(norm):  # |a| overflowed: divide by the larger component first
+        big = max(abs(ax), abs(ay))
+        ax, ay = ax / big, ay / big
+        norm = math.hypot(ax, ay)
+    return ax / norm, ay / norm
+
+
+@kernel
+def moves_rows(x, sensors, r, absolute, out):
+    """Write positions within reach into ``out`` (B, M, 2): ``sensors + r a`` for actions
+    ``x`` (``a`` on the unit disk), or for absolute positions ``x`` (``absolute``) those
+    farther than ``r (1 + TOL)`` scaled onto the speed circle (others unchanged)."""
+    for b in range(x.shape[0]):
+        rb = r[b if r.shape[0] > 1 else 0]
+        for m in range(x.shape[1]):
+            sx, sy, rr = sensors[b, m, 0], sensors[b, m, 1], rb[m]
+            if not absolute:
+                ax, ay = unit_disk(x[b, m, 0], x[b, m, 1])
+                out[b, m, 0], out[b, m, 1] = sx + ax * rr, sy + ay * rr
+                continue
+            dx, dy = x[b, m, 0] - sx, x[b, m, 1] - sy
+            if math.hypot(dx, dy) > rr * _LONG:
+                safe = rr if rr > 0.0 else 1.0
+                ax, ay = unit_disk(dx / safe, dy / safe)
+                out[b, m, 0], out[b, m, 1] = sx + ax * rr, sy + ay * rr
+            else:
+                out[b, m, 0], out[b, m, 1] = x[b, m, 0], x[b, m, 1]
+
+
+@kernel
+def keep_rows(new, sensors, target, r, rho, out, inside):
+    """Write ``new`` (B, M, 2) with the moves that end inside their ``rho`` disk around the
+    predicted ``target`` (B, 2) (by more than ``TOL``, relative) projected to the nearest
+    feasible point into ``out``; mark them in ``inside`` (B, M). A sensor with ``r = 0``
+    stays, even inside."""
+    for b in range(new.shape[0]):
+        rb, hb = r[b if r.shape[0] > 1 else 0], rho[b if rho.shape[0] > 1 else 0]
+        tx, ty = target[b, 0], target[b, 1]
+        for m in range(new.shape[1]):
+            qx, qy = new[b, m, 0] - tx, new[b, m, 1] - ty
+            hit = math.hypot(qx, qy) < hb[m] * _INSIDE and rb[m] > 0.0
+            inside[b, m] = hit
+            if hit:
+                px, py = project_feasible_point(
+                    qx, qy, sensors[b, m, 0] - tx, sensors[b, m, 1] - ty, rb[m], hb[m]
+                )
+                out[b, m, 0], out[b, m, 1] = px + tx, py + ty
+            else:
+                out[b, m, 0], out[b, m, 1] = new[b, m, 0], new[b, m, 1]
+
+
+@kernel
+def project_feasible_rows(q, c, r, rho, out):
+    """Write :func:`project_feasible_point` of rows ``q``, ``c`` (B, 2), ``r``, ``rho``
+    (B,) into ``out`` (B, 2)."""
+    for b in range(q.shape[0]):
+        out[b, 0], out[b, 1] = project_feasible_point(
+            q[b, 0], q[b, 1], c[b, 0], c[b, 1], r[b], rho[b]
+        )
+
+
+@kernel
+def fallback_rows(c, r, out):
+    """Write :func:`fallback_point` of rows ``c`` (B, 2), ``r`` (B,) into ``out`` (B, 2)."""
+    for b in range(c.shape[0]):
+        out[b, 0], out[b, 1] = fallback_point(c[b, 0], c[b, 1], r[b])
