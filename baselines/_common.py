@@ -117,14 +117,19 @@ def sensor_modes_of(c: FloatArray, r: FloatArray, rho: FloatArray) -> tuple[np.n
     unreachable = ~stay & (nc + r < rho)
     free = ~stay & ~unreachable
     degenerate = free & (rho <= 0.0) & (nc <= r)
-    if np.any(degenerate):
+    if degenerate.any():
         raise ValueError(
             f"rho must be > 0 for sensors {_where(degenerate)}: the predicted "
             "target is within their reach and the information grows without bound near it"
         )
-    fixed_rel = np.where(unreachable[..., None], geometry.unreachable_fallback(c, r), c)
+    if not unreachable.any():  # the common case: every fixed sensor stays where it is
+        fixed_rel = np.array(c, dtype=np.float64)
+    else:
+        fixed_rel = np.where(unreachable[..., None], geometry.unreachable_fallback(c, r), c)
+    if free.all():
+        return free, fixed_rel
     on_target = ~free & (np.hypot(fixed_rel[..., 0], fixed_rel[..., 1]) == 0.0)
-    if np.any(on_target):
+    if on_target.any():
         raise ValueError(
             f"sensors {_where(on_target)} cannot move (r = 0) and sit exactly "
             "on the predicted target, where the bearing is undefined"

@@ -2,7 +2,7 @@
 
 :class:`BatchedGSR` is :class:`activetrack.baselines.GSR` (without restarts) on a batched
 :class:`activetrack.problem.PlanningProblem`: :meth:`BatchedGSR.plan_batch` builds the
-problem from arrays and runs GSR's one vectorized sweep over the copies
+problem from arrays and runs GSR's compiled sweeps over the copies
 (:func:`activetrack.baselines.gsr.relax_batch`, what ``GSR().plan`` runs on a batched
 problem). New code can call ``GSR().plan`` on a batched problem directly.
 
@@ -21,7 +21,6 @@ from activetrack.baselines.gsr import (
     warn_warm_roots,
 )
 from activetrack.problem import PlanningProblem
-from activetrack.solver import _solve_batch_unchecked
 from activetrack.validation import FloatArray
 
 #: The result of :meth:`BatchedGSR.plan_batch`: ``positions`` (B, M, 2) absolute,
@@ -67,12 +66,4 @@ class BatchedGSR:
             raise ValueError(
                 f"plan_batch takes one batch axis: sensors (B, M, 2), got {problem.sensors.shape}"
             )
-        positions, value, sweeps = relax_batch(problem, self.tol, self.max_sweeps, solve=_solve)
-        return BatchedGSRResult(positions, value, sweeps)
-
-
-def _solve(*args):
-    """Call this module's ``_solve_batch_unchecked`` (looked up per call, so that
-    instrumentation that replaces it here, as ``benchmarks/throughput.py`` does, sees
-    every solve)."""
-    return _solve_batch_unchecked(*args)
+        return relax_batch(problem, self.tol, self.max_sweeps)

@@ -18,12 +18,12 @@ for a batch:
 - Sweeps stop when one improves the objective by at most ``tol`` (relative), when no
   sensor is left to re-solve, or after ``max_sweeps``.
 
-A batched problem (:attr:`PlanningProblem.batch_shape` not empty) runs one vectorized
-sweep over the copies (:func:`relax_batch`): each step solves sensor ``i`` of every copy
-still running at once with the solver's compiled batch kernel. A single problem runs
-the same rules in scalar form (:class:`Relaxation`, with the scalar solver: on one
-problem the vectorized bookkeeping costs more than the solves); the two share the sensor
-modes, the warm start, the objective and the stopping test.
+The sweeps are compiled (:mod:`activetrack.baselines.gsr_kernel`): one problem
+(:func:`relax_single`) and every copy of a batched problem (:func:`relax_batch`, a compiled
+loop over the copies) run the same kernel, so a copy's plan is bit for bit the single
+problem's. The restarts and the Hooke-Jeeves pattern moves run the same rules in Python
+(:class:`Relaxation`); both share the sensor modes, the warm start, the objective and the
+stopping test.
 
 GSR ends in a configuration no single sensor can improve, which need not be the team
 optimum; ``GSR(restarts=True)`` also relaxes from other starts and keeps the best
@@ -39,11 +39,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from activetrack import geometry
+from activetrack._jit import as_rows
+from activetrack.baselines import gsr_kernel as gk
 from activetrack.baselines import gsr_restarts
 from activetrack.baselines._common import sensor_modes, sensor_modes_of
 from activetrack.objective import sensor_information
 from activetrack.problem import PlanningProblem
-from activetrack.solver import _solve_batch_unchecked
 from activetrack.solver_scalar import solve_point
 from activetrack.validation import FloatArray
 
@@ -85,11 +86,14 @@ class GSRBatchResult:
         positions: next absolute positions, ``batch_shape + (M, 2)``.
         value: their objective, ``batch_shape``.
         sweeps: sweeps per copy, ``batch_shape``.
+        n_solves: single-sensor problems solved per copy, ``batch_shape`` (None when the
+            copies were planned with restarts).
     """
 
     positions: FloatArray
     value: FloatArray
     sweeps: np.ndarray
+    n_solves: np.ndarray | None = None
 
 
 def warn_warm_roots(warm_roots: object) -> None:
@@ -181,6 +185,8 @@ class GSR:
         return result
 
     def _plan_single(self, problem: PlanningProblem) -> GSRResult:
+        if not self.restarts and not self.accelerate:  # plain sweeps: compiled
+            return relax_single(problem, self.tol, self.max_sweeps)
         run = Relaxation(problem, self.tol, self.max_sweeps)
         warm, warm_feasible = run.warm_start()
         s, val, conv = run.relax(warm, True, self.accelerate)  # the warm start is feasible
@@ -245,8 +251,7 @@ class GSR:
                 np.array([r.value for r in results]).reshape(shape),
                 np.array([r.sweeps for r in results], dtype=np.int64).reshape(shape),
             )
-        positions, value, sweeps = relax_batch(problem, self.tol, self.max_sweeps)
-        return GSRBatchResult(positions, value, sweeps)
+        return relax_batch(problem, self.tol, self.max_sweeps)
 
 
 def _check_objective(problem: PlanningProblem) -> None:
@@ -285,75 +290,57 @@ def small_improvement(f0, f1, tol: float):
 # ---------------------------------------------------------------------------------------
 
 
-def relax_batch(
-    problem: PlanningProblem,
-    tol: float,
-    max_sweeps: int,
-    solve=None,
-) -> tuple[FloatArray, FloatArray, np.ndarray]:
-    """Return GSR's ``(positions, value, sweeps)`` for every copy of a batched problem.
-
-    Shapes ``batch_shape + (M, 2)``, ``batch_shape``, ``batch_shape``. ``solve`` replaces
-    the batch solver ``_solve_batch_unchecked`` (same signature; for instrumentation).
-    """
+def relax_batch(problem: PlanningProblem, tol: float, max_sweeps: int) -> GSRBatchResult:
+    """Return GSR's plans for every copy of a batched problem: positions ``batch_shape +
+    (M, 2)``, values, sweeps and single-sensor solves ``batch_shape`` (the compiled sweeps
+    of :func:`activetrack.baselines.gsr_kernel.relax_rows`, copy by copy)."""
     shape, M = problem.batch_shape, problem.n_sensors
     B = math.prod(shape)
-    c = problem.rel_sensors.reshape(B, M, 2)
+    c = as_rows(problem.rel_sensors, shape, (M, 2))
     r, rho, sd2, st2 = (
-        getattr(problem, k).reshape(B, M) for k in ("r", "rho", "sigma_d2", "sigma_theta2")
+        as_rows(getattr(problem, k), shape, (M,)) for k in ("r", "rho", "sigma_d2", "sigma_theta2")
     )
     free, fixed_rel = sensor_modes_of(c, r, rho)
     s, _ = warm_start(c, r, rho, free, fixed_rel)
-    prior = problem.prior_info.reshape(B, 2, 2)
-    phi = problem.objective.of_information
-    info = sensor_information(s, sd2, st2)
-    f1 = phi(prior + info.sum(axis=1))
-    stale = free.copy()
-    active = free.any(axis=1)
-    sweeps = np.zeros(B, dtype=np.int64)
-    sweep = _BatchSweep(phi, prior, c, r, rho, sd2, st2, free, solve or _solve_batch_unchecked)
-    while active.any():
-        f_before = f1.copy()
-        sweep(s, info, f1, stale, active)
-        sweeps += active
-        stop = (sweeps >= max_sweeps) | ~stale.any(axis=1) | small_improvement(f_before, f1, tol)
-        active &= ~stop
+    s = as_rows(s, (B,), (M, 2))
+    value, sweeps, solves = np.empty(B), np.empty(B, np.int64), np.empty(B, np.int64)
+    gk.relax_rows(
+        as_rows(problem.prior_info, shape, (2, 2)), c, r, rho, sd2, st2,
+        as_rows(free, (B,), (M,), np.bool_), s, float(tol), int(max_sweeps), value, sweeps,
+        solves,
+    )  # fmt: skip
     positions = s.reshape(shape + (M, 2)) + problem.target[..., None, :]
-    return positions, f1.reshape(shape), sweeps.reshape(shape)
+    return GSRBatchResult(
+        positions, value.reshape(shape), sweeps.reshape(shape), solves.reshape(shape)
+    )
 
 
-class _BatchSweep:
-    """One Gauss-Seidel sweep over the running copies of a batch (eq. 38), in place."""
-
-    def __init__(self, phi, prior, c, r, rho, sd2, st2, free, solve) -> None:
-        self.phi, self.prior, self.c, self.r, self.rho = phi, prior, c, r, rho
-        self.sd2, self.st2, self.free, self.solve = sd2, st2, free, solve
-
-    def __call__(self, s, info, cur, stale, active) -> None:
-        """Sweep the ``active`` copies: update ``s``, ``info``, ``cur``, ``stale`` in place."""
-        c, r, rho, sd2, st2, free = self.c, self.r, self.rho, self.sd2, self.st2, self.free
-        total = self.prior + info.sum(axis=1)  # rebuilt every sweep: no drift
-        cur[active] = self.phi(total[active])
-        for i in range(s.shape[1]):
-            idx = np.flatnonzero(active & stale[:, i])
-            if idx.size == 0:
-                continue
-            others = total[idx] - info[idx, i]
-            sol = self.solve(others, c[idx, i], r[idx, i], rho[idx, i], sd2[idx, i], st2[idx, i])
-            new_s = sol.s
-            stale[idx, i] = False
-            new_info = sensor_information(new_s, sd2[idx, i], st2[idx, i])
-            cand = others + new_info
-            val = self.phi(cand)
-            keep = val < cur[idx]
-            k = idx[keep]
-            changed = k[np.any(new_s[keep] != s[k, i], axis=1)]
-            s[k, i] = new_s[keep]
-            info[k, i] = new_info[keep]
-            total[k] = cand[keep]
-            cur[k] = val[keep]
-            stale[changed] = free[changed]  # the others now face a new problem
-            stale[changed, i] = False
+def relax_single(problem: PlanningProblem, tol: float, max_sweeps: int) -> GSRResult:
+    """Return GSR's plan of one problem from its warm start, plain sweeps (compiled:
+    :func:`activetrack.baselines.gsr_kernel.relax_point`)."""
+    free, fixed_rel = sensor_modes(problem)
+    c = as_rows(problem.rel_sensors, (), (problem.n_sensors, 2))[0]
+    r, rho, sd2, st2 = (
+        as_rows(getattr(problem, k), (), (problem.n_sensors,))[0]
+        for k in ("r", "rho", "sigma_d2", "sigma_theta2")
+    )
+    s, inside = warm_start(c, r, rho, free, fixed_rel)
+    s = np.array(s, np.float64)
+    prior = problem.prior_info
+    value, start, sweeps, solves, converged = gk.relax_point(
+        float(prior[0, 0]), float(prior[0, 1]), float(prior[1, 1]), c, r, rho, sd2, st2,
+        np.flatnonzero(free), s, float(tol), int(max_sweeps),
+    )  # fmt: skip
+    return GSRResult(
+        positions=s + problem.target,
+        value=float(value),
+        sweeps=int(sweeps),
+        n_solves=int(solves),
+        start="warm",
+        converged=bool(converged),
+        warm_value=float(start),
+        warm_feasible=not bool(np.any(inside)),
+    )
 
 
 # ---------------------------------------------------------------------------------------

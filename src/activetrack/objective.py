@@ -22,6 +22,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike
 
+from activetrack._jit import kernel
 from activetrack.linalg2 import inv2, rotation, trace_inv2
 from activetrack.validation import (
     FloatArray,
@@ -32,6 +33,25 @@ from activetrack.validation import (
 )
 
 
+@kernel
+def information_entries(x, y, sigma_d2, sigma_theta2):
+    """Return ``(a, b, c)``: the entries ``[[a, b], [b, c]]`` of the information of a sensor
+    at relative position ``(x, y)`` (eq. 17). A kernel on floats, and (its ``py_func``,
+    the same source) elementwise on arrays, real or complex."""
+    xx, xy, yy = x * x, x * y, y * y
+    n2 = xx + yy
+    wd = 1.0 / (sigma_d2 * n2)
+    wt = 1.0 / (sigma_theta2 * n2 * n2)
+    return wd * xx + wt * yy, (wd - wt) * xy, wd * yy + wt * xx
+
+
+@kernel
+def trace_of_inverse(a, b, c):
+    """Return ``tr([[a, b], [b, c]]^{-1}) = (a + c) / (ac - b^2)`` (a kernel on floats; its
+    ``py_func`` elementwise on arrays)."""
+    return (a + c) / (a * c - b * b)
+
+
 def sensor_information(
     rel: FloatArray, sigma_d2: FloatArray, sigma_theta2: FloatArray
 ) -> FloatArray:
@@ -39,14 +59,7 @@ def sensor_information(
 
     Unchecked kernel: ``rel`` must be non-zero and finite, variances positive.
     """
-    x, y = rel[..., 0], rel[..., 1]
-    xx, xy, yy = x * x, x * y, y * y
-    n2 = xx + yy
-    wd = 1.0 / (sigma_d2 * n2)
-    wt = 1.0 / (sigma_theta2 * n2 * n2)
-    a = wd * xx + wt * yy
-    b = (wd - wt) * xy
-    c = wd * yy + wt * xx
+    a, b, c = information_entries.py_func(rel[..., 0], rel[..., 1], sigma_d2, sigma_theta2)
     # Filled in place: three np.stack calls cost ~10x more on GSR's single (2,) sensors.
     out = np.empty(np.shape(a) + (2, 2), dtype=np.result_type(a, b, c))  # complex steps too
     out[..., 0, 0] = a
@@ -90,7 +103,7 @@ class TraceObjective:
 
     def of_entries(self, a: FloatArray, b: FloatArray, c: FloatArray) -> FloatArray:
         """Return ``tr([[a, b], [b, c]]^{-1}) = (a + c) / (ac - b^2)``."""
-        return (a + c) / (a * c - b * b)
+        return trace_of_inverse.py_func(a, b, c)
 
     def of_information(self, Y: FloatArray) -> FloatArray:
         """Return ``tr(Y^{-1})`` for total information matrices ``Y`` (..., 2, 2) (eq. 12, 17).
