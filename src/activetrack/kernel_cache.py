@@ -20,13 +20,19 @@ import numpy as np
 
 from activetrack._jit import KERNELS
 
-#: The modules whose kernels :func:`compile_all` reaches (importing them defines them all).
+#: The modules whose kernels :func:`compile_all` reaches (importing them defines them all;
+#: GSR's sweeps are the planners' layer's: this command, like ``cli.py``, reaches it lazily).
 KERNEL_MODULES = (
     "activetrack.hessenberg_qr",
     "activetrack.companion",
     "activetrack._coefficients",
     "activetrack.solver_steps",
     "activetrack.solver_scalar",
+    "activetrack.objective",
+    "activetrack.ekf_kernels",
+    "activetrack.motion_kernels",
+    "activetrack.occluder_kernels",
+    "activetrack.baselines.gsr_kernel",
 )
 
 
@@ -52,6 +58,7 @@ def compile_all() -> dict[str, Any]:
     case1_critical_points(prior, np.array([5.0, 1.0]), 1.0, 0.1, 0.01)
     monic_roots(np.ones((1, 10)))
     real_roots_scalar(tuple(float(k) for k in range(11)))
+    _world_and_planners()
     seconds = time.perf_counter() - start
     used = [k for k in KERNELS if k._compiled is not None]
     stats = [k.dispatcher.stats for k in used if hasattr(k.dispatcher, "stats")]
@@ -62,6 +69,25 @@ def compile_all() -> dict[str, Any]:
         "cache_hits": sum(sum(s.cache_hits.values()) for s in stats),
         "cache_misses": sum(sum(s.cache_misses.values()) for s in stats),
     }
+
+
+def _world_and_planners() -> None:
+    """Run the entry points of the world's kernels (moves, EKF, occluders, rays) and of
+    GSR's sweeps once: a step of one copy and of two copies of every kind of task, an
+    occluder layout drawn, GSR on a single and on a batched problem."""
+    from activetrack.baselines import GSR  # noqa: PLC0415 (the planners' layer, lazily)
+    from activetrack.world import World  # noqa: PLC0415
+
+    for scenario in ("paper", "uncertain_poses", "urban", "urban_random"):
+        for copies in (1, 2):
+            world = World(scenario, copies)
+            world.reset(seeds=range(copies))
+            world.step_actions(np.full((copies, world.n_sensors, 2), 0.5))
+            world.observe()
+    world = World("paper", 2)
+    world.reset(seeds=[0, 1])
+    world.step(GSR().plan(world.planning_problem()))
+    GSR().plan(world.planning_problem(0))
 
 
 def cache_folders() -> list[Path]:
@@ -79,9 +105,10 @@ def cache_folders() -> list[Path]:
 
 def clear_cache() -> int:
     """Delete the cached machine code of the library's kernels; return how many files."""
+    folders = cache_folders()  # imports every kernel module first
     stems = {Path(k.py_func.__code__.co_filename).stem for k in KERNELS}
     removed = 0
-    for folder in cache_folders():
+    for folder in folders:
         for path in folder.glob("*.nb[ic]"):
             if path.name.split(".", 1)[0] in stems:
                 path.unlink(missing_ok=True)

@@ -42,6 +42,17 @@ def edge_dist2(px, py, ax, ay, bx, by):
 
 
 @kernel
+def line_parameters(px, py, dx, dy, cx, cy, fx, fy):
+    """Return ``(ok, t, s)`` with ``p + t d = c + s f`` where the lines cross (``ok``:
+    they are not parallel; else ``t = s = 0``)."""
+    den = dx * fy - dy * fx
+    if den == 0.0:
+        return False, 0.0, 0.0
+    wx, wy = cx - px, cy - py
+    return True, (wx * fy - wy * fx) / den, (wx * dy - wy * dx) / den
+
+
+@kernel
 def inside_point(px, py, lay, ea, eb, starts, ends, bbox, eps):
     """Return whether (px, py) lies in the open interior of a polygon of layout ``lay``,
     farther than its ``eps`` from that polygon's boundary (even-odd crossing rule)."""
@@ -97,14 +108,11 @@ def blocked_segment(ax, ay, bx, by, lay, ea, eb, starts, ends, bbox, eps, scale,
         for j in range(starts[p], ends[p]):
             cx, cy = ea[lay, j, 0], ea[lay, j, 1]
             fx, fy = eb[lay, j, 0] - cx, eb[lay, j, 1] - cy
+            ok, t, s = line_parameters(ax, ay, dx, dy, cx, cy, fx, fy)
+            if ok and s >= -CUT and s <= 1.0 + CUT and t > 0.0 and t < 1.0:
+                cuts[n] = t
+                n += 1
             wx, wy = cx - ax, cy - ay
-            den = dx * fy - dy * fx
-            if den != 0.0:
-                t = (wx * fy - wy * fx) / den
-                s = (wx * dy - wy * dx) / den
-                if s >= -CUT and s <= 1.0 + CUT and t > 0.0 and t < 1.0:
-                    cuts[n] = t
-                    n += 1
             tv = (wx * dx + wy * dy) / sdd
             if abs(wx * dy - wy * dx) <= off_max and tv > 0.0 and tv < 1.0:
                 cuts[n] = tv
@@ -227,14 +235,10 @@ def candidates(ox, oy, qx, qy, r, lay, ea, eb, starts, ends, bbox, cross, cand):
                     for h in range(starts[q], ends[q]):
                         hx, hy = ea[lay, h, 0], ea[lay, h, 1]
                         kx, ky = eb[lay, h, 0] - hx, eb[lay, h, 1] - hy
-                        wx, wy = hx - ox, hy - oy
-                        den = gx * ky - gy * kx
-                        if den != 0.0:
-                            sh = (wx * ky - wy * kx) / den
-                            uh = (wx * gy - wy * gx) / den
-                            if uh >= -SHADOW_TOL and uh <= 1.0 + SHADOW_TOL:
-                                if sh > 1.0 + SHADOW_TOL:
-                                    smin = min(smin, sh)
+                        ok, sh, uh = line_parameters(ox, oy, gx, gy, hx, hy, kx, ky)
+                        if ok and uh >= -SHADOW_TOL and uh <= 1.0 + SHADOW_TOL:
+                            if sh > 1.0 + SHADOW_TOL:
+                                smin = min(smin, sh)
             if smin < math.inf:
                 _put(cand, 4 * E + j, ox + smin * gx, oy + smin * gy)
             else:
@@ -393,13 +397,8 @@ def crossings_into(a, b, polygon, out):
             if polygon[i] == polygon[j]:
                 continue
             d2x, d2y = b[j, 0] - a[j, 0], b[j, 1] - a[j, 1]
-            den = d1x * d2y - d1y * d2x
-            if den == 0.0:
-                continue
-            wx, wy = a[j, 0] - a[i, 0], a[j, 1] - a[i, 1]
-            t = (wx * d2y - wy * d2x) / den
-            s = (wx * d1y - wy * d1x) / den
-            if t >= 0.0 and t <= 1.0 and s >= 0.0 and s <= 1.0:
+            ok, t, s = line_parameters(a[i, 0], a[i, 1], d1x, d1y, a[j, 0], a[j, 1], d2x, d2y)
+            if ok and t >= 0.0 and t <= 1.0 and s >= 0.0 and s <= 1.0:
                 out[n, 0] = a[i, 0] + t * d1x
                 out[n, 1] = a[i, 1] + t * d1y
                 n += 1
