@@ -26,6 +26,8 @@ import functools
 from collections.abc import Callable
 from typing import Any, Generic, TypeVar
 
+import numpy as np
+
 F = TypeVar("F", bound=Callable[..., Any])
 
 _typed = False  # whether numba knows how to type a Kernel (done once, on first compile)
@@ -84,10 +86,17 @@ def as_rows(a: Any, shape: tuple[int, ...], tail: tuple[int, ...] = (), dtype: A
     """Return ``a`` broadcast to ``shape + tail`` as C-contiguous, writable rows
     ``(prod(shape), *tail)``: what the kernels take (one numba signature per dtype), copied
     only when needed."""
-    import numpy as np
-
+    full = shape + tail
+    if (  # the common case, already in shape: a view, no NumPy function calls
+        type(a) is np.ndarray
+        and a.shape == full
+        and a.dtype == (np.float64 if dtype is None else dtype)
+        and a.flags.c_contiguous
+        and a.flags.writeable
+    ):
+        return a.reshape((-1, *tail))
     a = np.asarray(a, dtype=np.float64 if dtype is None else dtype)
-    if a.shape != shape + tail:
-        a = np.broadcast_to(a, shape + tail)
+    if a.shape != full:
+        a = np.broadcast_to(a, full)
     a = a.reshape((-1, *tail))
     return a if a.flags.c_contiguous and a.flags.writeable else a.copy()

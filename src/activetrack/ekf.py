@@ -102,16 +102,18 @@ def update(
     batch = np.broadcast_shapes(x.shape[:-1], P.shape[:-2], z.shape[:-2], sensor_pos.shape[:-2])
     wd, wt = weights if weights is not None else (1.0 / sigma_d2, 1.0 / sigma_theta2)
     xf, Pf = as_rows(x, batch, (n,)), as_rows(P, batch, (n, n))
+    x_out, P_out = np.empty(xf.shape), np.empty(Pf.shape)
+    if pose_cov is not None:  # the terms in NumPy, on the arrays as given
+        if mask is not None:
+            wd, wt = wd * mask, wt * mask
+        codes = 0 if models is None else models
+        args = (z, sensor_pos, codes, wd, wt, orientation, pose_cov)
+        _update_with_poses(xf, Pf, batch, args, int(iterations), x_out, P_out)
+        return x_out.reshape(batch + (n,)), P_out.reshape(batch + (n, n))
     zf, sf = as_rows(z, batch, (m, 2)), as_rows(sensor_pos, batch, (m, 2))
     per = [_per_sensor(v, batch, m, np.float64) for v in (wd, wt, orientation)]
     per.append(np.ones((1, m), bool) if mask is None else _per_sensor(mask, batch, m, np.bool_))
-    x_out, P_out = np.empty(xf.shape), np.empty(Pf.shape)
-    if pose_cov is None:
-        ek.update_rows(xf, Pf, zf, sf, *per, int(iterations), x_out, P_out)
-    else:
-        codes = _per_sensor(0 if models is None else models, batch, m, np.int8)
-        pose = np.broadcast_to(pose_cov, batch + (m, 2, 2)).reshape(-1, m, 2, 2)
-        _update_with_poses(xf, Pf, zf, sf, codes, *per, pose, int(iterations), x_out, P_out)
+    ek.update_rows(xf, Pf, zf, sf, *per, int(iterations), x_out, P_out)
     return x_out.reshape(batch + (n,)), P_out.reshape(batch + (n, n))
 
 
@@ -122,29 +124,29 @@ def _per_sensor(v: Any, batch: tuple[int, ...], m: int, dtype: type) -> np.ndarr
 
 
 def _update_with_poses(
-    x: FloatArray, P: FloatArray, z: FloatArray, sensors: FloatArray, codes: np.ndarray,
-    wd: FloatArray, wt: FloatArray, orientation: FloatArray, mask: np.ndarray,
-    pose_cov: FloatArray, iterations: int, x_out: FloatArray, P_out: FloatArray,
+    x: FloatArray, P: FloatArray, batch: tuple[int, ...], args: tuple, iterations: int,
+    x_out: FloatArray, P_out: FloatArray,
 ) -> None:  # fmt: skip
-    """Write the posteriors of filters whose sensors' positions are uncertain (the terms of
-    :func:`activetrack.sensor_models.update_terms`, the kernels' posterior), each filter
-    relinearized until its position settles, at most ``iterations`` linearizations."""
-    wd, wt = wd * mask, wt * mask
+    """Write the posteriors of filters (rows ``x``, ``P`` of a batch of shape ``batch``)
+    whose sensors' positions are uncertain: the terms of
+    :func:`activetrack.sensor_models.update_terms` on ``args`` = ``(z, sensors, codes, w_d,
+    w_theta, orientation, pose_cov)`` as given (broadcasting over ``batch``), the kernels'
+    posterior; each filter relinearized until its position settles, at most ``iterations``
+    linearizations."""
     every = np.arange(x.shape[0])
+    m = np.shape(args[1])[-2]
+    tails = ((m, 2), (m, 2), (m,), (m,), (m,), (m,), (m, 2, 2))
 
     def terms(rows: np.ndarray, lin: FloatArray) -> FloatArray:
-        def take(a: np.ndarray) -> np.ndarray:  # all rows: no copy; one filter: unbatched
-            if every.size == 1:
-                return a[0]
-            return a if a.shape[0] == 1 or rows.size == every.size else a[rows]
-
-        if every.size == 1:  # one filter: unbatched arrays (cheaper NumPy calls)
+        if batch == ():  # one filter: the arrays as given
+            sub = args
             lin = lin[0]
-
-        Yi, bi = sensor_models.update_terms(
-            take(z), lin, take(sensors), take(codes), take(wd), take(wt), take(orientation),
-            take(pose_cov),
-        )  # fmt: skip
+        else:  # the rows' values of every batched argument
+            sub = tuple(
+                a if np.ndim(a) <= len(t) else as_rows(a, batch, t, np.asarray(a).dtype)[rows]
+                for a, t in zip(args, tails, strict=True)
+            )
+        Yi, bi = sensor_models.update_terms(sub[0], lin, *sub[1:])
         Y, b = Yi.sum(axis=-3), bi.sum(axis=-2)
         out = np.empty((rows.size, 5))
         out[:, 0], out[:, 1], out[:, 2] = Y[..., 0, 0], Y[..., 0, 1], Y[..., 1, 1]
