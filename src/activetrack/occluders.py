@@ -544,9 +544,9 @@ def line_of_sight(sensors: FloatArray, targets: FloatArray, occ: Occluders) -> n
     if t.shape[:-2] != lead:
         lead = np.broadcast_shapes(lead, t.shape[:-2])
     m, k = s.shape[-2], t.shape[-2]
-    lay = _layouts(occ, lead + (k, m), "line_of_sight")[:: k * m]  # each row's
+    lay = _layouts(occ, lead + (k, m), "line_of_sight")[:: max(k * m, 1)]  # each row's
     out = np.ones(lead + (k, m), bool)
-    if occ.n_edges:
+    if occ.n_edges and out.size:
         ea, eb, starts, ends, bbox, _, eps, scale = occ._kernel_args
         ok.sight_rows(_flat(s, lead + (m,)).reshape(-1, m, 2),
                       _flat(t, lead + (k,)).reshape(-1, k, 2), lay, ea, eb, starts, ends, bbox,

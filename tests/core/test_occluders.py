@@ -261,6 +261,9 @@ def test_line_of_sight_matches_dense_sampling():
             want = ~sampled_blocked(sensors[c], np.repeat(targets[c, k][None], 3, 0), polys)
             np.testing.assert_array_equal(got[c, k], want)
     assert 0 < got.sum() < got.size
+    # No target or no sensor: empty answers of the right shape.
+    assert oc.line_of_sight(sensors, targets[:, :0], occ).shape == (4, 0, 3)
+    assert oc.line_of_sight(sensors[:, :0], targets, occ).shape == (4, 2, 0)
     # One copy without a leading axis, targets broadcast against a batch of sensors.
     np.testing.assert_array_equal(oc.line_of_sight(sensors[1], targets[1], occ), got[1])
     np.testing.assert_array_equal(oc.line_of_sight(sensors, targets[1], occ)[1], got[1])
