@@ -318,14 +318,12 @@ def relax_batch(problem: PlanningProblem, tol: float, max_sweeps: int) -> GSRBat
 def relax_single(problem: PlanningProblem, tol: float, max_sweeps: int) -> GSRResult:
     """Return GSR's plan of one problem from its warm start, plain sweeps (compiled:
     :func:`activetrack.baselines.gsr_kernel.relax_point`)."""
-    free, fixed_rel = sensor_modes(problem)
-    c = as_rows(problem.rel_sensors, (), (problem.n_sensors, 2))[0]
-    r, rho, sd2, st2 = (
-        as_rows(getattr(problem, k), (), (problem.n_sensors,))[0]
-        for k in ("r", "rho", "sigma_d2", "sigma_theta2")
+    c = np.array(problem.rel_sensors, np.float64)  # kernel arrays: contiguous, writable
+    r, rho, sd2, st2 = np.array(
+        [problem.r, problem.rho, problem.sigma_d2, problem.sigma_theta2], np.float64
     )
+    free, fixed_rel = sensor_modes_of(c, r, rho)  # one target: the paper's problem
     s, inside = warm_start(c, r, rho, free, fixed_rel)
-    s = np.array(s, np.float64)
     prior = problem.prior_info
     value, start, sweeps, solves, converged = gk.relax_point(
         float(prior[0, 0]), float(prior[0, 1]), float(prior[1, 1]), c, r, rho, sd2, st2,
@@ -339,7 +337,7 @@ def relax_single(problem: PlanningProblem, tol: float, max_sweeps: int) -> GSRRe
         start="warm",
         converged=bool(converged),
         warm_value=float(start),
-        warm_feasible=not bool(np.any(inside)),
+        warm_feasible=not inside.any(),
     )
 
 
