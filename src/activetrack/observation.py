@@ -290,14 +290,17 @@ def cyclic_order(n_sensors: int) -> np.ndarray:
 
 
 def observations(
-    target: FloatArray, sensor: FloatArray, order: np.ndarray, rays: FloatArray | None = None
+    target: FloatArray,
+    sensor: FloatArray,
+    order: np.ndarray,
+    rays: FloatArray | int | None = None,
 ) -> np.ndarray:
     """Return all agents' observations, float32 of shape (..., M, 5 + 6M); with ``rays``
-    (..., M, R) each agent's own rays last."""
+    (..., M, R) each agent's own rays last (an int R: room for them, left unset)."""
     m, td, sd = sensor.shape[-2], target.shape[-1], sensor.shape[-1]
-    nr = 0 if rays is None else rays.shape[-1]
+    nr = 0 if rays is None else rays if isinstance(rays, int) else rays.shape[-1]
     full = np.empty(sensor.shape[:-2] + (m, td + sd * m + nr), dtype=np.float32)
-    if nr:
+    if nr and not isinstance(rays, int):
         full[..., td + sd * m :] = rays
     out = full[..., : td + sd * m]  # the team's part (a view: no second copy)
     if sensor.ndim == 2:  # one copy: a single gather
@@ -334,14 +337,17 @@ def global_state(
     return out
 
 
-def ray_readings(positions: FloatArray, occ: object) -> FloatArray:
+def ray_readings(positions: FloatArray, occ: object, out: np.ndarray | None = None) -> FloatArray:
     """Return the range-finder readings (..., M, RAYS) in [0, 1] from sensors at
     ``positions`` (..., M, 2) among the occluders ``occ``
-    (:func:`activetrack.occluders.ray_distances` over :data:`RAY_MAX`)."""
+    (:func:`activetrack.occluders.ray_distances` over :data:`RAY_MAX`), written into
+    ``out`` if given (float64 or float32, e.g. the observation's rays: no temporary)."""
     from activetrack import occluders  # noqa: PLC0415 (occluded scenarios only)
 
-    d = occluders.ray_distances(positions, RAY_DIRECTIONS, occ, RAY_MAX)
-    return np.divide(d, RAY_MAX, out=d)  # in place: no second large temporary
+    positions = np.asarray(positions, np.float64)
+    if out is None:
+        out = np.empty(positions.shape[:-1] + (RAYS,))
+    return occluders._rays_into(positions, RAY_DIRECTIONS, occ, RAY_MAX, RAY_MAX, out)
 
 
 def observation_bounds(n_sensors: int) -> tuple[np.ndarray, np.ndarray]:

@@ -332,9 +332,11 @@ def project_rows(o, q, r, lay, ea, eb, starts, ends, bbox, cross, eps, scale, ou
 
 
 @kernel
-def ray_rows(origins, directions, lay, ea, eb, starts, ends, bbox, eps, max_distance, out):
+def ray_rows(origins, directions, lay, ea, eb, starts, ends, bbox, eps, max_distance, divisor, out):
     """Fill ``out`` (M, R) with the distance along each ray from each origin to the first
-    edge (the smallest ``s > eps``), or ``max_distance`` if none is nearer.
+    edge (the smallest ``s > eps``), or ``max_distance`` if none is nearer, divided by
+    ``divisor`` (1: distances; ``out`` may be a float32 view, then each quotient is rounded
+    once, as a float64 array cast to float32 would be).
 
     Polygons whose bounding box is farther than ``max_distance`` from the origin are
     skipped (no hit of theirs could be nearer: a culling that changes no result).
@@ -371,7 +373,7 @@ def ray_rows(origins, directions, lay, ea, eb, starts, ends, bbox, eps, max_dist
                     hit = (u >= 0.0) & (u <= 1.0) & (s > e)
                     best[k] = min(best[k], s if hit else math.inf)
         for k in range(R):
-            out[i, k] = min(max_distance, best[k])
+            out[i, k] = min(max_distance, best[k]) / divisor
 
 
 @kernel

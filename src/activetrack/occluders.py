@@ -566,14 +566,27 @@ def ray_distances(
     is the layout axis.
     """
     o = np.asarray(origins, np.float64)
+    out = np.empty(o.shape[:-1] + (len(directions),))
+    return _rays_into(o, directions, occ, max_distance, 1.0, out)
+
+
+def _rays_into(
+    origins: FloatArray, directions: FloatArray, occ: Occluders, max_distance: float,
+    divisor: float, out: np.ndarray,
+) -> np.ndarray:  # fmt: skip
+    """Write :func:`ray_distances` divided by ``divisor`` into ``out`` (..., R) (float64 or
+    float32, a view whose leading axes merge into rows); return ``out``."""
+    o = np.asarray(origins, np.float64)
     dirs = _flat(np.asarray(directions, np.float64), (len(directions),))
     shape = o.shape[:-1]
     lay = _layouts(occ, shape, "ray_distances")
-    out = np.empty((math.prod(shape), len(dirs)))
+    rows = out.reshape(math.prod(shape), len(dirs))  # a view (checked below)
     ea, eb, starts, ends, bbox, _, eps, _ = occ._kernel_args
     ok.ray_rows(_flat(o, shape), dirs, lay, ea, eb, starts, ends, bbox, eps,
-                float(max_distance), out)  # fmt: skip
-    return out.reshape(shape + (len(dirs),))
+                float(max_distance), float(divisor), rows)  # fmt: skip
+    if not np.may_share_memory(rows, out):  # out's layout forced a copy: write it back
+        out[...] = rows.reshape(out.shape)
+    return out
 
 
 #: The smallest side of a random rectangle, relative to the bounds' scale.

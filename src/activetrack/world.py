@@ -708,7 +708,14 @@ class World:
         the paper): the prediction and the team as seen from each agent's seat.
         """
         target, sensor = self._features(index)
-        return observation.observations(target, sensor, self._order, self._rays(index))
+        if not self.layout.rays:
+            return observation.observations(target, sensor, self._order)
+        out = observation.observations(target, sensor, self._order, self.layout.rays)
+        # The rays straight into the observation (float32): no float64 temporary.
+        observation.ray_readings(
+            self.get("sensors", index), self.occluders(index), out[..., -self.layout.rays :]
+        )
+        return out
 
     def state(self, index: int | None = None) -> np.ndarray:
         """Return the global state, float32 (N, D + 1) or (D + 1,) for one copy."""

@@ -575,3 +575,24 @@ def test_random_layout_bad_input():
     # Sides below 1e-6 of the bounds' scale would be degenerate at the boundary tolerance.
     with pytest.raises(ValueError, match=r"size_range .* lo >= 0\.0001 "):
         oc.random_layout(rng, 1, (0, 0, 100, 1), (1e-5, 1.0))
+
+
+@pytest.mark.kernels
+def test_rays_written_into_float32_views_equal_the_float64_readings_cast():
+    """What the observation does (its rays written in place): the same values as the float64
+    readings rounded once to float32, for a view that reshapes in place and for one that
+    does not (written back); the rest of the array untouched."""
+    from activetrack.observation import RAY_DIRECTIONS, RAY_MAX, ray_readings
+
+    rng = np.random.default_rng(12)
+    occ = oc.Occluders.from_polygons(mixed_layout(rng))
+    pts = rng.uniform(-3.5, 3.5, (3, 4, 2))
+    want = (oc.ray_distances(pts, RAY_DIRECTIONS, occ, RAY_MAX) / RAY_MAX).astype(np.float32)
+    full = np.zeros((3, 4, 20), np.float32)
+    ray_readings(pts, occ, out=full[..., 4:])
+    np.testing.assert_array_equal(full[..., 4:], want)
+    assert not full[..., :4].any()
+    swapped = np.zeros((4, 3, 20), np.float32)
+    ray_readings(pts, occ, out=swapped.transpose(1, 0, 2)[..., 4:])
+    np.testing.assert_array_equal(swapped.transpose(1, 0, 2)[..., 4:], want)
+    assert not swapped[..., :4].any() and 0 < want.min() and want.max() <= 1
