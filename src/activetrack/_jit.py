@@ -100,3 +100,10 @@ def as_rows(a: Any, shape: tuple[int, ...], tail: tuple[int, ...] = (), dtype: A
         a = np.broadcast_to(a, full)
     a = a.reshape((-1, *tail))
     return a if a.flags.c_contiguous and a.flags.writeable else a.copy()
+
+
+def per_sensor_rows(v: Any, batch: tuple[int, ...], m: int, dtype: Any = np.float64) -> Any:
+    """Return a per-sensor value (a scalar, (M,) or ``batch + (M,)``) as kernel rows: (1, M)
+    when the batch shares it, else (B, M)."""
+    a = np.asarray(v, dtype)
+    return as_rows(a, () if a.ndim <= 1 else batch, (m,), dtype)

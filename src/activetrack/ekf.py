@@ -46,14 +46,12 @@ environment; :class:`ExtendedKalmanFilter` is a small validated stateful wrapper
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 from numpy.typing import ArrayLike
 
 from activetrack import ekf_kernels as ek
 from activetrack import sensor_models
-from activetrack._jit import as_rows
+from activetrack._jit import as_rows, per_sensor_rows
 from activetrack.ekf_kernels import ITERATION_TOL as ITERATION_TOL  # re-exported
 from activetrack.linalg2 import inv2
 from activetrack.motion import LinearMotionModel
@@ -111,16 +109,10 @@ def update(
         _update_with_poses(xf, Pf, batch, args, int(iterations), x_out, P_out)
         return x_out.reshape(batch + (n,)), P_out.reshape(batch + (n, n))
     zf, sf = as_rows(z, batch, (m, 2)), as_rows(sensor_pos, batch, (m, 2))
-    per = [_per_sensor(v, batch, m, np.float64) for v in (wd, wt, orientation)]
-    per.append(np.ones((1, m), bool) if mask is None else _per_sensor(mask, batch, m, np.bool_))
+    per = [per_sensor_rows(v, batch, m, np.float64) for v in (wd, wt, orientation)]
+    per.append(np.ones((1, m), bool) if mask is None else per_sensor_rows(mask, batch, m, np.bool_))
     ek.update_rows(xf, Pf, zf, sf, *per, int(iterations), x_out, P_out)
     return x_out.reshape(batch + (n,)), P_out.reshape(batch + (n, n))
-
-
-def _per_sensor(v: Any, batch: tuple[int, ...], m: int, dtype: type) -> np.ndarray:
-    """Return a per-sensor value as kernel rows (1, M) (shared by the batch) or (B, M)."""
-    a = np.asarray(v, dtype)
-    return as_rows(a, () if a.ndim <= 1 else batch, (m,), dtype)
 
 
 def _update_with_poses(

@@ -17,8 +17,9 @@ from activetrack._jit import kernel
 
 #: Relative tolerance of the unit-disk and minimum-distance tests.
 TOL = 1e-12
-_LONG = 1.0 + TOL
-_INSIDE = 1.0 - TOL
+#: Longer than the unit disk / the reach, and inside a ``rho`` disk, beyond rounding.
+LONG = 1.0 + TOL
+INSIDE = 1.0 - TOL
 
 
 @kernel
@@ -65,7 +66,7 @@ def project_feasible_point(qx, qy, cx, cy, r, rho):
 def unit_disk(ax, ay):
     """Return ``(ax, ay)`` scaled to length 1 if longer than ``1 + TOL`` (no overflow)."""
     norm = math.hypot(ax, ay)
-    if not norm > _LONG:
+    if not norm > LONG:
         return ax, ay
     if math.isinf(norm):  # |a| overflowed: divide by the larger component first
         big = max(abs(ax), abs(ay))
@@ -88,7 +89,7 @@ def moves_rows(x, sensors, r, absolute, out):
                 out[b, m, 0], out[b, m, 1] = sx + ax * rr, sy + ay * rr
                 continue
             dx, dy = x[b, m, 0] - sx, x[b, m, 1] - sy
-            if math.hypot(dx, dy) > rr * _LONG:
+            if math.hypot(dx, dy) > rr * LONG:
                 safe = rr if rr > 0.0 else 1.0
                 ax, ay = unit_disk(dx / safe, dy / safe)
                 out[b, m, 0], out[b, m, 1] = sx + ax * rr, sy + ay * rr
@@ -107,7 +108,7 @@ def keep_rows(new, sensors, target, r, rho, out, inside):
         tx, ty = target[b, 0], target[b, 1]
         for m in range(new.shape[1]):
             qx, qy = new[b, m, 0] - tx, new[b, m, 1] - ty
-            hit = math.hypot(qx, qy) < hb[m] * _INSIDE and rb[m] > 0.0
+            hit = math.hypot(qx, qy) < hb[m] * INSIDE and rb[m] > 0.0
             inside[b, m] = hit
             if hit:
                 px, py = project_feasible_point(

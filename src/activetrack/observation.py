@@ -290,18 +290,13 @@ def cyclic_order(n_sensors: int) -> np.ndarray:
 
 
 def observations(
-    target: FloatArray,
-    sensor: FloatArray,
-    order: np.ndarray,
-    rays: FloatArray | int | None = None,
+    target: FloatArray, sensor: FloatArray, order: np.ndarray, n_rays: int = 0
 ) -> np.ndarray:
-    """Return all agents' observations, float32 of shape (..., M, 5 + 6M); with ``rays``
-    (..., M, R) each agent's own rays last (an int R: room for them, left unset)."""
+    """Return all agents' observations, float32 of shape (..., M, 5 + 6M), with room for
+    ``n_rays`` range-finder readings last that the caller fills (:func:`ray_readings`
+    with ``out=``: the kernel writes them in place)."""
     m, td, sd = sensor.shape[-2], target.shape[-1], sensor.shape[-1]
-    nr = 0 if rays is None else rays if isinstance(rays, int) else rays.shape[-1]
-    full = np.empty(sensor.shape[:-2] + (m, td + sd * m + nr), dtype=np.float32)
-    if nr and not isinstance(rays, int):
-        full[..., td + sd * m :] = rays
+    full = np.empty(sensor.shape[:-2] + (m, td + sd * m + n_rays), dtype=np.float32)
     out = full[..., : td + sd * m]  # the team's part (a view: no second copy)
     if sensor.ndim == 2:  # one copy: a single gather
         out[:, :td] = target

@@ -200,10 +200,12 @@ def candidates(ox, oy, qx, qy, r, lay, ea, eb, starts, ends, bbox, cross, cand):
     E = ea.shape[1]
     X = cross.shape[1]
     reach2 = (r * (1.0 + REACH_TOL) * (1.0 + 1e-9)) ** 2
+    far = np.empty(starts.shape[0], np.bool_)  # each polygon's box out of reach, once
     for p in range(starts.shape[0]):
-        far = _far(ox, oy, bbox, lay, p, reach2)
+        far[p] = _far(ox, oy, bbox, lay, p, reach2)
+    for p in range(starts.shape[0]):
         for j in range(starts[p], ends[p]):
-            if far:
+            if far[p]:
                 for k in range(7):
                     _put(cand, k * E + j, nan, nan)
                 continue
@@ -230,7 +232,7 @@ def candidates(ox, oy, qx, qy, r, lay, ea, eb, starts, ends, bbox, cross, cand):
             smin = math.inf
             if has and glen <= r * (1.0 + REACH_TOL):
                 for q in range(starts.shape[0]):
-                    if _far(ox, oy, bbox, lay, q, reach2):
+                    if far[q]:
                         continue
                     for h in range(starts[q], ends[q]):
                         hx, hy = ea[lay, h, 0], ea[lay, h, 1]

@@ -27,14 +27,13 @@ from __future__ import annotations
 import numpy as np
 
 from activetrack import motion_kernels as mk
-from activetrack._jit import as_rows
+from activetrack._jit import as_rows, per_sensor_rows
 from activetrack.linalg2 import as_complex
 from activetrack.validation import FloatArray
 
 #: Relative tolerance of the unit-disk and minimum-distance tests.
 TOL = mk.TOL
-_LONG = 1.0 + TOL
-_INSIDE = 1.0 - TOL
+_LONG, _INSIDE = mk.LONG, mk.INSIDE
 
 
 def keep_distance(
@@ -55,16 +54,11 @@ def keep_distance(
     inside = np.empty(new.shape[:-1], bool)
     mk.keep_rows(
         as_rows(new, batch, (m, 2)), as_rows(sensors, batch, (m, 2)),
-        as_rows(target_pred, batch, (2,)), _per_sensor(r, batch, m), _per_sensor(rho, batch, m),
+        as_rows(target_pred, batch, (2,)), per_sensor_rows(r, batch, m),
+        per_sensor_rows(rho, batch, m),
         out.reshape(-1, m, 2), inside.reshape(-1, m),
     )  # fmt: skip
     return out, inside
-
-
-def _per_sensor(v: FloatArray, batch: tuple[int, ...], m: int) -> np.ndarray:
-    """Return a per-sensor value as kernel rows (1, M) (shared) or (B, M)."""
-    v = np.asarray(v, np.float64)
-    return as_rows(v, () if v.ndim <= 1 else batch, (m,))
 
 
 def _moves(x: FloatArray, sensors: FloatArray, r: FloatArray, absolute: bool) -> FloatArray:
@@ -73,7 +67,7 @@ def _moves(x: FloatArray, sensors: FloatArray, r: FloatArray, absolute: bool) ->
     batch, m = x.shape[:-2], x.shape[-2]
     out = np.empty(x.shape)
     mk.moves_rows(
-        as_rows(x, batch, (m, 2)), as_rows(sensors, batch, (m, 2)), _per_sensor(r, batch, m),
+        as_rows(x, batch, (m, 2)), as_rows(sensors, batch, (m, 2)), per_sensor_rows(r, batch, m),
         absolute, out.reshape(-1, m, 2),
     )  # fmt: skip
     return out

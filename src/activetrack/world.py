@@ -708,13 +708,12 @@ class World:
         the paper): the prediction and the team as seen from each agent's seat.
         """
         target, sensor = self._features(index)
-        if not self.layout.rays:
-            return observation.observations(target, sensor, self._order)
-        out = observation.observations(target, sensor, self._order, self.layout.rays)
-        # The rays straight into the observation (float32): no float64 temporary.
-        observation.ray_readings(
-            self.get("sensors", index), self.occluders(index), out[..., -self.layout.rays :]
-        )
+        rays = self.layout.rays
+        out = observation.observations(target, sensor, self._order, rays)
+        if rays:  # written straight into the observation (float32): no float64 temporary
+            observation.ray_readings(
+                self.get("sensors", index), self.occluders(index), out[..., -rays:]
+            )
         return out
 
     def state(self, index: int | None = None) -> np.ndarray:
