@@ -585,9 +585,23 @@ def test_rays_written_into_float32_views_equal_the_float64_readings_cast():
     from activetrack.observation import RAY_DIRECTIONS, RAY_MAX, ray_readings
 
     rng = np.random.default_rng(12)
-    occ = oc.Occluders.from_polygons(mixed_layout(rng))
+    polys = mixed_layout(rng)
+    occ = oc.Occluders.from_polygons(polys)
     pts = rng.uniform(-3.5, 3.5, (3, 4, 2))
+    pts = np.where(oc.inside(pts, occ)[..., None], pts + 7.0, pts)  # range finders outside
     want = (oc.ray_distances(pts, RAY_DIRECTIONS, occ, RAY_MAX) / RAY_MAX).astype(np.float32)
+    # The readings themselves, by the closed form of ray-segment intersections.
+    o, g = pts[..., None, None, :], RAY_DIRECTIONS[:, None, :]  # (3, 4, 1, 1, 2), (R, 1, 2)
+    a = np.concatenate(polys)
+    f = np.concatenate([np.roll(p, -1, axis=0) for p in polys]) - a  # (E, 2)
+    den = g[..., 0] * f[:, 1] - g[..., 1] * f[:, 0]  # (R, E)
+    w = a - o
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = (w[..., 0] * f[:, 1] - w[..., 1] * f[:, 0]) / den
+        u = (w[..., 0] * g[..., 1] - w[..., 1] * g[..., 0]) / den
+    hit = (u >= 0) & (u <= 1) & (s > 1e-9)
+    closed = np.minimum(np.min(np.where(hit, s, np.inf), axis=-1), RAY_MAX) / RAY_MAX
+    np.testing.assert_allclose(want, closed, rtol=1e-6)
     full = np.zeros((3, 4, 20), np.float32)
     ray_readings(pts, occ, out=full[..., 4:])
     np.testing.assert_array_equal(full[..., 4:], want)
@@ -596,3 +610,4 @@ def test_rays_written_into_float32_views_equal_the_float64_readings_cast():
     ray_readings(pts, occ, out=swapped.transpose(1, 0, 2)[..., 4:])
     np.testing.assert_array_equal(swapped.transpose(1, 0, 2)[..., 4:], want)
     assert not swapped[..., :4].any() and 0 < want.min() and want.max() <= 1
+    assert (want < 1).any()  # some rays hit an edge
