@@ -1,9 +1,11 @@
-"""Time of one closed-loop step of a single copy, and of one observation of N copies.
+"""Time of one closed-loop step of a single copy, and of one observation and one reset of
+N copies.
 
 ``World.step_actions`` on one copy (random actions, autoresets), microseconds per step,
 the median of three runs of ``--steps`` steps; ``World.observe()`` of ``--copies`` copies,
-milliseconds, the median of 200 calls. Run (also with PYTHONPATH at an export of another
-commit, to compare)::
+milliseconds, the median of 200 calls; ``World.reset()`` of all ``--copies`` copies (new
+seeds; random occluder layouts drawn anew), milliseconds, the median of three. Run (also
+with PYTHONPATH at an export of another commit, to compare)::
 
     OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/world_step.py
 """
@@ -54,6 +56,18 @@ def observe_ms(scenario: str, copies: int) -> float:
     return float(np.median(times) * 1e3)
 
 
+def reset_ms(scenario: str, copies: int) -> float:
+    """Return the median milliseconds of resetting all ``copies`` copies (three resets)."""
+    world = World(scenario, copies)
+    world.reset(seeds=range(copies))
+    times = []
+    for k in range(1, 4):
+        start = time.perf_counter()
+        world.reset(seeds=range(k * copies, (k + 1) * copies))
+        times.append(time.perf_counter() - start)
+    return float(np.median(times) * 1e3)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scenarios", nargs="+", default=["paper", "uncertain_poses", "urban"])
@@ -63,7 +77,8 @@ def main() -> None:
     for name in args.scenarios:
         print(
             f"{name:16s} step {step_us(name, args.steps):7.1f} us (one copy) | "
-            f"observe {observe_ms(name, args.copies):6.2f} ms ({args.copies} copies)",
+            f"observe {observe_ms(name, args.copies):6.2f} ms | reset "
+            f"{reset_ms(name, args.copies):7.1f} ms ({args.copies} copies)",
             flush=True,
         )
 
