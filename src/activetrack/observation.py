@@ -340,8 +340,13 @@ def ray_readings(positions: FloatArray, occ: object, out: np.ndarray | None = No
     from activetrack import occluders  # noqa: PLC0415 (occluded scenarios only)
 
     positions = np.asarray(positions, np.float64)
+    shape = positions.shape[:-1] + (RAYS,)
     if out is None:
-        out = np.empty(positions.shape[:-1] + (RAYS,))
+        out = np.empty(shape)
+    elif out.shape != shape or out.dtype not in (np.float32, np.float64):
+        raise ValueError(
+            f"out must be a float32 or float64 array of shape {shape}, got {out.dtype} {out.shape}"
+        )
     return occluders._rays_into(positions, RAY_DIRECTIONS, occ, RAY_MAX, RAY_MAX, out)
 
 

@@ -611,3 +611,6 @@ def test_rays_written_into_float32_views_equal_the_float64_readings_cast():
     np.testing.assert_array_equal(swapped.transpose(1, 0, 2)[..., 4:], want)
     assert not swapped[..., :4].any() and 0 < want.min() and want.max() <= 1
     assert (want < 1).any()  # some rays hit an edge
+    for bad in (np.zeros((3, 4, 15), np.float32), np.zeros((3, 4, 16), np.int64)):
+        with pytest.raises(ValueError, match="out must be a float32 or float64 array"):
+            ray_readings(pts, occ, out=bad)
