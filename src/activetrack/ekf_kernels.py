@@ -80,8 +80,8 @@ def range_bearing_terms(tx, ty, z, sensors, wd, wt, orientation, mask):
 
 
 @kernel
-def posterior_into(x, P, yxx, yxy, yyy, bx, by, x_out, P_out):
-    """Write eq. (11)'s posterior from ``(Y, b)`` into ``x_out``, ``P_out``.
+def posterior_into(x, P, yxx, yxy, yyy, bx, by, x_out, P_out, cov):
+    """Write eq. (11)'s posterior from ``(Y, b)`` into ``x_out`` and, if ``cov``, ``P_out``.
 
     ``P11 = L L^T``, ``I + L^T Y L = M M^T``; ``P+ = Z Z^T + blockdiag(0, S22)`` with
     ``Z = P[:, :2] L^{-T} M^{-T}`` and ``S22`` the prior's Schur complement: a sum of
@@ -114,6 +114,8 @@ def posterior_into(x, P, yxx, yxy, yyy, bx, by, x_out, P_out):
     for i in range(n):
         r0i, r1i = P[0, i], P[1, i]
         x_out[i] = x[i] + (g0 * r0i + g1 * r1i)
+        if not cov:
+            continue
         za, zb = z00 * r0i, z10 * r0i + z11 * r1i
         fa, fb = t00 * r0i, t01 * r0i + t11 * r1i
         for j in range(i + 1):
@@ -126,15 +128,28 @@ def posterior_into(x, P, yxx, yxy, yyy, bx, by, x_out, P_out):
 
 
 @kernel
-def relinearize_into(x, P, lin0, lin1, yxx, yxy, yyy, bx, by, x_out, P_out):
-    """Write the posterior of the iterated EKF linearized at ``lin`` (its terms ``(Y, b)``
-    there) into ``x_out``, ``P_out``; return whether the position moved less than
-    :data:`ITERATION_TOL` (relative to ``1 + |lin|``): ``nu_i = z - h(lin) - H (x - lin)``
-    gives ``b - Y (p - lin)``, from the same prior ``x``, ``P``."""
+def relinearized_b(x, lin0, lin1, yxx, yxy, yyy, bx, by):
+    """Return the gradient term of the iterated EKF linearized at ``lin`` (its terms
+    ``(Y, b)`` there): ``nu_i = z - h(lin) - H (x - lin)`` gives ``b - Y (p - lin)``."""
     d0, d1 = x[0] - lin0, x[1] - lin1
-    posterior_into(
-        x, P, yxx, yxy, yyy, bx - (yxx * d0 + yxy * d1), by - (yxy * d0 + yyy * d1), x_out, P_out
-    )
+    return bx - (yxx * d0 + yxy * d1), by - (yxy * d0 + yyy * d1)
+
+
+@kernel
+def relinearize_into(x, P, lin0, lin1, yxx, yxy, yyy, bx, by, x_out, P_out, cov):
+    """Write the posterior of the iterated EKF linearized at ``lin`` (its terms ``(Y, b)``
+    there; :func:`relinearized_b`) into ``x_out`` and, if ``cov``, ``P_out``, from the same
+    prior ``x``, ``P``; return whether the position moved less than :data:`ITERATION_TOL`
+    (relative to ``1 + |lin|``)."""
+    cx, cy = relinearized_b(x, lin0, lin1, yxx, yxy, yyy, bx, by)
+    posterior_into(x, P, yxx, yxy, yyy, cx, cy, x_out, P_out, cov)
+    return settled(x_out, lin0, lin1)
+
+
+@kernel
+def settled(x_out, lin0, lin1):
+    """Return whether the position ``x_out[:2]`` is within :data:`ITERATION_TOL` (relative
+    to ``1 + |lin|``) of the linearization point ``lin``."""
     step = max(abs(x_out[0] - lin0), abs(x_out[1] - lin1))
     return step <= ITERATION_TOL * (1.0 + max(abs(lin0), abs(lin1)))
 
@@ -143,7 +158,8 @@ def relinearize_into(x, P, lin0, lin1, yxx, yxy, yyy, bx, by, x_out, P_out):
 def update_rows(x, P, z, sensors, wd, wt, orientation, mask, iterations, x_out, P_out):
     """Write the EKF posteriors of B filters (``x`` (B, n), ``P`` (B, n, n), ``z``,
     ``sensors`` (B, M, 2), per-sensor ``wd``, ``wt``, ``orientation``, ``mask`` (B' , M))
-    into ``x_out``, ``P_out``: eq. (11), then up to ``iterations - 1`` relinearizations."""
+    into ``x_out``, ``P_out``: eq. (11), then up to ``iterations - 1`` relinearizations
+    (the covariance once, at the last linearization: the iterations need only the mean)."""
     for b in range(x.shape[0]):
         zb, sb = z[b], sensors[b]
         wdb = wd[b if wd.shape[0] > 1 else 0]
@@ -152,12 +168,17 @@ def update_rows(x, P, z, sensors, wd, wt, orientation, mask, iterations, x_out, 
         mb = mask[b if mask.shape[0] > 1 else 0]
         xb, Pb, xo, Po = x[b], P[b], x_out[b], P_out[b]
         yxx, yxy, yyy, bx, by = range_bearing_terms(xb[0], xb[1], zb, sb, wdb, wtb, ob, mb)
-        posterior_into(xb, Pb, yxx, yxy, yyy, bx, by, xo, Po)
+        posterior_into(xb, Pb, yxx, yxy, yyy, bx, by, xo, Po, iterations == 1)
+        if iterations == 1:
+            continue
         for _ in range(iterations - 1):
             lin0, lin1 = xo[0], xo[1]
             yxx, yxy, yyy, bx, by = range_bearing_terms(lin0, lin1, zb, sb, wdb, wtb, ob, mb)
-            if relinearize_into(xb, Pb, lin0, lin1, yxx, yxy, yyy, bx, by, xo, Po):
+            cx, cy = relinearized_b(xb, lin0, lin1, yxx, yxy, yyy, bx, by)
+            posterior_into(xb, Pb, yxx, yxy, yyy, cx, cy, xo, Po, False)
+            if settled(xo, lin0, lin1):
                 break
+        posterior_into(xb, Pb, yxx, yxy, yyy, cx, cy, xo, Po, True)  # the same mean again
 
 
 @kernel
@@ -173,8 +194,8 @@ def posterior_rows(x, P, terms, active, iterate, x_out, P_out):
         if iterate:
             lin0, lin1 = x_out[b, 0], x_out[b, 1]
             out[k] = not relinearize_into(
-                x[b], P[b], lin0, lin1, yxx, yxy, yyy, bx, by, x_out[b], P_out[b]
+                x[b], P[b], lin0, lin1, yxx, yxy, yyy, bx, by, x_out[b], P_out[b], True
             )
         else:
-            posterior_into(x[b], P[b], yxx, yxy, yyy, bx, by, x_out[b], P_out[b])
+            posterior_into(x[b], P[b], yxx, yxy, yyy, bx, by, x_out[b], P_out[b], True)
     return out

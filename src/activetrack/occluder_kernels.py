@@ -82,6 +82,17 @@ def inside_point(px, py, lay, ea, eb, starts, ends, bbox, eps):
 
 
 @kernel
+def _beside(ax, ay, dx, dy, x0, y0, x1, y1, margin):
+    """Return whether the box ``[x0, x1] x [y0, y1]`` lies on one side of the line through
+    ``a`` along ``d``, each corner farther than ``margin / |d|`` from it."""
+    c0 = (x0 - ax) * dy - (y0 - ay) * dx
+    c1 = (x1 - ax) * dy - (y0 - ay) * dx
+    c2 = (x1 - ax) * dy - (y1 - ay) * dx
+    c3 = (x0 - ax) * dy - (y1 - ay) * dx
+    return min(c0, c1, c2, c3) > margin or max(c0, c1, c2, c3) < -margin
+
+
+@kernel
 def blocked_segment(ax, ay, bx, by, lay, ea, eb, starts, ends, bbox, eps, scale, cuts):
     """Return whether a sub-interval of positive length of [a, b] lies in an occluder.
 
@@ -89,6 +100,10 @@ def blocked_segment(ax, ay, bx, by, lay, ea, eb, starts, ends, bbox, eps, scale,
     parameter) and those of vertices on its line (within ``CUT * scale``) cut [0, 1];
     the segment is blocked iff the midpoint of a piece is :func:`inside_point`. ``cuts``
     is scratch space of at least ``2E`` floats.
+
+    A polygon whose box is clear of the segment's line (farther than the cuts' margins:
+    the vertex offset, and ``CUT`` times an edge's length, which its box's half-perimeter
+    bounds) gives no cut and holds no midpoint: it is skipped.
     """
     e = eps[lay]
     lox, hix, loy, hiy = min(ax, bx), max(ax, bx), min(ay, by), max(ay, by)
@@ -99,11 +114,13 @@ def blocked_segment(ax, ay, bx, by, lay, ea, eb, starts, ends, bbox, eps, scale,
     near = False
     n = 0
     for p in range(starts.shape[0]):
-        if not (
-            hix > bbox[lay, p, 0] + e and lox < bbox[lay, p, 2] - e
-            and hiy > bbox[lay, p, 1] + e and loy < bbox[lay, p, 3] - e
-        ):  # fmt: skip
+        x0, y0, x1, y1 = bbox[lay, p, 0], bbox[lay, p, 1], bbox[lay, p, 2], bbox[lay, p, 3]
+        if not (hix > x0 + e and lox < x1 - e and hiy > y0 + e and loy < y1 - e):
             continue  # the segment stays out of this polygon (farther in than eps)
+        if _beside(ax, ay, dx, dy, x0, y0, x1, y1, off_max + CUT * math.sqrt(dd) * (
+            (x1 - x0) + (y1 - y0)
+        )):  # fmt: skip
+            continue  # its box lies on one side of the segment's line: no cuts, no inside
         near = True
         for j in range(starts[p], ends[p]):
             cx, cy = ea[lay, j, 0], ea[lay, j, 1]
@@ -272,25 +289,33 @@ def candidates(ox, oy, qx, qy, r, lay, ea, eb, starts, ends, bbox, cross, cand):
 
 
 @kernel
-def project_point(ox, oy, qx, qy, r, lay, ea, eb, starts, ends, bbox, cross, eps, scale, work):
-    """Return ``(x, y, projected)``: ``q`` if its straight move from ``o`` is within reach
-    ``r`` (to :data:`REACH_TOL`) and not blocked, else the nearest point of the reachable
-    set (``o`` if it is empty). ``work`` (7E + X + 2 + 2E, 3) is scratch space."""
+def within_reach(ox, oy, qx, qy, r):
+    """Return whether ``q`` is within reach ``r`` of ``o`` (to :data:`REACH_TOL`)."""
     dx, dy = qx - ox, qy - oy
     lim = r * (1.0 + REACH_TOL)
-    need = dx * dx + dy * dy > lim * lim
+    return dx * dx + dy * dy <= lim * lim
+
+
+@kernel
+def project_point(ox, oy, qx, qy, r, lay, ea, eb, starts, ends, bbox, cross, eps, scale, work):
+    """Return ``(x, y, projected)``: ``q`` if its straight move from ``o`` is
+    :func:`within_reach` and not blocked, else the nearest point of the reachable set
+    (``o`` if it is empty). ``work`` (7E + X + 2 + 2E, 3) is scratch space."""
+    reach = within_reach(ox, oy, qx, qy, r)
     E = ea.shape[1]
     if E == 0:
-        if need:  # the reach disk only
+        if not reach:  # the reach disk only
+            dx, dy = qx - ox, qy - oy
             n = math.hypot(dx, dy)
             return ox + (r / n) * dx, oy + (r / n) * dy, True
         return qx, qy, False
     C = 7 * E + cross.shape[1] + 2
     cuts = work[C:, 0]
-    if not need and not blocked_segment(
+    if reach and not blocked_segment(
         ox, oy, qx, qy, lay, ea, eb, starts, ends, bbox, eps, scale, cuts
     ):
         return qx, qy, False
+    lim = r * (1.0 + REACH_TOL)
     cand = work[:C, :2]
     dist = work[:C, 2]
     candidates(ox, oy, qx, qy, r, lay, ea, eb, starts, ends, bbox, cross, cand)
@@ -323,7 +348,22 @@ def project_rows(o, q, r, lay, ea, eb, starts, ends, bbox, cross, eps, scale, ou
     """Fill ``out`` (M, 2) and ``projected`` (M,) with :func:`project_point` of each row."""
     E = ea.shape[1]
     work = np.empty((9 * E + cross.shape[1] + 2, 3))
+    cuts = work[7 * E + cross.shape[1] + 2 :, 0]
     for i in range(o.shape[0]):
+        ox, oy, qx, qy = o[i, 0], o[i, 1], q[i, 0], q[i, 1]
+        # The common free move here: project_point is too large to be inlined, and a
+        # call costs about twice the test (its many array arguments).
+        if (
+            E > 0
+            and within_reach(ox, oy, qx, qy, r[i])
+            and not blocked_segment(
+                ox, oy, qx, qy, lay[i], ea, eb, starts, ends, bbox, eps, scale, cuts
+            )
+        ):
+            out[i, 0] = qx
+            out[i, 1] = qy
+            projected[i] = False
+            continue
         x, y, hit = project_point(
             o[i, 0], o[i, 1], q[i, 0], q[i, 1], r[i], lay[i], ea, eb, starts, ends, bbox,
             cross, eps, scale, work,
@@ -341,37 +381,53 @@ def ray_rows(origins, directions, lay, ea, eb, starts, ends, bbox, eps, max_dist
     once, as a float64 array cast to float32 would be).
 
     Polygons whose bounding box is farther than ``max_distance`` from the origin are
-    skipped (no hit of theirs could be nearer: a culling that changes no result).
+    skipped (no hit of theirs could be nearer), and so are the back faces of a polygon
+    whose box is farther than ``2 eps |d|`` away (|d| the longest direction): from outside
+    a polygon, a ray's first hit on it is where it enters, through an edge whose outer side
+    holds the origin, at ``s`` beyond ``eps``; an edge with the origin on its inner side or
+    line is only ever left through. Both cullings change no result in exact arithmetic.
     """
     R = directions.shape[0]
     reach2 = (max_distance * (1.0 + 1e-9)) ** 2
     inv = np.empty((ea.shape[1], R))  # 1 / (g x f) of each edge and direction (0: parallel)
+    side = np.empty(starts.shape[0])  # each polygon's orientation: 1 counter-clockwise, else -1
     dxs, dys = directions[:, 0].copy(), directions[:, 1].copy()
+    dmax2 = 0.0
+    for k in range(R):
+        dmax2 = max(dmax2, dxs[k] * dxs[k] + dys[k] * dys[k])
     best = np.empty(R)
     current = -1
     for i in range(origins.shape[0]):
         ox, oy, la = origins[i, 0], origins[i, 1], lay[i]
-        if la != current:  # rows of a layout come together: its table once
+        if la != current:  # rows of a layout come together: its tables once
             current = la
             for j in range(ea.shape[1]):
                 fx, fy = eb[la, j, 0] - ea[la, j, 0], eb[la, j, 1] - ea[la, j, 1]
                 for k in range(R):
                     den = directions[k, 0] * fy - directions[k, 1] * fx
                     inv[j, k] = 1.0 / den if den != 0.0 else 0.0
+            for p in range(starts.shape[0]):
+                area = 0.0
+                for j in range(starts[p], ends[p]):
+                    area += ea[la, j, 0] * eb[la, j, 1] - eb[la, j, 0] * ea[la, j, 1]
+                side[p] = 1.0 if area > 0.0 else -1.0
         e = eps[la]
+        clear2 = 4.0 * e * e * dmax2
         best[:] = math.inf
         for p in range(starts.shape[0]):
             if _far(ox, oy, bbox, la, p, reach2):
                 continue
+            front = _far(ox, oy, bbox, la, p, clear2)  # the origin is well outside it
             for j in range(starts[p], ends[p]):
                 cx, cy = ea[la, j, 0], ea[la, j, 1]
                 fx, fy = eb[la, j, 0] - cx, eb[la, j, 1] - cy
                 wx, wy = cx - ox, cy - oy
                 cwf = wx * fy - wy * fx
-                row = inv[j]
+                if front and cwf * side[p] >= 0.0:
+                    continue  # a back face: the origin on its inner side (or its line)
                 for k in range(R):  # branch-free, so that it vectorizes over the rays
-                    s = cwf * row[k]  # 0 for a parallel edge: never a hit (s > eps)
-                    u = (wx * dys[k] - wy * dxs[k]) * row[k]
+                    s = cwf * inv[j, k]  # 0 for a parallel edge: never a hit (s > eps)
+                    u = (wx * dys[k] - wy * dxs[k]) * inv[j, k]
                     hit = (u >= 0.0) & (u <= 1.0) & (s > e)
                     best[k] = min(best[k], s if hit else math.inf)
         for k in range(R):

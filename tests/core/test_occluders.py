@@ -533,6 +533,45 @@ def test_ray_distances_match_sampling_along_rays():
         assert np.all(boundary_distance(tip[close], polys) < 1e-9)
 
 
+@pytest.mark.kernels
+def test_ray_distances_equal_the_closed_form_over_every_edge():
+    """The kernel skips back faces of polygons it is clearly outside of; the first hit over
+    every edge of every polygon (both orientations, non-convex, overlapping, axis-aligned
+    boxes whose sides are their bounding boxes'), by the closed form, is the same, for
+    origins far off, just outside edges (from 1e-13 to 1e-3 off: those within ``eps`` see
+    through the polygon), on vertices and on edges."""
+    rng = np.random.default_rng(31)
+    polys = mixed_layout(rng, 6)
+    polys += [np.array([[3.0, 3.0], [4.0, 3.0], [4.0, 4.5], [3.0, 4.5]]), SQUARE - 4.0]
+    polys = [p if k % 2 else p[::-1] for k, p in enumerate(polys)]  # both orientations
+    occ = oc.Occluders.from_polygons(polys)
+    a = np.concatenate(polys)
+    f = np.concatenate([np.roll(p, -1, axis=0) for p in polys]) - a  # (E, 2)
+    t = rng.uniform(0, 1, 300)
+    k = rng.integers(0, len(a), 300)
+    normal = np.stack([f[k, 1], -f[k, 0]], -1) / np.linalg.norm(f[k], axis=-1)[:, None]
+    off = 10.0 ** rng.uniform(-13, -3, 300) * rng.choice([-1.0, 1.0], 300)
+    o = np.concatenate([
+        rng.uniform(-5, 5, (300, 2)),
+        a[k] + t[:, None] * f[k] + off[:, None] * normal,  # near an edge, either side
+        a[k[:50]],  # on vertices
+        a[k[:50]] + 0.5 * f[k[:50]],  # on edges
+    ])  # fmt: skip
+    o = o[~oc.inside(o, occ)]
+    ang = np.arange(16) * 2 * np.pi / 16 + rng.uniform(0, 0.4)
+    g = np.stack([np.cos(ang), np.sin(ang)], -1)
+    got = oc.ray_distances(o, g, occ, 4.0)
+    w = a - o[:, None, None, :]  # (B, 1, E, 2)
+    den = g[:, None, 0] * f[:, 1] - g[:, None, 1] * f[:, 0]  # (R, E)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = (w[..., 0] * f[:, 1] - w[..., 1] * f[:, 0]) / den
+        u = (w[..., 0] * g[:, None, 1] - w[..., 1] * g[:, None, 0]) / den
+    hit = (den != 0) & (u >= 0) & (u <= 1) & (s > occ.eps)
+    want = np.minimum(np.min(np.where(hit, s, np.inf), axis=-1), 4.0)
+    np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-12)
+    assert (want < 4.0).mean() > 0.3
+
+
 # ---------------------------------------------------------------- random_layout
 
 
