@@ -130,7 +130,7 @@ def _approach(problem, s, value, current, r, targets, rho, det, weights, occ):
     rel = s[:, None, :, :] - targets[:, :, None, :]  # (B, K, M, 2)
     seen = sensor_models.detection_factor(rel, det[0][:, None], det[1][:, None]) > 0.0
     if occ is not None:
-        seen &= line_of_sight(s, targets, occ)
+        seen = line_of_sight(s, targets, occ, where=seen)
     lost = ~seen.any(axis=1) & (r > 0.0) & (det[0] > 0.0)  # (B, M)
     if not np.any(lost):
         return s, value

@@ -54,11 +54,13 @@ def range_bearing_terms(tx, ty, z, sensors, wd, wt, orientation, mask):
     b_re = 0.0
     b_im = 0.0
     for i in range(sensors.shape[0]):
+        if not mask[i]:  # no measurement: no terms (adding zeros would change nothing)
+            continue
         dx, dy = tx - sensors[i, 0], ty - sensors[i, 1]
         n2 = dx * dx + dy * dy  # (no hypot: distances far from overflow, 4x cheaper)
         dist = math.sqrt(n2)
-        w_d = wd[i] if mask[i] else 0.0
-        w_t = wt[i] if mask[i] else 0.0
+        w_d = wd[i]
+        w_t = wt[i]
         if n2 < ZERO_DISTANCE2:  # no information at zero distance; keep the arithmetic finite
             dist = 1.0
             n2 = 1.0

@@ -78,6 +78,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from activetrack import observation_kernels as obk
+from activetrack._jit import as_rows
 from activetrack.scenarios import Scenario
 from activetrack.sensor_models import USES
 from activetrack.validation import FloatArray
@@ -206,24 +208,83 @@ def extended_features(
     """Return the extended layout's target blocks, flattened (..., 7K), and sensor blocks
     (..., M, 12), or (..., M, 12 + K) with the detection flags ``detected`` (..., K, M),
     from every target's prediction and the sensors' position fixes."""
-    K = len(x_preds)
+    return features(x_preds, P_preds, fixes, constants, dt, L, True, detected)
+
+
+def features(
+    x_preds: list[FloatArray],
+    P_preds: list[FloatArray],
+    fixes: FloatArray,
+    constants: FloatArray,
+    dt: float,
+    L: float,
+    extended: bool,
+    detected: np.ndarray | None = None,
+) -> tuple[FloatArray, FloatArray]:
+    """Return the target blocks (..., TD) and sensor blocks (..., M, SD) of either layout
+    (``extended``; the paper's takes one prediction and the sensors' positions as
+    ``fixes``), float64 (:func:`activetrack.observation_kernels.features_rows`)."""
+    args, batch = _kernel_args(x_preds, P_preds, fixes, constants, detected)
+    x, m = args[0], fixes.shape[-2]
+    td = EXT_TARGET_DIM * x.shape[1] if extended else TARGET_DIM
+    target = np.empty((x.shape[0], td))
+    sensor = np.empty((x.shape[0], m, 2 + constants.shape[-1] + args[-1]))
+    obk.features_rows(*args[:4], float(dt), float(L), extended, *args[4:], target, sensor)
+    return target.reshape(batch + (td,)), sensor.reshape(batch + sensor.shape[1:])
+
+
+def encode(
+    x_preds: list[FloatArray],
+    P_preds: list[FloatArray],
+    fixes: FloatArray,
+    constants: FloatArray,
+    dt: float,
+    L: float,
+    extended: bool,
+    detected: np.ndarray | None,
+    order: np.ndarray,
+    n_rays: int = 0,
+) -> np.ndarray:
+    """Return every agent's observation, float32 (..., M, D): :func:`observations` of
+    :func:`features` in one compiled pass, with room for ``n_rays`` range-finder readings
+    last that the caller fills (:func:`ray_readings` with ``out=``)."""
+    args, batch = _kernel_args(x_preds, P_preds, fixes, constants, detected)
+    x, m = args[0], fixes.shape[-2]
+    td = EXT_TARGET_DIM * x.shape[1] if extended else TARGET_DIM
+    d = td + (2 + constants.shape[-1] + args[-1]) * m + n_rays
+    out = np.empty((x.shape[0], m, d), dtype=np.float32)
+    obk.observe_rows(*args[:4], float(dt), float(L), extended, *args[4:], order, out)
+    return out.reshape(batch + (m, d))
+
+
+def _kernel_args(
+    x_preds: list[FloatArray],
+    P_preds: list[FloatArray],
+    fixes: FloatArray,
+    constants: FloatArray,
+    detected: np.ndarray | None,
+) -> tuple[tuple, tuple[int, ...]]:
+    """Return the kernels' ``(x, P, fixes, constants, detected, flags)`` and the batch
+    shape of ``fixes``: the predictions stacked (B, K, n), a target with a shorter state
+    padded with zeros (only its position block and velocity are read)."""
     batch = fixes.shape[:-2]
-    blocks = np.empty(batch + (K, EXT_TARGET_DIM))
-    for k, (x, P) in enumerate(zip(x_preds, P_preds, strict=True)):
-        blocks[..., k, :2] = x[..., :2]
-        blocks[..., k, 2:] = target_features(x, P, dt, L)
-    pos = blocks[..., :2]
-    origin = np.add.reduce(pos, axis=-2) * (1.0 / K)  # the centroid (cheaper than mean)
-    pos -= origin[..., None, :]
-    pos *= 1.0 / L
-    target = blocks.reshape(batch + (K * EXT_TARGET_DIM,))
-    flags = 0 if detected is None else K
-    sensor = np.empty(fixes.shape[:-1] + (EXT_SENSOR_DIM + flags,))
-    sensor[..., :2] = (fixes - origin[..., None, :]) / L
-    sensor[..., 2:EXT_SENSOR_DIM] = constants
-    if flags:
-        sensor[..., EXT_SENSOR_DIM:] = np.swapaxes(detected, -1, -2)
-    return target, sensor
+    m, K = fixes.shape[-2], len(x_preds)
+    dims = [x.shape[-1] for x in x_preds]
+    if K == 1:  # views, no copies
+        x = as_rows(x_preds[0], batch, (dims[0],))[:, None]
+        P = as_rows(P_preds[0], batch, (dims[0], dims[0]))[:, None]
+    else:
+        n = max(dims)
+        x, P = np.zeros(batch + (K, n)), np.zeros(batch + (K, n, n))
+        for k, (xk, Pk) in enumerate(zip(x_preds, P_preds, strict=True)):
+            x[..., k, : dims[k]] = xk
+            P[..., k, : dims[k], : dims[k]] = Pk
+        x, P = x.reshape(-1, K, n), P.reshape(-1, K, n, n)
+    f = as_rows(fixes, batch, (m, 2))
+    c = as_rows(constants, constants.shape[:1], constants.shape[1:])
+    if detected is None:
+        return (x, P, f, c, np.zeros((1, K, m), bool), 0), batch
+    return (x, P, f, c, as_rows(detected, batch, (K, m), np.bool_), K), batch
 
 
 def obs_dim(n_sensors: int) -> int:
@@ -260,27 +321,22 @@ def sensor_constants(
 
 def target_features(x_pred: FloatArray, P_pred: FloatArray, dt: float, L: float) -> FloatArray:
     """Return the target block from the prediction ``(x_hat(k+1|k), P(k+1|k))``, (..., 5)."""
-    # ``[()]``: NumPy scalars for a single prediction (cheaper arithmetic), views for a batch.
-    pxx, pyy, pxy = P_pred[..., 0, 0][()], P_pred[..., 1, 1][()], P_pred[..., 0, 1][()]
-    out = np.empty(x_pred.shape[:-1] + (TARGET_DIM,))
-    out[..., 0] = 0.5 * np.log(pxx / L**2)
-    out[..., 1] = 0.5 * np.log(pyy / L**2)
-    out[..., 2] = pxy / np.sqrt(pxx * pyy)
-    if x_pred.shape[-1] >= 4:
-        out[..., 3:5] = x_pred[..., 2:4] * (dt / L)
-    else:
-        out[..., 3:5] = 0.0
-    return out
+    x_pred, P_pred = np.asarray(x_pred, np.float64), np.asarray(P_pred, np.float64)
+    batch = np.broadcast_shapes(x_pred.shape[:-1], P_pred.shape[:-2])
+    one = np.zeros(batch + (1, 2))  # a sensor, whose block is not returned
+    return features([x_pred], [P_pred], one, np.zeros((1, 4)), dt, L, False)[0]
 
 
 def sensor_features(
     sensors: FloatArray, target_pos: FloatArray, constants: FloatArray, L: float
 ) -> FloatArray:
     """Return every sensor's block, shape (..., M, 6)."""
-    out = np.empty(sensors.shape[:-1] + (SENSOR_DIM,))
-    out[..., :2] = (sensors - target_pos[..., None, :]) / L
-    out[..., 2:] = constants
-    return out
+    sensors, target_pos = np.asarray(sensors, np.float64), np.asarray(target_pos, np.float64)
+    batch = np.broadcast_shapes(sensors.shape[:-2], target_pos.shape[:-1])
+    sensors = np.broadcast_to(sensors, batch + sensors.shape[-2:])
+    unit = np.broadcast_to(np.eye(2), batch + (2, 2))  # (the target block is not returned)
+    constants = np.asarray(constants, np.float64)
+    return features([target_pos], [unit], sensors, constants, 1.0, L, False)[1]
 
 
 def cyclic_order(n_sensors: int) -> np.ndarray:
@@ -292,24 +348,17 @@ def cyclic_order(n_sensors: int) -> np.ndarray:
 def observations(
     target: FloatArray, sensor: FloatArray, order: np.ndarray, n_rays: int = 0
 ) -> np.ndarray:
-    """Return all agents' observations, float32 of shape (..., M, 5 + 6M), with room for
-    ``n_rays`` range-finder readings last that the caller fills (:func:`ray_readings`
-    with ``out=``: the kernel writes them in place)."""
+    """Return all agents' observations, float32 of shape (..., M, TD + M SD), from the
+    target blocks (..., TD) and sensor blocks (..., M, SD): agent ``i`` sees the sensor
+    blocks in the order ``order[i]`` (:func:`cyclic_order`); with room for ``n_rays``
+    range-finder readings last that the caller fills (:func:`ray_readings` with ``out=``)."""
     m, td, sd = sensor.shape[-2], target.shape[-1], sensor.shape[-1]
-    full = np.empty(sensor.shape[:-2] + (m, td + sd * m + n_rays), dtype=np.float32)
-    out = full[..., : td + sd * m]  # the team's part (a view: no second copy)
-    if sensor.ndim == 2:  # one copy: a single gather
-        out[:, :td] = target
-        out[:, td:] = sensor[order].reshape(m, m * sd)
-        return full
-    # Cast once, then copy float32 (a cast in every strided copy below costs more).
-    out[..., :td] = target.astype(np.float32)[..., None, :]
-    # Agent i sees sensors i, i+1, ... (mod M): a contiguous window of the doubled list.
-    # Slicing windows is ~5x faster than fancy indexing with ``order`` on large batches.
-    doubled = np.concatenate([sensor, sensor], axis=-2, dtype=np.float32)
-    shape = sensor.shape[:-2] + (m * sd,)
-    for i, start in enumerate(order[:, 0].tolist()):
-        out[..., i, td:] = doubled[..., start : start + m, :].reshape(shape)
+    batch = sensor.shape[:-2]
+    full = np.empty(batch + (m, td + sd * m + n_rays), dtype=np.float32)
+    obk.windows_rows(
+        as_rows(target, batch, (td,)), as_rows(sensor, batch, (m, sd)),
+        as_rows(order, (m,), (m,), np.int64), full.reshape(-1, m, full.shape[-1]),
+    )  # fmt: skip
     return full
 
 

@@ -172,15 +172,17 @@ def blocked_rows(a, b, lay, ea, eb, starts, ends, bbox, eps, scale, out):
 
 
 @kernel
-def sight_rows(sensors, targets, lay, ea, eb, starts, ends, bbox, eps, scale, out):
+def sight_rows(sensors, targets, lay, ea, eb, starts, ends, bbox, eps, scale, where, out):
     """Fill ``out`` (B, K, M) with whether sensor ``m`` sees target ``k`` in row ``b``
     (``sensors`` (B, M, 2), ``targets`` (B, K, 2)): the segment from the sensor to the
-    target not :func:`blocked_segment`."""
+    target not :func:`blocked_segment`; only where ``where`` (B', K, M) holds (B' = 1: the
+    same for every row), False elsewhere."""
     cuts = np.empty(2 * ea.shape[1])
     for b in range(sensors.shape[0]):
+        wb = where[b if where.shape[0] > 1 else 0]
         for k in range(targets.shape[1]):
             for m in range(sensors.shape[1]):
-                out[b, k, m] = not blocked_segment(
+                out[b, k, m] = wb[k, m] and not blocked_segment(
                     sensors[b, m, 0], sensors[b, m, 1], targets[b, k, 0], targets[b, k, 1],
                     lay[b], ea, eb, starts, ends, bbox, eps, scale, cuts,
                 )  # fmt: skip

@@ -535,22 +535,33 @@ def project_move(
     return out, projected
 
 
-def line_of_sight(sensors: FloatArray, targets: FloatArray, occ: Occluders) -> np.ndarray:
+def line_of_sight(
+    sensors: FloatArray, targets: FloatArray, occ: Occluders, where: np.ndarray | None = None
+) -> np.ndarray:
     """Return whether each sensor (..., M, 2) sees each target (..., K, 2): (..., K, M),
     the segment between them not :func:`blocked` (batched ``occ``: the first of the
-    leading axes ``...`` is the layout axis)."""
+    leading axes ``...`` is the layout axis). ``where`` (bool, broadcastable to (..., K, M)):
+    only those pairs are tested, the others are False (what a detection needs: no segment
+    tested for a sensor out of range)."""
     s, t = np.asarray(sensors, np.float64), np.asarray(targets, np.float64)
     lead = s.shape[:-2]
     if t.shape[:-2] != lead:
         lead = np.broadcast_shapes(lead, t.shape[:-2])
     m, k = s.shape[-2], t.shape[-2]
     lay = _layouts(occ, lead + (k, m), "line_of_sight")[:: max(k * m, 1)]  # each row's
-    out = np.ones(lead + (k, m), bool)
-    if occ.n_edges and out.size:
-        ea, eb, starts, ends, bbox, _, eps, scale = occ._kernel_args
-        ok.sight_rows(_flat(s, lead + (m,)).reshape(-1, m, 2),
-                      _flat(t, lead + (k,)).reshape(-1, k, 2), lay, ea, eb, starts, ends, bbox,
-                      eps, scale, out.reshape(-1, k, m))  # fmt: skip
+    if not (occ.n_edges and math.prod(lead + (k, m))):
+        out = np.ones(lead + (k, m), bool)
+        return out if where is None else out & where
+    out = np.empty(lead + (k, m), bool)
+    if where is None:
+        w = np.ones((1, k, m), bool)
+    else:
+        w = np.asarray(where, np.bool_)
+        w = as_rows(w, lead if w.ndim > 2 else (), (k, m), np.bool_)
+    ea, eb, starts, ends, bbox, _, eps, scale = occ._kernel_args
+    ok.sight_rows(_flat(s, lead + (m,)).reshape(-1, m, 2),
+                  _flat(t, lead + (k,)).reshape(-1, k, 2), lay, ea, eb, starts, ends, bbox,
+                  eps, scale, w, out.reshape(-1, k, m))  # fmt: skip
     return out
 
 

@@ -249,7 +249,7 @@ def detections(
     if occluders is not None:
         from activetrack.occluders import line_of_sight  # noqa: PLC0415 (occluded scenarios)
 
-        seen &= line_of_sight(sensors, positions, occluders)
+        seen = line_of_sight(sensors, positions, occluders, where=seen)
     return seen
 
 

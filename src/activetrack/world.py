@@ -707,9 +707,8 @@ class World:
         The layout is :mod:`activetrack.observation`'s (``self.layout``; ``D = 5 + 6M`` in
         the paper): the prediction and the team as seen from each agent's seat.
         """
-        target, sensor = self._features(index)
         rays = self.layout.rays
-        out = observation.observations(target, sensor, self._order, rays)
+        out = observation.encode(*self._feature_args(index), self._order, rays)
         if rays:  # written straight into the observation (float32): no float64 temporary
             observation.ray_readings(
                 self.get("sensors", index), self.occluders(index), out[..., -rays:]
@@ -718,7 +717,7 @@ class World:
 
     def state(self, index: int | None = None) -> np.ndarray:
         """Return the global state, float32 (N, D + 1) or (D + 1,) for one copy."""
-        target, sensor = self._features(index)
+        target, sensor = observation.features(*self._feature_args(index))
         elapsed = self.get("k", index) / self._n_steps
         return observation.global_state(target, sensor, elapsed, self._rays(index))
 
@@ -748,29 +747,22 @@ class World:
             return occ
         return occ[index]
 
-    def _features(self, index: int | None) -> tuple[FloatArray, FloatArray]:
-        L = self.length_scale
-        if self._extended:
-            if self._one and index is not None:  # the single env: no get() calls
-                x_preds = [t["x_pred"] for t in self._t]
-                P_preds = [t["P_pred"] for t in self._t]
-                fixes = self._s["fixes"]
-            else:
-                K = self.n_targets
-                x_preds = [self.get("x_pred", index, k) for k in range(K)]
-                P_preds = [self.get("P_pred", index, k) for k in range(K)]
-                fixes = self.get("fixes", index)
-            detected = self.get("detected", index) if self._limited else None
-            return observation.extended_features(x_preds, P_preds, fixes, self._constants,
-                                                 self._dt, L, detected)  # fmt: skip
-        if self._one and index is not None:  # the common single-env call: no get() calls
-            t = self._t[0]
-            x_pred, P_pred, sensors = t["x_pred"], t["P_pred"], self._s["sensors"]
+    def _feature_args(self, index: int | None) -> tuple:
+        """Return :func:`activetrack.observation.features`' arguments for copy ``index``
+        (None: every copy): the predictions, the sensors' fixes (their positions in the
+        paper's layout), the constant entries, ``dt``, ``L``, the layout, the flags."""
+        if self._one and index is not None:  # the single env: no get() calls
+            x_preds = [t["x_pred"] for t in self._t]
+            P_preds = [t["P_pred"] for t in self._t]
+            fixes = self._s["fixes" if self._extended else "sensors"]
         else:
-            x_pred, P_pred, sensors = (self.get(k, index) for k in ("x_pred", "P_pred", "sensors"))
-        target = observation.target_features(x_pred, P_pred, self._dt, L)
-        sensor = observation.sensor_features(sensors, x_pred[..., :2], self._constants, L)
-        return target, sensor
+            K = self.n_targets
+            x_preds = [self.get("x_pred", index, k) for k in range(K)]
+            P_preds = [self.get("P_pred", index, k) for k in range(K)]
+            fixes = self.get("fixes" if self._extended else "sensors", index)
+        detected = self.get("detected", index) if self._limited else None
+        return (x_preds, P_preds, fixes, self._constants, self._dt, self.length_scale,
+                self._extended, detected)  # fmt: skip
 
     def position_error(self, index: int | None = None, per_target: bool = False) -> FloatArray:
         """Return ``||p_T(k) - p_hat_T(k|k)||`` (m) per copy, or of copy ``index``.

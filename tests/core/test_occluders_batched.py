@@ -241,6 +241,13 @@ def test_inside_blocked_line_of_sight_equal_the_layouts_kernels(seed):
     for i in range(12):
         np.testing.assert_array_equal(got[i], oc.line_of_sight(sensors[i], targets[i], lays[i]))
     assert got.any() and not got.all()
+    # Only the pairs ``where`` holds: the same answers there, False elsewhere (a full mask,
+    # and one (K, M) mask shared by every copy).
+    where = rng.random(got.shape) < 0.5
+    np.testing.assert_array_equal(oc.line_of_sight(sensors, targets, occ, where), got & where)
+    np.testing.assert_array_equal(
+        oc.line_of_sight(sensors, targets, occ, where[0, 0]), got & where[0, 0]
+    )
 
 
 @pytest.mark.parametrize("seed", [40, 41])
