@@ -83,28 +83,42 @@ def range_bearing_terms(tx, ty, z, sensors, wd, wt, orientation, mask):
 
 @kernel
 def posterior_into(x, P, yxx, yxy, yyy, bx, by, x_out, P_out, cov):
-    """Write eq. (11)'s posterior from ``(Y, b)`` into ``x_out`` and, if ``cov``, ``P_out``.
+    """Write eq. (11)'s posterior from ``(Y, b)`` into ``x_out``, ``P_out`` (without
+    ``cov``: only the position ``x_out[:2]``).
 
     ``P11 = L L^T``, ``I + L^T Y L = M M^T``; ``P+ = Z Z^T + blockdiag(0, S22)`` with
     ``Z = P[:, :2] L^{-T} M^{-T}`` and ``S22`` the prior's Schur complement: a sum of
     two positive semidefinite terms, exactly symmetric. The clamps only round quantities
     that are nonnegative in exact arithmetic.
     """
-    n = x.shape[0]
+    factored_into(x, P, prior_factor(P), yxx, yxy, yyy, bx, by, x_out, P_out, cov)
+
+
+@kernel
+def prior_factor(P):
+    """Return ``(l00, l10, l11, t00, t01, t11)``: the prior's position block ``P11 = L L^T``
+    (lower triangular) and ``T = L^{-T}``, what every linearization of one update shares."""
     p00, p01, p11 = P[0, 0], P[0, 1], P[1, 1]
     s = p11 - p01 * p01 / p00
     s = s if s > FLOOR * p11 else FLOOR * p11
     l00, l11 = math.sqrt(p00), math.sqrt(s)
     l10 = p01 / l00
+    t00, t11 = 1.0 / l00, 1.0 / l11
+    return l00, l10, l11, t00, -l10 * t00 * t11, t11
+
+
+@kernel
+def factored_into(x, P, factor, yxx, yxy, yyy, bx, by, x_out, P_out, cov):
+    """:func:`posterior_into` with the prior's :func:`prior_factor` given; without ``cov``
+    only the position of ``x_out`` is written (what an iteration needs)."""
+    l00, l10, l11, t00, t01, t11 = factor
     yl00, yl10 = yxx * l00 + yxy * l10, yxy * l00 + yyy * l10  # Y L, first column
     k00 = l00 * yl00 + l10 * yl10
     m00 = math.sqrt(1.0 + k00) if k00 > 0.0 else 1.0
     m10 = l11 * yl10 / m00
     e = l11 * l11 * yyy - m10 * m10
     m11 = math.sqrt(1.0 + e) if e > 0.0 else 1.0
-    # T = L^{-T} and U = M^{-T}, both upper triangular.
-    t00, t11 = 1.0 / l00, 1.0 / l11
-    t01 = -l10 * t00 * t11
+    # T = L^{-T} (given) and U = M^{-T}, both upper triangular.
     u00, u11 = 1.0 / m00, 1.0 / m11
     u01 = -m10 * u00 * u11
     # The correction K nu = P[:, :2] T (I + K)^{-1} L^T b, (I + K)^{-1} = U U^T.
@@ -113,11 +127,13 @@ def posterior_into(x, P, yxx, yxy, yyy, bx, by, x_out, P_out, cov):
     v0, v1 = u00 * w0 + u01 * w1, u11 * w1
     z00, z10, z11 = t00 * u00, t00 * u01 + t01 * u11, t11 * u11
     g0, g1 = t00 * v0 + t01 * v1, t11 * v1
-    for i in range(n):
+    if not cov:
+        for i in range(2):
+            x_out[i] = x[i] + (g0 * P[0, i] + g1 * P[1, i])
+        return
+    for i in range(x.shape[0]):
         r0i, r1i = P[0, i], P[1, i]
         x_out[i] = x[i] + (g0 * r0i + g1 * r1i)
-        if not cov:
-            continue
         za, zb = z00 * r0i, z10 * r0i + z11 * r1i
         fa, fb = t00 * r0i, t01 * r0i + t11 * r1i
         for j in range(i + 1):
@@ -140,9 +156,9 @@ def relinearized_b(x, lin0, lin1, yxx, yxy, yyy, bx, by):
 @kernel
 def relinearize_into(x, P, lin0, lin1, yxx, yxy, yyy, bx, by, x_out, P_out, cov):
     """Write the posterior of the iterated EKF linearized at ``lin`` (its terms ``(Y, b)``
-    there; :func:`relinearized_b`) into ``x_out`` and, if ``cov``, ``P_out``, from the same
-    prior ``x``, ``P``; return whether the position moved less than :data:`ITERATION_TOL`
-    (relative to ``1 + |lin|``)."""
+    there; :func:`relinearized_b`) into ``x_out``, ``P_out`` (as :func:`posterior_into`)
+    from the same prior ``x``, ``P``; return whether the position moved less than
+    :data:`ITERATION_TOL` (relative to ``1 + |lin|``)."""
     cx, cy = relinearized_b(x, lin0, lin1, yxx, yxy, yyy, bx, by)
     posterior_into(x, P, yxx, yxy, yyy, cx, cy, x_out, P_out, cov)
     return settled(x_out, lin0, lin1)
@@ -169,18 +185,19 @@ def update_rows(x, P, z, sensors, wd, wt, orientation, mask, iterations, x_out, 
         ob = orientation[b if orientation.shape[0] > 1 else 0]
         mb = mask[b if mask.shape[0] > 1 else 0]
         xb, Pb, xo, Po = x[b], P[b], x_out[b], P_out[b]
+        f = prior_factor(Pb)
         yxx, yxy, yyy, bx, by = range_bearing_terms(xb[0], xb[1], zb, sb, wdb, wtb, ob, mb)
-        posterior_into(xb, Pb, yxx, yxy, yyy, bx, by, xo, Po, iterations == 1)
+        factored_into(xb, Pb, f, yxx, yxy, yyy, bx, by, xo, Po, iterations == 1)
         if iterations == 1:
             continue
         for _ in range(iterations - 1):
             lin0, lin1 = xo[0], xo[1]
             yxx, yxy, yyy, bx, by = range_bearing_terms(lin0, lin1, zb, sb, wdb, wtb, ob, mb)
             cx, cy = relinearized_b(xb, lin0, lin1, yxx, yxy, yyy, bx, by)
-            posterior_into(xb, Pb, yxx, yxy, yyy, cx, cy, xo, Po, False)
+            factored_into(xb, Pb, f, yxx, yxy, yyy, cx, cy, xo, Po, False)
             if settled(xo, lin0, lin1):
                 break
-        posterior_into(xb, Pb, yxx, yxy, yyy, cx, cy, xo, Po, True)  # the same mean again
+        factored_into(xb, Pb, f, yxx, yxy, yyy, cx, cy, xo, Po, True)  # the same position
 
 
 @kernel
