@@ -27,6 +27,8 @@ from __future__ import annotations
 import numpy as np
 
 from activetrack import feasible_set, geometry
+from activetrack._jit import as_rows
+from activetrack.baselines import gsr_kernel as gk
 from activetrack.problem import PlanningProblem
 from activetrack.validation import FloatArray
 
@@ -111,30 +113,35 @@ def modes_and_arcs(
 
 
 def sensor_modes_of(c: FloatArray, r: FloatArray, rho: FloatArray) -> tuple[np.ndarray, FloatArray]:
-    """Return :func:`sensor_modes` for arrays ``c`` (..., M, 2) and ``r``, ``rho`` (..., M)."""
-    nc = np.hypot(c[..., 0], c[..., 1])
-    stay = r <= 0.0
-    unreachable = ~stay & (nc + r < rho)
-    free = ~stay & ~unreachable
-    degenerate = free & (rho <= 0.0) & (nc <= r)
+    """Return :func:`sensor_modes` for arrays ``c`` (..., M, 2) and ``r``, ``rho`` (..., M)
+    (:func:`activetrack.baselines.gsr_kernel.modes_row`)."""
+    c = np.asarray(c, np.float64)
+    batch, m = c.shape[:-2], c.shape[-2]
+    free, fixed = np.empty(batch + (m,), bool), np.empty(batch + (m, 2))
+    status = np.empty(batch + (m,), np.int64)
+    gk.modes_rows(
+        as_rows(c, batch, (m, 2)), as_rows(r, batch, (m,)), as_rows(rho, batch, (m,)),
+        free.reshape(-1, m), fixed.reshape(-1, m, 2), status.reshape(-1, m),
+    )  # fmt: skip
+    raise_for_status(status)
+    return free, fixed
+
+
+def raise_for_status(status: np.ndarray) -> None:
+    """Raise the ValueError of the sensors flagged by
+    :func:`activetrack.baselines.gsr_kernel.modes_row` (``status`` (..., M)), if any."""
+    degenerate = status == gk.DEGENERATE
     if degenerate.any():
         raise ValueError(
             f"rho must be > 0 for sensors {_where(degenerate)}: the predicted "
             "target is within their reach and the information grows without bound near it"
         )
-    if not unreachable.any():  # the common case: every fixed sensor stays where it is
-        fixed_rel = np.array(c, dtype=np.float64)
-    else:
-        fixed_rel = np.where(unreachable[..., None], geometry.unreachable_fallback(c, r), c)
-    if free.all():
-        return free, fixed_rel
-    on_target = ~free & (np.hypot(fixed_rel[..., 0], fixed_rel[..., 1]) == 0.0)
+    on_target = status == gk.ON_TARGET
     if on_target.any():
         raise ValueError(
             f"sensors {_where(on_target)} cannot move (r = 0) and sit exactly "
             "on the predicted target, where the bearing is undefined"
         )
-    return free, fixed_rel
 
 
 def _where(mask: np.ndarray, limit: int = 10) -> str:

@@ -38,11 +38,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from activetrack import geometry
 from activetrack._jit import as_rows
 from activetrack.baselines import gsr_kernel as gk
 from activetrack.baselines import gsr_restarts
-from activetrack.baselines._common import sensor_modes, sensor_modes_of
+from activetrack.baselines._common import raise_for_status, sensor_modes
 from activetrack.objective import sensor_information
 from activetrack.problem import PlanningProblem
 from activetrack.solver_scalar import solve_point
@@ -270,13 +269,16 @@ def warm_start(
 
     Batched. Free sensors start where they are (``c``), fixed ones at ``fixed_rel`` (their
     next position); a free sensor inside its ``rho`` disk starts from its projection onto
-    the feasible set (:func:`activetrack.geometry.project_feasible`).
+    the feasible set (:func:`activetrack.baselines.gsr_kernel.warm_row`).
     """
-    s = fixed_rel.copy()
-    nc = np.hypot(c[..., 0], c[..., 1])
-    inside = free & (nc < rho)
-    if np.any(inside):
-        s[inside] = geometry.project_feasible(c[inside], c[inside], r[inside], rho[inside])
+    c = np.asarray(c, np.float64)
+    batch, m = c.shape[:-2], c.shape[-2]
+    s, inside = np.empty(batch + (m, 2)), np.empty(batch + (m,), bool)
+    gk.warm_rows(
+        as_rows(c, batch, (m, 2)), as_rows(r, batch, (m,)), as_rows(rho, batch, (m,)),
+        as_rows(free, batch, (m,), np.bool_), as_rows(fixed_rel, batch, (m, 2)),
+        s.reshape(-1, m, 2), inside.reshape(-1, m),
+    )  # fmt: skip
     return s, inside
 
 
@@ -292,23 +294,21 @@ def small_improvement(f0, f1, tol: float):
 
 def relax_batch(problem: PlanningProblem, tol: float, max_sweeps: int) -> GSRBatchResult:
     """Return GSR's plans for every copy of a batched problem: positions ``batch_shape +
-    (M, 2)``, values, sweeps and single-sensor solves ``batch_shape`` (the compiled sweeps
-    of :func:`activetrack.baselines.gsr_kernel.relax_rows`, copy by copy)."""
+    (M, 2)``, values, sweeps and single-sensor solves ``batch_shape`` (the compiled modes,
+    warm start and sweeps of :func:`activetrack.baselines.gsr_kernel.relax_rows`, copy by
+    copy)."""
     shape, M = problem.batch_shape, problem.n_sensors
     B = math.prod(shape)
-    c = as_rows(problem.rel_sensors, shape, (M, 2))
     r, rho, sd2, st2 = (
         as_rows(getattr(problem, k), shape, (M,)) for k in ("r", "rho", "sigma_d2", "sigma_theta2")
     )
-    free, fixed_rel = sensor_modes_of(c, r, rho)
-    s, _ = warm_start(c, r, rho, free, fixed_rel)
-    s = as_rows(s, (B,), (M, 2))
+    s, status = np.empty((B, M, 2)), np.empty((B, M), np.int64)
     value, sweeps, solves = np.empty(B), np.empty(B, np.int64), np.empty(B, np.int64)
     gk.relax_rows(
-        as_rows(problem.prior_info, shape, (2, 2)), c, r, rho, sd2, st2,
-        as_rows(free, (B,), (M,), np.bool_), s, float(tol), int(max_sweeps), value, sweeps,
-        solves,
+        as_rows(problem.prior_info, shape, (2, 2)), as_rows(problem.rel_sensors, shape, (M, 2)),
+        r, rho, sd2, st2, float(tol), int(max_sweeps), s, status, value, sweeps, solves,
     )  # fmt: skip
+    raise_for_status(status.reshape(shape + (M,)))
     positions = s.reshape(shape + (M, 2)) + problem.target[..., None, :]
     return GSRBatchResult(
         positions, value.reshape(shape), sweeps.reshape(shape), solves.reshape(shape)
@@ -317,26 +317,29 @@ def relax_batch(problem: PlanningProblem, tol: float, max_sweeps: int) -> GSRBat
 
 def relax_single(problem: PlanningProblem, tol: float, max_sweeps: int) -> GSRResult:
     """Return GSR's plan of one problem from its warm start, plain sweeps (compiled:
-    :func:`activetrack.baselines.gsr_kernel.relax_point`)."""
+    :func:`activetrack.baselines.gsr_kernel.plan_point`)."""
     c = np.array(problem.rel_sensors, np.float64)  # kernel arrays: contiguous, writable
     r, rho, sd2, st2 = np.array(
         [problem.r, problem.rho, problem.sigma_d2, problem.sigma_theta2], np.float64
     )
-    free, fixed_rel = sensor_modes_of(c, r, rho)  # one target: the paper's problem
-    s, inside = warm_start(c, r, rho, free, fixed_rel)
+    m = c.shape[0]
+    s, fixed, status = np.empty((m, 2)), np.empty((m, 2)), np.empty(m, np.int64)
+    free, inside = np.empty(m, np.bool_), np.empty(m, np.bool_)
     prior = problem.prior_info
-    value, start, sweeps, solves, converged = gk.relax_point(
+    code, value, start, sweeps, solves, converged = gk.plan_point(
         float(prior[0, 0]), float(prior[0, 1]), float(prior[1, 1]), c, r, rho, sd2, st2,
-        np.flatnonzero(free), s, float(tol), int(max_sweeps),
+        float(tol), int(max_sweeps), free, fixed, status, s, inside,
     )  # fmt: skip
+    if code:
+        raise_for_status(status)
     return GSRResult(
         positions=s + problem.target,
-        value=float(value),
-        sweeps=int(sweeps),
-        n_solves=int(solves),
+        value=value,
+        sweeps=sweeps,
+        n_solves=solves,
         start="warm",
-        converged=bool(converged),
-        warm_value=float(start),
+        converged=converged,
+        warm_value=start,
         warm_feasible=not inside.any(),
     )
 

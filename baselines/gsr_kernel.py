@@ -13,11 +13,76 @@ equals the single problem's plan bit for bit. The restarts and the pattern moves
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from activetrack._jit import kernel
+from activetrack.motion_kernels import fallback_point, project_feasible_point
 from activetrack.objective import information_entries, trace_of_inverse
 from activetrack.solver_scalar import solve_point
+
+#: Sensor status of :func:`modes_row`: fine, a fixed sensor exactly on the target (no
+#: bearing), a free sensor with ``rho <= 0`` that can reach the target (no minimum; the
+#: first to report).
+OK, ON_TARGET, DEGENERATE = 0, 1, 2
+
+
+@kernel
+def modes_row(c, r, rho, free, fixed, status):
+    """Write each sensor's mode (``c`` (M, 2) relative to the target): ``free`` (``r > 0``
+    and the feasible set not empty), ``fixed`` (the current position, or for a sensor that
+    cannot leave the ``rho`` disk the reachable point farthest from the target) and
+    ``status`` (:data:`OK`, :data:`DEGENERATE`, :data:`ON_TARGET`); return the worst."""
+    worst = OK
+    for i in range(c.shape[0]):
+        nc = math.hypot(c[i, 0], c[i, 1])
+        stay = r[i] <= 0.0
+        unreachable = not stay and nc + r[i] < rho[i]
+        free[i] = not stay and not unreachable
+        if unreachable:
+            fixed[i, 0], fixed[i, 1] = fallback_point(c[i, 0], c[i, 1], r[i])
+        else:
+            fixed[i, 0], fixed[i, 1] = c[i, 0], c[i, 1]
+        status[i] = OK
+        if free[i] and rho[i] <= 0.0 and nc <= r[i]:
+            status[i] = DEGENERATE
+        elif not free[i] and math.hypot(fixed[i, 0], fixed[i, 1]) == 0.0:
+            status[i] = ON_TARGET
+        worst = max(worst, status[i])
+    return worst
+
+
+@kernel
+def warm_row(c, r, rho, free, fixed, s, inside):
+    """Write GSR's warm start into ``s`` (M, 2): ``fixed``, except a free sensor inside its
+    ``rho`` disk (marked in ``inside`` (M,)), which starts from its nearest feasible point;
+    return whether one did."""
+    any_inside = False
+    for i in range(c.shape[0]):
+        inside[i] = free[i] and math.hypot(c[i, 0], c[i, 1]) < rho[i]
+        if inside[i]:
+            s[i, 0], s[i, 1] = project_feasible_point(
+                c[i, 0], c[i, 1], c[i, 0], c[i, 1], r[i], rho[i]
+            )
+            any_inside = True
+        else:
+            s[i, 0], s[i, 1] = fixed[i, 0], fixed[i, 1]
+    return any_inside
+
+
+@kernel
+def modes_rows(c, r, rho, free, fixed, status):
+    """Run :func:`modes_row` on every row (``c``, ``fixed`` (B, M, 2), the others (B, M))."""
+    for b in range(c.shape[0]):
+        modes_row(c[b], r[b], rho[b], free[b], fixed[b], status[b])
+
+
+@kernel
+def warm_rows(c, r, rho, free, fixed, s, inside):
+    """Run :func:`warm_row` on every row (``inside`` (B, M))."""
+    for b in range(c.shape[0]):
+        warm_row(c[b], r[b], rho[b], free[b], fixed[b], s[b], inside[b])
 
 
 @kernel
@@ -88,14 +153,31 @@ def relax_point(pa, pb, pc, c, r, rho, sd2, st2, free, s, tol, max_sweeps):
 
 
 @kernel
-def relax_rows(prior, c, r, rho, sd2, st2, free, s, tol, max_sweeps, value, sweeps, solves):
-    """Run :func:`relax_point` on every row of a batch: ``prior`` (B, 2, 2), ``c``, ``s``
-    (B, M, 2), ``r``, ``rho``, ``sd2``, ``st2``, ``free`` (B, M); writes ``s`` in place and
-    ``value``, ``sweeps``, ``solves`` (B,)."""
+def plan_point(pa, pb, pc, c, r, rho, sd2, st2, tol, max_sweeps, free, fixed, status, s, inside):
+    """GSR's plan of one problem: the sensors' modes (:func:`modes_row`, into ``free``,
+    ``fixed``, ``status``), the warm start (:func:`warm_row`, into ``s``, ``inside``) and
+    :func:`relax_point` from it. Returns ``(status, value, start_value, sweeps, solves,
+    converged)``; a status other than :data:`OK` stops before the relaxation."""
+    worst = modes_row(c, r, rho, free, fixed, status)
+    if worst != OK:
+        return worst, np.nan, np.nan, 0, 0, False
+    warm_row(c, r, rho, free, fixed, s, inside)
+    v, start, sweeps, solves, converged = relax_point(
+        pa, pb, pc, c, r, rho, sd2, st2, np.flatnonzero(free), s, tol, max_sweeps
+    )
+    return OK, v, start, sweeps, solves, converged
+
+
+@kernel
+def relax_rows(prior, c, r, rho, sd2, st2, tol, max_sweeps, s, status, value, sweeps, solves):
+    """Run :func:`plan_point` on every row of a batch: ``prior`` (B, 2, 2), ``c``, ``s``
+    (B, M, 2), ``r``, ``rho``, ``sd2``, ``st2`` (B, M); writes the plans into ``s``, the
+    sensors' ``status`` (B, M) and ``value``, ``sweeps``, ``solves`` (B,)."""
+    m = c.shape[1]
+    free, fixed, inside = np.empty(m, np.bool_), np.empty((m, 2)), np.empty(m, np.bool_)
     for b in range(s.shape[0]):
-        idx = np.flatnonzero(free[b])
-        v, _, n_sweeps, n_solves, _ = relax_point(
+        _, v, _, n_sweeps, n_solves, _ = plan_point(
             prior[b, 0, 0], prior[b, 0, 1], prior[b, 1, 1], c[b], r[b], rho[b], sd2[b], st2[b],
-            idx, s[b], tol, max_sweeps,
+            tol, max_sweeps, free, fixed, status[b], s[b], inside,
         )  # fmt: skip
         value[b], sweeps[b], solves[b] = v, n_sweeps, n_solves

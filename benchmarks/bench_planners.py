@@ -55,6 +55,12 @@ def main() -> None:
         rng = np.random.default_rng([args.seed, m])
         return [random_problem(rng, m) for _ in range(args.problems)]
 
+    # Load (or compile) every planner's kernels first: the first call of a process pays it.
+    warm = problems(3)[:2]
+    for planner in (GSR(), GSR(restarts=True), GBES(spacing=math.pi / 100)):
+        for p in warm:
+            planner.plan(p, None)
+        GSR().plan_with_info(PlanningProblem.stack(warm))
     print(f"{args.problems} random problems per team size (seed {args.seed}), CPU time\n")
     print(
         "| planner | M | GBES spacing (m) | median ms/step | mean ms/step | mean ms/sensor | "

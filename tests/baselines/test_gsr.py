@@ -347,3 +347,48 @@ def test_compiled_sweeps_follow_the_python_relaxation_rules():
             assert res.value == value and res.converged == converged
             assert (res.sweeps, res.n_solves) == (run.sweeps, run.n_solves)
             assert res.warm_value == run.start_value and res.warm_feasible == feasible
+
+
+@pytest.mark.kernels
+def test_sensor_modes_and_warm_start_follow_their_geometry():
+    """The compiled modes and warm start on 400 sensors of every kind (free, still, unable
+    to leave the rho disk, starting inside it), by their definitions: free iff it can move
+    and its speed disk leaves the rho disk; a sensor that cannot gets the reachable point
+    farthest from the target; a free one inside its rho disk starts from the nearest
+    feasible point, found by dense sampling of the speed disk."""
+    from activetrack.baselines._common import sensor_modes_of
+    from activetrack.baselines.gsr import warm_start
+
+    rng = np.random.default_rng(21)
+    n = 400
+    ang = rng.uniform(-np.pi, np.pi, n)
+    nc = rng.uniform(0.05, 4.0, n)
+    c = (nc * np.stack([np.cos(ang), np.sin(ang)])).T.reshape(100, 4, 2)
+    r = np.where(rng.random(n) < 0.1, 0.0, rng.uniform(0.1, 2.0, n)).reshape(100, 4)
+    rho = rng.uniform(0.5, 4.0, n).reshape(100, 4)
+    free, fixed = sensor_modes_of(c, r, rho)
+    norm = np.hypot(c[..., 0], c[..., 1])
+    np.testing.assert_array_equal(free, (r > 0) & (norm + r >= rho))
+    away = (r > 0) & ~free
+    assert away.sum() > 10 and (~free & (r == 0)).sum() > 10
+    np.testing.assert_allclose(
+        fixed[away], c[away] + (r[away] / norm[away])[:, None] * c[away], rtol=1e-14
+    )
+    np.testing.assert_array_equal(fixed[~away], c[~away])
+    s, inside = warm_start(c, r, rho, free, fixed)
+    np.testing.assert_array_equal(inside, free & (norm < rho))
+    np.testing.assert_array_equal(s[~inside], fixed[~inside])
+    assert inside.sum() > 20
+    t = np.linspace(0, 1, 400)  # radii: steps of r / 399
+    phi = np.linspace(-np.pi, np.pi, 721)
+    disk = (t[:, None, None] * np.stack([np.cos(phi), np.sin(phi)], -1)).reshape(-1, 2)
+    for b, i in zip(*np.nonzero(inside), strict=True):
+        q = c[b, i] + r[b, i] * disk  # the speed disk, sampled
+        ok = np.hypot(q[:, 0], q[:, 1]) >= rho[b, i]
+        best = np.min(np.hypot(*(q[ok] - c[b, i]).T))
+        got = s[b, i]
+        assert np.hypot(*got) >= rho[b, i] * (1 - 1e-12)
+        assert np.hypot(*(got - c[b, i])) <= r[b, i] * (1 + 1e-12)
+        assert np.hypot(*(got - c[b, i])) <= best + 1e-12
+        # Not farther than a sample next to it (a radial and an angular step).
+        assert np.hypot(*(got - c[b, i])) >= best - r[b, i] / 399 - best * 2 * np.pi / 720
