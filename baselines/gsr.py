@@ -41,7 +41,7 @@ import numpy as np
 from activetrack._jit import as_rows
 from activetrack.baselines import gsr_kernel as gk
 from activetrack.baselines import gsr_restarts
-from activetrack.baselines._common import raise_for_status, sensor_modes
+from activetrack.baselines._common import raise_for_status, sensor_modes, sensor_modes_of
 from activetrack.objective import sensor_information
 from activetrack.problem import PlanningProblem
 from activetrack.solver_scalar import solve_point
@@ -317,31 +317,21 @@ def relax_batch(problem: PlanningProblem, tol: float, max_sweeps: int) -> GSRBat
 
 def relax_single(problem: PlanningProblem, tol: float, max_sweeps: int) -> GSRResult:
     """Return GSR's plan of one problem from its warm start, plain sweeps (compiled:
-    :func:`activetrack.baselines.gsr_kernel.plan_point`)."""
+    :func:`activetrack.baselines.gsr_kernel.plan_single`)."""
     c = np.array(problem.rel_sensors, np.float64)  # kernel arrays: contiguous, writable
     r, rho, sd2, st2 = np.array(
         [problem.r, problem.rho, problem.sigma_d2, problem.sigma_theta2], np.float64
     )
-    m = c.shape[0]
-    s, fixed, status = np.empty((m, 2)), np.empty((m, 2)), np.empty(m, np.int64)
-    free, inside = np.empty(m, np.bool_), np.empty(m, np.bool_)
+    s = np.empty(c.shape)
     prior = problem.prior_info
-    code, value, start, sweeps, solves, converged = gk.plan_point(
+    code, value, start, sweeps, solves, converged, warm_feasible = gk.plan_single(
         float(prior[0, 0]), float(prior[0, 1]), float(prior[1, 1]), c, r, rho, sd2, st2,
-        float(tol), int(max_sweeps), free, fixed, status, s, inside,
+        float(tol), int(max_sweeps), s,
     )  # fmt: skip
     if code:
-        raise_for_status(status)
-    return GSRResult(
-        positions=s + problem.target,
-        value=value,
-        sweeps=sweeps,
-        n_solves=solves,
-        start="warm",
-        converged=converged,
-        warm_value=start,
-        warm_feasible=not inside.any(),
-    )
+        sensor_modes_of(c, r, rho)  # raises, naming the sensors
+    s += problem.target
+    return GSRResult(s, value, sweeps, solves, "warm", converged, start, warm_feasible)
 
 
 # ---------------------------------------------------------------------------------------

@@ -169,6 +169,19 @@ def plan_point(pa, pb, pc, c, r, rho, sd2, st2, tol, max_sweeps, free, fixed, st
 
 
 @kernel
+def plan_single(pa, pb, pc, c, r, rho, sd2, st2, tol, max_sweeps, s):
+    """:func:`plan_point` with its own scratch arrays, the plan into ``s`` (M, 2). Returns
+    ``(status, value, start_value, sweeps, solves, converged, warm_feasible)``."""
+    m = c.shape[0]
+    free, fixed, inside = np.empty(m, np.bool_), np.empty((m, 2)), np.empty(m, np.bool_)
+    status = np.empty(m, np.int64)
+    worst, v, start, sweeps, solves, converged = plan_point(
+        pa, pb, pc, c, r, rho, sd2, st2, tol, max_sweeps, free, fixed, status, s, inside
+    )
+    return worst, v, start, sweeps, solves, converged, not inside.any()
+
+
+@kernel
 def relax_rows(prior, c, r, rho, sd2, st2, tol, max_sweeps, s, status, value, sweeps, solves):
     """Run :func:`plan_point` on every row of a batch: ``prior`` (B, 2, 2), ``c``, ``s``
     (B, M, 2), ``r``, ``rho``, ``sd2``, ``st2`` (B, M); writes the plans into ``s``, the
