@@ -248,6 +248,23 @@ def encode(
     """Return every agent's observation, float32 (..., M, D): :func:`observations` of
     :func:`features` in one compiled pass, with room for ``n_rays`` range-finder readings
     last that the caller fills (:func:`ray_readings` with ``out=``)."""
+    order = _checked_order(order, fixes.shape[-2])
+    return _encode(x_preds, P_preds, fixes, constants, dt, L, extended, detected, order, n_rays)
+
+
+def _encode(
+    x_preds: list[FloatArray],
+    P_preds: list[FloatArray],
+    fixes: FloatArray,
+    constants: FloatArray,
+    dt: float,
+    L: float,
+    extended: bool,
+    detected: np.ndarray | None,
+    order: np.ndarray,
+    n_rays: int,
+) -> np.ndarray:
+    """:func:`encode` with a checked ``order`` (the world's own, every step)."""
     args, batch = _kernel_args(x_preds, P_preds, fixes, constants, detected)
     x, m = args[0], fixes.shape[-2]
     td = EXT_TARGET_DIM * x.shape[1] if extended else TARGET_DIM
@@ -255,6 +272,20 @@ def encode(
     out = np.empty((x.shape[0], m, d), dtype=np.float32)
     obk.observe_rows(*args[:4], float(dt), float(L), extended, *args[4:], order, out)
     return out.reshape(batch + (m, d))
+
+
+def _checked_order(order: np.ndarray, m: int) -> np.ndarray:
+    """Return ``order`` as the kernels' (M, M) int64 table, or raise ValueError: the
+    kernels index with it unchecked."""
+    table = np.asarray(order)
+    if table.shape != (m, m) or not np.issubdtype(table.dtype, np.integer):
+        raise ValueError(
+            f"order must be an ({m}, {m}) integer table, got {table.dtype} {table.shape}"
+        )
+    table = np.ascontiguousarray(table, np.int64)
+    if m and (table.min() < 0 or table.max() >= m):
+        raise ValueError(f"order must hold sensor indices in [0, {m - 1}]")
+    return table
 
 
 def _kernel_args(
@@ -357,7 +388,7 @@ def observations(
     full = np.empty(batch + (m, td + sd * m + n_rays), dtype=np.float32)
     obk.windows_rows(
         as_rows(target, batch, (td,)), as_rows(sensor, batch, (m, sd)),
-        as_rows(order, (m,), (m,), np.int64), full.reshape(-1, m, full.shape[-1]),
+        _checked_order(order, m), full.reshape(-1, m, full.shape[-1]),
     )  # fmt: skip
     return full
 

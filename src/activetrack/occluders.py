@@ -556,8 +556,15 @@ def line_of_sight(
     if where is None:
         w = np.ones((1, k, m), bool)
     else:
-        w = np.asarray(where, np.bool_)
-        w = as_rows(w, lead if w.ndim > 2 else (), (k, m), np.bool_)
+        w = np.asarray(where)
+        if w.dtype != np.bool_ or w.ndim > len(lead) + 2:
+            raise ValueError(f"where must be a bool array broadcastable to {lead + (k, m)}")
+        try:
+            w = as_rows(w, lead if w.ndim > 2 else (), (k, m), np.bool_)
+        except ValueError:
+            raise ValueError(
+                f"where must be a bool array broadcastable to {lead + (k, m)}, got {w.shape}"
+            ) from None
     ea, eb, starts, ends, bbox, _, eps, scale = occ._kernel_args
     ok.sight_rows(_flat(s, lead + (m,)).reshape(-1, m, 2),
                   _flat(t, lead + (k,)).reshape(-1, k, 2), lay, ea, eb, starts, ends, bbox,

@@ -78,3 +78,24 @@ def test_paper_blocks_follow_the_docstring_entry_by_entry():
     s = features.sensor_features(sensors, x[..., :2], const, 3.0)
     np.testing.assert_allclose(s[..., :2], (sensors - x[..., None, :2]) / 3.0, rtol=1e-12)
     np.testing.assert_array_equal(s[..., 2:], np.broadcast_to(const, (2, 3, 4, 4)))
+
+
+def test_bad_orders_and_masks_are_refused_before_the_kernels():
+    """The kernels index with ``order`` unchecked: a table out of range, of the wrong shape
+    or type is a ValueError naming it (and line_of_sight's ``where`` likewise)."""
+    from activetrack import occluders as oc
+
+    target, sensor = np.zeros((2, 5)), np.zeros((2, 3, 6))
+    for bad in ([[0, 1, 3], [1, 2, 0], [2, 0, 1]], [[0, 1], [1, 0]], np.zeros((3, 3)),
+                -features.cyclic_order(3)):  # fmt: skip
+        with pytest.raises(ValueError, match="order must"):
+            features.observations(target, sensor, bad)
+    x, P = [np.zeros(4)], [np.eye(4)]
+    with pytest.raises(ValueError, match="order must"):
+        features.encode(x, P, np.ones((3, 2)), np.zeros((3, 4)), 0.1, 1.0, False, None,
+                        np.full((3, 3), 7))  # fmt: skip
+    occ = oc.Occluders.from_polygons([np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0]])])
+    s, t = np.zeros((4, 3, 2)) - 1.0, np.ones((4, 2, 2)) * 2.0
+    for bad in (np.ones((4, 2, 3)), np.ones((5, 2, 3), bool), np.ones((2, 2), bool)):
+        with pytest.raises(ValueError, match="where must be a bool array"):
+            oc.line_of_sight(s, t, occ, bad)
