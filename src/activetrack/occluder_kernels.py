@@ -465,3 +465,108 @@ def crossings_into(a, b, polygon, out):
                 out[n, 1] = a[i, 1] + t * d1y
                 n += 1
     return n
+
+
+@kernel
+def rectangle_into(cx, cy, w, h, c, s, out):
+    """Write the 4 vertices (counter-clockwise) of the ``w`` x ``h`` rectangle centred at
+    (cx, cy) and turned by the angle of cosine ``c`` and sine ``s`` into ``out`` (4, 2)."""
+    for k in range(4):
+        x = 0.5 * (w if k == 1 or k == 2 else -w)
+        y = 0.5 * (h if k >= 2 else -h)
+        out[k, 0] = cx + (x * c - y * s)
+        out[k, 1] = cy + (x * s + y * c)
+
+
+@kernel
+def too_close(points, poly, clearance):
+    """Return whether a point (k, 2) is inside the polygon ``poly`` (n, 2) (farther in than
+    its ``eps``, :func:`inside_point`) or nearer to it than ``clearance``."""
+    n = poly.shape[0]
+    ea, eb = np.empty((1, n, 2)), np.empty((1, n, 2))
+    bbox = np.empty((1, 1, 4))
+    scale = 1.0
+    for j in range(n):
+        for d in range(2):
+            ea[0, j, d] = poly[j, d]
+            eb[0, j, d] = poly[(j + 1) % n, d]
+            scale = max(scale, abs(poly[j, d]))
+    bbox[0, 0, 0], bbox[0, 0, 1] = poly[:, 0].min(), poly[:, 1].min()
+    bbox[0, 0, 2], bbox[0, 0, 3] = poly[:, 0].max(), poly[:, 1].max()
+    eps = np.full(1, TOL * scale)
+    starts, ends = np.zeros(1, np.intp), np.full(1, n, np.intp)
+    c2 = clearance * clearance
+    for i in range(points.shape[0]):
+        px, py = points[i, 0], points[i, 1]
+        if inside_point(px, py, 0, ea, eb, starts, ends, bbox, eps):
+            return True
+    for i in range(points.shape[0]):
+        for j in range(n):
+            if edge_dist2(points[i, 0], points[i, 1], ea[0, j, 0], ea[0, j, 1], eb[0, j, 0],
+                          eb[0, j, 1]) < c2:  # fmt: skip
+                return True
+    return False
+
+
+@kernel
+def rectangles_into(rng, bounds, sizes, clear, clearance, rotate, max_tries, out):
+    """Draw ``len(out)`` rectangles into ``out`` (n, 4, 2) from the generator ``rng``; return
+    the index of the first that found no place in ``max_tries`` draws, or -1.
+
+    Each draw: the sides uniform in ``sizes`` (lo, hi), the angle uniform in [0, pi) (0
+    without ``rotate``), the centre uniform among the positions keeping the rectangle in
+    ``bounds`` (xmin, ymin, xmax, ymax); drawn again while a ``clear`` point (k, 2) is
+    :func:`too_close`.
+    """
+    for k in range(out.shape[0]):
+        placed = False
+        for _ in range(max_tries):
+            w = rng.uniform(sizes[0], sizes[1])
+            h = rng.uniform(sizes[0], sizes[1])
+            ang = rng.uniform(0.0, np.pi) if rotate else 0.0
+            c, s = math.cos(ang), math.sin(ang)
+            hx = (0.5 * abs(c)) * w + (0.5 * abs(s)) * h  # the half extents
+            hy = (0.5 * abs(s)) * w + (0.5 * abs(c)) * h
+            lox, loy, hix, hiy = bounds[0] + hx, bounds[1] + hy, bounds[2] - hx, bounds[3] - hy
+            if lox > hix or loy > hiy:
+                continue
+            cx = rng.uniform(lox, hix)
+            cy = rng.uniform(loy, hiy)
+            rectangle_into(cx, cy, w, h, c, s, out[k])
+            if clear.shape[0] and too_close(clear, out[k], clearance):
+                continue
+            placed = True
+            break
+        if not placed:
+            return k
+    return -1
+
+
+@kernel
+def unique_points(points, n):
+    """Sort the first ``n`` rows of ``points`` (n, 2) by x, then y, and drop exact
+    repeats in place (as ``np.unique(points[:n], axis=0)``); return how many remain."""
+    for i in range(1, n):  # insertion sort: a few points
+        x, y = points[i, 0], points[i, 1]
+        k = i - 1
+        while k >= 0 and (points[k, 0] > x or (points[k, 0] == x and points[k, 1] > y)):
+            points[k + 1, 0], points[k + 1, 1] = points[k, 0], points[k, 1]
+            k -= 1
+        points[k + 1, 0], points[k + 1, 1] = x, y
+    m = 0
+    for i in range(n):
+        if m == 0 or points[i, 0] != points[m - 1, 0] or points[i, 1] != points[m - 1, 1]:
+            points[m, 0], points[m, 1] = points[i, 0], points[i, 1]
+            m += 1
+    return m
+
+
+@kernel
+def crossings_rows(a, b, polygon, out, counts):
+    """For each layout ``i`` (edges ``a[i]``, ``b[i]`` (E, 2)): its distinct crossings
+    (:func:`crossings_into`, then :func:`unique_points`) to the front of ``out[i]``, NaN
+    after them; their number into ``counts[i]``."""
+    for i in range(a.shape[0]):
+        n = unique_points(out[i], crossings_into(a[i], b[i], polygon, out[i]))
+        counts[i] = n
+        out[i, n:] = np.nan

@@ -291,12 +291,13 @@ class Occluders:
         """Return the number of vertices of each polygon (P,) (of each layout)."""
         return np.diff(np.append(self.starts, self.n_edges))
 
-    def replaced(self, rows: object, layouts: Sequence[Occluders]) -> Occluders:
+    def replaced(self, rows: object, layouts: Sequence[Occluders] | Occluders) -> Occluders:
         """Return a new batched set with layout ``rows[j]`` replaced by ``layouts[j]``.
 
         ``rows`` distinct ints in ``[0, N)``, ``layouts`` as many unbatched sets of this
-        set's polygon and vertex counts (``ValueError`` naming ``rows`` or ``layouts[j]``
-        otherwise). The other layouts' arrays are copied unchanged.
+        set's polygon and vertex counts, or one batched set of as many layouts
+        (``ValueError`` naming ``rows`` or ``layouts[j]`` otherwise). The other layouts'
+        arrays are copied unchanged.
         """
         if not self.batched:
             raise ValueError("replaced needs a batched set (Occluders.stack), got one layout")
@@ -309,14 +310,13 @@ class Occluders:
             raise ValueError(f"rows must lie in [0, {n}), got {idx.tolist()}")
         if len(np.unique(idx)) != len(idx):
             raise ValueError(f"rows must be distinct, got {idx.tolist()}")
-        layouts = list(layouts)
-        if len(layouts) != len(idx):
-            raise ValueError(
-                f"layouts must hold one layout per row ({len(idx)}), got {len(layouts)}"
-            )
-        if not layouts:
+        batch = isinstance(layouts, Occluders) and layouts.batched
+        count = layouts.n_layouts if batch else len(layouts := list(layouts))
+        if count != len(idx):
+            raise ValueError(f"layouts must hold one layout per row ({len(idx)}), got {count}")
+        if not count:
             return self
-        new = Occluders.stack(layouts)
+        new = layouts if batch else Occluders.stack(layouts)
         if new.n_polygons != self.n_polygons or not np.array_equal(
             new._vertex_counts(), self._vertex_counts()
         ):
@@ -377,32 +377,51 @@ class Occluders:
     @classmethod
     def _of_simple(cls, polys: list[np.ndarray]) -> Occluders:
         """Return the occluders of float64 polygons known to be simple (not checked)."""
-        scale = _scale(polys)
-        eps = TOL * scale
-        n = np.array([len(p) for p in polys], dtype=np.intp)
-        starts = np.concatenate([[0], np.cumsum(n)[:-1]]).astype(np.intp) if polys else n
-        if polys:
-            a = np.concatenate(polys)
-            b = np.concatenate([np.roll(p, -1, axis=0) for p in polys])
-            ep = np.repeat(np.arange(len(polys)), n)
-            bbox = np.array([[*p.min(0), *p.max(0)] for p in polys])
-            crossings = np.empty((len(a) * (len(a) - 1) // 2, 2))
-            found = ok.crossings_into(a, b, ep, crossings)
-            crossings = np.unique(crossings[:found], axis=0)
-        else:
-            a = b = crossings = np.empty((0, 2))
-            ep = np.empty(0, np.intp)
-            bbox = np.empty((0, 4))
+        if not polys:
+            empty = np.empty((0, 2))
+            return cls(
+                polygons=(), edges_a=_frozen(empty), edges_b=_frozen(empty),
+                edge_polygon=_frozen(np.empty(0, np.intp)), starts=_frozen(np.empty(0, np.intp)),
+                bbox=_frozen(np.empty((0, 4))), crossings=_frozen(empty), scale=1.0, eps=TOL,
+            )  # fmt: skip
+        counts = np.array([len(p) for p in polys], dtype=np.intp)
+        return cls._stack_simple(np.concatenate(polys)[None], counts)[0]
+
+    @classmethod
+    def _stack_simple(cls, vertices: np.ndarray, counts: np.ndarray) -> Occluders:
+        """Return the batched set of N layouts of simple polygons (not checked) with the same
+        vertex counts ``counts`` (P,): ``vertices`` (N, E, 2), each polygon's in order."""
+        vertices = np.ascontiguousarray(vertices, np.float64)
+        N, E = vertices.shape[:2]
+        starts = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.intp)
+        nxt = np.arange(1, E + 1)
+        nxt[starts + counts - 1] = starts  # each polygon's last vertex closes on its first
+        b = np.ascontiguousarray(vertices[:, nxt])
+        ep = np.repeat(np.arange(len(counts)), counts)
+        bbox = np.concatenate(
+            [np.minimum.reduceat(vertices, starts, axis=1),
+             np.maximum.reduceat(vertices, starts, axis=1)], axis=-1,
+        )  # fmt: skip
+        scale = np.maximum(1.0, np.max(np.abs(vertices), axis=(1, 2)))
+        crossings = np.empty((N, E * (E - 1) // 2, 2))
+        found = np.empty(N, np.intp)
+        ok.crossings_rows(vertices, b, ep, crossings, found)
+        x = int(found.max(initial=0))
+        polygons = tuple(
+            tuple(_frozen(v[s : s + n]) for s, n in zip(starts.tolist(), counts.tolist(),
+                                                        strict=True))
+            for v in vertices
+        )  # fmt: skip
         return cls(
-            polygons=tuple(_frozen(p) for p in polys),
-            edges_a=_frozen(a),
+            polygons=polygons,
+            edges_a=_frozen(vertices),
             edges_b=_frozen(b),
             edge_polygon=_frozen(ep),
             starts=_frozen(starts),
             bbox=_frozen(bbox),
-            crossings=_frozen(crossings),
-            scale=scale,
-            eps=eps,
+            crossings=_frozen(crossings[:, :x]),
+            scale=_frozen(scale),
+            eps=_frozen(TOL * scale),
         )
 
 
@@ -611,13 +630,6 @@ def _rays_into(
 _MIN_SIDE = 1e-6
 
 
-def _rectangle(center: np.ndarray, w: float, h: float, angle: float) -> np.ndarray:
-    """Return the 4 vertices (counter-clockwise) of a rotated rectangle."""
-    corners = 0.5 * np.array([[-w, -h], [w, -h], [w, h], [-w, h]])
-    c, s = np.cos(angle), np.sin(angle)
-    return center + corners @ np.array([[c, s], [-s, c]])
-
-
 def random_layout(
     rng: np.random.Generator,
     n: int,
@@ -666,46 +678,17 @@ def _rectangles(
     rng: np.random.Generator, n: int, bx: FloatArray, sz: FloatArray, pts: FloatArray,
     clearance: float, rotate: bool, max_tries: int,
 ) -> list[np.ndarray]:  # fmt: skip
-    """Return :func:`random_layout`'s rectangles (its arguments checked), (4, 2) each."""
-    polys: list[np.ndarray] = []
-    for k in range(n):
-        for _ in range(max_tries):
-            w, h = rng.uniform(sz[0], sz[1], 2)
-            ang = rng.uniform(0.0, np.pi) if rotate else 0.0
-            half = (
-                0.5
-                * np.abs(np.array([[np.cos(ang), np.sin(ang)], [np.sin(ang), np.cos(ang)]]))
-                @ [w, h]
-            )
-            lo, hi = bx[:2] + half, bx[2:] - half
-            if np.any(lo > hi):
-                continue
-            poly = _rectangle(rng.uniform(lo, hi), w, h, ang)
-            if len(pts) and _too_close(pts, poly, clearance):
-                continue
-            polys.append(poly)
-            break
-        else:
-            raise ValueError(
-                f"could not place rectangle {k} in {max_tries} tries (max_tries, bounds, "
-                "size_range or clearance too tight)"
-            )
-    return polys  # rectangles of sides >= size_range[0]: simple
-
-
-def _too_close(points: FloatArray, poly: np.ndarray, clearance: float) -> bool:
-    """Return whether a point (k, 2) is inside the polygon or nearer than ``clearance``."""
-    pts = _flat(points, (len(points),))
-    n = len(poly)
-    ea = np.ascontiguousarray(poly)[None]
-    eb = np.concatenate([poly[1:], poly[:1]])[None]
-    bbox = np.concatenate([poly.min(0), poly.max(0)])[None, None]
-    eps = np.array([TOL * _scale([poly])])
-    within = np.empty(len(pts), bool)
-    bounds = np.array([0], np.intp), np.array([n], np.intp)
-    ok.inside_rows(pts, np.zeros(len(pts), np.intp), ea, eb, *bounds, bbox, eps, within)
-    if np.any(within):
-        return True
-    d2 = np.empty((len(pts), n))
-    ok.edge_dist2_rows(pts, ea[0], eb[0], d2)
-    return bool(np.any(d2 < clearance * clearance))
+    """Return :func:`random_layout`'s rectangles (its arguments checked), (4, 2) each
+    (:func:`activetrack.occluder_kernels.rectangles_into`)."""
+    out = np.empty((n, 4, 2))
+    clear = np.ascontiguousarray(pts, np.float64).reshape(-1, 2)
+    failed = ok.rectangles_into(
+        rng, np.ascontiguousarray(bx, np.float64), np.ascontiguousarray(sz, np.float64), clear,
+        float(clearance), bool(rotate), int(max_tries), out,
+    )  # fmt: skip
+    if failed >= 0:
+        raise ValueError(
+            f"could not place rectangle {failed} in {max_tries} tries (max_tries, bounds, "
+            "size_range or clearance too tight)"
+        )
+    return list(out)  # rectangles of sides >= size_range[0]: simple

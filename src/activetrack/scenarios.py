@@ -315,27 +315,40 @@ class Scenario:
 
         Raises ``ValueError`` naming the fields when the rectangles cannot be placed.
         """
-        from activetrack.occluders import Occluders, _rectangles  # noqa: PLC0415
+        return self.draw_occluder_batch([rng])[0]
+
+    def draw_occluder_batch(self, rngs: list[np.random.Generator]):  # -> Occluders, batched
+        """Return the batched occluders of episodes drawn from ``rngs`` (one layout each, as
+        :meth:`draw_occluders`; the rectangles compiled:
+        :func:`activetrack.occluder_kernels.rectangles_into`)."""
+        from activetrack import occluder_kernels  # noqa: PLC0415 (occluded scenarios only)
+        from activetrack.occluders import Occluders  # noqa: PLC0415
 
         clear = np.array(
             [self.sensor_center, *(x[:2] for x in self.target_states("x0_hat"))], np.float64
         )
-        try:
-            drawn = _rectangles(  # random_layout's rectangles (the fields are checked)
-                rng, self.random_occluders, np.asarray(self.occluder_bounds, np.float64),
-                np.asarray(self.occluder_size, np.float64), clear, self.sensor_radius, True, 1000,
-            )  # fmt: skip
-        except ValueError:
-            raise ValueError(
-                f"random_occluders: {self.random_occluders} rectangles of sides "
-                f"{self.occluder_size} do not fit in occluder_bounds {self.occluder_bounds} "
-                f"clear of the sensors' start disk and the targets' x0_hat by sensor_radius "
-                f"{self.sensor_radius:g}; widen occluder_bounds or lower random_occluders, "
-                "occluder_size or sensor_radius"
-            ) from None
+        bounds = np.asarray(self.occluder_bounds, np.float64)
+        sizes = np.asarray(self.occluder_size, np.float64)
         # Both sets are simple polygons already (the fixed ones checked with the scenario).
         fixed = [np.asarray(poly, np.float64) for poly in self.occluders]
-        return Occluders._of_simple([*fixed, *drawn])
+        counts = np.array([len(p) for p in fixed] + [4] * self.random_occluders, np.intp)
+        vertices = np.empty((len(rngs), int(counts.sum()), 2))
+        n_fixed = int(counts[: len(fixed)].sum())
+        if fixed:
+            vertices[:, :n_fixed] = np.concatenate(fixed)
+        for j, rng in enumerate(rngs):
+            drawn = vertices[j, n_fixed:].reshape(self.random_occluders, 4, 2)  # a view
+            if occluder_kernels.rectangles_into(
+                rng, bounds, sizes, clear, float(self.sensor_radius), True, 1000, drawn
+            ) >= 0:  # fmt: skip
+                raise ValueError(
+                    f"random_occluders: {self.random_occluders} rectangles of sides "
+                    f"{self.occluder_size} do not fit in occluder_bounds {self.occluder_bounds} "
+                    f"clear of the sensors' start disk and the targets' x0_hat by sensor_radius "
+                    f"{self.sensor_radius:g}; widen occluder_bounds or lower random_occluders, "
+                    "occluder_size or sensor_radius"
+                )
+        return Occluders._stack_simple(vertices, counts)
 
     def _converted_motion(self, kk: int) -> Any:
         """Return ``motion`` checked: one model, or (K > 1) a tuple of K models."""

@@ -389,7 +389,7 @@ class World:
             e = None if e is None else e[0]
         sensors = self._start_positions(u)
         if self._random_layouts:  # each episode's own layout, drawn after the other draws
-            layouts = [self.scenario.draw_occluders(self.rng(i)) for i in rows.tolist()]
+            layouts = self.scenario.draw_occluder_batch([self.rng(i) for i in rows.tolist()])
             self._occ = layouts[0] if self._one else self._occ.replaced(rows, layouts)
         if self._occ is not None:  # no sensor starts inside an occluder: draw again
             sensors = self._outside_occluders(sensors, rows, one=isinstance(sel, int))

@@ -154,3 +154,64 @@ def test_occluders_of_a_copy_that_does_not_exist_names_the_index(index):
     with pytest.raises(ValueError, match=r"index must be None or an integer in \[0, 2\]"):
         w.occluders(index)
     assert World("paper").occluders() is None
+
+
+def _reference_rectangles(rng, n, bounds, sizes, clear, clearance):
+    """The draws of random_layout in NumPy: sides, angle, centre; redrawn while a clear
+    point is inside (matplotlib) or nearer than ``clearance`` (distance to each side)."""
+    out = []
+    for _ in range(n):
+        while True:
+            w, h = rng.uniform(sizes[0], sizes[1], 2)
+            ang = rng.uniform(0.0, np.pi)
+            rot = np.array([[np.cos(ang), np.sin(ang)], [-np.sin(ang), np.cos(ang)]])
+            half = 0.5 * np.abs(rot) @ [w, h]
+            lo, hi = bounds[:2] + half, bounds[2:] - half
+            if np.any(lo > hi):
+                continue
+            corners = 0.5 * np.array([[-w, -h], [w, -h], [w, h], [-w, h]])
+            poly = rng.uniform(lo, hi) + corners @ rot
+            a, b = poly, np.roll(poly, -1, axis=0)
+            f = b - a
+            t = np.clip(np.einsum("kej,ej->ke", clear[:, None] - a, f) / np.sum(f * f, -1), 0, 1)
+            d = np.linalg.norm(clear[:, None] - (a + t[..., None] * f), axis=-1)
+            if Path(poly).contains_points(clear).any() or (d < clearance).any():
+                continue
+            out.append(poly)
+            break
+    return np.array(out)
+
+
+@pytest.mark.kernels
+def test_compiled_rectangles_are_the_numpy_draws():
+    """The compiled rectangles (occluder_kernels.rectangles_into) consume the generator as
+    the NumPy draws do (same rectangles to rounding, the same state afterwards), over
+    layouts where the clearance rejects many draws; a batch of layouts equals the layouts
+    drawn one at a time."""
+    from activetrack import occluders as oc
+
+    bounds, sizes = np.array([-6.0, -5.0, 7.0, 4.0]), np.array([1.0, 3.5])
+    clear = np.array([[0.0, 0.0], [2.0, 1.0], [-3.0, -2.0]])
+    for seed in range(60):
+        got = oc.random_layout(np.random.default_rng(seed), 5, bounds, sizes, clear=clear,
+                               clearance=1.5)  # fmt: skip
+        ref_rng = np.random.default_rng(seed)
+        want = _reference_rectangles(ref_rng, 5, bounds, sizes, clear, 1.5)
+        np.testing.assert_allclose(np.array(got.polygons), want, rtol=0, atol=1e-13)
+        rng = np.random.default_rng(seed)
+        oc.random_layout(rng, 5, bounds, sizes, clear=clear, clearance=1.5)
+        assert rng.random() == ref_rng.random()  # as many draws
+    sc = make_scenario("urban_random")
+    batch = sc.draw_occluder_batch([np.random.default_rng(s) for s in range(6)])
+    single = oc.Occluders.stack([sc.draw_occluders(np.random.default_rng(s)) for s in range(6)])
+    for name in ("edges_a", "edges_b", "bbox", "crossings", "scale", "eps", "starts"):
+        np.testing.assert_array_equal(getattr(batch, name), getattr(single, name))
+    for i in range(6):
+        for p, q in zip(batch[i].polygons, single[i].polygons, strict=True):
+            np.testing.assert_array_equal(p, q)
+    # A batch in place of a list of layouts, in replaced.
+    base = oc.Occluders.stack([batch[0]] * 4)
+    np.testing.assert_array_equal(
+        base.replaced([3, 1], batch[[2, 5]]).edges_a,
+        base.replaced([3, 1], [batch[2], batch[5]]).edges_a,
+    )
