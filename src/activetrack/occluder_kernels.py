@@ -398,16 +398,12 @@ def ray_rows(origins, directions, lay, ea, eb, starts, ends, bbox, eps, max_dist
     for k in range(R):
         dmax2 = max(dmax2, dxs[k] * dxs[k] + dys[k] * dys[k])
     best = np.empty(R)
+    made = np.full(ea.shape[1], -1)  # the layout whose row of ``inv`` each edge holds
     current = -1
     for i in range(origins.shape[0]):
         ox, oy, la = origins[i, 0], origins[i, 1], lay[i]
-        if la != current:  # rows of a layout come together: its tables once
+        if la != current:  # rows of a layout come together: its orientations once
             current = la
-            for j in range(ea.shape[1]):
-                fx, fy = eb[la, j, 0] - ea[la, j, 0], eb[la, j, 1] - ea[la, j, 1]
-                for k in range(R):
-                    den = directions[k, 0] * fy - directions[k, 1] * fx
-                    inv[j, k] = 1.0 / den if den != 0.0 else 0.0
             for p in range(starts.shape[0]):
                 area = 0.0
                 for j in range(starts[p], ends[p]):
@@ -427,6 +423,11 @@ def ray_rows(origins, directions, lay, ea, eb, starts, ends, bbox, eps, max_dist
                 cwf = wx * fy - wy * fx
                 if front and cwf * side[p] >= 0.0:
                     continue  # a back face: the origin on its inner side (or its line)
+                if made[j] != la:  # the edge's row of the table, once per layout
+                    made[j] = la
+                    for k in range(R):
+                        den = directions[k, 0] * fy - directions[k, 1] * fx
+                        inv[j, k] = 1.0 / den if den != 0.0 else 0.0
                 for k in range(R):  # branch-free, so that it vectorizes over the rays
                     s = cwf * inv[j, k]  # 0 for a parallel edge: never a hit (s > eps)
                     u = (wx * dys[k] - wy * dxs[k]) * inv[j, k]
