@@ -177,8 +177,8 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         add_ray_arguments(q, "expert-labelled episodes")
         q.set_defaults(func=run_train, parser=q, method_defaults=own)
 
-    imitation("bc", "behaviour cloning of GSR", {"iterations": 1})
-    imitation("dagger", "DAgger with GSR labels", DAGGER_DEFAULTS)
+    imitation("bc", "behaviour cloning of an expert (--expert)", {"iterations": 1})
+    imitation("dagger", "DAgger with an expert's labels (--expert)", DAGGER_DEFAULTS)
 
     q = methods.add_parser(
         "ppo",
