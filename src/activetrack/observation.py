@@ -249,22 +249,6 @@ def encode(
     :func:`features` in one compiled pass, with room for ``n_rays`` range-finder readings
     last that the caller fills (:func:`ray_readings` with ``out=``)."""
     order = _checked_order(order, fixes.shape[-2])
-    return _encode(x_preds, P_preds, fixes, constants, dt, L, extended, detected, order, n_rays)
-
-
-def _encode(
-    x_preds: list[FloatArray],
-    P_preds: list[FloatArray],
-    fixes: FloatArray,
-    constants: FloatArray,
-    dt: float,
-    L: float,
-    extended: bool,
-    detected: np.ndarray | None,
-    order: np.ndarray,
-    n_rays: int,
-) -> np.ndarray:
-    """:func:`encode` with a checked ``order`` (the world's own, every step)."""
     args, batch = _kernel_args(x_preds, P_preds, fixes, constants, detected)
     x, m = args[0], fixes.shape[-2]
     td = EXT_TARGET_DIM * x.shape[1] if extended else TARGET_DIM
@@ -277,6 +261,8 @@ def _encode(
 def _checked_order(order: np.ndarray, m: int) -> np.ndarray:
     """Return ``order`` as the kernels' (M, M) int64 table, or raise ValueError: the
     kernels index with it unchecked."""
+    if order is _CYCLIC.get(m):  # the tables cyclic_order hands out: read-only, valid
+        return order
     table = np.asarray(order)
     if table.shape != (m, m) or not np.issubdtype(table.dtype, np.integer):
         raise ValueError(
@@ -371,9 +357,18 @@ def sensor_features(
 
 
 def cyclic_order(n_sensors: int) -> np.ndarray:
-    """Return the (M, M) index table whose row i is ``i, i+1, ..., i+M-1 (mod M)``."""
-    idx = np.arange(n_sensors)
-    return (idx[:, None] + idx[None, :]) % n_sensors
+    """Return the (M, M) index table whose row i is ``i, i+1, ..., i+M-1 (mod M)``
+    (read-only, one per M)."""
+    table = _CYCLIC.get(n_sensors)
+    if table is None:
+        idx = np.arange(n_sensors)
+        table = _CYCLIC[n_sensors] = (idx[:, None] + idx[None, :]) % n_sensors
+        table.flags.writeable = False
+    return table
+
+
+#: The tables of :func:`cyclic_order`, by M.
+_CYCLIC: dict[int, np.ndarray] = {}
 
 
 def observations(

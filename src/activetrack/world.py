@@ -174,7 +174,7 @@ class World:
         self.layout = observation.layout_of(sc)
         self._extended = self.layout.extended
         self._constants = self.layout.sensor_constants(sc, self.length_scale)
-        self._order = observation.cyclic_order(m)  # (int64, in range: observe's table)
+        self._order = observation.cyclic_order(m)
 
         self._rngs: list[np.random.Generator | None] = [None] * N
         self._noise = (
@@ -708,7 +708,7 @@ class World:
         the paper): the prediction and the team as seen from each agent's seat.
         """
         rays = self.layout.rays
-        out = observation._encode(*self._feature_args(index), self._order, rays)
+        out = observation.encode(*self._feature_args(index), self._order, rays)
         if rays:  # written straight into the observation (float32): no float64 temporary
             observation.ray_readings(
                 self.get("sensors", index), self.occluders(index), out[..., -rays:]
