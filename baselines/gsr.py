@@ -331,7 +331,10 @@ def relax_single(problem: PlanningProblem, tol: float, max_sweeps: int) -> GSRRe
     if code:
         sensor_modes_of(c, r, rho)  # raises, naming the sensors
     s += problem.target
-    return GSRResult(s, value, sweeps, solves, "warm", converged, start, warm_feasible)
+    return GSRResult(
+        s, float(value), int(sweeps), int(solves), "warm", bool(converged), float(start),
+        bool(warm_feasible),
+    )  # fmt: skip
 
 
 # ---------------------------------------------------------------------------------------
