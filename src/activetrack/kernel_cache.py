@@ -32,6 +32,7 @@ KERNEL_MODULES = (
     "activetrack.ekf_kernels",
     "activetrack.motion_kernels",
     "activetrack.occluder_kernels",
+    "activetrack.observation_kernels",
     "activetrack.baselines.gsr_kernel",
 )
 
@@ -75,6 +76,7 @@ def _world_and_planners() -> None:
     """Run the entry points of the world's kernels (moves, EKF, occluders, rays) and of
     GSR's sweeps once: a step of one copy and of two copies of every kind of task, an
     occluder layout drawn, GSR on a single and on a batched problem."""
+    from activetrack import observation  # noqa: PLC0415
     from activetrack.baselines import GSR  # noqa: PLC0415 (the planners' layer, lazily)
     from activetrack.world import World  # noqa: PLC0415
 
@@ -84,10 +86,13 @@ def _world_and_planners() -> None:
             world.reset(seeds=range(copies))
             world.step_actions(np.full((copies, world.n_sensors, 2), 0.5))
             world.observe()
+            world.state()
+    observation.observations(np.zeros((1, 5)), np.zeros((1, 2, 6)), observation.cyclic_order(2))
     world = World("paper", 2)
     world.reset(seeds=[0, 1])
     world.step(GSR().plan(world.planning_problem()))
     GSR().plan(world.planning_problem(0))
+    GSR(restarts=True).plan(world.planning_problem(0))  # the sensors' modes, the warm start
 
 
 def cache_folders() -> list[Path]:
