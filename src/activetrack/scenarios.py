@@ -332,6 +332,8 @@ class Scenario:
         # Both sets are simple polygons already (the fixed ones checked with the scenario).
         fixed = [np.asarray(poly, np.float64) for poly in self.occluders]
         counts = np.array([len(p) for p in fixed] + [4] * self.random_occluders, np.intp)
+        if not counts.size:  # an open plane
+            return Occluders.stack([Occluders._of_simple([])] * len(rngs))
         vertices = np.empty((len(rngs), int(counts.sum()), 2))
         n_fixed = int(counts[: len(fixed)].sum())
         if fixed:

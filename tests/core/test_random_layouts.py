@@ -215,3 +215,17 @@ def test_compiled_rectangles_are_the_numpy_draws():
         base.replaced([3, 1], batch[[2, 5]]).edges_a,
         base.replaced([3, 1], [batch[2], batch[5]]).edges_a,
     )
+
+
+def test_draw_occluders_without_random_rectangles():
+    """An open plane draws no polygon; a fixed layout draws itself (no generator used)."""
+    rng = np.random.default_rng(0)
+    state = rng.bit_generator.state
+    assert make_scenario("paper").draw_occluders(rng).n_polygons == 0
+    urban = make_scenario("urban")
+    drawn = urban.draw_occluders(rng)
+    assert drawn.n_polygons == len(urban.occluders) and not drawn.batched
+    for p, q in zip(drawn.polygons, urban.occluders, strict=True):
+        np.testing.assert_array_equal(p, np.asarray(q, float))
+    assert rng.bit_generator.state == state
+    assert make_scenario("paper").draw_occluder_batch([rng, rng]).n_layouts == 2
