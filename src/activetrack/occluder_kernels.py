@@ -563,11 +563,15 @@ def unique_points(points, n):
 
 
 @kernel
-def crossings_rows(a, b, polygon, out, counts):
+def crossings_rows(a, b, polygon, scratch, counts, out):
     """For each layout ``i`` (edges ``a[i]``, ``b[i]`` (E, 2)): its distinct crossings
-    (:func:`crossings_into`, then :func:`unique_points`) to the front of ``out[i]``, NaN
-    after them; their number into ``counts[i]``."""
+    (:func:`crossings_into`, then :func:`unique_points`, in ``scratch`` (E(E-1)/2, 2)),
+    their number into ``counts[i]`` and, if ``out`` (N, X, 2) has room (X >= every count),
+    the crossings to the front of ``out[i]`` with NaN rows after them."""
     for i in range(a.shape[0]):
-        n = unique_points(out[i], crossings_into(a[i], b[i], polygon, out[i]))
+        n = unique_points(scratch, crossings_into(a[i], b[i], polygon, scratch))
         counts[i] = n
+        if out.shape[1] < n:
+            continue
+        out[i, :n] = scratch[:n]
         out[i, n:] = np.nan

@@ -403,10 +403,13 @@ class Occluders:
              np.maximum.reduceat(vertices, starts, axis=1)], axis=-1,
         )  # fmt: skip
         scale = np.maximum(1.0, np.max(np.abs(vertices), axis=(1, 2)))
-        crossings = np.empty((N, E * (E - 1) // 2, 2))
-        found = np.empty(N, np.intp)
-        ok.crossings_rows(vertices, b, ep, crossings, found)
+        # Twice: their number first (a layout's scratch only), then the padded table.
+        scratch, found = np.empty((E * (E - 1) // 2, 2)), np.empty(N, np.intp)
+        ok.crossings_rows(vertices, b, ep, scratch, found, np.empty((N, 0, 2)))
         x = int(found.max(initial=0))
+        crossings = np.empty((N, x, 2))
+        if x:
+            ok.crossings_rows(vertices, b, ep, scratch, found, crossings)
         polygons = tuple(
             tuple(_frozen(v[s : s + n]) for s, n in zip(starts.tolist(), counts.tolist(),
                                                         strict=True))
@@ -419,7 +422,7 @@ class Occluders:
             edge_polygon=_frozen(ep),
             starts=_frozen(starts),
             bbox=_frozen(bbox),
-            crossings=_frozen(crossings[:, :x]),
+            crossings=_frozen(crossings),
             scale=_frozen(scale),
             eps=_frozen(TOL * scale),
         )
