@@ -97,7 +97,9 @@ def update(
     x, P = np.asarray(x, np.float64), np.asarray(P, np.float64)
     z, sensor_pos = np.asarray(z, np.float64), np.asarray(sensor_pos, np.float64)
     n, m = x.shape[-1], sensor_pos.shape[-2]
-    batch = np.broadcast_shapes(x.shape[:-1], P.shape[:-2], z.shape[:-2], sensor_pos.shape[:-2])
+    batch = x.shape[:-1]
+    if not (P.shape[:-2] == z.shape[:-2] == sensor_pos.shape[:-2] == batch):  # (rare)
+        batch = np.broadcast_shapes(batch, P.shape[:-2], z.shape[:-2], sensor_pos.shape[:-2])
     wd, wt = weights if weights is not None else (1.0 / sigma_d2, 1.0 / sigma_theta2)
     xf, Pf = as_rows(x, batch, (n,)), as_rows(P, batch, (n, n))
     x_out, P_out = np.empty(xf.shape), np.empty(Pf.shape)
