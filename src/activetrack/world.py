@@ -305,10 +305,11 @@ class World:
     def _draw_noise(self, rows: np.ndarray) -> None:
         """Refill the noise blocks of copies ``rows``, never past their episode's last step."""
         b = self.noise_block
-        for i in rows.tolist():
-            steps = int(min(b, max(self._n_steps - self.get("k", i), 1)))
+        k = self._s["k"]
+        left = np.minimum(b, np.maximum(self._n_steps - (k if self._one else k[rows]), 1))
+        for i, steps in zip(rows.tolist(), np.atleast_1d(left).tolist(), strict=True):
             self._noise[i, b - steps :] = self.rng(i).standard_normal((steps, self._n_noise))
-            self._noise_left[i] = steps
+        self._noise_left[rows] = left
 
     def _step_noise(self, sel: _Selection) -> FloatArray:
         """Return the ``n + 2M`` standard normals of this step for the selected copies."""
@@ -317,11 +318,16 @@ class World:
                 return (self._rngs[sel] or self.rng(sel)).standard_normal(self._n_noise)
             return np.stack([self.rng(i).standard_normal(self._n_noise) for i in self._rows(sel)])
         rows = self._rows(sel)
-        empty = rows[self._noise_left[rows] == 0]
-        if empty.size:
-            self._draw_noise(empty)
-        noise = self._noise[rows, self.noise_block - self._noise_left[rows]]
-        self._noise_left[rows] -= 1
+        left = self._noise_left[rows]
+        if not left.all():
+            self._draw_noise(rows[left == 0])
+            left = self._noise_left[rows]
+        if left.min() == left.max():  # copies in step (the common case): one column
+            noise = self._noise[sel if isinstance(sel, slice) else rows,
+                                self.noise_block - int(left[0])]  # fmt: skip
+        else:
+            noise = self._noise[rows, self.noise_block - left]
+        self._noise_left[rows] = left - 1
         return noise[0] if isinstance(sel, int) else noise
 
     # Selections -------------------------------------------------------------------------
