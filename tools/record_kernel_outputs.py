@@ -9,8 +9,10 @@ GSR's plans): record at two commits and compare::
 
 Cases: ``inside``, ``blocked``, ``project_move`` and ``ray_distances`` on 30 random layouts
 (rectangles and non-convex stars, one layout and batches of five), ``apply_actions``,
-``move_to``, ``project_feasible`` and ``unreachable_fallback`` on random states, and GSR's
-plans of 300 random three-sensor problems, batched and one by one.
+``move_to``, ``project_feasible`` and ``unreachable_fallback`` on random states, GSR's
+plans of 300 random three-sensor problems, batched and one by one, the observations and
+states of every task over 30 seeded steps of random actions (one copy and seven), and 300
+random layouts (``random_layout``'s vertices and every array of ``Occluders``).
 """
 
 from __future__ import annotations
@@ -24,10 +26,24 @@ import numpy as np
 sys.path.insert(1, str(Path(__file__).resolve().parents[1]))  # tests.core (layouts)
 
 
+def mixed_layout(rng: np.random.Generator, n: int) -> list[np.ndarray]:
+    """Return n // 2 rotated rectangles (made here, in NumPy: the same inputs whatever the
+    library's ``random_layout`` rounds) and n - n // 2 non-convex stars in [-3, 3]^2."""
+    from tests.core.test_occluders import star_polygon
+
+    polys = []
+    for _ in range(n // 2):
+        w, h = rng.uniform(0.5, 2.0, 2)
+        c, s = np.cos(a := rng.uniform(0, np.pi)), np.sin(a)
+        corners = 0.5 * np.array([[-w, -h], [w, -h], [w, h], [-w, h]])
+        polys.append(rng.uniform(-2, 2, 2) + corners @ np.array([[c, s], [-s, c]]))
+    stars = [star_polygon(rng, rng.uniform(-2, 2, 2), 7, 0.3, 1.2) for _ in range(n - n // 2)]
+    return polys + stars
+
+
 def occluder_cases(out: dict) -> None:
     """Add the occluder functions' results on random layouts to ``out``."""
     from activetrack import occluders as oc
-    from tests.core.test_occluders import mixed_layout
 
     dirs = np.stack([np.cos(np.arange(16) * np.pi / 8), np.sin(np.arange(16) * np.pi / 8)], -1)
     for seed in range(30):
@@ -103,6 +119,40 @@ def gsr_cases(out: dict) -> None:
     out["gsr_solves"] = np.array([x.n_solves for x in single])
 
 
+def world_cases(out: dict) -> None:
+    """Add every task's observations and states along seeded random-action episodes."""
+    from activetrack.scenarios import TASKS
+    from activetrack.world import World
+
+    for task in ["paper", "homogeneous", *TASKS]:
+        for n in (1, 7):
+            w = World(task, n)
+            w.reset(seeds=range(n))
+            rng = np.random.default_rng(5)
+            for step in range(30):
+                shape = (w.n_sensors, 2) if n == 1 else (n, w.n_sensors, 2)
+                w.step_actions(rng.uniform(-1.2, 1.2, shape))
+                ended = np.atleast_1d(w.get("terminated") | w.get("truncated"))
+                if ended.any():
+                    w.reset(None if n == 1 else ended)
+                if step % 3 == 0:
+                    out[f"{task}_{n}_{step}_obs"] = w.observe()
+                    out[f"{task}_{n}_{step}_state"] = w.state()
+
+
+def layout_cases(out: dict) -> None:
+    """Add 300 random layouts: their vertices and every array of their Occluders."""
+    from activetrack import occluders as oc
+
+    clear = np.array([[8.0, 0.0], [0.0, 0.0]])
+    for seed in range(300):
+        lay = oc.random_layout(np.random.default_rng(seed), 6, (-24, -10, 12, 20), (2, 5),
+                               clear=clear, clearance=4.0)  # fmt: skip
+        for name in ("edges_a", "edges_b", "bbox", "crossings", "starts", "edge_polygon"):
+            out[f"layout{seed}_{name}"] = np.asarray(getattr(lay, name))
+        out[f"layout{seed}_scale"] = np.array([lay.scale, lay.eps])
+
+
 def compare(a: str, b: str) -> int:
     """Print how many arrays of two recordings differ (and where); return 1 if any."""
     x, y = np.load(a), np.load(b)
@@ -113,9 +163,10 @@ def compare(a: str, b: str) -> int:
     for k in bad:
         diff = x[k] != y[k]
         size = ""
-        if x[k].dtype.kind == "f":
-            rel = np.abs(x[k] - y[k]) / np.maximum(np.abs(x[k]), np.finfo(float).tiny)
-            size = f", by at most {np.max(rel):.1e} relative"
+        if x[k].dtype.kind == "f" and x[k].shape == y[k].shape:
+            d = np.abs(x[k].astype(float) - y[k].astype(float))
+            rel = d / np.maximum(np.abs(x[k]), np.finfo(float).tiny)
+            size = f", by at most {np.max(rel):.1e} relative ({np.max(d):.1e} absolute)"
         print(f"{k}: {int(diff.sum())} of {diff.size} entries differ{size}")
     print(f"{len(x)} arrays, {len(bad)} differ")
     return 1 if bad else 0
@@ -136,6 +187,8 @@ def main() -> int:
     occluder_cases(out)
     motion_cases(out)
     gsr_cases(out)
+    world_cases(out)
+    layout_cases(out)
     tmp = Path(args.out).with_suffix(".tmp.npz")
     np.savez(tmp, **out)
     tmp.replace(args.out)
