@@ -1,0 +1,120 @@
+"""Three variants of the look-ahead planner tried against GSR on ``paper`` (README, "Planning
+ahead"): none is kept in the library; each is a patch of this process only.
+
+- ``follow``: per heading, paths that turn to follow the predicted target after 3 and 6
+  steps (extra options of ``horizon_paths.heading_paths``);
+- ``sigma``: each sensor's information averaged over the four sigma points of the
+  predicted position (its Cholesky factor times ``sqrt(2) alpha``);
+- ``episode-end``: the horizon's weights cut at the episode's last step.
+
+Prints the ratio of the look-ahead's mean trace to GSR's over 100 seeds from ``--start``
+(one batched world each, paired) with a bootstrap 95% interval. Run::
+
+    OPENBLAS_NUM_THREADS=1 .venv/bin/python tools/lookahead_attempts.py none --start 2000
+    OPENBLAS_NUM_THREADS=1 .venv/bin/python tools/lookahead_attempts.py follow --start 2000
+    OPENBLAS_NUM_THREADS=1 python tools/lookahead_attempts.py sigma --alpha 0.5 --start 2000
+    OPENBLAS_NUM_THREADS=1 .venv/bin/python tools/lookahead_attempts.py episode-end --start 1000
+"""
+
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+
+from activetrack.baselines import horizon_model as hm
+from activetrack.baselines import horizon_paths as hp
+from activetrack.baselines import lookahead as la
+from activetrack.baselines.gsr import GSR
+from activetrack.objective import sensor_information
+from activetrack.world import World
+
+STATE: dict = {"cov": None, "left": None}
+
+
+def patch(attempt: str, alpha: float) -> None:
+    """Install the variant ``attempt`` in this process."""
+    if attempt == "follow":
+        heading = hp.heading_paths
+
+        def follow(model, start, targets, r, rho, dirs):
+            base = heading(model, start, targets, r, rho, dirs)
+            extra = []
+            for j in (3, 6):
+                out, prev = base.copy(), base[:, :, :, j - 1]
+                for h in range(j, base.shape[3]):
+                    goal = prev + (targets[:, h, 0] - targets[:, h - 1, 0])[:, None, None, :]
+                    rr, rh = r[:, :, None], rho[:, :, None]
+                    prev = model.mend(hp.toward(prev, goal, rr), prev, targets[:, h], rr, rh)
+                    out[:, :, :, h] = prev
+                extra.append(out)
+            return np.concatenate([base, *extra], axis=2)
+
+        hp.heading_paths = follow
+    elif attempt == "sigma":
+        plain = hp.PathModel.information
+
+        def averaged(self, positions, targets):
+            if not self.paper:
+                return plain(self, positions, targets)
+            chol = np.linalg.cholesky(STATE["cov"])  # (B, 2, 2)
+            rel = positions - targets[:, None, None, :, 0]
+            sd2, st2 = self.sigma_d2[:, :, None, None], self.sigma_theta2[:, :, None, None]
+            total = 0.0
+            for j in range(2):
+                for sign in (1.0, -1.0):
+                    d = (sign * alpha * np.sqrt(2.0)) * chol[:, :, j]
+                    total = total + sensor_information(rel - d[:, None, None, None, :], sd2, st2)
+            return [total / 4.0]
+
+        hp.PathModel.information = averaged
+    elif attempt == "episode-end":
+        weights = hm.discount_weights
+
+        def cut(horizon, discount):
+            w = weights(horizon, discount)
+            if STATE["left"] is not None:
+                w = w.copy()
+                w[STATE["left"] :] = 0.0
+            return w
+
+        hm.discount_weights = cut
+
+
+def mean_traces(seeds: list[int], planner: la.Lookahead | None) -> np.ndarray:
+    """Return each seed's mean posterior trace on ``paper`` (GSR for ``planner`` None)."""
+    world = World("paper", len(seeds))
+    world.reset(seeds=seeds)
+    gsr, previous, traces = GSR(), None, []
+    while not world.truncated.all():
+        problem = world.planning_problem()
+        STATE["cov"] = np.array(problem.prior_cov)
+        STATE["left"] = world.scenario.n_steps - int(world.k[0])  # copies in step
+        if planner is None:
+            positions = gsr.plan(problem)
+        else:
+            res = planner.plan_prediction(problem, previous=previous)
+            positions, previous = res.positions, res.plan
+        world.step(positions)
+        traces.append(world.trace.copy())
+    return np.mean(traces, axis=0)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("attempt", choices=["none", "follow", "sigma", "episode-end"])
+    parser.add_argument("--start", type=int, default=2000, help="first of 100 seeds")
+    parser.add_argument("--alpha", type=float, default=0.5, help="sigma: the points' scale")
+    args = parser.parse_args()
+    seeds = list(range(args.start, args.start + 100))
+    gsr = mean_traces(seeds, None)  # before the patch: GSR is unaffected by every variant
+    patch(args.attempt, args.alpha)
+    look = mean_traces(seeds, la.Lookahead())
+    idx = np.random.default_rng(0).integers(0, 100, (4000, 100))
+    boot = look[idx].mean(axis=1) / gsr[idx].mean(axis=1)
+    lo, hi = np.percentile(boot, [2.5, 97.5])
+    print(f"{args.attempt}: ratio {look.mean() / gsr.mean():.4f} [{lo:.4f}, {hi:.4f}]")
+
+
+if __name__ == "__main__":
+    main()
