@@ -224,6 +224,7 @@ def features(
     """Return the target blocks (..., TD) and sensor blocks (..., M, SD) of either layout
     (``extended``; the paper's takes one prediction and the sensors' positions as
     ``fixes``), float64 (:func:`activetrack.observation_kernels.features_rows`)."""
+    fixes, constants = np.asarray(fixes, np.float64), np.asarray(constants, np.float64)
     args, batch = _kernel_args(x_preds, P_preds, fixes, constants, detected)
     x, m = args[0], fixes.shape[-2]
     td = EXT_TARGET_DIM * x.shape[1] if extended else TARGET_DIM
@@ -248,6 +249,7 @@ def encode(
     """Return every agent's observation, float32 (..., M, D): :func:`observations` of
     :func:`features` in one compiled pass, with room for ``n_rays`` range-finder readings
     last that the caller fills (:func:`ray_readings` with ``out=``)."""
+    fixes, constants = np.asarray(fixes, np.float64), np.asarray(constants, np.float64)
     order = _checked_order(order, fixes.shape[-2])
     args, batch = _kernel_args(x_preds, P_preds, fixes, constants, detected)
     x, m = args[0], fixes.shape[-2]

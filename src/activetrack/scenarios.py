@@ -313,16 +313,24 @@ class Scenario:
         """Return an episode's occluders: the fixed ``occluders`` and ``random_occluders``
         rectangles drawn from ``rng`` (:func:`activetrack.occluders.random_layout`).
 
-        Raises ``ValueError`` naming the fields when the rectangles cannot be placed.
+        Raises ``ValueError`` naming the fields when the rectangles cannot be placed, and
+        ``TypeError`` for an ``rng`` that is not a ``numpy.random.Generator``.
         """
         return self.draw_occluder_batch([rng])[0]
 
-    def draw_occluder_batch(self, rngs: list[np.random.Generator]):  # -> Occluders, batched
+    def draw_occluder_batch(self, rngs: Any):  # -> Occluders, batched
         """Return the batched occluders of episodes drawn from ``rngs`` (one layout each, as
         :meth:`draw_occluders`; the rectangles compiled:
         :func:`activetrack.occluder_kernels.rectangles_into`)."""
         from activetrack import occluder_kernels  # noqa: PLC0415 (occluded scenarios only)
         from activetrack.occluders import Occluders  # noqa: PLC0415
+
+        rngs = list(rngs)
+        for j, rng in enumerate(rngs):
+            if not isinstance(rng, np.random.Generator):
+                raise TypeError(
+                    f"rngs[{j}] must be a numpy.random.Generator, got {type(rng).__name__}"
+                )
 
         clear = np.array(
             [self.sensor_center, *(x[:2] for x in self.target_states("x0_hat"))], np.float64

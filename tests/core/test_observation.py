@@ -99,3 +99,14 @@ def test_bad_orders_and_masks_are_refused_before_the_kernels():
     for bad in (np.ones((4, 2, 3)), np.ones((5, 2, 3), bool), np.ones((2, 2), bool)):
         with pytest.raises(ValueError, match="where must be a bool array"):
             oc.line_of_sight(s, t, occ, bad)
+
+
+def test_encode_takes_lists_like_arrays():
+    """Nested lists are arrays here too (converted at the boundary, not inside numba)."""
+    x, P = [np.array([0.5, -1.0, 2.0, 1.0])], [np.diag([2.0, 3.0, 1.0, 1.0])]
+    fixes, const = [[3.0, 4.0], [-1.0, 2.0]], [[0.0, 0.1, 0.2, 0.3]] * 2
+    order = features.cyclic_order(2)
+    got = features.encode(x, P, fixes, const, 0.1, 5.0, False, None, order)
+    want = features.encode(x, P, np.array(fixes), np.array(const), 0.1, 5.0, False, None, order)
+    np.testing.assert_array_equal(got, want)
+    np.testing.assert_allclose(got[0, 5:7], (np.array([3.0, 4.0]) - [0.5, -1.0]) / 5.0, rtol=1e-6)

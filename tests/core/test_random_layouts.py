@@ -229,3 +229,12 @@ def test_draw_occluders_without_random_rectangles():
         np.testing.assert_array_equal(p, np.asarray(q, float))
     assert rng.bit_generator.state == state
     assert make_scenario("paper").draw_occluder_batch([rng, rng]).n_layouts == 2
+
+
+def test_draw_occluders_refuses_what_is_not_a_generator():
+    sc = make_scenario("urban_random")
+    for bad in (0, None, np.random.RandomState(0)):
+        with pytest.raises(TypeError, match=r"rngs\[0\] must be a numpy.random.Generator"):
+            sc.draw_occluders(bad)
+    with pytest.raises(TypeError, match=r"rngs\[1\]"):
+        sc.draw_occluder_batch([np.random.default_rng(0), 3])
