@@ -138,6 +138,8 @@ def world_cases(out: dict) -> None:
                 if step % 3 == 0:
                     out[f"{task}_{n}_{step}_obs"] = w.observe()
                     out[f"{task}_{n}_{step}_state"] = w.state()
+                    for key in ("sensors", "x_hat", "P", "x_pred", "P_pred", "trace"):
+                        out[f"{task}_{n}_{step}_{key}"] = np.asarray(w.get(key))
 
 
 def layout_cases(out: dict) -> None:
@@ -160,15 +162,21 @@ def compare(a: str, b: str) -> int:
         print(f"different cases: {sorted(set(x) ^ set(y))}")
         return 1
     bad = [k for k in x if not np.array_equal(x[k], y[k])]
+    worst = 0.0
     for k in bad:
         diff = x[k] != y[k]
         size = ""
         if x[k].dtype.kind == "f" and x[k].shape == y[k].shape:
             d = np.abs(x[k].astype(float) - y[k].astype(float))
             rel = d / np.maximum(np.abs(x[k]), np.finfo(float).tiny)
-            size = f", by at most {np.max(rel):.1e} relative ({np.max(d):.1e} absolute)"
+            scaled = np.max(d) / max(float(np.max(np.abs(x[k]))), np.finfo(float).tiny)
+            size = (
+                f", by at most {np.max(rel):.1e} relative ({np.max(d):.1e} absolute,"
+                f" {scaled:.1e} of the largest entry)"
+            )
+            worst = max(worst, scaled)
         print(f"{k}: {int(diff.sum())} of {diff.size} entries differ{size}")
-    print(f"{len(x)} arrays, {len(bad)} differ")
+    print(f"{len(x)} arrays, {len(bad)} differ, by at most {worst:.1e} of an array's largest entry")
     return 1 if bad else 0
 
 

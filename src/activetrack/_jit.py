@@ -37,11 +37,17 @@ KERNELS: list[Kernel[Any]] = []  # every kernel defined so far (activetrack.kern
 class Kernel(Generic[F]):
     """A function compiled by numba on its first call (see the module docstring)."""
 
-    def __init__(self, fn: F) -> None:
+    def __init__(self, fn: F, inline: bool = False) -> None:
         self.py_func = fn
+        self.inline = inline
         self._compiled: Callable[..., Any] | None = None
         functools.update_wrapper(self, fn)
         KERNELS.append(self)
+
+    @property
+    def targetoptions(self) -> dict[str, Any]:
+        """Return the options numba's inlining pass reads from a callee (``inline``)."""
+        return {"inline": "always"} if self.inline else {}
 
     @property
     def dispatcher(self) -> Callable[..., Any]:
@@ -53,7 +59,10 @@ class Kernel(Generic[F]):
             # error_model="numpy": a float division by zero gives inf/NaN instead of raising
             # (no zero test before every division); kernels guard their divisors, so the
             # plain-Python run (NUMBA_DISABLE_JIT=1) takes the same branches.
-            self._compiled = numba.njit(cache=True, nogil=True, error_model="numpy")(self.py_func)
+            options = {"inline": "always"} if self.inline else {}
+            self._compiled = numba.njit(cache=True, nogil=True, error_model="numpy", **options)(
+                self.py_func
+            )
         return self._compiled
 
     def __call__(self, *args: Any) -> Any:
@@ -80,6 +89,13 @@ def _teach_numba() -> None:
 def kernel(fn: F) -> F:
     """Return ``fn`` as a :class:`Kernel`: compiled with numba on its first call."""
     return Kernel(fn)  # type: ignore[return-value]
+
+
+def inline_kernel(fn: F) -> F:
+    """Return ``fn`` as a :class:`Kernel` that numba inlines into the kernels calling it
+    (``inline="always"``): a row function called once per row of a loop, whose many array
+    arguments would otherwise cost a call and reference counting per row."""
+    return Kernel(fn, inline=True)  # type: ignore[return-value]
 
 
 def as_rows(a: Any, shape: tuple[int, ...], tail: tuple[int, ...] = (), dtype: Any = None) -> Any:

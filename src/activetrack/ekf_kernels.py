@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 
-from activetrack._jit import kernel
+from activetrack._jit import inline_kernel, kernel
 from activetrack.measurement import ZERO_DISTANCE2
 
 #: Floor of the conditional variance ``p11 - p01^2 / p00`` of a prior's position block,
@@ -28,7 +28,7 @@ ITERATION_TOL = 1e-10
 _TWO_PI = 2.0 * math.pi
 
 
-@kernel
+@inline_kernel
 def wrap(a):
     """Return the angle ``a`` wrapped to ``[-pi, pi)`` (as :func:`measurement.wrap_angle`)."""
     if abs(a) < math.pi:
@@ -36,7 +36,7 @@ def wrap(a):
     return a - _TWO_PI * math.floor((a + math.pi) / _TWO_PI)
 
 
-@kernel
+@inline_kernel
 def range_bearing_terms(tx, ty, z, sensors, wd, wt, orientation, mask):
     """Return ``(Y_xx, Y_xy, Y_yy, b_x, b_y)`` linearized at the target position (tx, ty).
 
@@ -94,7 +94,7 @@ def posterior_into(x, P, yxx, yxy, yyy, bx, by, x_out, P_out, cov):
     factored_into(x, P, prior_factor(P), yxx, yxy, yyy, bx, by, x_out, P_out, cov)
 
 
-@kernel
+@inline_kernel
 def prior_factor(P):
     """Return ``(l00, l10, l11, t00, t01, t11)``: the prior's position block ``P11 = L L^T``
     (lower triangular) and ``T = L^{-T}``, what every linearization of one update shares."""
@@ -107,7 +107,7 @@ def prior_factor(P):
     return l00, l10, l11, t00, -l10 * t00 * t11, t11
 
 
-@kernel
+@inline_kernel
 def factored_into(x, P, factor, yxx, yxy, yyy, bx, by, x_out, P_out, cov):
     """:func:`posterior_into` with the prior's :func:`prior_factor` given; without ``cov``
     only the position of ``x_out`` is written (what an iteration needs)."""
@@ -145,7 +145,7 @@ def factored_into(x, P, factor, yxx, yxy, yyy, bx, by, x_out, P_out, cov):
             P_out[j, i] = v
 
 
-@kernel
+@inline_kernel
 def relinearized_b(x, lin0, lin1, yxx, yxy, yyy, bx, by):
     """Return the gradient term of the iterated EKF linearized at ``lin`` (its terms
     ``(Y, b)`` there): ``nu_i = z - h(lin) - H (x - lin)`` gives ``b - Y (p - lin)``."""
@@ -164,7 +164,7 @@ def relinearize_into(x, P, lin0, lin1, yxx, yxy, yyy, bx, by, x_out, P_out, cov)
     return settled(x_out, lin0, lin1)
 
 
-@kernel
+@inline_kernel
 def settled(x_out, lin0, lin1):
     """Return whether the position ``x_out[:2]`` is within :data:`ITERATION_TOL` (relative
     to ``1 + |lin|``) of the linearization point ``lin``."""
@@ -172,32 +172,40 @@ def settled(x_out, lin0, lin1):
     return step <= ITERATION_TOL * (1.0 + max(abs(lin0), abs(lin1)))
 
 
+@inline_kernel
+def update_row(x, P, z, sensors, wd, wt, orientation, mask, iterations, x_out, P_out):
+    """Write one filter's EKF posterior (``x`` (n,), ``P`` (n, n), ``z``, ``sensors`` (M, 2),
+    per-sensor ``wd``, ``wt``, ``orientation``, ``mask`` (M,)) into ``x_out``, ``P_out``:
+    eq. (11), then up to ``iterations - 1`` relinearizations (the covariance once, at the
+    last linearization: the iterations need only the mean)."""
+    f = prior_factor(P)
+    yxx, yxy, yyy, bx, by = range_bearing_terms(x[0], x[1], z, sensors, wd, wt, orientation, mask)
+    factored_into(x, P, f, yxx, yxy, yyy, bx, by, x_out, P_out, iterations == 1)
+    if iterations == 1:
+        return
+    for _ in range(iterations - 1):
+        lin0, lin1 = x_out[0], x_out[1]
+        yxx, yxy, yyy, bx, by = range_bearing_terms(
+            lin0, lin1, z, sensors, wd, wt, orientation, mask
+        )
+        cx, cy = relinearized_b(x, lin0, lin1, yxx, yxy, yyy, bx, by)
+        factored_into(x, P, f, yxx, yxy, yyy, cx, cy, x_out, P_out, False)
+        if settled(x_out, lin0, lin1):
+            break
+    factored_into(x, P, f, yxx, yxy, yyy, cx, cy, x_out, P_out, True)  # the same position
+
+
 @kernel
 def update_rows(x, P, z, sensors, wd, wt, orientation, mask, iterations, x_out, P_out):
-    """Write the EKF posteriors of B filters (``x`` (B, n), ``P`` (B, n, n), ``z``,
-    ``sensors`` (B, M, 2), per-sensor ``wd``, ``wt``, ``orientation``, ``mask`` (B' , M))
-    into ``x_out``, ``P_out``: eq. (11), then up to ``iterations - 1`` relinearizations
-    (the covariance once, at the last linearization: the iterations need only the mean)."""
+    """Write the EKF posteriors (:func:`update_row`) of B filters (``x`` (B, n), ``P``
+    (B, n, n), ``z``, ``sensors`` (B, M, 2), per-sensor ``wd``, ``wt``, ``orientation``,
+    ``mask`` (B', M)) into ``x_out``, ``P_out``."""
     for b in range(x.shape[0]):
-        zb, sb = z[b], sensors[b]
-        wdb = wd[b if wd.shape[0] > 1 else 0]
-        wtb = wt[b if wt.shape[0] > 1 else 0]
-        ob = orientation[b if orientation.shape[0] > 1 else 0]
-        mb = mask[b if mask.shape[0] > 1 else 0]
-        xb, Pb, xo, Po = x[b], P[b], x_out[b], P_out[b]
-        f = prior_factor(Pb)
-        yxx, yxy, yyy, bx, by = range_bearing_terms(xb[0], xb[1], zb, sb, wdb, wtb, ob, mb)
-        factored_into(xb, Pb, f, yxx, yxy, yyy, bx, by, xo, Po, iterations == 1)
-        if iterations == 1:
-            continue
-        for _ in range(iterations - 1):
-            lin0, lin1 = xo[0], xo[1]
-            yxx, yxy, yyy, bx, by = range_bearing_terms(lin0, lin1, zb, sb, wdb, wtb, ob, mb)
-            cx, cy = relinearized_b(xb, lin0, lin1, yxx, yxy, yyy, bx, by)
-            factored_into(xb, Pb, f, yxx, yxy, yyy, cx, cy, xo, Po, False)
-            if settled(xo, lin0, lin1):
-                break
-        factored_into(xb, Pb, f, yxx, yxy, yyy, cx, cy, xo, Po, True)  # the same position
+        update_row(
+            x[b], P[b], z[b], sensors[b], wd[b if wd.shape[0] > 1 else 0],
+            wt[b if wt.shape[0] > 1 else 0], orientation[b if orientation.shape[0] > 1 else 0],
+            mask[b if mask.shape[0] > 1 else 0], iterations, x_out[b], P_out[b],
+        )  # fmt: skip
 
 
 @kernel

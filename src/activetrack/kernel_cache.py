@@ -31,6 +31,7 @@ KERNEL_MODULES = (
     "activetrack.objective",
     "activetrack.ekf_kernels",
     "activetrack.motion_kernels",
+    "activetrack.loop_kernels",
     "activetrack.occluder_kernels",
     "activetrack.observation_kernels",
     "activetrack.baselines.gsr_kernel",

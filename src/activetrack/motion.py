@@ -18,6 +18,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.linalg
 
+from activetrack import loop_kernels as lk
+from activetrack._jit import as_rows
 from activetrack.validation import FloatArray, as_finite, positive, psd
 
 
@@ -79,21 +81,26 @@ def psd_factor(A: FloatArray) -> FloatArray:
 def predict(
     x: FloatArray, P: FloatArray, Phi: FloatArray, Q: FloatArray
 ) -> tuple[FloatArray, FloatArray]:
-    """Return the propagated mean and symmetric covariance of eq. (3) (batched, unchecked)."""
-    if P.ndim == 2:  # one filter: two small products are cheaper than the batch reshapes
-        P_pred = Phi @ (P @ Phi.T)
-        P_pred += Q
-        P_pred += P_pred.T
-        P_pred *= 0.5
-        return Phi @ x, P_pred
-    x_pred = x @ Phi.T
-    n = Phi.shape[0]
+    """Return the propagated mean and symmetric covariance of eq. (3) (batched, unchecked;
+    :func:`activetrack.loop_kernels.predict_into`, exactly symmetric for a symmetric ``P``)."""
+    x, P = np.asarray(x, np.float64), np.asarray(P, np.float64)
+    n = P.shape[-1]
     batch = P.shape[:-2]
-    # Two plain GEMMs over the whole batch: stacked (n, n) matmuls are several times slower.
-    PPhiT = (P.reshape(-1, n) @ Phi.T).reshape(-1, n, n)  # P Phi^T
-    # Phi (P Phi^T) = ((P Phi^T)^T Phi^T)^T = (Phi P^T Phi^T)^T; P is symmetric.
-    P_pred = (PPhiT.mT.reshape(-1, n) @ Phi.T).reshape(*batch, n, n) + Q
-    return x_pred, 0.5 * (P_pred + P_pred.mT)
+    if x.shape[:-1] != batch:  # (rare) a mean without the covariance's batch, or the reverse
+        batch = np.broadcast_shapes(batch, x.shape[:-1])
+    x_out, P_out = np.empty(batch + (n,)), np.empty(batch + (n, n))
+    lk.predict_rows(
+        as_rows(x, batch, (n,)), as_rows(P, batch, (n, n)), matrix(Phi), matrix(Q),
+        x_out.reshape(-1, n), P_out.reshape(-1, n, n),
+    )  # fmt: skip
+    return x_out, P_out
+
+
+def matrix(a: FloatArray) -> FloatArray:
+    """Return ``a`` as a C-contiguous float64 matrix (the kernels' one signature)."""
+    if type(a) is np.ndarray and a.dtype == np.float64 and a.flags.c_contiguous:
+        return a
+    return np.ascontiguousarray(a, np.float64)
 
 
 def van_loan(

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 
-from activetrack._jit import kernel
+from activetrack._jit import inline_kernel, kernel
 
 #: Relative tolerance of the unit-disk and minimum-distance tests.
 TOL = 1e-12
@@ -75,48 +75,60 @@ def unit_disk(ax, ay):
     return ax / norm, ay / norm
 
 
+@inline_kernel
+def move_point(x, y, sx, sy, r, absolute):
+    """Return one sensor's position within reach ``r`` of ``(sx, sy)``: ``s + r a`` for
+    the action ``(x, y)`` (``a`` on the unit disk), or for the absolute position ``(x, y)``
+    (``absolute``) itself, scaled onto the speed circle if farther than ``r (1 + TOL)``."""
+    if not absolute:
+        ax, ay = unit_disk(x, y)
+        return sx + ax * r, sy + ay * r
+    dx, dy = x - sx, y - sy
+    if math.hypot(dx, dy) > r * LONG:
+        safe = r if r > 0.0 else 1.0
+        ax, ay = unit_disk(dx / safe, dy / safe)
+        return sx + ax * r, sy + ay * r
+    return x, y
+
+
+@inline_kernel
+def keep_point(nx, ny, sx, sy, tx, ty, r, rho):
+    """Return ``(x, y, inside)``: the move ``(nx, ny)`` from ``(sx, sy)``, projected to the
+    nearest feasible point if it ends inside the ``rho`` disk around the predicted target
+    ``(tx, ty)`` (by more than ``TOL``, relative); ``inside`` marks that. A sensor with
+    ``r = 0`` stays, even inside."""
+    qx, qy = nx - tx, ny - ty
+    if math.hypot(qx, qy) < rho * INSIDE and r > 0.0:
+        px, py = project_feasible_point(qx, qy, sx - tx, sy - ty, r, rho)
+        return px + tx, py + ty, True
+    return nx, ny, False
+
+
 @kernel
 def moves_rows(x, sensors, r, absolute, out):
-    """Write positions within reach into ``out`` (B, M, 2): ``sensors + r a`` for actions
-    ``x`` (``a`` on the unit disk), or for absolute positions ``x`` (``absolute``) those
-    farther than ``r (1 + TOL)`` scaled onto the speed circle (others unchanged)."""
+    """Write positions within reach into ``out`` (B, M, 2): :func:`move_point` of the
+    actions or absolute positions ``x`` (B, M, 2) from ``sensors``."""
     for b in range(x.shape[0]):
         rb = r[b if r.shape[0] > 1 else 0]
         for m in range(x.shape[1]):
-            sx, sy, rr = sensors[b, m, 0], sensors[b, m, 1], rb[m]
-            if not absolute:
-                ax, ay = unit_disk(x[b, m, 0], x[b, m, 1])
-                out[b, m, 0], out[b, m, 1] = sx + ax * rr, sy + ay * rr
-                continue
-            dx, dy = x[b, m, 0] - sx, x[b, m, 1] - sy
-            if math.hypot(dx, dy) > rr * LONG:
-                safe = rr if rr > 0.0 else 1.0
-                ax, ay = unit_disk(dx / safe, dy / safe)
-                out[b, m, 0], out[b, m, 1] = sx + ax * rr, sy + ay * rr
-            else:
-                out[b, m, 0], out[b, m, 1] = x[b, m, 0], x[b, m, 1]
+            out[b, m, 0], out[b, m, 1] = move_point(
+                x[b, m, 0], x[b, m, 1], sensors[b, m, 0], sensors[b, m, 1], rb[m], absolute
+            )
 
 
 @kernel
 def keep_rows(new, sensors, target, r, rho, out, inside):
     """Write ``new`` (B, M, 2) with the moves that end inside their ``rho`` disk around the
-    predicted ``target`` (B, 2) (by more than ``TOL``, relative) projected to the nearest
-    feasible point into ``out``; mark them in ``inside`` (B, M). A sensor with ``r = 0``
-    stays, even inside."""
+    predicted ``target`` (B, 2) projected (:func:`keep_point`) into ``out``; mark them in
+    ``inside`` (B, M)."""
     for b in range(new.shape[0]):
         rb, hb = r[b if r.shape[0] > 1 else 0], rho[b if rho.shape[0] > 1 else 0]
         tx, ty = target[b, 0], target[b, 1]
         for m in range(new.shape[1]):
-            qx, qy = new[b, m, 0] - tx, new[b, m, 1] - ty
-            hit = math.hypot(qx, qy) < hb[m] * INSIDE and rb[m] > 0.0
-            inside[b, m] = hit
-            if hit:
-                px, py = project_feasible_point(
-                    qx, qy, sensors[b, m, 0] - tx, sensors[b, m, 1] - ty, rb[m], hb[m]
-                )
-                out[b, m, 0], out[b, m, 1] = px + tx, py + ty
-            else:
-                out[b, m, 0], out[b, m, 1] = new[b, m, 0], new[b, m, 1]
+            out[b, m, 0], out[b, m, 1], inside[b, m] = keep_point(
+                new[b, m, 0], new[b, m, 1], sensors[b, m, 0], sensors[b, m, 1], tx, ty,
+                rb[m], hb[m],
+            )  # fmt: skip
 
 
 @kernel

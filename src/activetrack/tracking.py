@@ -16,7 +16,10 @@ from typing import Any
 
 import numpy as np
 
-from activetrack import ekf, measurement, sensor_models
+from activetrack import ekf, sensor_models
+from activetrack import loop_kernels as lk
+from activetrack._jit import as_rows
+from activetrack.motion import matrix
 from activetrack.scenarios import Scenario
 from activetrack.validation import FloatArray
 
@@ -28,6 +31,10 @@ class TargetParams:
     Phi: FloatArray
     Q: FloatArray
     noise_factor: FloatArray
+
+    def __post_init__(self) -> None:  # the kernels' arrays: C-contiguous float64
+        for name in ("Phi", "Q", "noise_factor"):
+            object.__setattr__(self, name, matrix(getattr(self, name)))
 
     @property
     def dim(self) -> int:
@@ -67,6 +74,8 @@ class LoopParams:
     filter_iterations: int = 1  # 1: the EKF of eq. (11); more: the iterated EKF
 
     def __post_init__(self) -> None:
+        for name in ("Phi", "Q", "noise_factor"):  # as the targets' (C-contiguous float64)
+            object.__setattr__(self, name, matrix(getattr(self, name)))
         if not self.targets:
             object.__setattr__(
                 self, "targets", (TargetParams(self.Phi, self.Q, self.noise_factor),)
@@ -81,8 +90,19 @@ class LoopParams:
             std = np.stack([np.sqrt(self.sigma_d2), np.sqrt(self.sigma_theta2)], -1)
             if self.models is not None:
                 std = std * sensor_models.USES[self.models]
-            object.__setattr__(self, "_std", std)
+            object.__setattr__(self, "_std", np.ascontiguousarray(std))
         return std
+
+    @property
+    def uses(self) -> np.ndarray:
+        """Return the (M, 2) bool table of the components each sensor measures
+        (:data:`activetrack.sensor_models.USES` of its model)."""
+        uses = self.__dict__.get("_uses")
+        if uses is None:
+            m = self.n_sensors
+            uses = np.ones((m, 2), bool) if self.models is None else sensor_models.USES[self.models]
+            object.__setattr__(self, "_uses", np.ascontiguousarray(uses))
+        return uses
 
     @classmethod
     def from_scenario(cls, sc: Scenario) -> LoopParams:
@@ -197,8 +217,16 @@ def advance_target(
 
 
 def move_target(target: TargetParams, x_true: FloatArray, process_noise: FloatArray) -> FloatArray:
-    """Return the true target's next state (eq. 2) from ``process_noise`` (..., n) normals."""
-    return x_true @ target.Phi.T + process_noise @ target.noise_factor.T
+    """Return the true target's next state (eq. 2) from ``process_noise`` (..., n) normals
+    (:func:`activetrack.loop_kernels.move_target_into`)."""
+    n = target.dim
+    batch = x_true.shape[:-1]
+    out = np.empty(batch + (n,))
+    lk.move_target_rows(
+        target.Phi, target.noise_factor, as_rows(x_true, batch, (n,)),
+        as_rows(process_noise, batch, (n,)), out.reshape(-1, n),
+    )  # fmt: skip
+    return out
 
 
 def measure(
@@ -209,16 +237,22 @@ def measure(
     One target: ``positions`` (..., 2), ``noise`` (..., 2M) -> (..., M, 2); K targets in one
     call: ``positions`` (..., K, 2), ``noise`` (..., 2MK) target-major -> (..., K, M, 2).
     ``sensors`` (..., M, 2) are the true positions. Bearings are wrapped once, after the
-    noise; a component a sensor's model does not measure is exactly 0.
+    noise; a component a sensor's model does not measure is exactly 0
+    (:func:`activetrack.loop_kernels.measure_point`).
     """
-    if positions.ndim > sensors.ndim - 1:  # K targets: a target axis before the sensors'
-        sensors = sensors[..., None, :, :]
-    z = measurement.range_bearing(positions, sensors, params.orientation, wrap=False)
-    z += noise.reshape(z.shape) * params.noise_std
-    measurement.wrap_angle(z[..., 1], inplace=True)
-    if params.models is not None:  # an unmeasured component is exactly 0
-        z = np.where(sensor_models.USES[params.models], z, 0.0)
-    return z
+    one = positions.ndim == sensors.ndim - 1
+    targets = positions[..., None, :] if one else positions
+    k, m = targets.shape[-2], sensors.shape[-2]
+    batch = targets.shape[:-2]
+    if sensors.shape[:-2] != batch:
+        batch = np.broadcast_shapes(batch, sensors.shape[:-2])
+    out = np.empty(batch + (k, m, 2))
+    lk.measure_rows(
+        as_rows(targets, batch, (k, 2)), as_rows(sensors, batch, (m, 2)),
+        params.orientation, params.noise_std, params.uses,
+        as_rows(noise, batch, (2 * m * k,)), out.reshape(-1, k, m, 2),
+    )  # fmt: skip
+    return out[..., 0, :, :] if one else out
 
 
 def detections(

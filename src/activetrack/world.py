@@ -49,7 +49,8 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from activetrack import observation, sensor_motion, tracking
+from activetrack import loop_kernels, observation, observation_kernels, sensor_motion, tracking
+from activetrack._jit import as_rows
 from activetrack.ekf import position_nees
 from activetrack.motion import predict, psd_factor
 from activetrack.objective import OBJECTIVES, TRACE
@@ -155,6 +156,23 @@ class World:
         # The detection draws (p_detect < 1), M per target, last.
         self._detect_slice = slice(p.n_noise - m * K, p.n_noise)
         self._limited = sc.limited_sensing
+        # One target, known sensor positions, every sensor measures, no occluders: the whole
+        # step is one compiled call (activetrack.loop_kernels.advance_rows).
+        self._fused = (
+            K == 1 and not self._limited and p.filter_iterations == 1 and not self._pose
+            and p.occluders is None and sc.random_occluders == 0
+        )  # fmt: skip
+        if self._fused:  # the kernel's constants: the sensors' table, the target's matrices
+            t0 = p.targets[0]
+            table = np.empty((m, loop_kernels.TABLE_COLUMNS))
+            table[:, loop_kernels.R], table[:, loop_kernels.RHO] = p.r, p.rho
+            table[:, loop_kernels.ORIENTATION] = p.orientation
+            table[:, loop_kernels.STD_D : loop_kernels.STD_T + 1] = p.noise_std
+            table[:, loop_kernels.USE_D : loop_kernels.USE_T + 1] = p.uses
+            table[:, loop_kernels.W_D], table[:, loop_kernels.W_T] = p.weights
+            self._fused_args = (table, np.stack([t0.Phi, t0.noise_factor, t0.Q]))
+            n0 = t0.dim  # one copy's work arrays: P Phi^T, the measurements, all sensors
+            self._fused_work = (np.empty((n0, n0)), np.empty((m, 2)), np.ones(m, bool))
         if N > 1:  # the step's normals are (copies, n_noise) then; one copy's are (n_noise,)
             self._noise_slices = [
                 ((slice(None), a), (slice(None), b)) for a, b in self._noise_slices
@@ -175,6 +193,15 @@ class World:
         self._extended = self.layout.extended
         self._constants = self.layout.sensor_constants(sc, self.length_scale)
         self._order = observation.cyclic_order(m)
+        self._obs_shape = (m, self.layout.obs_dim)
+        self._obs_cache: np.ndarray | None = None  # the observation a one-copy step made
+        if self._fused:  # the observation kernels' constant arguments
+            constants = np.ascontiguousarray(self._constants, np.float64)
+            td = observation.EXT_TARGET_DIM * K if self._extended else observation.TARGET_DIM
+            self._obs_args = (constants, float(self._dt), float(self.length_scale),
+                              self._extended)  # fmt: skip
+            self._obs_work = (np.zeros((1, m), bool), np.empty(td),
+                              np.empty((m, 2 + constants.shape[1])), self._order)  # fmt: skip
 
         self._rngs: list[np.random.Generator | None] = [None] * N
         self._noise = (
@@ -188,13 +215,14 @@ class World:
         self._one = N == 1
         targets = []
         for tp, x0_hat, P0 in zip(p.targets, self._x0_hats, self._P0s, strict=True):
+            x_pred, P_pred = predict(x0_hat, P0, tp.Phi, tp.Q)
             targets.append(
                 {
                     "x_true": x0_hat.copy(),
                     "x_hat": x0_hat.copy(),
                     "P": P0.copy(),
-                    "x_pred": tp.Phi @ x0_hat,
-                    "P_pred": predict(x0_hat, P0, tp.Phi, tp.Q)[1],
+                    "x_pred": x_pred,
+                    "P_pred": P_pred,
                 }
             )
         sensors = np.broadcast_to(
@@ -367,6 +395,7 @@ class World:
         sel = self._select(indices)
         if sel is None:
             return
+        self._obs_cache = None  # the state changes
         rows = self._rows(sel)
         if seeds is not None:
             seeds = list(seeds)
@@ -503,93 +532,33 @@ class World:
 
     def _step(self, move: Any, moves: FloatArray, live: Any) -> StepResult | None:
         """Move the sensors of the copies ``live`` by ``move`` and advance them (steps 1-5)."""
+        if self._one and self._fused:  # the single env: the short way
+            if live is not None and self._select(live) is None:
+                return None
+            return self._step_one(move is sensor_motion.move_to, moves)
         sel = 0 if live is None and self._one else self._select(live)
         if sel is None:
             return None
         st = self._s
         if st["ended"] if self._one else st["ended"][sel].any():
-            rows = self._rows(sel)
-            bad = [i for i in rows.tolist() if self.get("terminated", i) or self.get("truncated", i)
-                   or not self._started(i)]  # fmt: skip
-            raise RuntimeError(
-                f"copies {bad[:10]} have no running episode (never reset, or ended): reset them"
-                " before stepping"
-            )
+            self._not_running(sel)
         # A subset of several copies is computed with all of them and written back alone:
         # stacked matrix products round a row differently with another number of rows, and
         # a copy's numbers must not depend on which other copies step with it.
         partial = isinstance(sel, np.ndarray)
         calc = slice(None) if partial else sel
-        p = self.params
-        K = self.n_targets
-        tgt = self._t
-        # (One target without a comprehension: on Python 3.11 each one is a function call.)
-        if self._one:
-            sensors = st["sensors"]
-            fixes = st["fixes"] if self._pose else sensors
-            x_preds = [tgt[0]["x_pred"]] if K == 1 else [t["x_pred"] for t in tgt]
-        else:
-            sensors = st["sensors"][calc]
-            fixes = st["fixes"][calc] if self._pose else sensors
-            x_preds = [tgt[0]["x_pred"][calc]] if K == 1 else [t["x_pred"][calc] for t in tgt]
-        # Sensors move from where they believe they are, out of every target's rho disk.
-        if K == 1:
-            where = x_preds[0][..., :2]
-        else:  # (..., K, 2), filled row by row (cheaper than np.stack on small arrays)
-            where = np.empty(x_preds[0].shape[:-1] + (K, 2))
-            for k, x in enumerate(x_preds):
-                where[..., k, :] = x[..., :2]
         mv = moves if self._one and moves.ndim == 2 else moves[calc]
-        moved, projected = move(mv, fixes, where, p.r, p.rho)
-        if self._occ is not None:  # no move ends in or passes through an occluder
-            moved, projected = self._around_occluders(sensors, fixes, moved, projected)
-        if self._one and self._noise is None:  # the single env's draw, without a call
-            noise = (self._rngs[0] or self.rng(0)).standard_normal(self._n_noise)
+        if self._fused:
+            noise = self._noise_of(sel, partial)
+            absolute = move is sensor_motion.move_to
+            sensors, projected, target, _ = self._advance_fused(mv, absolute, noise, calc)
+            fixes, detected, results = sensors, None, [target]
+            trace = target[-1][sel] if partial else target[-1]
         else:
-            noise = self._step_noise(sel)
-        if partial:
-            full = np.zeros((self.num_copies, self._n_noise))
-            full[sel] = noise
-            noise = full
-        if self._pose:  # the true sensor makes the believed displacement; a new fix
-            sensors = sensors + (moved - fixes)
-            fixes = self._fix(
-                sensors, noise[..., self._pose_slice].reshape(*noise.shape[:-1], -1, 2)
-            )
-        else:
-            sensors = fixes = moved
-        trace = None
+            sensors, fixes, projected, detected, results = self._advance(move, mv, sel, calc)
+            trace = None
         scores = []
-        general = K > 1 or self._limited or p.filter_iterations > 1
-        detected = None
-        if general:  # every target moves, then all are measured in one call
-            moved_t = [
-                tracking.move_target(tp, t["x_true"] if self._one else t["x_true"][calc],
-                                     noise[proc])
-                for t, tp, (proc, _) in zip(tgt, p.targets, self._noise_slices, strict=True)
-            ]  # fmt: skip
-            true_pos = np.empty(moved_t[0].shape[:-1] + (K, 2))
-            for k, x in enumerate(moved_t):
-                true_pos[..., k, :] = x[..., :2]
-            z_all = tracking.measure(p, true_pos, sensors, noise[self._meas_slice])
-            if self._limited:
-                draws = noise[self._detect_slice] if p.p_detect is not None else None
-                detected = tracking.detections(p, true_pos, sensors, draws, self._occ)
-        for k, (t, tp, x_pred, (proc, meas)) in enumerate(
-            zip(tgt, p.targets, x_preds, self._noise_slices, strict=True)
-        ):
-            P_pred = t["P_pred"] if self._one else t["P_pred"][calc]
-            if not general:
-                x_true = t["x_true"] if self._one else t["x_true"][calc]
-                x_true, _, x_post, P_post = tracking.advance_target(
-                    p, tp, x_true, x_pred, P_pred, sensors, fixes, noise[proc], noise[meas]
-                )
-            else:
-                x_true = moved_t[k]
-                z = z_all[..., k, :, :]
-                seen = None if detected is None else detected[..., k, :]
-                x_post, P_post = tracking.filter_update(p, x_pred, P_pred, z, fixes, seen)
-            x_next, P_next = predict(x_post, P_post, tp.Phi, tp.Q)
+        for t, (x_true, x_post, P_post, x_next, P_next, *tr) in zip(self._t, results, strict=True):
             if partial:
                 x_true, x_post, P_post, x_next, P_next = (
                     a[sel] for a in (x_true, x_post, P_post, x_next, P_next)
@@ -601,8 +570,9 @@ class World:
             else:  # the fresh arrays become the state (no copies)
                 t["x_true"], t["x_hat"], t["P"], t["x_pred"], t["P_pred"] = (
                     x_true, x_post, P_post, x_next, P_next)  # fmt: skip
-            tr = TRACE.of_covariance(P_post)  # its position block
-            trace = tr if trace is None else trace + tr
+            if not tr:
+                tr = TRACE.of_covariance(P_post)  # its position block
+                trace = tr if trace is None else trace + tr
             if not self._plain:
                 scores.append(self.objective.of_covariance(P_post))
         if partial:
@@ -622,11 +592,7 @@ class World:
         if detected is not None:
             new["detected"] = detected
         if self._one:
-            k = st["k"] + 1
-            truncated = k >= self._n_steps
-            if np.count_nonzero(projected):  # cheaper than .any() on a few elements
-                st["n_projected"] = st["n_projected"] + projected
-            st.update(new, k=k, truncated=truncated, ended=bool(terminated) or truncated)
+            truncated = self._store_one(new, bool(np.count_nonzero(projected)))
         else:
             k = st["k"][sel] + 1
             truncated = k >= self._n_steps
@@ -640,6 +606,175 @@ class World:
             st["k"][sel], st["truncated"][sel] = k, truncated
             st["ended"][sel] = terminated | truncated
         return StepResult(-self._scale * score, terminated, truncated)
+
+    def _not_running(self, sel: _Selection) -> None:
+        """Raise the RuntimeError of a step of copies ``sel`` without a running episode."""
+        rows = self._rows(sel)
+        bad = [i for i in rows.tolist() if self.get("terminated", i) or self.get("truncated", i)
+               or not self._started(i)]  # fmt: skip
+        raise RuntimeError(
+            f"copies {bad[:10]} have no running episode (never reset, or ended): reset them"
+            " before stepping"
+        )
+
+    def _step_one(self, absolute: bool, moves: FloatArray) -> StepResult:
+        """:meth:`_step` of a fused world of one copy: one compiled call
+        (:func:`activetrack.loop_kernels.advance_observe_row`) on its unbatched arrays,
+        which also makes the observation :meth:`observe` returns next."""
+        st, t = self._s, self._t[0]
+        if st["ended"]:
+            self._not_running(0)
+        sensors, x_true, P_pred = st["sensors"], t["x_true"], t["P_pred"]
+        if type(moves) is not np.ndarray or moves.dtype != np.float64:
+            moves = np.asarray(moves, np.float64)
+        if moves.ndim == 3 and moves.shape[0] == 1:  # (1, M, 2)
+            moves = moves[0]
+        if moves.shape != sensors.shape:  # the kernel indexes unchecked
+            raise ValueError(f"moves must have shape {sensors.shape}, got {moves.shape}")
+        if self._noise is None:  # the single env's draw, without a call
+            noise = (self._rngs[0] or self.rng(0)).standard_normal(self._n_noise)
+        else:  # a world of one copy with noise blocks
+            noise = self._step_noise(0)
+        new_sensors, projected = np.empty(sensors.shape), np.empty(sensors.shape[0], bool)
+        x_next_true, x_post, x_pred = (
+            np.empty(x_true.shape),
+            np.empty(x_true.shape),
+            np.empty(x_true.shape),
+        )
+        P_post, P_next = np.empty(P_pred.shape), np.empty(P_pred.shape)
+        obs = np.empty(self._obs_shape, np.float32)
+        trace, count = loop_kernels.advance_observe_row.dispatcher(  # (no wrapper call)
+            moves, absolute, sensors, x_true, t["x_pred"], P_pred, noise, *self._fused_args,
+            new_sensors, projected, x_next_true, x_post, P_post, x_pred, P_next,
+            *self._fused_work, *self._obs_args, *self._obs_work, obs,
+        )  # fmt: skip
+        self._obs_cache = obs
+        t["x_true"], t["x_hat"], t["P"], t["x_pred"], t["P_pred"] = (
+            x_next_true, x_post, P_post, x_pred, P_next)  # fmt: skip
+        trace = np.float64(trace)
+        score = trace if self._plain else self.objective.combine(
+            np.stack([self.objective.of_covariance(P_post)], -1)
+        )  # fmt: skip
+        terminated = trace > self._max_trace
+        new = {"sensors": new_sensors, "fixes": new_sensors, "projected": projected,
+               "trace": trace, "score": score, "terminated": terminated}  # fmt: skip
+        return StepResult(-self._scale * score, terminated, self._store_one(new, count > 0))
+
+    def _store_one(self, new: dict[str, Any], projected: bool) -> bool:
+        """Store a step's results ``new`` in a world of one copy (``projected``: whether a
+        move was pushed out of a ``rho`` disk); return ``truncated``."""
+        st = self._s
+        k = st["k"] + 1
+        truncated = k >= self._n_steps
+        if projected:
+            st["n_projected"] = st["n_projected"] + new["projected"]
+        st.update(new, k=k, truncated=truncated, ended=bool(new["terminated"]) or truncated)
+        return truncated
+
+    def _noise_of(self, sel: _Selection, partial: bool) -> FloatArray:
+        """Return the step's standard normals of the copies ``sel`` (all copies' rows, zero
+        for those not stepping, when ``partial``)."""
+        if self._one and self._noise is None:  # the single env's draw, without a call
+            return (self._rngs[0] or self.rng(0)).standard_normal(self._n_noise)
+        noise = self._step_noise(sel)
+        if partial:
+            full = np.zeros((self.num_copies, self._n_noise))
+            full[sel] = noise
+            noise = full
+        return noise
+
+    def _advance_fused(
+        self, moves: FloatArray, absolute: bool, noise: FloatArray, calc: _Selection
+    ) -> tuple[FloatArray, np.ndarray, tuple[Any, ...], int]:
+        """Return ``(sensors, projected, (x_true, x_post, P_post, x_pred, P_pred, trace),
+        count)`` (``count``: the moves pushed out of a ``rho`` disk)
+        of one compiled step (:func:`activetrack.loop_kernels.advance_rows`) of the copies
+        ``calc`` of a batched world (one target, known sensor positions, every sensor
+        measures)."""
+        st, t = self._s, self._t[0]
+        sensors, x_true = st["sensors"][calc], t["x_true"][calc]
+        x_pred, P_pred = t["x_pred"][calc], t["P_pred"][calc]
+        n, m = x_true.shape[-1], self.n_sensors
+        batch = x_true.shape[:-1]
+        out = (
+            np.empty(sensors.shape), np.empty(sensors.shape[:-1], bool), np.empty(x_true.shape),
+            np.empty(x_true.shape), np.empty(P_pred.shape), np.empty(x_true.shape),
+            np.empty(P_pred.shape), np.empty(batch),
+        )  # fmt: skip
+        count = loop_kernels.advance_rows(
+            as_rows(moves, batch, (m, 2)), absolute, as_rows(sensors, batch, (m, 2)),
+            as_rows(x_true, batch, (n,)), as_rows(x_pred, batch, (n,)),
+            as_rows(P_pred, batch, (n, n)), as_rows(noise, batch, (self._n_noise,)),
+            *self._fused_args, *out,
+        )  # fmt: skip
+        return out[0], out[1], out[2:], count
+
+    def _advance(
+        self, move: Any, moves: FloatArray, sel: _Selection, calc: _Selection
+    ) -> tuple[FloatArray, FloatArray, np.ndarray, np.ndarray | None, list[tuple]]:
+        """Return ``(sensors, fixes, projected, detected, results)`` of one step of the
+        copies ``calc``, stage by stage: ``results`` holds every target's ``(x_true,
+        x_post, P_post, x_pred, P_pred)``."""
+        st, p, K, tgt = self._s, self.params, self.n_targets, self._t
+        # (One target without a comprehension: on Python 3.11 each one is a function call.)
+        if self._one:
+            sensors = st["sensors"]
+            fixes = st["fixes"] if self._pose else sensors
+            x_preds = [tgt[0]["x_pred"]] if K == 1 else [t["x_pred"] for t in tgt]
+        else:
+            sensors = st["sensors"][calc]
+            fixes = st["fixes"][calc] if self._pose else sensors
+            x_preds = [tgt[0]["x_pred"][calc]] if K == 1 else [t["x_pred"][calc] for t in tgt]
+        # Sensors move from where they believe they are, out of every target's rho disk.
+        if K == 1:
+            where = x_preds[0][..., :2]
+        else:  # (..., K, 2), filled row by row (cheaper than np.stack on small arrays)
+            where = np.empty(x_preds[0].shape[:-1] + (K, 2))
+            for k, x in enumerate(x_preds):
+                where[..., k, :] = x[..., :2]
+        moved, projected = move(moves, fixes, where, p.r, p.rho)
+        if self._occ is not None:  # no move ends in or passes through an occluder
+            moved, projected = self._around_occluders(sensors, fixes, moved, projected)
+        noise = self._noise_of(sel, isinstance(sel, np.ndarray))
+        if self._pose:  # the true sensor makes the believed displacement; a new fix
+            sensors = sensors + (moved - fixes)
+            fixes = self._fix(
+                sensors, noise[..., self._pose_slice].reshape(*noise.shape[:-1], -1, 2)
+            )
+        else:
+            sensors = fixes = moved
+        general = K > 1 or self._limited or p.filter_iterations > 1
+        detected = None
+        if general:  # every target moves, then all are measured in one call
+            moved_t = [
+                tracking.move_target(tp, t["x_true"] if self._one else t["x_true"][calc],
+                                     noise[proc])
+                for t, tp, (proc, _) in zip(tgt, p.targets, self._noise_slices, strict=True)
+            ]  # fmt: skip
+            true_pos = np.empty(moved_t[0].shape[:-1] + (K, 2))
+            for k, x in enumerate(moved_t):
+                true_pos[..., k, :] = x[..., :2]
+            z_all = tracking.measure(p, true_pos, sensors, noise[self._meas_slice])
+            if self._limited:
+                draws = noise[self._detect_slice] if p.p_detect is not None else None
+                detected = tracking.detections(p, true_pos, sensors, draws, self._occ)
+        results = []
+        for k, (t, tp, x_pred, (proc, meas)) in enumerate(
+            zip(tgt, p.targets, x_preds, self._noise_slices, strict=True)
+        ):
+            P_pred = t["P_pred"] if self._one else t["P_pred"][calc]
+            if not general:
+                x_true = t["x_true"] if self._one else t["x_true"][calc]
+                x_true, _, x_post, P_post = tracking.advance_target(
+                    p, tp, x_true, x_pred, P_pred, sensors, fixes, noise[proc], noise[meas]
+                )
+            else:
+                x_true = moved_t[k]
+                z = z_all[..., k, :, :]
+                seen = None if detected is None else detected[..., k, :]
+                x_post, P_post = tracking.filter_update(p, x_pred, P_pred, z, fixes, seen)
+            results.append((x_true, x_post, P_post, *predict(x_post, P_post, tp.Phi, tp.Q)))
+        return sensors, fixes, projected, detected, results
 
     def _around_occluders(
         self, sensors: FloatArray, fixes: FloatArray, moved: FloatArray, projected: np.ndarray
@@ -714,11 +849,32 @@ class World:
         the paper): the prediction and the team as seen from each agent's seat.
         """
         rays = self.layout.rays
+        if self._one and self._fused and (index is None or (type(index) is int and index == 0)):
+            return self._observe_one()[None] if index is None else self._observe_one()
         out = observation.encode(*self._feature_args(index), self._order, rays)
         if rays:  # written straight into the observation (float32): no float64 temporary
             observation.ray_readings(
                 self.get("sensors", index), self.occluders(index), out[..., -rays:]
             )
+        return out
+
+    def _observe_one(self) -> np.ndarray:
+        """:meth:`observe` of a fused world of one copy: the observation its last step made,
+        or the kernel's (:func:`activetrack.observation_kernels.features_row`,
+        ``windows_row``) on views of the world's own arrays, unchecked."""
+        out = self._obs_cache
+        if out is not None:  # handed out once: a second call makes a new array
+            self._obs_cache = None
+            return out
+        t = self._t[0]
+        x, P = t["x_pred"], t["P_pred"]
+        n, (m, d) = x.shape[0], self._obs_shape
+        detected, target, sensor, order = self._obs_work
+        out = np.empty((m, d), np.float32)
+        observation_kernels.observe_rows.dispatcher(
+            x.reshape(1, 1, n), P.reshape(1, 1, n, n), self._s["sensors"].reshape(1, m, 2),
+            *self._obs_args, detected.reshape(1, 1, m), 0, order, out.reshape(1, m, d),
+        )  # fmt: skip
         return out
 
     def state(self, index: int | None = None) -> np.ndarray:

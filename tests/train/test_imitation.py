@@ -123,18 +123,24 @@ def test_bc_is_fast_close_to_gsr_and_better_than_rm(bc, references):
 
 @pytest.mark.slow
 def test_dagger_at_least_as_good_as_bc_on_the_same_label_budget(bc, references):
-    """Same expert-label budget (40 episodes x 50 steps x 3 agents), same 20 held-out seeds.
+    """Same expert-label budget (40 episodes x 50 steps x 3 agents), same 20 held-out seeds,
+    the median over three training seeds of each.
 
-    Tolerance: DAgger's mean trace may exceed BC's by at most 5%. That is the noise of one
-    training run, not a margin for a bad method: over three training seeds each, at this
-    budget, we measured BC at 2.25 to 2.40 and DAgger at 2.27 to 2.54 on validation seeds
-    (GSR 2.17) -- DAgger is not reliably better than BC on this preset (see the README).
+    Tolerance: DAgger's median may exceed BC's by at most 5%. One training run is too noisy
+    to compare: at this budget, training seeds 0, 1, 2 gave BC 2.31, 2.36, 2.55 and DAgger
+    2.30, 2.35, 2.36 at one commit, and after changes of 1e-15 in the world's arithmetic
+    (which move GSR's labels by about 1e-7) BC 2.33, 2.35, 2.56 and DAgger 3.24, 2.36, 2.41
+    (GSR 2.27): a DAgger run sometimes fails badly, and DAgger is not reliably better than
+    BC on this preset (see the README).
     """
     bc_result, _ = bc
     gsr, _ = references
-    dagger = train_imitation("paper", seed=0, config=DAGGER_TEST)
-    assert len(dagger.data) == len(bc_result.data)
-    bc_trace = _mean_trace(bc_result.policy).mean()
-    dagger_trace = _mean_trace(dagger.policy).mean()
-    print(f"DAgger {dagger_trace:.4f} BC {bc_trace:.4f} GSR {gsr.mean():.4f}")
-    assert dagger_trace <= 1.05 * bc_trace
+    bc_traces, dagger_traces = [], []
+    for seed in (0, 1, 2):
+        bc_run = bc_result if seed == 0 else train_imitation("paper", seed=seed, config=BC_TEST)
+        dagger = train_imitation("paper", seed=seed, config=DAGGER_TEST)
+        assert len(dagger.data) == len(bc_run.data)
+        bc_traces.append(_mean_trace(bc_run.policy).mean())
+        dagger_traces.append(_mean_trace(dagger.policy).mean())
+    print(f"DAgger {dagger_traces} BC {bc_traces} GSR {gsr.mean():.4f}")
+    assert np.median(dagger_traces) <= 1.05 * np.median(bc_traces)

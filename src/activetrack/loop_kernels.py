@@ -1,0 +1,221 @@
+"""Compiled closed-loop arithmetic: target motion (eq. 2), measurements (eq. 4), the
+prediction (eq. 3), and one copy's whole step, one copy at a time.
+
+The kernels behind :func:`activetrack.tracking.move_target`,
+:func:`activetrack.tracking.measure` and :func:`activetrack.motion.predict` (written for one
+target or one filter, looped over rows in compiled code), and :func:`advance_rows`, the
+step of :class:`activetrack.world.World` for copies whose sensors know their positions and
+track one target that every sensor measures, with no occluders: the sensors' moves
+(eq. 13-16, :mod:`activetrack.motion_kernels`), the target's motion, the measurements,
+the EKF update (eq. 11, :mod:`activetrack.ekf_kernels`), the prediction and the trace of
+the posterior position covariance, all in one call. The other tasks run the same kernels
+one stage at a time.
+
+Rounding: sums run in index order and products are rounded one at a time, so results can
+differ from NumPy's (whose matrix products go through BLAS, with fused multiply-adds on
+this machine) in the last bit; a distance is ``math.hypot``, as NumPy's complex ``abs``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from activetrack import ekf_kernels as ek
+from activetrack import motion_kernels as mk
+from activetrack import observation_kernels as obk
+from activetrack._jit import inline_kernel, kernel
+
+
+@inline_kernel
+def move_target_into(Phi, F, x, w, out):
+    """Write the true target's next state ``Phi x + F w`` (eq. 2) into ``out`` (n,)."""
+    n = x.shape[0]
+    for i in range(n):
+        a = 0.0
+        for j in range(n):
+            a += Phi[i, j] * x[j]
+        c = 0.0
+        for j in range(w.shape[0]):
+            c += F[i, j] * w[j]
+        out[i] = a + c
+
+
+@kernel
+def move_target_rows(Phi, F, x, w, out):
+    """Write :func:`move_target_into` of rows ``x`` (B, n), ``w`` (B, n) into ``out``."""
+    for b in range(x.shape[0]):
+        move_target_into(Phi, F, x[b], w[b], out[b])
+
+
+@inline_kernel
+def measure_point(tx, ty, sx, sy, phi, noise_d, noise_t, std_d, std_t, use_d, use_t):
+    """Return one sensor's noisy ``(d, theta)`` (eq. 4) of the target at ``(tx, ty)`` from
+    ``(sx, sy)`` with orientation ``phi``: the standard normals times the standard
+    deviations added, the bearing wrapped to ``[-pi, pi)`` after the noise, and a component
+    the sensor does not measure (``use_d``, ``use_t`` False) exactly 0."""
+    dx, dy = tx - sx, ty - sy
+    d = math.hypot(dx, dy) + noise_d * std_d
+    t = ek.wrap((math.atan2(dy, dx) - phi) + noise_t * std_t)
+    return (d if use_d else 0.0), (t if use_t else 0.0)
+
+
+@kernel
+def measure_into(tx, ty, sensors, orientation, std, uses, noise, out):
+    """Write every sensor's :func:`measure_point` of one target into ``out`` (M, 2);
+    ``noise`` (2M,) sensor-major, ``std`` (M, 2), ``uses`` (M, 2) bool."""
+    for i in range(sensors.shape[0]):
+        out[i, 0], out[i, 1] = measure_point(
+            tx, ty, sensors[i, 0], sensors[i, 1], orientation[i], noise[2 * i],
+            noise[2 * i + 1], std[i, 0], std[i, 1], uses[i, 0], uses[i, 1],
+        )  # fmt: skip
+
+
+@kernel
+def measure_rows(positions, sensors, orientation, std, uses, noise, out):
+    """Write the measurements of K targets at ``positions`` (B, K, 2) by sensors (B, M, 2)
+    into ``out`` (B, K, M, 2); ``noise`` (B, 2MK) target-major."""
+    m = sensors.shape[1]
+    for b in range(positions.shape[0]):
+        for k in range(positions.shape[1]):
+            measure_into(
+                positions[b, k, 0], positions[b, k, 1], sensors[b], orientation, std, uses,
+                noise[b, 2 * m * k : 2 * m * (k + 1)], out[b, k],
+            )  # fmt: skip
+
+
+@inline_kernel
+def predict_into(x, P, Phi, Q, x_out, P_out, scratch):
+    """Write the prediction of eq. (3), ``Phi x`` and ``Phi P Phi^T + Q``, into ``x_out``,
+    ``P_out`` (``scratch`` (n, n) for ``P Phi^T``); the covariance symmetrized as the mean
+    of its two triangles, exactly symmetric (``P`` must be symmetric)."""
+    n = x.shape[0]
+    for i in range(n):
+        a = 0.0
+        for j in range(n):
+            a += Phi[i, j] * x[j]
+        x_out[i] = a
+        for j in range(n):
+            c = 0.0
+            for k in range(n):
+                c += P[i, k] * Phi[j, k]
+            scratch[i, j] = c
+    for i in range(n):
+        for j in range(n):
+            c = 0.0
+            for k in range(n):
+                c += Phi[i, k] * scratch[k, j]
+            P_out[i, j] = c
+    for i in range(n):
+        for j in range(i + 1):
+            v = 0.5 * ((P_out[i, j] + Q[i, j]) + (P_out[j, i] + Q[j, i]))
+            P_out[i, j] = v
+            P_out[j, i] = v
+
+
+@kernel
+def predict_rows(x, P, Phi, Q, x_out, P_out):
+    """Write :func:`predict_into` of rows ``x`` (B, n), ``P`` (B, n, n) into ``x_out``,
+    ``P_out``."""
+    scratch = np.empty(Phi.shape)
+    for b in range(x.shape[0]):
+        predict_into(x[b], P[b], Phi, Q, x_out[b], P_out[b], scratch)
+
+
+#: Columns of the per-sensor table of :func:`advance_row`: reach, minimum distance,
+#: orientation, measurement noise standard deviations, whether the range and the bearing
+#: are measured (1 or 0), the filter's weights ``(w_d, w_theta)``.
+R, RHO, ORIENTATION, STD_D, STD_T, USE_D, USE_T, W_D, W_T = range(9)
+TABLE_COLUMNS = 9
+
+
+@inline_kernel
+def advance_row(
+    moves, absolute, sensors, x_true, x_pred, P_pred, noise, table, mats, sensors_out,
+    projected, x_true_out, x_post, P_post, x_next, P_next, scratch, z, every,
+):  # fmt: skip
+    """Return ``(trace, n_projected)`` after one step of one copy (one target, known
+    sensor positions, every sensor measures): the trace of the posterior position
+    covariance and the number of moves pushed out of a ``rho`` disk; write the step: the
+    sensors' moves (:func:`activetrack.motion_kernels.move_point` of the actions or
+    absolute positions ``moves`` (M, 2), then :func:`activetrack.motion_kernels.keep_point`
+    about the predicted target ``x_pred[:2]``) into ``sensors_out`` and ``projected``; the
+    target's motion (:func:`move_target_into`, the first ``n`` standard normals of
+    ``noise`` (n + 2M,)) into ``x_true_out``; the measurements from the new positions
+    (:func:`measure_into`, the next ``2M``) into ``z`` (M, 2); the EKF posterior (eq. 11,
+    :func:`activetrack.ekf_kernels.update_row`, every sensor: ``every`` (M,) True) into
+    ``x_post``, ``P_post``; the prediction (:func:`predict_into`, ``scratch`` (n, n)) into
+    ``x_next``, ``P_next``. ``table`` (M, :data:`TABLE_COLUMNS`) holds the sensors'
+    constants, ``mats`` (3, n, n) the target's ``Phi``, noise factor and ``Q``."""
+    n, m = x_true.shape[0], sensors.shape[0]
+    Phi, F, Q = mats[0], mats[1], mats[2]
+    tx, ty = x_pred[0], x_pred[1]
+    count = 0
+    for i in range(m):
+        sx, sy, r = sensors[i, 0], sensors[i, 1], table[i, R]
+        nx, ny = mk.move_point(moves[i, 0], moves[i, 1], sx, sy, r, absolute)
+        px, py, hit = mk.keep_point(nx, ny, sx, sy, tx, ty, r, table[i, RHO])
+        sensors_out[i, 0], sensors_out[i, 1], projected[i] = px, py, hit
+        count += hit
+    move_target_into(Phi, F, x_true, noise[:n], x_true_out)
+    tx, ty = x_true_out[0], x_true_out[1]
+    for i in range(m):
+        z[i, 0], z[i, 1] = measure_point(
+            tx, ty, sensors_out[i, 0], sensors_out[i, 1], table[i, ORIENTATION],
+            noise[n + 2 * i], noise[n + 2 * i + 1], table[i, STD_D], table[i, STD_T],
+            table[i, USE_D] != 0.0, table[i, USE_T] != 0.0,
+        )  # fmt: skip
+    ek.update_row(
+        x_pred, P_pred, z, sensors_out, table[:, W_D], table[:, W_T], table[:, ORIENTATION],
+        every, 1, x_post, P_post,
+    )  # fmt: skip
+    predict_into(x_post, P_post, Phi, Q, x_next, P_next, scratch)
+    return P_post[0, 0] + P_post[1, 1], count
+
+
+@kernel
+def advance_rows(
+    moves, absolute, sensors, x_true, x_pred, P_pred, noise, table, mats, sensors_out,
+    projected, x_true_out, x_post, P_post, x_next, P_next, trace,
+):  # fmt: skip
+    """Write :func:`advance_row` of B copies (rows of ``moves`` (B, M, 2), ``sensors``,
+    ``x_true``, ``x_pred``, ``P_pred``, ``noise``) into the rows of the outputs, the
+    traces into ``trace`` (B,); return the number of moves pushed out of a ``rho`` disk."""
+    n, m = x_true.shape[1], sensors.shape[1]
+    scratch = np.empty((n, n))
+    z = np.empty((m, 2))
+    every = np.ones(m, np.bool_)
+    count = 0
+    for b in range(moves.shape[0]):
+        trace[b], c = advance_row(
+            moves[b], absolute, sensors[b], x_true[b], x_pred[b], P_pred[b], noise[b], table,
+            mats, sensors_out[b], projected[b], x_true_out[b], x_post[b], P_post[b],
+            x_next[b], P_next[b], scratch, z, every,
+        )  # fmt: skip
+        count += c
+    return count
+
+
+@kernel
+def advance_observe_row(
+    moves, absolute, sensors, x_true, x_pred, P_pred, noise, table, mats, sensors_out,
+    projected, x_true_out, x_post, P_post, x_next, P_next, scratch, z, every, constants, dt,
+    L, extended, detected, target, sensor, order, obs,
+):  # fmt: skip
+    """:func:`advance_row`, then every agent's observation of the new state into ``obs``
+    (M, D) float32 (:func:`activetrack.observation_kernels.features_row` of the prediction
+    ``x_next``, ``P_next`` and the new positions, in the agents' views
+    :func:`activetrack.observation_kernels.windows_row`; ``target``, ``sensor`` its work
+    arrays, no detection flags): the single environment's step in one call."""
+    out = advance_row(
+        moves, absolute, sensors, x_true, x_pred, P_pred, noise, table, mats, sensors_out,
+        projected, x_true_out, x_post, P_post, x_next, P_next, scratch, z, every,
+    )  # fmt: skip
+    n = x_next.shape[0]
+    obk.features_row(
+        x_next.reshape(1, n), P_next.reshape(1, n, n), sensors_out, constants, dt, L, extended,
+        detected, 0, target, sensor,
+    )  # fmt: skip
+    obk.windows_row(target, sensor, order, obs)
+    return out

@@ -1,0 +1,154 @@
+"""The compiled closed-loop arithmetic (:mod:`activetrack.loop_kernels`) against NumPy
+longhand, and the world's one-call step against its stage-by-stage step.
+
+The stage-by-stage step (target motion, measurement, EKF, prediction, each its own call)
+is checked against the paper's longhand loop in ``test_world.py``; here the one-call step
+(:func:`activetrack.loop_kernels.advance_rows`, ``advance_observe_row``) must give the same
+states, rewards and observations on every task it serves.
+"""
+
+import numpy as np
+import pytest
+
+from activetrack import motion, tracking
+from activetrack.motion import predict
+from activetrack.world import World
+from tests.core.helpers import random_spd
+
+pytestmark = pytest.mark.kernels
+
+#: Tasks whose step is one compiled call (one target, known positions, no occluders).
+FUSED = ["paper", "homogeneous", "range_only", "bearing_only", "mixed"]
+
+
+@pytest.mark.parametrize("batch", [(), (3,), (2, 3)])
+def test_predict_matches_numpy_and_is_exactly_symmetric(batch):
+    rng = np.random.default_rng(0)
+    n = 6
+    Phi = rng.standard_normal((n, n))
+    Q = random_spd(rng, n)
+    P = np.stack([random_spd(rng, n) for _ in range(int(np.prod(batch)))]).reshape(batch + (n, n))
+    x = rng.standard_normal(batch + (n,))
+    x_next, P_next = predict(x, P, Phi, Q)
+    want = Phi @ P @ Phi.T + Q  # NumPy's own products, in its own order
+    np.testing.assert_allclose(P_next, want, rtol=1e-13, atol=1e-13 * np.abs(want).max())
+    np.testing.assert_allclose(x_next, x @ Phi.T, rtol=1e-13, atol=1e-13)
+    assert np.array_equal(P_next, np.swapaxes(P_next, -1, -2))  # exactly, not to rounding
+    assert P_next.shape == batch + (n, n) and x_next.shape == batch + (n,)
+
+
+def test_predict_broadcasts_one_mean_over_covariances():
+    rng = np.random.default_rng(1)
+    m = motion.constant_velocity(1.0, 0.1) if hasattr(motion, "constant_velocity") else None
+    Phi = np.eye(4) + np.diag([1.0, 1.0], 2) if m is None else m.Phi
+    P = np.stack([random_spd(rng, 4) for _ in range(3)])
+    x = rng.standard_normal(4)
+    x_next, P_next = predict(x, P, Phi, np.eye(4))
+    assert x_next.shape == (3, 4)
+    np.testing.assert_allclose(x_next, np.broadcast_to(Phi @ x, (3, 4)), rtol=1e-14)
+
+
+def test_move_target_matches_numpy():
+    rng = np.random.default_rng(2)
+    n = 4
+    target = tracking.TargetParams(rng.standard_normal((n, n)), random_spd(rng, n),
+                                   rng.standard_normal((n, n)).T)  # fmt: skip
+    x, w = rng.standard_normal((5, n)), rng.standard_normal((5, n))
+    got = tracking.move_target(target, x, w)
+    want = x @ target.Phi.T + w @ target.noise_factor.T
+    np.testing.assert_allclose(got, want, rtol=1e-13, atol=1e-13)
+    # a transposed (Fortran-ordered) noise factor is stored C-contiguous for the kernels
+    assert target.noise_factor.flags.c_contiguous
+
+
+def _worlds(scenario, n, **kw):
+    """Return two worlds from the same seeds: one-call steps, and stage-by-stage steps."""
+    fused, staged = World(scenario, n, **kw), World(scenario, n, **kw)
+    assert fused._fused
+    staged._fused = False  # the general path (every stage its own call)
+    seeds = [7 + 3 * i for i in range(n)]
+    fused.reset(seeds=seeds)
+    staged.reset(seeds=seeds)
+    return fused, staged
+
+
+def _assert_same_state(a, b):
+    for key in ("sensors", "fixes", "projected", "n_projected", "k", "trace", "score"):
+        np.testing.assert_allclose(
+            np.asarray(a.get(key), float), np.asarray(b.get(key), float), rtol=1e-12, atol=1e-12
+        )
+    for key in ("x_true", "x_hat", "P", "x_pred", "P_pred"):
+        np.testing.assert_allclose(a.get(key), b.get(key), rtol=1e-11, atol=1e-11)
+
+
+@pytest.mark.parametrize("scenario", FUSED)
+@pytest.mark.parametrize("n", [1, 4])
+def test_one_call_step_equals_the_stage_by_stage_step(scenario, n):
+    fused, staged = _worlds(scenario, n, n_steps=30, max_trace=40.0, rho=19.0)
+    rng = np.random.default_rng(3)
+    m = fused.n_sensors
+    shape = (m, 2) if n == 1 else (n, m, 2)
+    projected = 0
+    for step in range(70):
+        where = np.asarray(fused.get("x_pred"))[..., None, :2]
+        toward = where - np.asarray(fused.get("sensors"))  # full speed at the target
+        toward /= np.linalg.norm(toward, axis=-1, keepdims=True)
+        if step % 3 == 2:  # absolute positions, some at the predicted target itself
+            goal = np.asarray(fused.get("sensors")) + rng.uniform(-3, 3, shape)
+            goal = np.where(rng.random(shape[:-1] + (1,)) < 0.5, where, goal)
+            ra, rb = fused.step(goal), staged.step(goal)
+        else:  # actions toward the target or random, some far outside the unit disk
+            a = np.where(rng.random(shape[:-1] + (1,)) < 0.7, toward, rng.uniform(-1.5, 1.5, shape))
+            ra, rb = fused.step_actions(a), staged.step_actions(a)
+        for x, y in zip(ra, rb, strict=True):
+            np.testing.assert_allclose(np.asarray(x, float), np.asarray(y, float), rtol=1e-12)
+        _assert_same_state(fused, staged)
+        obs_a, obs_b = fused.observe(), staged.observe()
+        np.testing.assert_allclose(obs_a, obs_b, rtol=1e-6, atol=1e-6)
+        projected += int(np.sum(fused.get("projected")))
+        ended = np.atleast_1d(fused.get("terminated") | fused.get("truncated"))
+        if ended.any():
+            idx = None if n == 1 else ended
+            fused.reset(idx)
+            staged.reset(idx)
+    assert projected > 0  # the rho rule was exercised
+
+
+def test_one_call_step_of_a_subset_of_copies():
+    fused, staged = _worlds("paper", 5)
+    rng = np.random.default_rng(4)
+    for live in ([0, 2], [4], np.array([True, False, True, True, False]), None):
+        a = rng.uniform(-1, 1, (5, 3, 2))
+        before = np.array(fused.get("x_hat"))
+        ra, rb = fused.step_actions(a, live), staged.step_actions(a, live)
+        np.testing.assert_allclose(ra.reward, rb.reward, rtol=1e-12)
+        _assert_same_state(fused, staged)
+        if live is not None:  # the others are untouched, bit for bit
+            stepped = np.zeros(5, bool)
+            stepped[live] = True
+            rest = np.flatnonzero(~stepped)
+            assert np.array_equal(fused.get("x_hat")[rest], before[rest])
+
+
+def test_single_copy_observation_is_made_by_the_step_and_handed_out_once():
+    fused, staged = _worlds("paper", 1)
+    a = np.full((3, 2), 0.3)
+    fused.step_actions(a)
+    staged.step_actions(a)
+    first, second = fused.observe(), fused.observe()
+    assert first is not second  # a second call makes a new array
+    np.testing.assert_array_equal(first, second)
+    np.testing.assert_allclose(first, staged.observe(), rtol=1e-6, atol=1e-6)
+    fused.reset(seeds=[1])  # the state changes: the step's observation is gone
+    staged.reset(seeds=[1])
+    np.testing.assert_array_equal(fused.observe(), staged.observe())
+
+
+@pytest.mark.parametrize("bad", [np.zeros((2, 2)), np.zeros((3, 3)), np.zeros((2, 3, 2))])
+def test_single_copy_step_refuses_a_wrong_shape(bad):
+    world = World("paper")
+    world.reset(seeds=[0])
+    before = np.array(world.get("sensors"))
+    with pytest.raises(ValueError, match="shape"):
+        world.step_actions(bad)
+    assert np.array_equal(world.get("sensors"), before)  # nothing stored
