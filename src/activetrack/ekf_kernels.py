@@ -28,7 +28,7 @@ ITERATION_TOL = 1e-10
 _TWO_PI = 2.0 * math.pi
 
 
-@inline_kernel
+@kernel
 def wrap(a):
     """Return the angle ``a`` wrapped to ``[-pi, pi)`` (as :func:`measurement.wrap_angle`)."""
     if abs(a) < math.pi:
@@ -36,7 +36,7 @@ def wrap(a):
     return a - _TWO_PI * math.floor((a + math.pi) / _TWO_PI)
 
 
-@inline_kernel
+@kernel
 def range_bearing_terms(tx, ty, z, sensors, wd, wt, orientation, mask):
     """Return ``(Y_xx, Y_xy, Y_yy, b_x, b_y)`` linearized at the target position (tx, ty).
 
@@ -94,7 +94,7 @@ def posterior_into(x, P, yxx, yxy, yyy, bx, by, x_out, P_out, cov):
     factored_into(x, P, prior_factor(P), yxx, yxy, yyy, bx, by, x_out, P_out, cov)
 
 
-@inline_kernel
+@kernel
 def prior_factor(P):
     """Return ``(l00, l10, l11, t00, t01, t11)``: the prior's position block ``P11 = L L^T``
     (lower triangular) and ``T = L^{-T}``, what every linearization of one update shares."""
@@ -145,7 +145,7 @@ def factored_into(x, P, factor, yxx, yxy, yyy, bx, by, x_out, P_out, cov):
             P_out[j, i] = v
 
 
-@inline_kernel
+@kernel
 def relinearized_b(x, lin0, lin1, yxx, yxy, yyy, bx, by):
     """Return the gradient term of the iterated EKF linearized at ``lin`` (its terms
     ``(Y, b)`` there): ``nu_i = z - h(lin) - H (x - lin)`` gives ``b - Y (p - lin)``."""
@@ -164,7 +164,7 @@ def relinearize_into(x, P, lin0, lin1, yxx, yxy, yyy, bx, by, x_out, P_out, cov)
     return settled(x_out, lin0, lin1)
 
 
-@inline_kernel
+@kernel
 def settled(x_out, lin0, lin1):
     """Return whether the position ``x_out[:2]`` is within :data:`ITERATION_TOL` (relative
     to ``1 + |lin|``) of the linearization point ``lin``."""

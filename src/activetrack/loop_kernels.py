@@ -49,7 +49,7 @@ def move_target_rows(Phi, F, x, w, out):
         move_target_into(Phi, F, x[b], w[b], out[b])
 
 
-@inline_kernel
+@kernel
 def measure_point(tx, ty, sx, sy, phi, noise_d, noise_t, std_d, std_t, use_d, use_t):
     """Return one sensor's noisy ``(d, theta)`` (eq. 4) of the target at ``(tx, ty)`` from
     ``(sx, sy)`` with orientation ``phi``: the standard normals times the standard

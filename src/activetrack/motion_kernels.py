@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 
-from activetrack._jit import inline_kernel, kernel
+from activetrack._jit import kernel
 
 #: Relative tolerance of the unit-disk and minimum-distance tests.
 TOL = 1e-12
@@ -75,7 +75,7 @@ def unit_disk(ax, ay):
     return ax / norm, ay / norm
 
 
-@inline_kernel
+@kernel
 def move_point(x, y, sx, sy, r, absolute):
     """Return one sensor's position within reach ``r`` of ``(sx, sy)``: ``s + r a`` for
     the action ``(x, y)`` (``a`` on the unit disk), or for the absolute position ``(x, y)``
@@ -91,7 +91,7 @@ def move_point(x, y, sx, sy, r, absolute):
     return x, y
 
 
-@inline_kernel
+@kernel
 def keep_point(nx, ny, sx, sy, tx, ty, r, rho):
     """Return ``(x, y, inside)``: the move ``(nx, ny)`` from ``(sx, sy)``, projected to the
     nearest feasible point if it ends inside the ``rho`` disk around the predicted target
