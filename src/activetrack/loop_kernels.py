@@ -86,6 +86,17 @@ def measure_rows(positions, sensors, orientation, std, uses, noise, out):
 
 
 @inline_kernel
+def times_transpose_into(A, B, out):
+    """Write ``A B^T`` into ``out``, each entry's products added in index order."""
+    for i in range(A.shape[0]):
+        for j in range(B.shape[0]):
+            c = 0.0
+            for k in range(A.shape[1]):
+                c += A[i, k] * B[j, k]
+            out[i, j] = c
+
+
+@inline_kernel
 def predict_into(x, P, Phi, Q, x_out, P_out, scratch):
     """Write the prediction of eq. (3), ``Phi x`` and ``Phi P Phi^T + Q``, into ``x_out``,
     ``P_out`` (``scratch`` (n, n) for ``P Phi^T``); the covariance symmetrized as the mean
@@ -96,17 +107,8 @@ def predict_into(x, P, Phi, Q, x_out, P_out, scratch):
         for j in range(n):
             a += Phi[i, j] * x[j]
         x_out[i] = a
-        for j in range(n):
-            c = 0.0
-            for k in range(n):
-                c += P[i, k] * Phi[j, k]
-            scratch[i, j] = c
-    for i in range(n):
-        for j in range(n):
-            c = 0.0
-            for k in range(n):
-                c += Phi[i, k] * scratch[k, j]
-            P_out[i, j] = c
+    times_transpose_into(P, Phi, scratch)  # P Phi^T
+    times_transpose_into(Phi, scratch.T, P_out)  # Phi (P Phi^T)
     for i in range(n):
         for j in range(i + 1):
             v = 0.5 * ((P_out[i, j] + Q[i, j]) + (P_out[j, i] + Q[j, i]))
