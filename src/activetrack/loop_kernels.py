@@ -8,12 +8,14 @@ step of :class:`activetrack.world.World` for copies whose sensors know their pos
 track one target that every sensor measures, with no occluders: the sensors' moves
 (eq. 13-16, :mod:`activetrack.motion_kernels`), the target's motion, the measurements,
 the EKF update (eq. 11, :mod:`activetrack.ekf_kernels`), the prediction and the trace of
-the posterior position covariance, all in one call. The other tasks run the same kernels
-one stage at a time.
+the posterior position covariance, all in one call; :func:`advance_observe_row` also
+writes the agents' observations (the single environment's step). The other tasks run the
+same kernels one stage at a time.
 
-Rounding: sums run in index order and products are rounded one at a time, so results can
-differ from NumPy's (whose matrix products go through BLAS, with fused multiply-adds on
-this machine) in the last bit; a distance is ``math.hypot``, as NumPy's complex ``abs``.
+Rounding: each product is rounded and the sums run in index order, so results can differ
+in the last bit from NumPy's matrix products (BLAS, with its own order and fused
+multiply-adds); a distance is libm's ``hypot`` (``np.hypot``), which differs in the last
+bit from NumPy's complex ``abs`` for many inputs.
 """
 
 from __future__ import annotations
