@@ -46,6 +46,7 @@ Example::
 
 from __future__ import annotations
 
+import math
 import warnings
 from typing import Any
 
@@ -379,7 +380,7 @@ def actions_array(actions: dict[str, Any], agents: list[str], what: str = "actio
     if (
         a.shape != (len(agents), 2)
         or a.dtype.kind not in "iuf"  # no bool, complex, object or string actions
-        or np.count_nonzero(np.isfinite(a)) != a.size
+        or not all(map(math.isfinite, a.ravel().tolist()))  # (cheaper than np.isfinite here)
     ):
         raise ValueError(_bad_action_message(actions, agents, what))
     return a if a.dtype == np.float64 else a.astype(np.float64)

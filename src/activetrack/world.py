@@ -532,10 +532,12 @@ class World:
 
     def _step(self, move: Any, moves: FloatArray, live: Any) -> StepResult | None:
         """Move the sensors of the copies ``live`` by ``move`` and advance them (steps 1-5)."""
+        absolute = move is sensor_motion.move_to
+        mv = self._moves_array(moves, "positions" if absolute else "actions")
         if self._one and self._fused:  # the single env: the short way
             if live is not None and self._select(live) is None:
                 return None
-            return self._step_one(move is sensor_motion.move_to, moves)
+            return self._step_one(absolute, mv)
         sel = 0 if live is None and self._one else self._select(live)
         if sel is None:
             return None
@@ -547,10 +549,8 @@ class World:
         # a copy's numbers must not depend on which other copies step with it.
         partial = isinstance(sel, np.ndarray)
         calc = slice(None) if partial else sel
-        mv = moves if self._one and moves.ndim == 2 else moves[calc]
         if self._fused:
             noise = self._noise_of(sel, partial)
-            absolute = move is sensor_motion.move_to
             sensors, projected, target, _ = self._advance_fused(mv, absolute, noise, calc)
             fixes, detected, results = sensors, None, [target]
             trace = target[-1][sel] if partial else target[-1]
@@ -607,6 +607,32 @@ class World:
             st["ended"][sel] = terminated | truncated
         return StepResult(-self._scale * score, terminated, truncated)
 
+    def _moves_array(self, moves: Any, name: str) -> FloatArray:
+        """Return the proposed moves as float64 (M, 2) for a world of one copy (which also
+        takes (1, M, 2)) or (N, M, 2), finite; or raise ValueError naming ``name``."""
+        m = self.n_sensors
+        a = moves if type(moves) is np.ndarray else np.asarray(moves)
+        if a.dtype != np.float64:
+            if a.dtype.kind not in "iuf":
+                raise ValueError(f"{name} must be real numbers, got dtype {a.dtype}")
+            a = a.astype(np.float64)
+        if self._one:
+            if a.shape == (1, m, 2):
+                a = a[0]
+            if a.shape != (m, 2):
+                raise ValueError(f"{name} must have shape ({m}, 2) or (1, {m}, 2), got {a.shape}")
+            # (on the single env's few numbers, cheaper than np.isfinite)
+            if not all(map(math.isfinite, a.ravel().tolist())):
+                raise ValueError(f"{name} must be finite (no NaN or inf), got {a.tolist()}")
+            return a
+        if a.shape != (self.num_copies, m, 2):
+            raise ValueError(f"{name} must have shape ({self.num_copies}, {m}, 2), got {a.shape}")
+        finite = np.isfinite(a).all(axis=(1, 2))
+        if not finite.all():
+            bad = np.flatnonzero(~finite)[:10].tolist()
+            raise ValueError(f"{name} must be finite (no NaN or inf); copies {bad}")
+        return a
+
     def _not_running(self, sel: _Selection) -> None:
         """Raise the RuntimeError of a step of copies ``sel`` without a running episode."""
         rows = self._rows(sel)
@@ -625,12 +651,6 @@ class World:
         if st["ended"]:
             self._not_running(0)
         sensors, x_true, P_pred = st["sensors"], t["x_true"], t["P_pred"]
-        if type(moves) is not np.ndarray or moves.dtype != np.float64:
-            moves = np.asarray(moves, np.float64)
-        if moves.ndim == 3 and moves.shape[0] == 1:  # (1, M, 2)
-            moves = moves[0]
-        if moves.shape != sensors.shape:  # the kernel indexes unchecked
-            raise ValueError(f"moves must have shape {sensors.shape}, got {moves.shape}")
         if self._noise is None:  # the single env's draw, without a call
             noise = (self._rngs[0] or self.rng(0)).standard_normal(self._n_noise)
         else:  # a world of one copy with noise blocks

@@ -144,11 +144,36 @@ def test_single_copy_observation_is_made_by_the_step_and_handed_out_once():
     np.testing.assert_array_equal(fused.observe(), staged.observe())
 
 
-@pytest.mark.parametrize("bad", [np.zeros((2, 2)), np.zeros((3, 3)), np.zeros((2, 3, 2))])
-def test_single_copy_step_refuses_a_wrong_shape(bad):
-    world = World("paper")
-    world.reset(seeds=[0])
-    before = np.array(world.get("sensors"))
-    with pytest.raises(ValueError, match="shape"):
-        world.step_actions(bad)
-    assert np.array_equal(world.get("sensors"), before)  # nothing stored
+@pytest.mark.parametrize("n", [1, 3])
+@pytest.mark.parametrize(
+    "bad, match",
+    [
+        ("shape", "actions must have shape"),
+        ("nan", "actions must be finite"),
+        ("inf", "actions must be finite"),
+        ("text", "actions must be real numbers"),
+    ],
+)
+def test_a_bad_step_raises_and_changes_nothing(n, bad, match):
+    """A step with bad moves raises a ValueError naming them, before any state or random
+    draw changes: the episode then goes on exactly as if the call had not been made."""
+    world, twin = World("paper", n), World("paper", n)
+    for w in (world, twin):
+        w.reset(seeds=range(n))
+    m = world.n_sensors
+    good = np.full((n, m, 2), 0.3) if n > 1 else np.full((m, 2), 0.3)
+    wrong = {
+        "shape": np.zeros((n, m + 1, 2)),
+        "nan": np.where(np.arange(good.size).reshape(good.shape) == 1, np.nan, good),
+        "inf": np.where(np.arange(good.size).reshape(good.shape) == 0, -np.inf, good),
+        "text": np.full(good.shape, "a"),
+    }[bad]
+    with pytest.raises(ValueError, match=match):
+        world.step_actions(wrong)
+    with pytest.raises(ValueError, match=match.replace("actions", "positions")):
+        world.step(wrong)
+    for w in (world, twin):
+        w.step_actions(good)
+    for key in ("sensors", "k", "trace", "x_true", "x_hat", "P", "x_pred", "P_pred"):
+        np.testing.assert_array_equal(world.get(key), twin.get(key))  # bit for bit
+    np.testing.assert_array_equal(world.observe(), twin.observe())
