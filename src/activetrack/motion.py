@@ -81,18 +81,34 @@ def psd_factor(A: FloatArray) -> FloatArray:
 def predict(
     x: FloatArray, P: FloatArray, Phi: FloatArray, Q: FloatArray
 ) -> tuple[FloatArray, FloatArray]:
-    """Return the propagated mean and symmetric covariance of eq. (3) (batched, unchecked;
-    :func:`activetrack.loop_kernels.predict_into`, exactly symmetric for a symmetric ``P``)."""
+    """Return the propagated mean and symmetric covariance of eq. (3) (batched;
+    :func:`activetrack.loop_kernels.predict_into`, exactly symmetric for a symmetric ``P``).
+
+    ``x`` (..., n) and ``P`` (..., n, n) keep their own batch shapes; the values are not
+    checked, the sizes are (ValueError: the kernel indexes unchecked).
+    """
     x, P = np.asarray(x, np.float64), np.asarray(P, np.float64)
-    n = P.shape[-1]
+    Phi, Q = matrix(Phi), matrix(Q)
+    n = Phi.shape[0]
+    if Phi.shape != (n, n) or Q.shape != (n, n) or x.shape[-1:] != (n,) or P.shape[-2:] != (n, n):
+        raise ValueError(
+            f"predict needs x (..., {n}) and P (..., {n}, {n}) for Phi and Q of shape"
+            f" ({n}, {n}); got x {x.shape}, P {P.shape}, Phi {Phi.shape}, Q {Q.shape}"
+        )
     batch = P.shape[:-2]
-    if x.shape[:-1] != batch:  # (rare) a mean without the covariance's batch, or the reverse
-        batch = np.broadcast_shapes(batch, x.shape[:-1])
-    x_out, P_out = np.empty(batch + (n,)), np.empty(batch + (n, n))
-    lk.predict_rows(
-        as_rows(x, batch, (n,)), as_rows(P, batch, (n, n)), matrix(Phi), matrix(Q),
-        x_out.reshape(-1, n), P_out.reshape(-1, n, n),
-    )  # fmt: skip
+    x_out, P_out = np.empty(x.shape), np.empty(P.shape)
+    if x.shape[:-1] == batch:  # (the common case) the mean's rows beside the covariances'
+        lk.predict_rows(
+            as_rows(x, batch, (n,)), as_rows(P, batch, (n, n)), Phi, Q, x_out.reshape(-1, n),
+            P_out.reshape(-1, n, n),
+        )  # fmt: skip
+        return x_out, P_out
+    # A mean and covariances of other batch shapes: each with a stand-in for the other.
+    xr, Pr = as_rows(x, x.shape[:-1], (n,)), as_rows(P, batch, (n, n))
+    lk.predict_rows(xr, np.zeros((xr.shape[0], n, n)), Phi, Q, x_out.reshape(-1, n),
+                    np.empty((xr.shape[0], n, n)))  # fmt: skip
+    lk.predict_rows(np.zeros((Pr.shape[0], n)), Pr, Phi, Q, np.empty((Pr.shape[0], n)),
+                    P_out.reshape(-1, n, n))  # fmt: skip
     return x_out, P_out
 
 

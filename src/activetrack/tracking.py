@@ -218,9 +218,16 @@ def advance_target(
 
 def move_target(target: TargetParams, x_true: FloatArray, process_noise: FloatArray) -> FloatArray:
     """Return the true target's next state (eq. 2) from ``process_noise`` (..., n) normals
-    (:func:`activetrack.loop_kernels.move_target_into`)."""
+    (:func:`activetrack.loop_kernels.move_target_into`; the two batch shapes broadcast)."""
     n = target.dim
+    if x_true.shape[-1:] != (n,) or process_noise.shape[-1:] != (n,):
+        raise ValueError(
+            f"move_target needs x_true and process_noise of shape (..., {n}), got"
+            f" {x_true.shape} and {process_noise.shape}"
+        )
     batch = x_true.shape[:-1]
+    if process_noise.shape[:-1] != batch:
+        batch = np.broadcast_shapes(batch, process_noise.shape[:-1])
     out = np.empty(batch + (n,))
     lk.move_target_rows(
         target.Phi, target.noise_factor, as_rows(x_true, batch, (n,)),
@@ -240,9 +247,14 @@ def measure(
     noise; a component a sensor's model does not measure is exactly 0
     (:func:`activetrack.loop_kernels.measure_point`).
     """
-    one = positions.ndim == sensors.ndim - 1
+    one = positions.ndim <= sensors.ndim - 1  # else a target axis before the sensors'
     targets = positions[..., None, :] if one else positions
     k, m = targets.shape[-2], sensors.shape[-2]
+    if m != params.n_sensors or positions.shape[-1:] != (2,) or sensors.shape[-1:] != (2,):
+        raise ValueError(
+            f"measure needs sensors (..., {params.n_sensors}, 2) and positions (..., 2) or"
+            f" (..., K, 2), got {sensors.shape} and {positions.shape}"
+        )
     batch = targets.shape[:-2]
     if sensors.shape[:-2] != batch:
         batch = np.broadcast_shapes(batch, sensors.shape[:-2])
@@ -250,7 +262,8 @@ def measure(
     lk.measure_rows(
         as_rows(targets, batch, (k, 2)), as_rows(sensors, batch, (m, 2)),
         params.orientation, params.noise_std, params.uses,
-        as_rows(noise, batch, (2 * m * k,)), out.reshape(-1, k, m, 2),
+        as_rows(np.reshape(noise, batch + (2 * m * k,)), batch, (2 * m * k,)),
+        out.reshape(-1, k, m, 2),
     )  # fmt: skip
     return out[..., 0, :, :] if one else out
 

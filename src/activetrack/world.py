@@ -533,17 +533,18 @@ class World:
     def _step(self, move: Any, moves: FloatArray, live: Any) -> StepResult | None:
         """Move the sensors of the copies ``live`` by ``move`` and advance them (steps 1-5)."""
         absolute = move is sensor_motion.move_to
-        mv = self._moves_array(moves, "positions" if absolute else "actions")
+        name = "positions" if absolute else "actions"
         if self._one and self._fused:  # the single env: the short way
             if live is not None and self._select(live) is None:
                 return None
-            return self._step_one(absolute, mv)
+            return self._step_one(absolute, moves, name)
         sel = 0 if live is None and self._one else self._select(live)
         if sel is None:
             return None
         st = self._s
         if st["ended"] if self._one else st["ended"][sel].any():
             self._not_running(sel)
+        mv = self._moves_array(moves, name, sel)
         # A subset of several copies is computed with all of them and written back alone:
         # stacked matrix products round a row differently with another number of rows, and
         # a copy's numbers must not depend on which other copies step with it.
@@ -607,9 +608,10 @@ class World:
             st["ended"][sel] = terminated | truncated
         return StepResult(-self._scale * score, terminated, truncated)
 
-    def _moves_array(self, moves: Any, name: str) -> FloatArray:
-        """Return the proposed moves as float64 (M, 2) for a world of one copy (which also
-        takes (1, M, 2)) or (N, M, 2), finite; or raise ValueError naming ``name``."""
+    def _moves_array(self, moves: Any, name: str, sel: _Selection) -> FloatArray:
+        """Return the proposed moves as C-contiguous float64 (M, 2) for a world of one copy
+        (which also takes (1, M, 2)) or (N, M, 2), those of the copies ``sel`` finite (the
+        others are not used); or raise ValueError naming ``name``."""
         m = self.n_sensors
         a = moves if type(moves) is np.ndarray else np.asarray(moves)
         if a.dtype != np.float64:
@@ -624,12 +626,13 @@ class World:
             # (on the single env's few numbers, cheaper than np.isfinite)
             if not all(map(math.isfinite, a.ravel().tolist())):
                 raise ValueError(f"{name} must be finite (no NaN or inf), got {a.tolist()}")
-            return a
+            # one kernel signature: a read-only or strided array would compile another
+            return a if a.flags.c_contiguous and a.flags.writeable else a.copy()
         if a.shape != (self.num_copies, m, 2):
             raise ValueError(f"{name} must have shape ({self.num_copies}, {m}, 2), got {a.shape}")
-        finite = np.isfinite(a).all(axis=(1, 2))
+        finite = np.isfinite(a[sel]).all(axis=(-2, -1))
         if not finite.all():
-            bad = np.flatnonzero(~finite)[:10].tolist()
+            bad = self._rows(sel)[~np.atleast_1d(finite)][:10].tolist()
             raise ValueError(f"{name} must be finite (no NaN or inf); copies {bad}")
         return a
 
@@ -643,13 +646,14 @@ class World:
             " before stepping"
         )
 
-    def _step_one(self, absolute: bool, moves: FloatArray) -> StepResult:
+    def _step_one(self, absolute: bool, moves: Any, name: str) -> StepResult:
         """:meth:`_step` of a fused world of one copy: one compiled call
         (:func:`activetrack.loop_kernels.advance_observe_row`) on its unbatched arrays,
         which also makes the observation :meth:`observe` returns next."""
         st, t = self._s, self._t[0]
         if st["ended"]:
             self._not_running(0)
+        moves = self._moves_array(moves, name, 0)
         sensors, x_true, P_pred = st["sensors"], t["x_true"], t["P_pred"]
         if self._noise is None:  # the single env's draw, without a call
             noise = (self._rngs[0] or self.rng(0)).standard_normal(self._n_noise)

@@ -10,8 +10,9 @@ states, rewards and observations on every task it serves.
 import numpy as np
 import pytest
 
-from activetrack import motion, tracking
+from activetrack import tracking
 from activetrack.motion import predict
+from activetrack.scenarios import make_scenario
 from activetrack.world import World
 from tests.core.helpers import random_spd
 
@@ -37,15 +38,45 @@ def test_predict_matches_numpy_and_is_exactly_symmetric(batch):
     assert P_next.shape == batch + (n, n) and x_next.shape == batch + (n,)
 
 
-def test_predict_broadcasts_one_mean_over_covariances():
+def test_predict_keeps_each_batch_shape_and_checks_sizes():
     rng = np.random.default_rng(1)
-    m = motion.constant_velocity(1.0, 0.1) if hasattr(motion, "constant_velocity") else None
-    Phi = np.eye(4) + np.diag([1.0, 1.0], 2) if m is None else m.Phi
+    Phi = np.eye(4) + np.diag([0.1, 0.1], 2)  # constant velocity, dt = 0.1
+    Q = random_spd(rng, 4)
     P = np.stack([random_spd(rng, 4) for _ in range(3)])
     x = rng.standard_normal(4)
-    x_next, P_next = predict(x, P, Phi, np.eye(4))
-    assert x_next.shape == (3, 4)
-    np.testing.assert_allclose(x_next, np.broadcast_to(Phi @ x, (3, 4)), rtol=1e-14)
+    x_next, P_next = predict(x, P, Phi, Q)  # one mean, three covariances
+    assert x_next.shape == (4,) and P_next.shape == (3, 4, 4)
+    np.testing.assert_allclose(x_next, Phi @ x, rtol=1e-14)
+    np.testing.assert_allclose(P_next, Phi @ P @ Phi.T + Q, rtol=1e-13)
+    xs = rng.standard_normal((2, 4))
+    x_next, P_next = predict(xs, P[0], Phi, Q)  # two means, one covariance
+    assert x_next.shape == (2, 4) and P_next.shape == (4, 4)
+    np.testing.assert_allclose(x_next, xs @ Phi.T, rtol=1e-14)
+    for bad in ((x[:2], P), (x, P[:, :2, :2]), (np.zeros((5, 2)), np.zeros((5, 2, 2)))):
+        with pytest.raises(ValueError, match="predict needs"):  # the kernel would overrun
+            predict(*bad, Phi, Q)
+
+
+def test_measure_and_move_target_broadcast_and_check_sizes():
+    p = tracking.LoopParams.from_scenario(make_scenario("paper"))
+    rng = np.random.default_rng(5)
+    sensors = rng.normal(size=(4, 3, 2)) * 5
+    target = rng.normal(size=2)
+    noise = rng.standard_normal((4, 6))
+    z = tracking.measure(p, target, sensors, noise)  # one target for every copy
+    for b in range(4):
+        np.testing.assert_array_equal(z[b], tracking.measure(p, target, sensors[b], noise[b]))
+    np.testing.assert_array_equal(z, tracking.measure(p, target, sensors, noise.reshape(4, 3, 2)))
+    with pytest.raises(ValueError, match="measure needs"):  # more sensors than the params'
+        tracking.measure(p, target, np.zeros((6, 2)), np.zeros(12))
+    with pytest.raises(ValueError):  # too few normals
+        tracking.measure(p, target, sensors, noise[:1])
+    t0 = p.targets[0]
+    x, w = rng.normal(size=4), rng.standard_normal((3, 4))
+    got = tracking.move_target(t0, x, w)
+    np.testing.assert_allclose(got, x @ t0.Phi.T + w @ t0.noise_factor.T, rtol=1e-13, atol=1e-13)
+    with pytest.raises(ValueError, match="move_target needs"):
+        tracking.move_target(t0, x[:2], w)
 
 
 def test_move_target_matches_numpy():
@@ -177,3 +208,15 @@ def test_a_bad_step_raises_and_changes_nothing(n, bad, match):
     for key in ("sensors", "k", "trace", "x_true", "x_hat", "P", "x_pred", "P_pred"):
         np.testing.assert_array_equal(world.get(key), twin.get(key))  # bit for bit
     np.testing.assert_array_equal(world.observe(), twin.observe())
+
+
+def test_moves_of_copies_that_do_not_step_are_not_read():
+    world = World("paper", 3)
+    world.reset(seeds=[0, 1, 2])
+    a = np.full((3, 3, 2), 0.2)
+    a[1] = np.nan  # copy 1 does not step
+    world.step_actions(a, live=[0, 2])
+    assert world.get("k").tolist() == [1, 0, 1]
+    assert np.isfinite(world.get("x_hat")).all()
+    with pytest.raises(ValueError, match=r"copies \[1\]"):
+        world.step_actions(a, live=[1, 2])
