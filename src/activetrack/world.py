@@ -627,7 +627,8 @@ class World:
             if not all(map(math.isfinite, a.ravel().tolist())):
                 raise ValueError(f"{name} must be finite (no NaN or inf), got {a.tolist()}")
             # one kernel signature: a read-only or strided array would compile another
-            return a if a.flags.c_contiguous and a.flags.writeable else a.copy()
+            flags = a.flags
+            return a if flags.c_contiguous and flags.writeable else a.copy()
         if a.shape != (self.num_copies, m, 2):
             raise ValueError(f"{name} must have shape ({self.num_copies}, {m}, 2), got {a.shape}")
         finite = np.isfinite(a[sel]).all(axis=(-2, -1))
