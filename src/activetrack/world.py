@@ -545,6 +545,9 @@ class World:
         if st["ended"] if self._one else st["ended"][sel].any():
             self._not_running(sel)
         mv = self._moves_array(moves, name, sel)
+        if isinstance(sel, np.ndarray):  # the others are computed, not used: zero moves
+            given, mv = mv, np.zeros_like(mv)
+            mv[sel] = given[sel]
         # A subset of several copies is computed with all of them and written back alone:
         # stacked matrix products round a row differently with another number of rows, and
         # a copy's numbers must not depend on which other copies step with it.
