@@ -225,15 +225,18 @@ def move_target(target: TargetParams, x_true: FloatArray, process_noise: FloatAr
             f"move_target needs x_true and process_noise of shape (..., {n}), got"
             f" {x_true.shape} and {process_noise.shape}"
         )
-    batch = x_true.shape[:-1]
-    if process_noise.shape[:-1] != batch:
-        batch = np.broadcast_shapes(batch, process_noise.shape[:-1])
+    batch = _batch(x_true.shape[:-1], process_noise.shape[:-1])
     out = np.empty(batch + (n,))
     lk.move_target_rows(
         target.Phi, target.noise_factor, as_rows(x_true, batch, (n,)),
         as_rows(process_noise, batch, (n,)), out.reshape(-1, n),
     )  # fmt: skip
     return out
+
+
+def _batch(first: tuple[int, ...], second: tuple[int, ...]) -> tuple[int, ...]:
+    """Return the batch shape two arguments broadcast to (the first when they agree)."""
+    return first if first == second else np.broadcast_shapes(first, second)
 
 
 def measure(
@@ -255,9 +258,7 @@ def measure(
             f"measure needs sensors (..., {params.n_sensors}, 2) and positions (..., 2) or"
             f" (..., K, 2), got {sensors.shape} and {positions.shape}"
         )
-    batch = targets.shape[:-2]
-    if sensors.shape[:-2] != batch:
-        batch = np.broadcast_shapes(batch, sensors.shape[:-2])
+    batch = _batch(targets.shape[:-2], sensors.shape[:-2])
     out = np.empty(batch + (k, m, 2))
     lk.measure_rows(
         as_rows(targets, batch, (k, 2)), as_rows(sensors, batch, (m, 2)),
