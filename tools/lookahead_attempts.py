@@ -25,7 +25,6 @@ import numpy as np
 from activetrack.baselines import horizon_model as hm
 from activetrack.baselines import horizon_paths as hp
 from activetrack.baselines import lookahead as la
-from activetrack.baselines.gsr import GSR
 from activetrack.objective import sensor_information
 from activetrack.world import World
 
@@ -81,23 +80,18 @@ def patch(attempt: str, alpha: float) -> None:
         hm.discount_weights = cut
 
 
-def mean_traces(seeds: list[int], planner: la.Lookahead | None) -> np.ndarray:
-    """Return each seed's mean posterior trace on ``paper`` (GSR for ``planner`` None)."""
-    world = World("paper", len(seeds))
-    world.reset(seeds=seeds)
-    gsr, previous, traces = GSR(), None, []
-    while not world.truncated.all():
-        problem = world.planning_problem()
+class Watched:
+    """The look-ahead planner, with what the variants read set before each plan: the
+    prediction's position covariance and the steps left (the copies are in step)."""
+
+    def __init__(self, planner: la.Lookahead, n_steps: int) -> None:
+        self.planner, self.n_steps, self.k = planner, n_steps, 0
+
+    def plan_prediction(self, problem, previous=None):  # noqa: ANN001, ANN201 (as Lookahead's)
         STATE["cov"] = np.array(problem.prior_cov)
-        STATE["left"] = world.scenario.n_steps - int(world.k[0])  # copies in step
-        if planner is None:
-            positions = gsr.plan(problem)
-        else:
-            res = planner.plan_prediction(problem, previous=previous)
-            positions, previous = res.positions, res.plan
-        world.step(positions)
-        traces.append(world.trace.copy())
-    return np.mean(traces, axis=0)
+        STATE["left"] = self.n_steps - self.k
+        self.k += 1
+        return self.planner.plan_prediction(problem, previous=previous)
 
 
 def main() -> None:
@@ -107,9 +101,10 @@ def main() -> None:
     parser.add_argument("--alpha", type=float, default=0.5, help="sigma: the points' scale")
     args = parser.parse_args()
     seeds = list(range(args.start, args.start + 100))
-    gsr = mean_traces(seeds, None)  # before the patch: GSR is unaffected by every variant
+    gsr, _ = la.run_batched("paper", seeds)  # before the patch: GSR is unaffected by every variant
     patch(args.attempt, args.alpha)
-    look = mean_traces(seeds, la.Lookahead())
+    n_steps = World("paper").scenario.n_steps
+    look, _ = la.run_batched("paper", seeds, Watched(la.Lookahead(), n_steps))
     idx = np.random.default_rng(0).integers(0, 100, (4000, 100))
     boot = look[idx].mean(axis=1) / gsr[idx].mean(axis=1)
     lo, hi = np.percentile(boot, [2.5, 97.5])
