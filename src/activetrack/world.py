@@ -659,10 +659,7 @@ class World:
             self._not_running(0)
         moves = self._moves_array(moves, name, 0)
         sensors, x_true, P_pred = st["sensors"], t["x_true"], t["P_pred"]
-        if self._noise is None:  # the single env's draw, without a call
-            noise = (self._rngs[0] or self.rng(0)).standard_normal(self._n_noise)
-        else:  # a world of one copy with noise blocks
-            noise = self._step_noise(0)
+        noise = self._noise_of(0, False)
         new_sensors, projected = np.empty(sensors.shape), np.empty(sensors.shape[0], bool)
         x_next_true, x_post, x_pred = (
             np.empty(x_true.shape),

@@ -64,8 +64,11 @@ def test_measure_and_move_target_broadcast_and_check_sizes():
     target = rng.normal(size=2)
     noise = rng.standard_normal((4, 6))
     z = tracking.measure(p, target, sensors, noise)  # one target for every copy
-    for b in range(4):
-        np.testing.assert_array_equal(z[b], tracking.measure(p, target, sensors[b], noise[b]))
+    d = target - sensors  # eq. (4) longhand, orientation 0, bearings wrapped after the noise
+    want_d = np.hypot(d[..., 0], d[..., 1]) + np.sqrt(p.sigma_d2) * noise[:, 0::2]
+    want_t = np.arctan2(d[..., 1], d[..., 0]) + np.sqrt(p.sigma_theta2) * noise[:, 1::2]
+    want_t = (want_t + np.pi) % (2 * np.pi) - np.pi
+    np.testing.assert_allclose(z, np.stack([want_d, want_t], -1), rtol=1e-14, atol=1e-14)
     np.testing.assert_array_equal(z, tracking.measure(p, target, sensors, noise.reshape(4, 3, 2)))
     with pytest.raises(ValueError, match="measure needs"):  # more sensors than the params'
         tracking.measure(p, target, np.zeros((6, 2)), np.zeros(12))
@@ -220,3 +223,55 @@ def test_moves_of_copies_that_do_not_step_are_not_read():
     assert np.isfinite(world.get("x_hat")).all()
     with pytest.raises(ValueError, match=r"copies \[1\]"):
         world.step_actions(a, live=[1, 2])
+
+
+def test_one_call_step_of_mixed_sensors_matches_a_longhand_step():
+    """One step of ``mixed`` (range-and-bearing, range-only and bearing-only sensors),
+    written out from eq. (2), (4), (11) and (3): the draws taken from a copy of the
+    episode's generator, the EKF with only the measured rows of H and R."""
+    import copy
+
+    world = World("mixed")
+    world.reset(seeds=[3])
+    sc, p = world.scenario, world.params
+    m, n = world.n_sensors, 4
+    sensors, x_true = np.array(world.get("sensors", 0)), np.array(world.get("x_true", 0))
+    x_pred, P_pred = np.array(world.get("x_pred", 0)), np.array(world.get("P_pred", 0))
+    normals = copy.deepcopy(world.rng(0)).standard_normal(n + 2 * m)
+    a = np.random.default_rng(0).uniform(-0.6, 0.6, (m, 2))
+    world.step_actions(a)
+    assert not world.get("projected", 0).any()
+    moved = sensors + sc.r[:, None] * a
+    phi, noise_factor = p.targets[0].Phi, p.targets[0].noise_factor
+    target = phi @ x_true + noise_factor @ normals[:n]
+    sd2, st2 = sc.per_sensor("sigma_d2"), sc.per_sensor("sigma_theta2")
+    rows, h_rows, r_diag, nu = [], [], [], []
+    for i, (s, code) in enumerate(zip(moved, sc.sensor_models, strict=True)):
+        dx, dy = target[0] - s[0], target[1] - s[1]
+        ex, ey = x_pred[0] - s[0], x_pred[1] - s[1]
+        e2 = ex * ex + ey * ey
+        if code in (0, 1):  # range
+            z = np.hypot(dx, dy) + np.sqrt(sd2[i]) * normals[n + 2 * i]
+            rows.append(z)
+            h_rows.append([ex / np.sqrt(e2), ey / np.sqrt(e2)])
+            r_diag.append(sd2[i])
+            nu.append(z - np.sqrt(e2))
+        if code in (0, 2):  # bearing, wrapped after the noise
+            z = np.arctan2(dy, dx) + np.sqrt(st2[i]) * normals[n + 2 * i + 1]
+            z = (z + np.pi) % (2 * np.pi) - np.pi
+            h_rows.append([-ey / e2, ex / e2])
+            r_diag.append(st2[i])
+            nu.append((z - np.arctan2(ey, ex) + np.pi) % (2 * np.pi) - np.pi)
+    H = np.zeros((len(h_rows), n))
+    H[:, :2] = h_rows
+    S = H @ P_pred @ H.T + np.diag(r_diag)
+    K = P_pred @ H.T @ np.linalg.inv(S)
+    x_post, P_post = x_pred + K @ np.array(nu), P_pred - K @ S @ K.T
+    np.testing.assert_allclose(world.get("sensors", 0), moved, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(world.get("x_true", 0), target, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(world.get("x_hat", 0), x_post, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(world.get("P", 0), P_post, rtol=1e-8, atol=1e-12)
+    np.testing.assert_allclose(world.get("x_pred", 0), phi @ x_post, rtol=1e-9, atol=1e-9)
+    P_next = phi @ P_post @ phi.T + p.targets[0].Q
+    np.testing.assert_allclose(world.get("P_pred", 0), P_next, rtol=1e-8, atol=1e-12)
+    assert world.get("trace", 0) == pytest.approx(P_post[0, 0] + P_post[1, 1], rel=1e-9)

@@ -127,11 +127,12 @@ def test_dagger_at_least_as_good_as_bc_on_the_same_label_budget(bc, references):
     the median over three training seeds of each.
 
     Tolerance: DAgger's median may exceed BC's by at most 5%. One training run is too noisy
-    to compare: at this budget, training seeds 0, 1, 2 gave BC 2.31, 2.36, 2.55 and DAgger
-    2.30, 2.35, 2.36 at one commit, and after changes of 1e-15 in the world's arithmetic
-    (which move GSR's labels by about 1e-7) BC 2.33, 2.35, 2.56 and DAgger 3.24, 2.36, 2.41
-    (GSR 2.27): a DAgger run sometimes fails badly, and DAgger is not reliably better than
-    BC on this preset (see the README).
+    to compare: this test prints (``pytest -s tests/train/test_imitation.py -k dagger``)
+    DAgger 3.24, 2.36, 2.41 and BC 2.33, 2.35, 2.56 for seeds 0, 1, 2 (GSR 2.27), where the
+    single-seed version of it printed DAgger 2.30 and BC 2.31 one commit earlier (27d4a82),
+    before changes of 1e-15 in the world's arithmetic that move GSR's labels by about 1e-7:
+    a DAgger run sometimes fails badly, and DAgger is not reliably better than BC on this
+    preset (see the README).
     """
     bc_result, _ = bc
     gsr, _ = references
