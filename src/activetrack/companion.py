@@ -18,7 +18,7 @@ import math
 import numpy as np
 
 from activetrack._jit import kernel
-from activetrack.hessenberg_qr import hessenberg_eigvals
+from activetrack.hessenberg_qr import hqr
 from activetrack.validation import FloatArray
 
 IM_TOL = 1e-2  # accept eigenvalues this close to the real axis (extra candidates are harmless)
@@ -68,14 +68,63 @@ def monic(gam: FloatArray) -> FloatArray:
 
 
 @kernel
-def _companion_into(q: FloatArray, a: FloatArray) -> None:
-    """Write the companion matrix of ``z^n + sum q_k z^k`` into ``a`` (n, n), ``n = len(q)``."""
+def _balanced_companion_into(q: FloatArray, a: FloatArray) -> None:
+    """Write the balanced companion matrix of ``z^n + sum q_k z^k`` into ``a`` (n, n).
+
+    :func:`activetrack.hessenberg_qr.balance` of the companion matrix (first row
+    ``-q`` reversed, ones below the diagonal), bit for bit, in O(n) a pass instead of
+    O(n^2): a diagonal similarity keeps the sparsity, so only the first row ``top`` and
+    the subdiagonal ``sub`` are stored, and each row or column sum runs over its nonzero
+    entries in the general loop's order.
+    """
     n = q.shape[0]
+    top = np.empty(n)
+    sub = np.ones(n)  # sub[i] = a[i, i - 1] (sub[0] unused)
+    for j in range(n):
+        top[j] = -q[n - 1 - j]
+    done = False
+    while not done:
+        done = True
+        for i in range(n):
+            c = 0.0  # column i without the diagonal: a[0, i], a[i + 1, i]
+            if i != 0:
+                c += abs(top[i])
+            if i + 1 < n:
+                c += abs(sub[i + 1])
+            r = 0.0  # row i without the diagonal
+            if i == 0:
+                for j in range(1, n):
+                    r += abs(top[j])
+            else:
+                r = abs(sub[i])
+            if c == 0.0 or r == 0.0:
+                continue
+            s = c + r
+            f = 1.0
+            g = r / 2.0
+            while c < g:
+                f *= 2.0
+                c *= 4.0
+            g = r * 2.0
+            while c > g:
+                f /= 2.0
+                c /= 4.0
+            if (c + r) / f < 0.95 * s:
+                done = False
+                if i == 0:
+                    for j in range(n):
+                        top[j] /= f
+                    top[0] *= f
+                else:
+                    sub[i] /= f
+                    top[i] *= f
+                if i + 1 < n:
+                    sub[i + 1] *= f
     a[:, :] = 0.0
     for j in range(n):
-        a[0, j] = -q[n - 1 - j]
+        a[0, j] = top[j]
     for i in range(1, n):
-        a[i, i - 1] = 1.0
+        a[i, i - 1] = sub[i]
 
 
 @kernel
@@ -101,8 +150,8 @@ def _roots_into(q: FloatArray, wr: FloatArray, wi: FloatArray) -> bool:
         return True
     n = 10 - z
     a = np.empty((n, n))  # contiguous: QR's indexing compiles to fixed strides
-    _companion_into(q[z:], a)
-    if not hessenberg_eigvals(a, wr[z:], wi[z:]):
+    _balanced_companion_into(q[z:], a)
+    if not hqr(a, wr[z:], wi[z:]):
         wr[:] = np.nan
         wi[:] = np.nan
         return False

@@ -125,28 +125,21 @@ def hqr(a: np.ndarray, wr: np.ndarray, wi: np.ndarray) -> bool:
                 y = x
                 w = -0.4375 * s * s
             its += 1
-            # The shifts' first column, and where two small subdiagonal entries in a row
-            # let the bulge start (m > low).
-            m = nn - 2
-            p = q = r = 0.0
-            while m >= low:
-                z = a[m, m]
-                r = x - z
-                s = y - z
-                p = (r * s - w) / a[m + 1, m] + a[m, m + 1]
-                q = a[m + 1, m + 1] - z - r - s
-                r = a[m + 2, m + 1]
-                s = 1.0 / (abs(p) + abs(q) + abs(r))  # a reciprocal: divisions are slow
-                p *= s
-                q *= s
-                r *= s
-                if m == low:
-                    break
-                u = abs(a[m, m - 1]) * (abs(q) + abs(r))
-                v = abs(p) * (abs(a[m - 1, m - 1]) + abs(z) + abs(a[m + 1, m + 1]))
-                if u + v == v:
-                    break
-                m -= 1
+            # The first column of (A - s1)(A - s2) at the top of the active block: the bulge
+            # starts at m = low. (EISPACK also looks for two small subdiagonal entries in a
+            # row to start lower; at n = 10 that saves a few rows in one sweep of twenty
+            # and costs two divisions per row of the search in every sweep.)
+            m = low
+            z = a[m, m]
+            r = x - z
+            s = y - z
+            p = (r * s - w) / a[m + 1, m] + a[m, m + 1]
+            q = a[m + 1, m + 1] - z - r - s
+            r = a[m + 2, m + 1]
+            s = 1.0 / (abs(p) + abs(q) + abs(r))  # a reciprocal: divisions are slow
+            p *= s
+            q *= s
+            r *= s
             for i in range(m + 2, nn + 1):
                 a[i, i - 2] = 0.0
                 if i != m + 2:
@@ -166,10 +159,7 @@ def hqr(a: np.ndarray, wr: np.ndarray, wi: np.ndarray) -> bool:
                 s = math.copysign(math.sqrt(p * p + q * q + r * r), p)
                 if s == 0.0:
                     continue
-                if k == m:
-                    if low != m:
-                        a[k, k - 1] = -a[k, k - 1]
-                else:
+                if k != m:
                     a[k, k - 1] = -s * x
                 p += s
                 inv = 1.0 / s
@@ -179,20 +169,29 @@ def hqr(a: np.ndarray, wr: np.ndarray, wi: np.ndarray) -> bool:
                 inv = 1.0 / p
                 q *= inv
                 r *= inv
-                for j in range(k, nn + 1):
-                    p = a[k, j] + q * a[k + 1, j]
-                    if k != nn - 1:
-                        p += r * a[k + 2, j]
+                # The reflection on rows k..k+2 (columns k..nn), then columns k..k+2;
+                # a 2-vector one at the last step. The two loops are written out (not one
+                # loop with a branch inside) so that each compiles branch-free.
+                if k != nn - 1:
+                    for j in range(k, nn + 1):
+                        p = a[k, j] + q * a[k + 1, j] + r * a[k + 2, j]
                         a[k + 2, j] -= p * z
-                    a[k + 1, j] -= p * y
-                    a[k, j] -= p * x
-                for i in range(low, min(nn, k + 3) + 1):
-                    p = x * a[i, k] + y * a[i, k + 1]
-                    if k != nn - 1:
-                        p += z * a[i, k + 2]
+                        a[k + 1, j] -= p * y
+                        a[k, j] -= p * x
+                    for i in range(low, min(nn, k + 3) + 1):
+                        p = x * a[i, k] + y * a[i, k + 1] + z * a[i, k + 2]
                         a[i, k + 2] -= p * r
-                    a[i, k + 1] -= p * q
-                    a[i, k] -= p
+                        a[i, k + 1] -= p * q
+                        a[i, k] -= p
+                else:
+                    for j in range(k, nn + 1):
+                        p = a[k, j] + q * a[k + 1, j]
+                        a[k + 1, j] -= p * y
+                        a[k, j] -= p * x
+                    for i in range(low, nn + 1):
+                        p = x * a[i, k] + y * a[i, k + 1]
+                        a[i, k + 1] -= p * q
+                        a[i, k] -= p
     return True
 
 

@@ -27,6 +27,7 @@ KERNEL_MODULES = (
     "activetrack.companion",
     "activetrack._coefficients",
     "activetrack.solver_steps",
+    "activetrack.solver_inputs",
     "activetrack.solver_scalar",
     "activetrack.objective",
     "activetrack.ekf_kernels",

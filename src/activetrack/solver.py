@@ -92,8 +92,16 @@ from numpy.typing import ArrayLike
 from activetrack._coefficients import sylvester_gammas
 from activetrack.companion import monic, monic_roots
 from activetrack.solver_batch import solve_batch
+from activetrack.solver_inputs import (
+    MAX_DISTANCE_RATIO,
+    MAX_PRIOR_CONDITION,
+    MAX_SCALE,
+    MIN_INFORMATION_RATIO,
+    MIN_SCALE,
+    accepted_point,
+)
 from activetrack.solver_results import BatchSolution, SingleSensorSolution
-from activetrack.solver_scalar import solve_scalar
+from activetrack.solver_scalar import solve_checked, solve_point
 from activetrack.solver_steps import (
     RHO_FLOOR,
     SIGN_RATIO,
@@ -127,12 +135,6 @@ __all__ = [
     "solve_single_sensor",
     "solve_single_sensor_batch",
 ]
-
-MIN_SCALE = 1e-50  # smallest nonzero magnitude accepted (see the module docstring)
-MAX_SCALE = 1e50  # largest magnitude accepted
-MAX_DISTANCE_RATIO = 1e5  # largest ||c|| / r accepted
-MAX_PRIOR_CONDITION = 1e8  # largest condition number l1 / l2 of prior_info accepted
-MIN_INFORMATION_RATIO = 1e-30  # of the two largest of l1, 1/sigma_d2, 1/(sigma_theta2 r^2)
 
 # The private batch kernel under its historical name (the batched GSR, tests and tools use
 # it): _solve_batch_unchecked(P, c, r, rho, sigma_d2, sigma_theta2) -> BatchSolution on
@@ -172,12 +174,6 @@ def _check_scale(l1, l2, nc, r, rho, sigma_d2, sigma_theta2) -> None:
     _check_information(l1, 1.0 / sigma_d2, 1.0 / (sigma_theta2 * safe * safe), r)
 
 
-def _informative(l1: float, a: float, b_r2: float) -> bool:
-    """Return whether the two largest information scales are within the ratio (floats)."""
-    least = MIN_INFORMATION_RATIO * max(l1, a, b_r2)
-    return (l1 >= least) + (a >= least) + (b_r2 >= least) >= 2
-
-
 _INFO_NAMES = ("prior_info", "sigma_d2", "sigma_theta2")
 
 
@@ -209,48 +205,57 @@ def _check_information(l1, a, b_r2, r) -> None:
 def _checked_scalars(prior_info, c, r, rho, sigma_d2, sigma_theta2) -> tuple[float, ...]:
     """Return ``(p11, p12, p22, c1, c2, r, rho, sigma_d2, sigma_theta2)`` as checked floats.
 
-    Float-only after the two array conversions: a check costs about a microsecond.
+    Converts each input (ValueError if not numeric or of the wrong shape), then lets
+    :func:`~activetrack.solver_inputs.accepted_point` decide; only a rejected problem runs
+    the checks below, which name the parameter outside the accepted range.
     """
     P = _as_array("prior_info", prior_info)
     if P.shape != (2, 2):
         raise ValueError(f"prior_info must have shape (2, 2), got {P.shape}")
     p11, p12, p21, p22 = P.ravel().tolist()
-    spd2_entries("prior_info", p11, p12, p21, p22, MAX_SCALE)
-    p12 = 0.5 * (p12 + p21)
     cc = _as_array("c", c)
     if cc.shape != (2,):
         raise ValueError(f"c must have shape (2,), got {cc.shape}")
     c1, c2 = cc.tolist()
-    if not (math.isfinite(c1) and math.isfinite(c2)):
-        raise ValueError(f"c must be finite (no NaN or inf), got {c!r}")
     r = real_scalar("r", r, allow_zero=True)
     rho = real_scalar("rho", rho, allow_zero=True)
     sigma_d2 = real_scalar("sigma_d2", sigma_d2)
     sigma_theta2 = real_scalar("sigma_theta2", sigma_theta2)
-    l1, l2 = eigenvalues(p11, p12, p22)
-    nc = math.hypot(c1, c2)
-    lo, hi = MIN_SCALE, MAX_SCALE
-    # The whole accepted range in one test (every call runs it); _check_scale names what
-    # is outside.
-    inside = (
-        lo <= l2
-        and l1 <= hi
-        and l1 <= MAX_PRIOR_CONDITION * l2
-        and lo <= sigma_d2 <= hi
-        and lo <= sigma_theta2 <= hi
-        and (lo <= rho <= hi or rho == 0.0)
-        and (lo <= nc <= hi or nc == 0.0)
-        and (
-            r == 0.0
-            or lo <= r <= hi
-            and nc <= MAX_DISTANCE_RATIO * r
-            and (rho >= RHO_FLOOR * r or rho == 0.0)
-            and _informative(l1, 1.0 / sigma_d2, 1.0 / (sigma_theta2 * r * r))
-        )
-    )
-    if not inside:
-        _check_scale(l1, l2, nc, r, rho, sigma_d2, sigma_theta2)
-    return p11, p12, p22, c1, c2, r, rho, sigma_d2, sigma_theta2
+    if not accepted_point(p11, p12, p21, p22, c1, c2, r, rho, sigma_d2, sigma_theta2):
+        spd2_entries("prior_info", p11, p12, p21, p22, MAX_SCALE)
+        if not (math.isfinite(c1) and math.isfinite(c2)):
+            raise ValueError(f"c must be finite (no NaN or inf), got {c!r}")
+        l1, l2 = eigenvalues(p11, 0.5 * (p12 + p21), p22)
+        # Raises unless the problem sits on an edge of the range within rounding (the
+        # ratios are tested as quotients here, as products in accepted_point): then solved.
+        _check_scale(l1, l2, math.hypot(c1, c2), r, rho, sigma_d2, sigma_theta2)
+    return p11, 0.5 * (p12 + p21), p22, c1, c2, r, rho, sigma_d2, sigma_theta2
+
+
+_FLOAT64 = np.dtype(np.float64)
+
+
+def _plain_floats(prior_info, c, r, rho, sigma_d2, sigma_theta2) -> tuple[float, ...] | None:
+    """Return the ten floats of one problem (the prior's four entries first) when the
+    inputs are float64 arrays of shapes (2, 2) and (2,) and four floats, else None (the
+    general conversion of :func:`_checked_scalars` then runs). Cheap tests first: this
+    runs before every checked scalar solve."""
+    if (
+        type(prior_info) is np.ndarray
+        and type(c) is np.ndarray
+        and prior_info.dtype is _FLOAT64  # NumPy's float64 dtype is one object
+        and c.dtype is _FLOAT64
+        and prior_info.shape == (2, 2)
+        and c.shape == (2,)
+        and isinstance(r, float)
+        and isinstance(rho, float)
+        and isinstance(sigma_d2, float)
+        and isinstance(sigma_theta2, float)
+    ):
+        (p11, p12), (p21, p22) = prior_info.tolist()
+        c1, c2 = c.tolist()
+        return p11, p12, p21, p22, c1, c2, r, rho, sigma_d2, sigma_theta2
+    return None
 
 
 # ---------------------------------------------------------------------------------------
@@ -283,30 +288,32 @@ def solve_single_sensor(
     Raises:
         ValueError: naming the offending parameter and its allowed range.
     """
-    if check:
-        args = _checked_scalars(prior_info, c, r, rho, sigma_d2, sigma_theta2)
-    elif (
-        type(prior_info) is np.ndarray
-        and type(c) is np.ndarray
-        and prior_info.dtype == c.dtype == np.float64
-    ):  # float64 arrays (GSR's case): their floats at once
-        p11, p12, _, p22 = prior_info.ravel().tolist()
-        c1, c2 = c.tolist()
-        args = (p11, p12, p22, c1, c2, float(r), float(rho), float(sigma_d2), float(sigma_theta2))
-    else:
-        P = prior_info
-        args = (
-            float(P[0][0]),
-            float(P[0][1]),
-            float(P[1][1]),
-            float(c[0]),
-            float(c[1]),
-            float(r),
-            float(rho),
-            float(sigma_d2),
-            float(sigma_theta2),
-        )
-    return SingleSensorSolution(*solve_scalar(*args))
+    plain = _plain_floats(prior_info, c, r, rho, sigma_d2, sigma_theta2)
+    accepted = False
+    if check and plain is not None:  # checks and solve in one compiled call
+        # The dispatchers themselves: the Kernel wrapper's call costs a few tenths of a us.
+        sx, sy, value, case, feasible, accepted = solve_checked.dispatcher(*plain)
+    if not accepted:
+        if check:
+            args = _checked_scalars(prior_info, c, r, rho, sigma_d2, sigma_theta2)
+        elif plain is not None:  # float64 arrays and floats (GSR's case)
+            p11, p12, _, p22, c1, c2, r, rho, sigma_d2, sigma_theta2 = plain
+            args = (p11, p12, p22, c1, c2, r, rho, sigma_d2, sigma_theta2)
+        else:
+            P = prior_info
+            args = (
+                float(P[0][0]),
+                float(P[0][1]),
+                float(P[1][1]),
+                float(c[0]),
+                float(c[1]),
+                float(r),
+                float(rho),
+                float(sigma_d2),
+                float(sigma_theta2),
+            )
+        sx, sy, value, case, feasible = solve_point.dispatcher(*args)
+    return SingleSensorSolution(np.array([sx, sy]), value, case, feasible)
 
 
 def solve_single_sensor_batch(

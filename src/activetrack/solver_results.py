@@ -9,7 +9,7 @@ import numpy as np
 from activetrack.validation import FloatArray
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, init=False)
 class SingleSensorSolution:
     """The solution of one single-sensor problem.
 
@@ -24,6 +24,12 @@ class SingleSensorSolution:
     value: float
     case: int
     feasible: bool
+
+    def __init__(self, s: FloatArray, value: float, case: int, feasible: bool) -> None:
+        # The generated __init__ of a frozen dataclass sets each field through
+        # object.__setattr__ (0.8 us, a tenth of a scalar solve); one dict update does it
+        # at a third of that.
+        self.__dict__.update(s=s, value=value, case=case, feasible=feasible)
 
 
 @dataclass(frozen=True)

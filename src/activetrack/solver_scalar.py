@@ -3,9 +3,9 @@
 The steps of :mod:`activetrack.solver_steps` on floats, the roots of f3 (eq. 33) from the
 compiled companion-matrix QR (:func:`activetrack.companion.accepted_roots_into`),
 candidates kept as they come. :func:`solve_point` is the kernel; :func:`solve_rows` runs
-it over a batch in compiled code (the batched solver), :func:`solve_scalar` for one
-problem from Python. Inputs are validated by the callers
-(:func:`activetrack.solver.solve_single_sensor` and ``solve_single_sensor_batch``).
+it over a batch in compiled code (the batched solver), :func:`solve_checked` checks and
+solves one problem from Python in one call (:func:`activetrack.solver.solve_single_sensor`
+names what it rejects). The other kernels take validated inputs.
 """
 
 from __future__ import annotations
@@ -17,6 +17,7 @@ import numpy as np
 from activetrack._coefficients import sylvester_gammas
 from activetrack._jit import kernel
 from activetrack.companion import accepted_roots_into
+from activetrack.solver_inputs import accepted_point
 from activetrack.solver_steps import (
     FEAS_TOL,
     N_POLISH,
@@ -40,7 +41,6 @@ from activetrack.solver_steps import (
     to_original,
     value_at,
 )
-from activetrack.validation import FloatArray
 
 MAX_STARTS = N_POLISH + 3  # Newton starts: the best critical root candidates, D, A, B
 assert N_POLISH == 2, "_two_best picks the polished root candidates"
@@ -204,17 +204,15 @@ def solve_rows(P, c, r, rho, sigma_d2, sigma_theta2, s, value, case, feasible):
         feasible[i] = ok
 
 
-def solve_scalar(
-    p11: float,
-    p12: float,
-    p22: float,
-    c1: float,
-    c2: float,
-    r: float,
-    rho: float,
-    sigma_d2: float,
-    sigma_theta2: float,
-) -> tuple[FloatArray, float, int, bool]:
-    """Return ``(s, value, case, feasible)`` for validated float inputs (:func:`solve_point`)."""
-    sx, sy, value, case, ok = solve_point(p11, p12, p22, c1, c2, r, rho, sigma_d2, sigma_theta2)
-    return np.array([sx, sy]), value, case, ok
+@kernel
+def solve_checked(p11, p12, p21, p22, c1, c2, r, rho, sigma_d2, sigma_theta2):
+    """Return ``(sx, sy, value, case, feasible, accepted)``: :func:`solve_point` of one
+    problem given as ten floats (the prior's four entries, symmetrized here) when
+    :func:`~activetrack.solver_inputs.accepted_point` accepts them; otherwise ``accepted``
+    is False (and the rest NaN, 0, False), for the caller to say why."""
+    if not accepted_point(p11, p12, p21, p22, c1, c2, r, rho, sigma_d2, sigma_theta2):
+        return math.nan, math.nan, math.nan, 0, False, False
+    sx, sy, value, case, ok = solve_point(
+        p11, 0.5 * (p12 + p21), p22, c1, c2, r, rho, sigma_d2, sigma_theta2
+    )
+    return sx, sy, value, case, ok, True

@@ -15,6 +15,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 FloatArray = NDArray[np.float64]
+SYMMETRY_TOL = 1e-9  # |p12 - p21| of a 2x2 SPD matrix, relative to its largest entry
 
 
 class UnexpectedKeywordError(TypeError, ValueError):
@@ -173,7 +174,7 @@ def spd2_entries(
     scale = max(abs(p11), abs(p22), abs(p12))
     if scale > max_abs or abs(p21) > max_abs:
         raise ValueError(f"{name}: entries must be within [-{max_abs:g}, {max_abs:g}]")
-    if abs(p12 - p21) > 1e-9 * max(scale, 1e-300):
+    if abs(p12 - p21) > SYMMETRY_TOL * max(scale, 1e-300):
         raise ValueError(f"{name} must be symmetric")
     if p11 <= 0.0 or p11 * p22 - p12 * p21 <= 0.0:
         raise ValueError(f"{name} must be positive definite (eigenvalues > 0)")
@@ -190,7 +191,7 @@ def spd2_stack(name: str, arr: FloatArray, *, max_abs: float = 1e150) -> None:
         raise ValueError(f"{name}: entries must be within [-{max_abs:g}, {max_abs:g}]")
     p11, p12, p21, p22 = arr[..., 0, 0], arr[..., 0, 1], arr[..., 1, 0], arr[..., 1, 1]
     scale = np.maximum(np.maximum(np.abs(p11), np.abs(p22)), np.abs(p12))
-    if np.any(np.abs(p12 - p21) > 1e-9 * np.maximum(scale, 1e-300)):
+    if np.any(np.abs(p12 - p21) > SYMMETRY_TOL * np.maximum(scale, 1e-300)):
         raise ValueError(f"{name} must be symmetric")
     if np.any(p11 <= 0.0) or np.any(p11 * p22 - p12 * p21 <= 0.0):
         raise ValueError(f"{name} must be positive definite (eigenvalues > 0)")

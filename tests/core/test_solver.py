@@ -451,6 +451,24 @@ def test_batch_broadcasts_scalars_and_matches_unchecked_path():
         assert u.value == pytest.approx(a.value[i], rel=1e-10)
 
 
+def test_argument_types_give_the_same_answer():
+    """Float64 arrays with floats take the one-call path (checks inside the compiled
+    solve); lists, ints, float32 and other layouts the general conversion; unchecked
+    calls skip the checks. All solve the same problem bit for bit (the values below are
+    exact in float32)."""
+    P = np.array([[2.0, 0.25], [0.25, 1.0]])
+    base = solve_single_sensor(P, np.array([3.0, 1.0]), 1.0, 0.5, 0.125, 0.25)
+    for args in (
+        (P.tolist(), [3, 1], 1, 0.5, 0.125, 0.25),
+        (P.astype(np.float32), (3.0, 1.0), np.float32(1.0), 0.5, 0.125, np.float32(0.25)),
+        (np.asfortranarray(P), np.array([3, 1]), 1.0, np.float64(0.5), 0.125, 0.25),
+    ):
+        for check in (True, False):
+            out = solve_single_sensor(*args, check=check)
+            assert np.array_equal(out.s, base.s) and out.value == base.value
+            assert (out.case, out.feasible) == (base.case, base.feasible)
+
+
 # ---------------------------------------------------------------------------- validation
 
 GOOD = dict(

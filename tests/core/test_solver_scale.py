@@ -258,6 +258,12 @@ def test_reported_failures_are_refused(name, kwargs, why):
     with pytest.raises(ValueError, match=name) as err:
         solve_single_sensor(**kw)
     assert why in str(err.value)
+    # Float64 arrays and floats take the one-call path (checks in the compiled solve);
+    # what it refuses is explained by the same named checks.
+    arrays = dict(kw, prior_info=np.asarray(kw["prior_info"], float), c=np.asarray(kw["c"], float))
+    with pytest.raises(ValueError, match=name) as fast:
+        solve_single_sensor(**arrays)
+    assert str(fast.value) == str(err.value)
     batch = {k: np.stack([np.asarray(v, dtype=float)] * 3) for k, v in kw.items()}
     with pytest.raises(ValueError, match=name):
         solve_single_sensor_batch(**batch)
