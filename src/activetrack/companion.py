@@ -18,7 +18,7 @@ import math
 import numpy as np
 
 from activetrack._jit import kernel
-from activetrack.hessenberg_qr import hqr
+from activetrack.hessenberg_qr import balance_factor, hqr
 from activetrack.validation import FloatArray
 
 IM_TOL = 1e-2  # accept eigenvalues this close to the real axis (extra candidates are harmless)
@@ -99,17 +99,8 @@ def _balanced_companion_into(q: FloatArray, a: FloatArray) -> None:
                 r = abs(sub[i])
             if c == 0.0 or r == 0.0:
                 continue
-            s = c + r
-            f = 1.0
-            g = r / 2.0
-            while c < g:
-                f *= 2.0
-                c *= 4.0
-            g = r * 2.0
-            while c > g:
-                f /= 2.0
-                c /= 4.0
-            if (c + r) / f < 0.95 * s:
+            f = balance_factor(c, r)
+            if f != 1.0:
                 done = False
                 if i == 0:
                     for j in range(n):

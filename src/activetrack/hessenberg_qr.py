@@ -30,6 +30,24 @@ MAX_ITS = 300  # QR iterations per eigenvalue before giving up: LAPACK dlahqr's 
 
 
 @kernel
+def balance_factor(c: float, r: float) -> float:
+    """Return the power of 2 by which balancing divides a row and multiplies its column
+    (``c``, ``r``: the column's and the row's off-diagonal 1-norms, both > 0), or 1.0
+    when that would not lower ``c + r`` by 5%."""
+    s = c + r
+    f = 1.0
+    g = r / 2.0
+    while c < g:
+        f *= 2.0
+        c *= 4.0
+    g = r * 2.0
+    while c > g:
+        f /= 2.0
+        c /= 4.0
+    return f if (c + r) / f < 0.95 * s else 1.0
+
+
+@kernel
 def balance(a: np.ndarray) -> None:
     """Balance the square matrix ``a`` in place by a diagonal similarity of powers of 2."""
     n = a.shape[0]
@@ -45,17 +63,8 @@ def balance(a: np.ndarray) -> None:
                     r += abs(a[i, j])
             if c == 0.0 or r == 0.0:
                 continue
-            s = c + r
-            f = 1.0
-            g = r / 2.0
-            while c < g:
-                f *= 2.0
-                c *= 4.0
-            g = r * 2.0
-            while c > g:
-                f /= 2.0
-                c /= 4.0
-            if (c + r) / f < 0.95 * s:
+            f = balance_factor(c, r)
+            if f != 1.0:
                 done = False
                 for j in range(n):
                     a[i, j] /= f
