@@ -49,20 +49,20 @@ class Kernel(Generic[F]):
         """Return the options numba's inlining pass reads from a callee (``inline``)."""
         return {"inline": "always"} if self.inline else {}
 
-    @property
+    @functools.cached_property
     def dispatcher(self) -> Callable[..., Any]:
-        """Return numba's dispatcher of the function (created now if needed)."""
-        if self._compiled is None:
-            import numba
+        """Return numba's dispatcher of the function (created on the first access; later
+        accesses are a plain attribute lookup, which hot Python paths rely on)."""
+        import numba
 
-            _teach_numba()
-            # error_model="numpy": a float division by zero gives inf/NaN instead of raising
-            # (no zero test before every division); kernels guard their divisors, so the
-            # plain-Python run (NUMBA_DISABLE_JIT=1) takes the same branches.
-            options = {"inline": "always"} if self.inline else {}
-            self._compiled = numba.njit(cache=True, nogil=True, error_model="numpy", **options)(
-                self.py_func
-            )
+        _teach_numba()
+        # error_model="numpy": a float division by zero gives inf/NaN instead of raising
+        # (no zero test before every division); kernels guard their divisors, so the
+        # plain-Python run (NUMBA_DISABLE_JIT=1) takes the same branches.
+        options = {"inline": "always"} if self.inline else {}
+        self._compiled = numba.njit(cache=True, nogil=True, error_model="numpy", **options)(
+            self.py_func
+        )
         return self._compiled
 
     def __call__(self, *args: Any) -> Any:

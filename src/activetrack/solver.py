@@ -205,30 +205,32 @@ def _check_information(l1, a, b_r2, r) -> None:
 def _checked_scalars(prior_info, c, r, rho, sigma_d2, sigma_theta2) -> tuple[float, ...]:
     """Return ``(p11, p12, p22, c1, c2, r, rho, sigma_d2, sigma_theta2)`` as checked floats.
 
-    Converts each input (ValueError if not numeric or of the wrong shape), then lets
-    :func:`~activetrack.solver_inputs.accepted_point` decide; only a rejected problem runs
-    the checks below, which name the parameter outside the accepted range.
+    The named checks in order (the prior's shape and entries, ``c``'s, the four scalars),
+    then the accepted scale range: :func:`~activetrack.solver_inputs.accepted_point`
+    decides, and only a rejected problem runs :func:`_check_scale`, which names the
+    parameter outside it.
     """
     P = _as_array("prior_info", prior_info)
     if P.shape != (2, 2):
         raise ValueError(f"prior_info must have shape (2, 2), got {P.shape}")
     p11, p12, p21, p22 = P.ravel().tolist()
+    spd2_entries("prior_info", p11, p12, p21, p22, MAX_SCALE)
     cc = _as_array("c", c)
     if cc.shape != (2,):
         raise ValueError(f"c must have shape (2,), got {cc.shape}")
     c1, c2 = cc.tolist()
+    if not (math.isfinite(c1) and math.isfinite(c2)):
+        raise ValueError(f"c must be finite (no NaN or inf), got {c!r}")
     r = real_scalar("r", r, allow_zero=True)
     rho = real_scalar("rho", rho, allow_zero=True)
     sigma_d2 = real_scalar("sigma_d2", sigma_d2)
     sigma_theta2 = real_scalar("sigma_theta2", sigma_theta2)
-    if not accepted_point(p11, p12, p21, p22, c1, c2, r, rho, sigma_d2, sigma_theta2):
-        spd2_entries("prior_info", p11, p12, p21, p22, MAX_SCALE)
-        if not (math.isfinite(c1) and math.isfinite(c2)):
-            raise ValueError(f"c must be finite (no NaN or inf), got {c!r}")
+    nc = math.hypot(c1, c2)
+    if not accepted_point(p11, p12, p21, p22, c1, c2, nc, r, rho, sigma_d2, sigma_theta2):
         l1, l2 = eigenvalues(p11, 0.5 * (p12 + p21), p22)
         # Raises unless the problem sits on an edge of the range within rounding (the
         # ratios are tested as quotients here, as products in accepted_point): then solved.
-        _check_scale(l1, l2, math.hypot(c1, c2), r, rho, sigma_d2, sigma_theta2)
+        _check_scale(l1, l2, nc, r, rho, sigma_d2, sigma_theta2)
     return p11, 0.5 * (p12 + p21), p22, c1, c2, r, rho, sigma_d2, sigma_theta2
 
 
@@ -236,10 +238,12 @@ _FLOAT64 = np.dtype(np.float64)
 
 
 def _plain_floats(prior_info, c, r, rho, sigma_d2, sigma_theta2) -> tuple[float, ...] | None:
-    """Return the ten floats of one problem (the prior's four entries first) when the
-    inputs are float64 arrays of shapes (2, 2) and (2,) and four floats, else None (the
-    general conversion of :func:`_checked_scalars` then runs). Cheap tests first: this
-    runs before every checked scalar solve."""
+    """Return the floats of one problem (the prior's four entries, ``c``, ``||c||``, ``r``,
+    ``rho``, the variances) when the inputs are float64 arrays of shapes (2, 2) and (2,)
+    and four floats, else None (the general conversion of :func:`_checked_scalars` then
+    runs). Cheap tests first: this runs before every checked scalar solve. ``||c||`` is
+    Python's ``math.hypot`` (correctly rounded), which the named checks use too: the
+    compiled one may differ in the last bit, and the range's edges must not move."""
     if (
         type(prior_info) is np.ndarray
         and type(c) is np.ndarray
@@ -254,7 +258,7 @@ def _plain_floats(prior_info, c, r, rho, sigma_d2, sigma_theta2) -> tuple[float,
     ):
         (p11, p12), (p21, p22) = prior_info.tolist()
         c1, c2 = c.tolist()
-        return p11, p12, p21, p22, c1, c2, r, rho, sigma_d2, sigma_theta2
+        return p11, p12, p21, p22, c1, c2, math.hypot(c1, c2), r, rho, sigma_d2, sigma_theta2
     return None
 
 
@@ -288,16 +292,22 @@ def solve_single_sensor(
     Raises:
         ValueError: naming the offending parameter and its allowed range.
     """
-    plain = _plain_floats(prior_info, c, r, rho, sigma_d2, sigma_theta2)
+    plain = _plain_floats(prior_info, c, r, rho, sigma_d2, sigma_theta2) if check else None
     accepted = False
-    if check and plain is not None:  # checks and solve in one compiled call
+    if plain is not None:  # checks and solve in one compiled call
         # The dispatchers themselves: the Kernel wrapper's call costs a few tenths of a us.
         sx, sy, value, case, feasible, accepted = solve_checked.dispatcher(*plain)
     if not accepted:
         if check:
             args = _checked_scalars(prior_info, c, r, rho, sigma_d2, sigma_theta2)
-        elif plain is not None:  # float64 arrays and floats (GSR's case)
-            p11, p12, _, p22, c1, c2, r, rho, sigma_d2, sigma_theta2 = plain
+        elif (
+            type(prior_info) is np.ndarray
+            and type(c) is np.ndarray
+            and prior_info.dtype == c.dtype == np.float64
+        ):  # float64 arrays (GSR's case): their floats at once
+            p11, p12, _, p22 = prior_info.ravel().tolist()
+            c1, c2 = c.tolist()
+            r, rho, sigma_d2, sigma_theta2 = map(float, (r, rho, sigma_d2, sigma_theta2))
             args = (p11, p12, p22, c1, c2, r, rho, sigma_d2, sigma_theta2)
         else:
             P = prior_info

@@ -47,9 +47,10 @@ def _spd2(p11: float, p12: float, p21: float, p22: float) -> bool:
 
 
 @kernel
-def accepted_point(p11, p12, p21, p22, c1, c2, r, rho, sigma_d2, sigma_theta2) -> bool:
-    """Return whether one problem (the prior's four entries, ``c``, ``r``, ``rho``, the two
-    noise variances, floats) is inside the accepted range of :mod:`activetrack.solver`."""
+def accepted_point(p11, p12, p21, p22, c1, c2, nc, r, rho, sigma_d2, sigma_theta2) -> bool:
+    """Return whether one problem (the prior's four entries, ``c``, ``nc = ||c||`` as the
+    caller's named checks compute it, ``r``, ``rho``, the two noise variances; floats) is
+    inside the accepted range of :mod:`activetrack.solver`."""
     if not _spd2(p11, p12, p21, p22):
         return False
     if not (math.isfinite(c1) and math.isfinite(c2)):
@@ -60,7 +61,6 @@ def accepted_point(p11, p12, p21, p22, c1, c2, r, rho, sigma_d2, sigma_theta2) -
     if not (0.0 < sigma_d2 < math.inf and 0.0 < sigma_theta2 < math.inf):
         return False
     l1, l2 = eigenvalues(p11, 0.5 * (p12 + p21), p22)
-    nc = math.hypot(c1, c2)
     lo, hi = MIN_SCALE, MAX_SCALE
     return (
         lo <= l2

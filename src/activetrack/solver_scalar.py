@@ -205,12 +205,13 @@ def solve_rows(P, c, r, rho, sigma_d2, sigma_theta2, s, value, case, feasible):
 
 
 @kernel
-def solve_checked(p11, p12, p21, p22, c1, c2, r, rho, sigma_d2, sigma_theta2):
+def solve_checked(p11, p12, p21, p22, c1, c2, nc, r, rho, sigma_d2, sigma_theta2):
     """Return ``(sx, sy, value, case, feasible, accepted)``: :func:`solve_point` of one
-    problem given as ten floats (the prior's four entries, symmetrized here) when
-    :func:`~activetrack.solver_inputs.accepted_point` accepts them; otherwise ``accepted``
-    is False (and the rest NaN, 0, False), for the caller to say why."""
-    if not accepted_point(p11, p12, p21, p22, c1, c2, r, rho, sigma_d2, sigma_theta2):
+    problem given as floats (the prior's four entries, symmetrized here; ``nc = ||c||``
+    for the range test) when :func:`~activetrack.solver_inputs.accepted_point` accepts
+    them; otherwise ``accepted`` is False (and the rest NaN, 0, False), for the caller to
+    say why."""
+    if not accepted_point(p11, p12, p21, p22, c1, c2, nc, r, rho, sigma_d2, sigma_theta2):
         return math.nan, math.nan, math.nan, 0, False, False
     sx, sy, value, case, ok = solve_point(
         p11, 0.5 * (p12 + p21), p22, c1, c2, r, rho, sigma_d2, sigma_theta2

@@ -505,6 +505,37 @@ def test_scalar_rejects_bad_input(name, value, why):
     assert why in str(err.value)
 
 
+@pytest.mark.parametrize(
+    ("bad", "why"),
+    [
+        (
+            dict(prior_info=np.array([[np.nan, 0.0], [0.0, 1.0]]), r=-1.0),
+            "prior_info must be finite",
+        ),
+        (dict(prior_info=np.array([[1.0, 0.5], [0.0, 1.0]]), c=np.ones(3)), "symmetric"),
+        (dict(c=np.array([np.inf, 0.0]), sigma_d2=-0.1), "c must be finite"),
+        (dict(r=-1.0, sigma_theta2=0.0), "r must be"),
+    ],
+)
+def test_several_faults_name_the_first_in_argument_order(bad, why):
+    """The prior, then ``c``, then the scalars: the first fault in the signature's order is
+    the one named, whichever path (arrays or lists) the inputs take."""
+    for kwargs in (
+        dict(GOOD, **bad),
+        {k: np.asarray(v).tolist() for k, v in {**GOOD, **bad}.items()},
+    ):
+        with pytest.raises(ValueError, match=why):
+            solve_single_sensor(**kwargs)
+
+
+def test_unchecked_solve_of_wrong_shapes_raises():
+    """``check=False`` skips the range checks, never the prior's and c's sizes: a (3, 3)
+    prior or a (3,) ``c`` raises instead of solving some other problem."""
+    for name, value in (("prior_info", np.eye(3)), ("c", np.array([3.0, 1.0, 2.0]))):
+        with pytest.raises(ValueError):
+            solve_single_sensor(**dict(GOOD, **{name: value}), check=False)
+
+
 @pytest.mark.parametrize(("name", "value", "why"), BAD)
 def test_batch_rejects_bad_input(name, value, why):
     kwargs = {k: np.stack([v, v]) if k in ("prior_info", "c") else v for k, v in GOOD.items()}

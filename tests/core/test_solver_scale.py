@@ -269,6 +269,29 @@ def test_reported_failures_are_refused(name, kwargs, why):
         solve_single_sensor_batch(**batch)
 
 
+@pytest.mark.kernels
+def test_range_edges_are_decided_on_pythons_hypot():
+    """At the edges ``||c|| / r = 1e5`` and ``||c|| = 1e-50`` the decision is the one the
+    named checks explain: ``||c||`` by Python's ``math.hypot`` (correctly rounded; numba's
+    differs in the last bit on about 0.6% of inputs), refused iff the product test and the
+    quotient test both fail, whichever path (float64 arrays: checks in the compiled call;
+    lists: the Python conversion) the inputs take."""
+    rng = np.random.default_rng(7)
+    prior = np.array([[2.0, 0.3], [0.3, 1.0]])
+    for _ in range(600):
+        ang = rng.uniform(-math.pi, math.pi)
+        c = rng.uniform(0.5, 3.0) * np.array([math.cos(ang), math.sin(ang)])
+        nc = math.hypot(*c)
+        r = nc / 1e5 * (1.0 + rng.integers(-3, 4) * 2.2e-16)
+        refused = nc > 1e5 * r and nc / r > 1e5
+        tiny = c * 1e-50 / nc * (1.0 + rng.integers(-3, 4) * 2.2e-16)
+        tiny_refused = math.hypot(*tiny) < 1e-50
+        for cc, rr, expect in ((c, r, refused), (tiny, 1.0, tiny_refused)):
+            for args in ((prior, cc, rr), (prior.tolist(), cc.tolist(), rr)):
+                out = solve_strictly(solve_single_sensor, *args, 0.0, 1.0, 1.0)
+                assert isinstance(out, ValueError) == expect, (cc, rr, out)
+
+
 def test_nearly_singular_prior_is_refused_without_a_crash():
     """Symmetric within 1e-9 but singular once symmetrized: refused, naming prior_info."""
     P = np.array([[1.0, 1.0 + 4e-10], [1.0 - 4e-10, 1.0]])  # det = 1.6e-19 > 0 as given
