@@ -1,10 +1,17 @@
-"""Three variants of the look-ahead planner tried against GSR on ``paper`` (README, "Planning
+"""Variants of the look-ahead planner tried against GSR on ``paper`` (README, "Planning
 ahead"): none is kept in the library; each is a patch of this process only.
 
 - ``follow``: per heading, paths that turn to follow the predicted target after 3 and 6
   steps (extra options of ``horizon_paths.heading_paths``);
+- ``half-speed``: the headings also at half speed (extra options);
+- ``relative``: the headings also in the predicted target's frame: each step the
+  target's predicted displacement plus the speed left over along the heading (extra
+  options);
 - ``sigma``: each sensor's information averaged over the four sigma points of the
   predicted position (its Cholesky factor times ``sqrt(2) alpha``);
+- ``inflate``: the information computed at distances inflated by the prediction's
+  uncertainty, ``d_eff^2 = d^2 + alpha sigma^2`` (``sigma^2`` the predicted position's
+  largest variance): plans that rely on standing close count less;
 - ``episode-end``: the horizon's weights cut at the episode's last step.
 
 Prints the ratio of the look-ahead's mean trace to GSR's over 100 seeds from ``--start``
@@ -14,6 +21,7 @@ Prints the ratio of the look-ahead's mean trace to GSR's over 100 seeds from ``-
     OPENBLAS_NUM_THREADS=1 .venv/bin/python tools/lookahead_attempts.py follow --start 2000
     OPENBLAS_NUM_THREADS=1 python tools/lookahead_attempts.py sigma --alpha 0.5 --start 2000
     OPENBLAS_NUM_THREADS=1 .venv/bin/python tools/lookahead_attempts.py episode-end --start 1000
+    OPENBLAS_NUM_THREADS=1 python tools/lookahead_attempts.py inflate --alpha 1 --start 3000
 """
 
 from __future__ import annotations
@@ -50,6 +58,41 @@ def patch(attempt: str, alpha: float) -> None:
             return np.concatenate([base, *extra], axis=2)
 
         hp.heading_paths = follow
+    elif attempt in ("half-speed", "relative"):
+        heading = hp.heading_paths
+
+        def more(model, start, targets, r, rho, dirs):
+            base = heading(model, start, targets, r, rho, dirs)
+            if attempt == "half-speed":
+                return np.concatenate([base, heading(model, start, targets, 0.5 * r, rho, dirs)], 2)
+            out, prev = (
+                np.empty_like(base),
+                np.broadcast_to(start[:, :, None], base[:, :, :, 0].shape),
+            )
+            rr, rh = r[:, :, None], rho[:, :, None]
+            for h in range(base.shape[3]):
+                a, b = (h - 1, h) if h > 0 else (0, 1)
+                move = (targets[:, b, 0] - targets[:, a, 0])[:, None, None, :]
+                spare = np.maximum(rr[..., None] - np.linalg.norm(move, axis=-1, keepdims=True), 0)
+                prev = model.mend(prev + move + spare * dirs, prev, targets[:, h], rr, rh)
+                out[:, :, :, h] = prev
+            return np.concatenate([base, out], axis=2)
+
+        hp.heading_paths = more
+    elif attempt == "inflate":
+        plain_info = hp.PathModel.information
+
+        def inflated(self, positions, targets):
+            if not self.paper:
+                return plain_info(self, positions, targets)
+            rel = positions - targets[:, None, None, :, 0]
+            d2 = np.maximum(np.sum(rel * rel, axis=-1, keepdims=True), 1e-300)
+            var = np.linalg.eigvalsh(STATE["cov"])[:, -1][:, None, None, None, None]
+            rel = rel * np.sqrt(1.0 + alpha * var / d2)
+            sd2, st2 = self.sigma_d2[:, :, None, None], self.sigma_theta2[:, :, None, None]
+            return [sensor_information(rel, sd2, st2)]
+
+        hp.PathModel.information = inflated
     elif attempt == "sigma":
         plain = hp.PathModel.information
 
@@ -96,9 +139,14 @@ class Watched:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("attempt", choices=["none", "follow", "sigma", "episode-end"])
+    parser.add_argument(
+        "attempt",
+        choices=["none", "follow", "half-speed", "relative", "sigma", "inflate", "episode-end"],
+    )
     parser.add_argument("--start", type=int, default=2000, help="first of 100 seeds")
-    parser.add_argument("--alpha", type=float, default=0.5, help="sigma: the points' scale")
+    parser.add_argument(
+        "--alpha", type=float, default=0.5, help="sigma: the points' scale; inflate: kappa"
+    )
     args = parser.parse_args()
     seeds = list(range(args.start, args.start + 100))
     gsr, _ = la.run_batched("paper", seeds)  # before the patch: GSR is unaffected by every variant
