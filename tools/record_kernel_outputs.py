@@ -10,9 +10,10 @@ GSR's plans): record at two commits and compare::
 Cases: ``inside``, ``blocked``, ``project_move`` and ``ray_distances`` on 30 random layouts
 (rectangles and non-convex stars, one layout and batches of five), ``apply_actions``,
 ``move_to``, ``project_feasible`` and ``unreachable_fallback`` on random states, GSR's
-plans of 300 random three-sensor problems, batched and one by one, the observations and
-states of every task over 30 seeded steps of random actions (one copy and seven), and 300
-random layouts (``random_layout``'s vertices and every array of ``Occluders``).
+plans of 300 random three-sensor problems, batched and one by one, the single-sensor
+solver on 2,000 random problems (``bench_solver.py``'s), one by one and batched, the
+observations and states of every task over 30 seeded steps of random actions (one copy
+and seven), and 300 random layouts (``random_layout``'s vertices and every array of ``Occluders``).
 """
 
 from __future__ import annotations
@@ -119,6 +120,28 @@ def gsr_cases(out: dict) -> None:
     out["gsr_solves"] = np.array([x.n_solves for x in single])
 
 
+def solver_cases(out: dict) -> None:
+    """The single-sensor solver on 2,000 of ``bench_solver.py``'s random problems (seed 0),
+    one call each (checked) and in one batch."""
+    from activetrack.solver import solve_single_sensor, solve_single_sensor_batch
+    from benchmarks.bench_solver import random_problems
+
+    prior, c, r, rho, sd2, st2 = random_problems(np.random.default_rng(0), 2000)
+    batch = solve_single_sensor_batch(prior, c, r, rho, sd2, st2)
+    out["solver_batch_s"], out["solver_batch_value"] = batch.s, batch.value
+    out["solver_batch_case"], out["solver_batch_feasible"] = batch.case, batch.feasible
+    one = [
+        solve_single_sensor(
+            prior[i], c[i], float(r[i]), float(rho[i]), float(sd2[i]), float(st2[i])
+        )
+        for i in range(len(r))
+    ]
+    out["solver_s"] = np.array([x.s for x in one])
+    out["solver_value"] = np.array([x.value for x in one])
+    out["solver_case"] = np.array([x.case for x in one])
+    out["solver_feasible"] = np.array([x.feasible for x in one])
+
+
 def world_cases(out: dict) -> None:
     """Add every task's observations and states along seeded random-action episodes."""
     from activetrack.scenarios import TASKS
@@ -195,6 +218,7 @@ def main() -> int:
     occluder_cases(out)
     motion_cases(out)
     gsr_cases(out)
+    solver_cases(out)
     world_cases(out)
     layout_cases(out)
     tmp = Path(args.out).with_suffix(".tmp.npz")
