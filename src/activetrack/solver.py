@@ -381,7 +381,7 @@ def _as_array(name: str, value: ArrayLike) -> FloatArray:
     """Return ``value`` as a float64 array or raise ValueError naming ``name``."""
     try:
         return np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
+    except (TypeError, ValueError, OverflowError) as exc:  # 10**400: too large a float
         raise ValueError(f"{name} must be numeric, got {value!r}") from exc
 
 

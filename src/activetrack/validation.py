@@ -35,7 +35,7 @@ def as_finite(name: str, value: ArrayLike, shape: Sequence[int | None] | None = 
     """
     try:
         arr = np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
+    except (TypeError, ValueError, OverflowError) as exc:  # 10**400: too large a float
         raise ValueError(f"{name} must be numeric, got {value!r}") from exc
     if shape is not None:
         if arr.ndim != len(shape) or any(
@@ -147,7 +147,7 @@ def real_scalar(name: str, value: ArrayLike, *, allow_zero: bool = False) -> flo
     else:
         try:
             arr = np.asarray(value, dtype=np.float64)
-        except (TypeError, ValueError) as exc:
+        except (TypeError, ValueError, OverflowError) as exc:  # 10**400: too large a float
             raise ValueError(f"{name} must be a real number, got {value!r}") from exc
         if arr.ndim != 0:
             raise ValueError(f"{name} must be a scalar, got shape {arr.shape}")

@@ -528,6 +528,22 @@ def test_several_faults_name_the_first_in_argument_order(bad, why):
             solve_single_sensor(**kwargs)
 
 
+@pytest.mark.parametrize("name", ["prior_info", "c", "r", "sigma_theta2"])
+def test_ints_too_large_for_a_float_raise_naming_the_field(name):
+    """``10**400`` cannot become a float64 (NumPy raises OverflowError): a ValueError
+    naming the field, from the scalar and the batched solver."""
+    huge = 10**400
+    value = {"prior_info": [[huge, 0], [0, 1]], "c": [huge, 1]}.get(name, huge)
+    with pytest.raises(ValueError, match=name):
+        solve_single_sensor(**dict(GOOD, **{name: value}))
+    batch = {
+        k: [np.asarray(v).tolist()] if k in ("prior_info", "c") else v for k, v in GOOD.items()
+    }
+    batch[name] = [value]
+    with pytest.raises(ValueError, match=name):
+        solve_single_sensor_batch(**batch)
+
+
 def test_unchecked_solve_of_wrong_shapes_raises():
     """``check=False`` skips the range checks, never the prior's and c's sizes: a (3, 3)
     prior or a (3,) ``c`` raises instead of solving some other problem."""
