@@ -136,8 +136,8 @@ def hqr(a: np.ndarray, wr: np.ndarray, wi: np.ndarray) -> bool:
             its += 1
             # The first column of (A - s1)(A - s2) at the top of the active block: the bulge
             # starts at m = low. (EISPACK also looks for two small subdiagonal entries in a
-            # row to start lower; at n = 10 that saves a few rows in one sweep of twenty
-            # and costs two divisions per row of the search in every sweep.)
+            # row to start lower; at n = 10 such a pair is rare, and the search costs two
+            # divisions per row in every sweep.)
             m = low
             z = a[m, m]
             r = x - z

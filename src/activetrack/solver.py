@@ -295,7 +295,7 @@ def solve_single_sensor(
     plain = _plain_floats(prior_info, c, r, rho, sigma_d2, sigma_theta2) if check else None
     accepted = False
     if plain is not None:  # checks and solve in one compiled call
-        # The dispatchers themselves: the Kernel wrapper's call costs a few tenths of a us.
+        # The dispatchers themselves: the Kernel wrapper adds a Python call on the hot path.
         sx, sy, value, case, feasible, accepted = solve_checked.dispatcher(*plain)
     if not accepted:
         if check:

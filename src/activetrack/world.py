@@ -555,7 +555,7 @@ class World:
         calc = slice(None) if partial else sel
         if self._fused:
             noise = self._noise_of(sel, partial)
-            sensors, projected, target, _ = self._advance_fused(mv, absolute, noise, calc)
+            sensors, projected, target = self._advance_fused(mv, absolute, noise, calc)
             fixes, detected, results = sensors, None, [target]
             trace = target[-1][sel] if partial else target[-1]
         else:
@@ -710,9 +710,8 @@ class World:
 
     def _advance_fused(
         self, moves: FloatArray, absolute: bool, noise: FloatArray, calc: _Selection
-    ) -> tuple[FloatArray, np.ndarray, tuple[Any, ...], int]:
-        """Return ``(sensors, projected, (x_true, x_post, P_post, x_pred, P_pred, trace),
-        count)`` (``count``: the moves pushed out of a ``rho`` disk)
+    ) -> tuple[FloatArray, np.ndarray, tuple[Any, ...]]:
+        """Return ``(sensors, projected, (x_true, x_post, P_post, x_pred, P_pred, trace))``
         of one compiled step (:func:`activetrack.loop_kernels.advance_rows`) of the copies
         ``calc`` of a batched world (one target, known sensor positions, every sensor
         measures)."""
@@ -726,13 +725,13 @@ class World:
             np.empty(x_true.shape), np.empty(P_pred.shape), np.empty(x_true.shape),
             np.empty(P_pred.shape), np.empty(batch),
         )  # fmt: skip
-        count = loop_kernels.advance_rows(
+        loop_kernels.advance_rows(  # (its count of projected moves: the caller's rows only)
             as_rows(moves, batch, (m, 2)), absolute, as_rows(sensors, batch, (m, 2)),
             as_rows(x_true, batch, (n,)), as_rows(x_pred, batch, (n,)),
             as_rows(P_pred, batch, (n, n)), as_rows(noise, batch, (self._n_noise,)),
             *self._fused_args, *out,
         )  # fmt: skip
-        return out[0], out[1], out[2:], count
+        return out[0], out[1], out[2:]
 
     def _advance(
         self, move: Any, moves: FloatArray, sel: _Selection, calc: _Selection

@@ -457,7 +457,8 @@ def test_argument_types_give_the_same_answer():
     calls skip the checks. All solve the same problem bit for bit (the values below are
     exact in float32)."""
     P = np.array([[2.0, 0.25], [0.25, 1.0]])
-    base = solve_single_sensor(P, np.array([3.0, 1.0]), 1.0, 0.5, 0.125, 0.25)
+    # The reference answer is checked against the dense search and the 40-digit objective.
+    base = check_against_brute_force(P, np.array([3.0, 1.0]), 1.0, 0.5, 0.125, 0.25)
     for args in (
         (P.tolist(), [3, 1], 1, 0.5, 0.125, 0.25),
         (P.astype(np.float32), (3.0, 1.0), np.float32(1.0), 0.5, 0.125, np.float32(0.25)),
