@@ -44,7 +44,7 @@ from activetrack.baselines import gsr_restarts
 from activetrack.baselines._common import raise_for_status, sensor_modes, sensor_modes_of
 from activetrack.objective import sensor_information
 from activetrack.problem import PlanningProblem
-from activetrack.solver_scalar import solve_point
+from activetrack.solver_scalar import NO_ROOTS, ROOTS_SIZE, ROOTS_TAG, solve_point_from
 from activetrack.validation import FloatArray
 
 STARTS = gsr_restarts.STARTS
@@ -360,19 +360,23 @@ class Relaxation:
         self.sweeps = 0
         self.n_solves = 0
         self.start_value = math.nan
+        self._roots = np.empty((len(self.r), ROOTS_SIZE))  # each sensor's last f3 roots
+        self._roots[:, ROOTS_TAG] = NO_ROOTS
 
     def solve(self, others: FloatArray, i: int) -> FloatArray:
         """Return sensor ``i``'s optimum given the information ``others`` (eq. 38), (2,).
 
         The solver's kernel on floats (what ``solve_single_sensor(..., check=False)``
-        runs, without its wrapping: GSR calls it ~10 times a plan).
+        runs, without its wrapping: GSR calls it ~10 times a plan), from the roots of the
+        sensor's previous solve in this relaxation, as the compiled sweeps do.
         """
         self.n_solves += 1
         p11, p12, _, p22 = others.ravel().tolist()
         c1, c2 = self._c[i]
-        sx, sy, _, _, _ = solve_point(
-            p11, p12, p22, c1, c2, self.r[i], self.rho[i], self._sd2[i], self._st2[i]
-        )
+        sx, sy, _, _, _ = solve_point_from(
+            p11, p12, p22, c1, c2, self.r[i], self.rho[i], self._sd2[i], self._st2[i],
+            self._roots[i],
+        )  # fmt: skip
         return np.array([sx, sy])
 
     def info(self, s: FloatArray, i: int) -> FloatArray:
@@ -442,6 +446,7 @@ class Relaxation:
         reach) of a ``known`` solution is stopped there: it is in that solution's basin.
         Sets ``start_value``, the objective of ``s0``.
         """
+        self._roots[:, ROOTS_TAG] = NO_ROOTS  # a fresh start, as the compiled relaxation's
         info0 = sensor_information(s0, self.sd2, self.st2)
         self.start_value = self.phi(self.prior + info0.sum(axis=0))
         if self.n_free == 0:

@@ -4,7 +4,8 @@
 feasible warm start without pattern moves (what ``GSR()`` runs): Gauss-Seidel sweeps over
 the free sensors, each solving its exact single-sensor problem (Section IV-A,
 :func:`activetrack.solver_scalar.solve_point`) given the others' information, an update
-kept only if it lowers ``tr(Y^{-1})``, a sensor re-solved only when another one moved,
+kept only if it lowers ``tr(Y^{-1})``, a sensor re-solved only when another one moved
+(from the roots of its previous solve: :func:`activetrack.solver_scalar.solve_point_from`),
 until a sweep improves by at most ``tol`` (relative), nothing is left to re-solve, or
 ``max_sweeps``. :func:`relax_rows` runs it over a batch in compiled code, so a batch row
 equals the single problem's plan bit for bit. The restarts and the pattern moves
@@ -20,7 +21,7 @@ import numpy as np
 from activetrack._jit import kernel
 from activetrack.motion_kernels import fallback_point, project_feasible_point
 from activetrack.objective import information_entries, trace_of_inverse
-from activetrack.solver_scalar import solve_point
+from activetrack.solver_scalar import NO_ROOTS, ROOTS_SIZE, ROOTS_TAG, solve_point_from
 
 #: Sensor status of :func:`modes_row`: fine, a fixed sensor exactly on the target (no
 #: bearing), a free sensor with ``rho <= 0`` that can reach the target (no minimum; the
@@ -97,9 +98,10 @@ def _total(pa, pb, pc, ia, ib, ic):
 
 
 @kernel
-def _sweep(pa, pb, pc, s, ia, ib, ic, c, r, rho, sd2, st2, free, stale):
-    """Run one sweep in place (``s``, the entries ``ia``, ``ib``, ``ic``, ``stale``); return
-    the objective after it and the number of single-sensor solves."""
+def _sweep(pa, pb, pc, s, ia, ib, ic, c, r, rho, sd2, st2, free, stale, roots):
+    """Run one sweep in place (``s``, the entries ``ia``, ``ib``, ``ic``, ``stale``, each
+    sensor's f3 roots ``roots`` (M, ROOTS_SIZE)); return the objective after it and the
+    number of single-sensor solves."""
     ta, tb, tc = _total(pa, pb, pc, ia, ib, ic)  # rebuilt every sweep: no drift
     cur = trace_of_inverse(ta, tb, tc)
     solves = 0
@@ -108,7 +110,9 @@ def _sweep(pa, pb, pc, s, ia, ib, ic, c, r, rho, sd2, st2, free, stale):
             continue
         i = free[k]
         oa, ob, oc = ta - ia[i], tb - ib[i], tc - ic[i]
-        sx, sy, _, _, _ = solve_point(oa, ob, oc, c[i, 0], c[i, 1], r[i], rho[i], sd2[i], st2[i])
+        sx, sy, _, _, _ = solve_point_from(
+            oa, ob, oc, c[i, 0], c[i, 1], r[i], rho[i], sd2[i], st2[i], roots[i]
+        )
         solves += 1
         stale[k] = False
         na, nb, nc = information_entries(sx, sy, sd2[i], st2[i])
@@ -141,12 +145,14 @@ def relax_point(pa, pb, pc, c, r, rho, sd2, st2, free, s, tol, max_sweeps):
     if free.shape[0] == 0:
         return start, start, 0, 0, True
     stale = np.ones(free.shape[0], np.bool_)
+    roots = np.empty((m, ROOTS_SIZE))
+    roots[:, ROOTS_TAG] = NO_ROOTS
     f0 = start
-    f1, solves = _sweep(pa, pb, pc, s, ia, ib, ic, c, r, rho, sd2, st2, free, stale)
+    f1, solves = _sweep(pa, pb, pc, s, ia, ib, ic, c, r, rho, sd2, st2, free, stale, roots)
     sweeps = 1
     while sweeps < max_sweeps and stale.any() and not f0 - f1 <= tol * f0:
         f0 = f1
-        f1, n = _sweep(pa, pb, pc, s, ia, ib, ic, c, r, rho, sd2, st2, free, stale)
+        f1, n = _sweep(pa, pb, pc, s, ia, ib, ic, c, r, rho, sd2, st2, free, stale, roots)
         solves += n
         sweeps += 1
     return f1, start, sweeps, solves, (f0 - f1 <= tol * f0) or not stale.any()

@@ -9,6 +9,18 @@ polynomials in one kernel call; one polynomial inside the compiled solver), and 
 the acceptance rule: eigenvalues within ``IM_TOL`` of the real axis and ``RE_TOL`` of
 ``[-1, 1]`` (the circle is ``|X| <= 1``) are kept, real parts clipped onto ``[-1, 1]``.
 Accepting a few spurious near-real roots is harmless: each only adds a candidate point.
+
+A solve that knows the roots of a nearby f3 (GSR's later sweeps: the sensor's problem
+moved a little since its last solve) starts from them instead
+(:func:`accepted_roots_from`): Aberth-Ehrlich steps (Bini 1996), each root frozen once
+``|f3|`` there is within the rounding bound of Horner's rule, then an inclusion test
+(Carstensen 1991): with ``W_k = f3(z_k) / prod_{j != k} (z_k - z_j)``, ``f3`` is the
+characteristic polynomial of ``diag(z) - 1 W^T``, whose Gerschgorin column disks
+``D(z_k - W_k, (n - 1)|W_k|)`` lie in ``D(z_k, n |W_k|)``; where those (with ``|f3(z_k)|``
+enlarged by its rounding bound) are pairwise disjoint, each holds exactly one root, so
+every root is within its disk's radius of its approximation. Otherwise (a cluster, a
+root moving far, ``WARM_ITERS`` steps without convergence) the companion-matrix QR
+decides, as for a fresh problem.
 """
 
 from __future__ import annotations
@@ -24,6 +36,11 @@ from activetrack.validation import FloatArray
 IM_TOL = 1e-2  # accept eigenvalues this close to the real axis (extra candidates are harmless)
 RE_TOL = 1e-2  # ... and this far outside [-1, 1] (clipped onto the circle)
 _RE_BOUND = 1.0 + RE_TOL
+WARM_ITERS = 8  # Aberth sweeps from a warm start before the QR takes over
+_N = 10  # f3's degree
+# Horner's rule in complex arithmetic on a degree-10 polynomial: |computed - exact| at z
+# is below this times sum_k |q_k| |z|^k (with |q_10| = 1), by a wide margin.
+_HORNER_ERR = 4.0 * _N * 2.220446049250313e-16
 
 
 @kernel
@@ -174,6 +191,124 @@ def monic_roots(q: FloatArray) -> np.ndarray:
 
 
 @kernel
+def _horner(q: FloatArray, x: float, y: float) -> tuple[float, float, float, float]:
+    """Return ``(Re p, Im p, Re p', Im p')`` of ``p = z^10 + sum q_k z^k`` at ``x + iy``."""
+    pr, pi = 1.0, 0.0
+    dr, di = 0.0, 0.0
+    for j in range(_N - 1, -1, -1):
+        dr, di = dr * x - di * y + pr, dr * y + di * x + pi
+        pr, pi = pr * x - pi * y + q[j], pr * y + pi * x
+    return pr, pi, dr, di
+
+
+@kernel
+def _abs_sum(aq: FloatArray, a: float) -> float:
+    """Return ``a^10 + sum aq_k a^k`` (``aq = |q|``): Horner's rounding scale at ``|z| = a``."""
+    b = 1.0
+    for j in range(_N - 1, -1, -1):
+        b = b * a + aq[j]
+    return b
+
+
+@kernel
+def _separated(err: FloatArray, zr: FloatArray, zi: FloatArray) -> bool:
+    """Return whether the inclusion disks ``D(z_k, n err_k / prod_{j != k} |z_k - z_j|)``
+    (``err_k``: a bound on ``|p(z_k)|``) are pairwise disjoint: then each holds exactly
+    one root (module docstring)."""
+    rad = np.empty(_N)
+    for k in range(_N):
+        m2 = 1.0
+        for j in range(_N):
+            if j != k:
+                ur, ui = zr[k] - zr[j], zi[k] - zi[j]
+                m2 *= ur * ur + ui * ui
+        if not (m2 > 0.0 and math.isfinite(m2)):
+            return False
+        rad[k] = _N * err[k] / math.sqrt(m2) * (1.0 + 1e-6)  # 1e-6: the product's rounding
+    for k in range(_N):
+        for j in range(k):
+            ur, ui = zr[k] - zr[j], zi[k] - zi[j]
+            s = rad[k] + rad[j]
+            if ur * ur + ui * ui <= s * s:
+                return False
+    return True
+
+
+@kernel
+def _aberth_into(q: FloatArray, zr: FloatArray, zi: FloatArray) -> bool:
+    """Return whether Aberth steps from ``zr + 1j zi`` (10,) found every root of monic
+    ``q`` (10,), certified by :func:`_separated`; the approximations are updated in place
+    (meaningless if not). Gauss-Seidel order: each step uses the others' newest values."""
+    aq = np.empty(_N)
+    for k in range(_N):
+        aq[k] = abs(q[k])
+    done = np.zeros(_N, np.bool_)
+    err = np.empty(_N)
+    for _ in range(WARM_ITERS):
+        moved = False
+        for k in range(_N):
+            if done[k]:
+                continue
+            x, y = zr[k], zi[k]
+            pr, pi, dr, di = _horner(q, x, y)
+            bound = _HORNER_ERR * _abs_sum(aq, math.sqrt(x * x + y * y))
+            if pr * pr + pi * pi <= bound * bound:  # |p| at rounding level: a root
+                done[k] = True
+                err[k] = math.sqrt(pr * pr + pi * pi) + bound
+                continue
+            d2 = dr * dr + di * di
+            if not d2 > 0.0:  # p' = 0 (or NaN): no Newton step
+                return False
+            nr, ni = (pr * dr + pi * di) / d2, (pi * dr - pr * di) / d2  # p / p'
+            sr, si = 0.0, 0.0  # sum_j 1 / (z_k - z_j)
+            for j in range(_N):
+                if j != k:
+                    ur, ui = x - zr[j], y - zi[j]
+                    u2 = ur * ur + ui * ui
+                    if not u2 > 0.0:  # two approximations coincide
+                        return False
+                    sr += ur / u2
+                    si -= ui / u2
+            er, ei = 1.0 - (nr * sr - ni * si), -(nr * si + ni * sr)  # 1 - (p / p') s
+            e2 = er * er + ei * ei
+            if not e2 > 0.0:
+                return False
+            zr[k] = x - (nr * er + ni * ei) / e2
+            zi[k] = y - (ni * er - nr * ei) / e2
+            moved = True
+        if not moved:
+            return _separated(err, zr, zi)
+    return False
+
+
+@kernel
+def accepted_roots_from(
+    gam: FloatArray, out: FloatArray, zr: FloatArray, zi: FloatArray, warm: bool
+) -> tuple[int, bool]:
+    """Return ``(n, found)``: how many roots of one f3 (coefficients ``gam`` (11,)) are
+    accepted (into the front of ``out`` (10,), clipped to [-1, 1], in the order found) and
+    whether its roots were found (into ``zr + 1j zi`` (10,)).
+
+    With ``warm``, ``zr + 1j zi`` holds the roots of a nearby f3 to start from
+    (:func:`_aberth_into`, module docstring); else, or where that fails, and for an f3
+    with an exact root at 0, the companion QR (:func:`_roots_into`).
+    """
+    q = np.empty(10)
+    _monic_into(gam, q)
+    found = warm and q[0] != 0.0 and _aberth_into(q, zr, zi)
+    if not found:
+        found = _roots_into(q, zr, zi)
+    n = 0
+    if found:
+        for k in range(10):
+            re = zr[k]
+            if -IM_TOL <= zi[k] <= IM_TOL and -_RE_BOUND <= re <= _RE_BOUND:
+                out[n] = min(1.0, max(-1.0, re))
+                n += 1
+    return n, found
+
+
+@kernel
 def accepted_roots_into(gam: FloatArray, out: FloatArray) -> int:
     """Return how many roots of one f3 (coefficients ``gam`` (11,)) are accepted; they go,
     clipped to [-1, 1], to the front of ``out`` (10,) in the order found.
@@ -181,17 +316,7 @@ def accepted_roots_into(gam: FloatArray, out: FloatArray) -> int:
     :func:`monic` + :func:`monic_roots` for one polynomial, then the acceptance rule of
     the module docstring (NaN fails it).
     """
-    q = np.empty(10)
-    wr = np.empty(10)
-    wi = np.empty(10)
-    _monic_into(gam, q)
-    n = 0
-    if _roots_into(q, wr, wi):
-        for k in range(10):
-            re = wr[k]
-            if -IM_TOL <= wi[k] <= IM_TOL and -_RE_BOUND <= re <= _RE_BOUND:
-                out[n] = min(1.0, max(-1.0, re))
-                n += 1
+    n, _ = accepted_roots_from(gam, out, np.empty(10), np.empty(10), False)
     return n
 
 

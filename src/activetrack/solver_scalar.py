@@ -1,8 +1,10 @@
 """The single-sensor solver, one problem, compiled (Section IV-A).
 
 The steps of :mod:`activetrack.solver_steps` on floats, the roots of f3 (eq. 33) from the
-compiled companion-matrix QR (:func:`activetrack.companion.accepted_roots_into`),
-candidates kept as they come. :func:`solve_point` is the kernel; :func:`solve_rows` runs
+compiled companion-matrix QR (:func:`activetrack.companion.accepted_roots_from`; from a
+nearby f3's roots where the caller keeps them, as GSR's sweeps do), candidates kept as
+they come. :func:`solve_point` is the kernel (:func:`solve_point_from` with the roots
+kept); :func:`solve_rows` runs
 it over a batch in compiled code (the batched solver), :func:`solve_checked` checks and
 solves one problem from Python in one call (:func:`activetrack.solver.solve_single_sensor`
 names what it rejects). The other kernels take validated inputs.
@@ -16,7 +18,7 @@ import numpy as np
 
 from activetrack._coefficients import sylvester_gammas
 from activetrack._jit import kernel
-from activetrack.companion import accepted_roots_into
+from activetrack.companion import accepted_roots_from
 from activetrack.solver_inputs import accepted_point
 from activetrack.solver_steps import (
     FEAS_TOL,
@@ -43,6 +45,11 @@ from activetrack.solver_steps import (
 )
 
 MAX_STARTS = N_POLISH + 3  # Newton starts: the best critical root candidates, D, A, B
+#: The roots kept by :func:`solve_point_from`: ``roots[:10]`` real parts, ``roots[10:20]``
+#: imaginary parts, ``roots[ROOTS_TAG]`` which f3 they belong to (f3 in x or in y: the
+#: ``swap`` of :func:`~activetrack.solver_steps.circle_polynomial`), or none.
+ROOTS_SIZE, ROOTS_TAG = 21, 20
+NO_ROOTS, UNSWAPPED, SWAPPED = 0.0, 1.0, 2.0
 assert N_POLISH == 2, "_two_best picks the polished root candidates"
 
 
@@ -99,6 +106,21 @@ def solve_point(p11, p12, p22, c1, c2, r, rho, sigma_d2, sigma_theta2):
     ``p11, p12, p22``: the symmetric prior information; ``c1, c2``: the sensor relative to
     the target; the rest as in :func:`activetrack.solver.solve_single_sensor`.
     """
+    roots = np.empty(ROOTS_SIZE)
+    roots[ROOTS_TAG] = NO_ROOTS
+    return solve_point_from(p11, p12, p22, c1, c2, r, rho, sigma_d2, sigma_theta2, roots)
+
+
+@kernel
+def solve_point_from(p11, p12, p22, c1, c2, r, rho, sigma_d2, sigma_theta2, roots):
+    """:func:`solve_point`, keeping f3's roots in ``roots`` (:data:`ROOTS_SIZE`,): the real
+    parts, the imaginary parts and a tag (:data:`NO_ROOTS`, or which variable f3 was in).
+
+    Where the tag matches this problem's f3, the roots there are the starting point of
+    :func:`activetrack.companion.accepted_roots_from`; this problem's roots (and tag)
+    replace them. A caller solving a sequence of nearby problems (GSR's sweeps) passes
+    the same array each time; the answer is that of a fresh solve up to rounding.
+    """
     cph, sph, l1, l2 = eig_frame(p11, p12, p22)
     a = 1.0 / sigma_d2
     b = 1.0 / sigma_theta2
@@ -136,10 +158,15 @@ def solve_point(p11, p12, p22, c1, c2, r, rho, sigma_d2, sigma_theta2):
         swap = abs(C1) > abs(C2)
         hk = circle_polynomial(L1, L2, A, Bn, C1, C2, swap)
         gam = np.array(sylvester_gammas(*hk))
-        roots = np.empty(10)
-        for i in range(accepted_roots_into(gam, roots)):
+        accepted = np.empty(10)
+        tag = SWAPPED if swap else UNSWAPPED
+        n_accepted, found = accepted_roots_from(
+            gam, accepted, roots[:10], roots[10:20], roots[ROOTS_TAG] == tag
+        )
+        roots[ROOTS_TAG] = tag if found else NO_ROOTS
+        for i in range(n_accepted):
             # Both points are candidates; the critical one(s) are also Newton starts.
-            for x, y, crit in root_candidates(hk, roots[i], C1, C2, swap):
+            for x, y, crit in root_candidates(hk, accepted[i], C1, C2, swap):
                 if x * x + y * y >= lo:
                     f = f0(L1, L2, A, Bn, x, y)
                     if f < best_f:
