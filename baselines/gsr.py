@@ -44,7 +44,7 @@ from activetrack.baselines import gsr_restarts
 from activetrack.baselines._common import raise_for_status, sensor_modes, sensor_modes_of
 from activetrack.objective import sensor_information
 from activetrack.problem import PlanningProblem
-from activetrack.solver_scalar import NO_ROOTS, ROOTS_SIZE, ROOTS_TAG, solve_point_from
+from activetrack.solver_scalar import NO_ROOTS, ROOTS_SIZE, ROOTS_TAG, solve_point
 from activetrack.validation import FloatArray
 
 STARTS = gsr_restarts.STARTS
@@ -99,8 +99,8 @@ def warn_warm_roots(warm_roots: object) -> None:
     """Warn that ``warm_roots`` is deprecated (it has no effect) unless it is None."""
     if warm_roots is not None:
         warnings.warn(
-            "warm_roots is deprecated and has no effect: the compiled solver has no warm "
-            "start (issue 17); it will be removed",
+            "warm_roots is deprecated and has no effect: every GSR starts a sensor's later "
+            "solves from its previous roots (certified, else the QR); it will be removed",
             DeprecationWarning,
             stacklevel=3,
         )
@@ -137,8 +137,8 @@ class GSR:
             optimum, ``"greedy"``/``"greedy-reversed"`` sequential placement in sensor
             order or reversed.
         accelerate: use Hooke-Jeeves pattern moves (single problems).
-        warm_roots: deprecated, no effect (the compiled solver has no warm start: a fresh
-            solve costs what a certified warm one did); passing it warns.
+        warm_roots: deprecated, no effect (a sensor's later solves always start from its
+            previous roots, certified, else the companion QR); passing it warns.
         last_result: the :class:`GSRResult` (single problem) or :class:`GSRBatchResult`
             (batch) of the latest :meth:`plan` call.
     """
@@ -373,7 +373,7 @@ class Relaxation:
         self.n_solves += 1
         p11, p12, _, p22 = others.ravel().tolist()
         c1, c2 = self._c[i]
-        sx, sy, _, _, _ = solve_point_from(
+        sx, sy, _, _, _ = solve_point(
             p11, p12, p22, c1, c2, self.r[i], self.rho[i], self._sd2[i], self._st2[i],
             self._roots[i],
         )  # fmt: skip

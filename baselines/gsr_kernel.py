@@ -5,10 +5,10 @@ feasible warm start without pattern moves (what ``GSR()`` runs): Gauss-Seidel sw
 the free sensors, each solving its exact single-sensor problem (Section IV-A,
 :func:`activetrack.solver_scalar.solve_point`) given the others' information, an update
 kept only if it lowers ``tr(Y^{-1})``, a sensor re-solved only when another one moved
-(from the roots of its previous solve: :func:`activetrack.solver_scalar.solve_point_from`),
-until a sweep improves by at most ``tol`` (relative), nothing is left to re-solve, or
-``max_sweeps``. :func:`relax_rows` runs it over a batch in compiled code, so a batch row
-equals the single problem's plan bit for bit. The restarts and the pattern moves
+(from the roots of its previous solve, kept in an array per sensor), until a sweep
+improves by at most ``tol`` (relative), nothing is left to re-solve, or ``max_sweeps``.
+:func:`relax_rows` runs it over a batch in compiled code, so a batch row equals the
+single problem's plan bit for bit. The restarts and the pattern moves
 (``GSR(restarts=True)``, ``GSR(accelerate=True)``) run the Python ``Relaxation``.
 """
 
@@ -21,7 +21,7 @@ import numpy as np
 from activetrack._jit import kernel
 from activetrack.motion_kernels import fallback_point, project_feasible_point
 from activetrack.objective import information_entries, trace_of_inverse
-from activetrack.solver_scalar import NO_ROOTS, ROOTS_SIZE, ROOTS_TAG, solve_point_from
+from activetrack.solver_scalar import NO_ROOTS, ROOTS_SIZE, ROOTS_TAG, solve_point
 
 #: Sensor status of :func:`modes_row`: fine, a fixed sensor exactly on the target (no
 #: bearing), a free sensor with ``rho <= 0`` that can reach the target (no minimum; the
@@ -110,7 +110,7 @@ def _sweep(pa, pb, pc, s, ia, ib, ic, c, r, rho, sd2, st2, free, stale, roots):
             continue
         i = free[k]
         oa, ob, oc = ta - ia[i], tb - ib[i], tc - ic[i]
-        sx, sy, _, _, _ = solve_point_from(
+        sx, sy, _, _, _ = solve_point(
             oa, ob, oc, c[i, 0], c[i, 1], r[i], rho[i], sd2[i], st2[i], roots[i]
         )
         solves += 1

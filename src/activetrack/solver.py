@@ -101,7 +101,7 @@ from activetrack.solver_inputs import (
     accepted_point,
 )
 from activetrack.solver_results import BatchSolution, SingleSensorSolution
-from activetrack.solver_scalar import solve_checked, solve_point
+from activetrack.solver_scalar import UNCHECKED, solve_checked
 from activetrack.solver_steps import (
     RHO_FLOOR,
     SIGN_RATIO,
@@ -322,7 +322,10 @@ def solve_single_sensor(
                 float(sigma_d2),
                 float(sigma_theta2),
             )
-        sx, sy, value, case, feasible = solve_point.dispatcher(*args)
+        p11, p12, p22, c1, c2, r, rho, sigma_d2, sigma_theta2 = args
+        sx, sy, value, case, feasible, _ = solve_checked.dispatcher(
+            p11, p12, p12, p22, c1, c2, UNCHECKED, r, rho, sigma_d2, sigma_theta2
+        )  # checked above, or not to be
     return SingleSensorSolution(np.array([sx, sy]), value, case, feasible)
 
 

@@ -3,8 +3,7 @@
 The steps of :mod:`activetrack.solver_steps` on floats, the roots of f3 (eq. 33) from the
 compiled companion-matrix QR (:func:`activetrack.companion.accepted_roots_from`; from a
 nearby f3's roots where the caller keeps them, as GSR's sweeps do), candidates kept as
-they come. :func:`solve_point` is the kernel (:func:`solve_point_from` with the roots
-kept); :func:`solve_rows` runs
+they come. :func:`solve_point` is the kernel; :func:`solve_rows` runs
 it over a batch in compiled code (the batched solver), :func:`solve_checked` checks and
 solves one problem from Python in one call (:func:`activetrack.solver.solve_single_sensor`
 names what it rejects). The other kernels take validated inputs.
@@ -45,11 +44,12 @@ from activetrack.solver_steps import (
 )
 
 MAX_STARTS = N_POLISH + 3  # Newton starts: the best critical root candidates, D, A, B
-#: The roots kept by :func:`solve_point_from`: ``roots[:10]`` real parts, ``roots[10:20]``
+#: The roots kept by :func:`solve_point`: ``roots[:10]`` real parts, ``roots[10:20]``
 #: imaginary parts, ``roots[ROOTS_TAG]`` which f3 they belong to (f3 in x or in y: the
 #: ``swap`` of :func:`~activetrack.solver_steps.circle_polynomial`), or none.
 ROOTS_SIZE, ROOTS_TAG = 21, 20
-NO_ROOTS, UNSWAPPED, SWAPPED = 0.0, 1.0, 2.0
+NO_ROOTS, UNSWAPPED, SWAPPED = 0.0, 1.0, 2.0  # NO_ROOTS = 0: np.zeros is a fresh state
+UNCHECKED = -1.0  # the ||c|| that tells solve_checked to skip the checks
 assert N_POLISH == 2, "_two_best picks the polished root candidates"
 
 
@@ -100,26 +100,18 @@ def _two_best(fs, xs, ys, n):
 
 
 @kernel
-def solve_point(p11, p12, p22, c1, c2, r, rho, sigma_d2, sigma_theta2):
+def solve_point(p11, p12, p22, c1, c2, r, rho, sigma_d2, sigma_theta2, roots):
     """Return ``(sx, sy, value, case, feasible)`` for one validated problem.
 
     ``p11, p12, p22``: the symmetric prior information; ``c1, c2``: the sensor relative to
     the target; the rest as in :func:`activetrack.solver.solve_single_sensor`.
-    """
-    roots = np.empty(ROOTS_SIZE)
-    roots[ROOTS_TAG] = NO_ROOTS
-    return solve_point_from(p11, p12, p22, c1, c2, r, rho, sigma_d2, sigma_theta2, roots)
-
-
-@kernel
-def solve_point_from(p11, p12, p22, c1, c2, r, rho, sigma_d2, sigma_theta2, roots):
-    """:func:`solve_point`, keeping f3's roots in ``roots`` (:data:`ROOTS_SIZE`,): the real
-    parts, the imaginary parts and a tag (:data:`NO_ROOTS`, or which variable f3 was in).
-
-    Where the tag matches this problem's f3, the roots there are the starting point of
+    ``roots`` (:data:`ROOTS_SIZE`,) keeps f3's roots between solves: the real parts, the
+    imaginary parts and a tag (:data:`NO_ROOTS`, or which variable f3 was in). Where the
+    tag matches this problem's f3, the roots there are the starting point of
     :func:`activetrack.companion.accepted_roots_from`; this problem's roots (and tag)
-    replace them. A caller solving a sequence of nearby problems (GSR's sweeps) passes
-    the same array each time; the answer is that of a fresh solve up to rounding.
+    replace them. A fresh solve passes ``np.zeros(ROOTS_SIZE)``; a caller solving a
+    sequence of nearby problems (GSR's sweeps) passes the same array each time, and gets
+    the fresh solve's answer up to rounding.
     """
     cph, sph, l1, l2 = eig_frame(p11, p12, p22)
     a = 1.0 / sigma_d2
@@ -218,11 +210,13 @@ def solve_point_from(p11, p12, p22, c1, c2, r, rho, sigma_d2, sigma_theta2, root
 def solve_rows(P, c, r, rho, sigma_d2, sigma_theta2, s, value, case, feasible):
     """Solve the validated problems row by row into ``s`` (B, 2), ``value``, ``case``,
     ``feasible`` (B,); inputs (B, 2, 2), (B, 2) and (B,) x 4 (the prior symmetrized)."""
+    roots = np.empty(ROOTS_SIZE)
     for i in range(P.shape[0]):
         p12 = 0.5 * (P[i, 0, 1] + P[i, 1, 0])
+        roots[ROOTS_TAG] = NO_ROOTS  # rows are independent: each a fresh solve
         sx, sy, v, k, ok = solve_point(
             P[i, 0, 0], p12, P[i, 1, 1], c[i, 0], c[i, 1], r[i], rho[i], sigma_d2[i],
-            sigma_theta2[i],
+            sigma_theta2[i], roots,
         )  # fmt: skip
         s[i, 0] = sx
         s[i, 1] = sy
@@ -234,13 +228,20 @@ def solve_rows(P, c, r, rho, sigma_d2, sigma_theta2, s, value, case, feasible):
 @kernel
 def solve_checked(p11, p12, p21, p22, c1, c2, nc, r, rho, sigma_d2, sigma_theta2):
     """Return ``(sx, sy, value, case, feasible, accepted)``: :func:`solve_point` of one
-    problem given as floats (the prior's four entries, symmetrized here; ``nc = ||c||``
-    for the range test) when :func:`~activetrack.solver_inputs.accepted_point` accepts
-    them; otherwise ``accepted`` is False (and the rest NaN, 0, False), for the caller to
-    say why."""
-    if not accepted_point(p11, p12, p21, p22, c1, c2, nc, r, rho, sigma_d2, sigma_theta2):
-        return math.nan, math.nan, math.nan, 0, False, False
+    problem given as floats (the prior's four entries; ``nc = ||c||`` for the range test),
+    a fresh solve.
+
+    The prior is symmetrized and the problem solved only when
+    :func:`~activetrack.solver_inputs.accepted_point` accepts it; otherwise ``accepted``
+    is False (and the rest NaN, 0, False), for the caller to say why. ``nc =``
+    :data:`UNCHECKED` (never a norm; a flag argument would cost the Python call a tenth of
+    its time) solves without checks, ``p12`` then the off-diagonal entry (``p21`` unused).
+    """
+    if nc != UNCHECKED:  # NaN (a NaN in c) is checked, and refused
+        if not accepted_point(p11, p12, p21, p22, c1, c2, nc, r, rho, sigma_d2, sigma_theta2):
+            return math.nan, math.nan, math.nan, 0, False, False
+        p12 = 0.5 * (p12 + p21)
     sx, sy, value, case, ok = solve_point(
-        p11, 0.5 * (p12 + p21), p22, c1, c2, r, rho, sigma_d2, sigma_theta2
+        p11, p12, p22, c1, c2, r, rho, sigma_d2, sigma_theta2, np.zeros(ROOTS_SIZE)
     )
     return sx, sy, value, case, ok, True

@@ -22,7 +22,6 @@ from activetrack.solver_scalar import (
     ROOTS_SIZE,
     ROOTS_TAG,
     solve_point,
-    solve_point_from,
 )
 from tests.core.test_hessenberg_qr import matched_error, mp_roots, poly_from_roots
 
@@ -156,8 +155,8 @@ def test_a_solve_from_kept_roots_is_the_fresh_solve() -> None:
         for _ in range(4):
             L = L + 10 ** rng.uniform(-4, -1) * np.trace(L) * np.diag(rng.uniform(0, 1, 2))
             args = (L[0, 0], L[0, 1], L[1, 1], c[0], c[1], r, rho, sd2, st2)
-            warm = solve_point_from(*args, roots)
-            fresh = solve_point(*args)
+            warm = solve_point(*args, roots)
+            fresh = solve_point(*args, np.zeros(ROOTS_SIZE))
             assert roots[ROOTS_TAG] != NO_ROOTS
             assert warm[3:] == fresh[3:]
             assert abs(warm[2] - fresh[2]) <= 1e-12 * fresh[2]
