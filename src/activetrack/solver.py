@@ -99,6 +99,7 @@ from activetrack.solver_inputs import (
     MIN_INFORMATION_RATIO,
     MIN_SCALE,
     accepted_point,
+    accepted_rows,
 )
 from activetrack.solver_results import BatchSolution, SingleSensorSolution
 from activetrack.solver_scalar import UNCHECKED, solve_checked
@@ -374,9 +375,20 @@ def solve_single_sensor_batch(
         per_sensor(k, v, n, allow_zero=k in ("r", "rho"))
         for k, v in zip(names, (r, rho, sigma_d2, sigma_theta2), strict=True)
     ]
-    p12 = 0.5 * (P[:, 0, 1] + P[:, 1, 0])
-    l1, l2 = eigenvalues(P[:, 0, 0], p12, P[:, 1, 1])
-    _check_scale(l1, l2, np.hypot(cc[:, 0], cc[:, 1]), *args)
+    P = np.ascontiguousarray(P)
+    cc = np.ascontiguousarray(cc)
+    # ||c|| as the scalar solver computes it (Python's hypot), so that the compiled rule
+    # that decides (the scalar solver's) accepts exactly the rows it accepts.
+    nc = np.array([math.hypot(x, y) for x, y in cc.tolist()])
+    ok = np.empty(n, dtype=bool)
+    if not accepted_rows(P, cc, nc, *args, ok):
+        bad = ~ok
+        p12 = 0.5 * (P[bad, 0, 1] + P[bad, 1, 0])
+        l1, l2 = eigenvalues(P[bad, 0, 0], p12, P[bad, 1, 1])
+        # Raises, naming the parameter, unless the rows sit on an edge of the range within
+        # rounding (tested as quotients here, as products by the rule): then solved, as
+        # the scalar solver solves them.
+        _check_scale(l1, l2, nc[bad], *(a[bad] for a in args))
     return solve_batch(P, cc, *args)
 
 

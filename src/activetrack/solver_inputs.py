@@ -2,9 +2,11 @@
 
 The bounds of the accepted scale range (documented in :mod:`activetrack.solver`) and
 :func:`accepted_point`, the test a checked scalar solve runs on its ten floats before
-solving (in the same compiled call, :func:`activetrack.solver_scalar.solve_checked`).
-A rejected problem is handed to the Python checks of :mod:`activetrack.solver`, which
-name the offending parameter and its allowed range; this module only decides.
+solving (in the same compiled call, :func:`activetrack.solver_scalar.solve_checked`);
+:func:`accepted_rows` runs it over a batch for the checked batched solve, so both accept
+exactly the same problems. A rejected problem is handed to the Python checks of
+:mod:`activetrack.solver`, which name the offending parameter and its allowed range; this
+module only decides.
 """
 
 from __future__ import annotations
@@ -78,3 +80,17 @@ def accepted_point(p11, p12, p21, p22, c1, c2, nc, r, rho, sigma_d2, sigma_theta
             and informative(l1, 1.0 / sigma_d2, 1.0 / (sigma_theta2 * r * r))
         )
     )
+
+
+@kernel
+def accepted_rows(P, c, nc, r, rho, sigma_d2, sigma_theta2, out) -> bool:
+    """Write :func:`accepted_point` of each row into ``out`` (B,) (``P`` (B, 2, 2), ``c``
+    (B, 2), the rest (B,)); return whether every row is accepted."""
+    every = True
+    for i in range(P.shape[0]):
+        out[i] = accepted_point(
+            P[i, 0, 0], P[i, 0, 1], P[i, 1, 0], P[i, 1, 1], c[i, 0], c[i, 1], nc[i], r[i],
+            rho[i], sigma_d2[i], sigma_theta2[i],
+        )  # fmt: skip
+        every = every and out[i]
+    return every

@@ -301,3 +301,43 @@ def test_nearly_singular_prior_is_refused_without_a_crash():
     ):
         out = solve_strictly(solve, *args)
         assert isinstance(out, ValueError) and "prior_info" in str(out), out
+
+
+def _edge_reaches(ratio: float, above: bool, n: int = 3) -> list[float]:
+    """Return reaches ``r`` where the product ``ratio * r`` and the quotient disagree:
+    ``fl(fl(ratio * r) / r)`` is above ``ratio`` (``above``) or below it."""
+    out = []
+    for r in np.random.default_rng(11).uniform(0.01, 10.0, 20000):
+        q = (ratio * r) / r
+        if (q > ratio) if above else (q < ratio):
+            out.append(float(r))
+            if len(out) == n:
+                break
+    return out
+
+
+@pytest.mark.kernels
+def test_the_range_edges_are_decided_alike_by_the_scalar_and_the_batched_solver():
+    """At ``||c|| = 1e5 r`` and ``rho = 1e-9 r`` computed as products, where the quotients
+    round past the bound, both solvers accept (one rule decides both, compiled) and agree
+    bit for bit; one float further out, both refuse, naming the parameter."""
+    from activetrack.solver_inputs import MAX_DISTANCE_RATIO
+    from activetrack.solver_steps import RHO_FLOOR
+
+    prior = np.array([[2.0, 0.3], [0.3, 1.0]])
+    cases = [(r, MAX_DISTANCE_RATIO * r, 0.5 * r) for r in _edge_reaches(MAX_DISTANCE_RATIO, True)]
+    cases += [(r, 3.0 * r, RHO_FLOOR * r) for r in _edge_reaches(RHO_FLOOR, False)]
+    assert len(cases) == 6
+    for r, nc, rho in cases:
+        c = np.array([nc, 0.0])
+        one = solve_single_sensor(prior, c, r, rho, 0.1, 0.01)
+        batch = solve_single_sensor_batch(prior[None], c[None], [r], [rho], [0.1], [0.01])
+        assert np.array_equal(batch.s[0], one.s) and batch.value[0] == one.value
+        if nc > 10 * r:  # the ||c|| edge: one float farther
+            far, near, why = np.array([np.nextafter(nc, np.inf), 0.0]), rho, r"\|\|c\|\| / r"
+        else:  # the rho edge: one float nearer
+            far, near, why = c, np.nextafter(rho, 0.0), "rho / r"
+        with pytest.raises(ValueError, match=why):
+            solve_single_sensor(prior, far, r, near, 0.1, 0.01)
+        with pytest.raises(ValueError, match=why):
+            solve_single_sensor_batch(prior[None], far[None], [r], [near], [0.1], [0.01])
