@@ -368,7 +368,8 @@ class Relaxation:
 
         The solver's kernel on floats (what ``solve_single_sensor(..., check=False)``
         runs, without its wrapping: GSR calls it ~10 times a plan), from the roots of the
-        sensor's previous solve in this relaxation, as the compiled sweeps do.
+        sensor's previous solve on this object (forgotten at each :meth:`relax`, as the
+        compiled sweeps start each relaxation afresh).
         """
         self.n_solves += 1
         p11, p12, _, p22 = others.ravel().tolist()

@@ -39,8 +39,11 @@ _RE_BOUND = 1.0 + RE_TOL
 WARM_ITERS = 8  # Aberth sweeps from a warm start before the QR takes over
 _N = 10  # f3's degree
 # Horner's rule in complex arithmetic on a degree-10 polynomial: |computed - exact| at z
-# is below this times sum_k |q_k| |z|^k (with |q_10| = 1), by a wide margin.
+# is below (2 sqrt(2) + 1) n eps sum_k |q_k| |z|^k (|q_10| = 1) to first order. A root is
+# taken as found where |p| is below _HORNER_ERR times that sum; the certificate bounds the
+# exact |p| by the computed one plus twice that (a margin over the first-order bound).
 _HORNER_ERR = 4.0 * _N * 2.220446049250313e-16
+_TINY = 1e-290  # products below this (near the subnormals) have lost their relative precision
 
 
 @kernel
@@ -222,7 +225,7 @@ def _separated(err: FloatArray, zr: FloatArray, zi: FloatArray) -> bool:
             if j != k:
                 ur, ui = zr[k] - zr[j], zi[k] - zi[j]
                 m2 *= ur * ur + ui * ui
-        if not (m2 > 0.0 and math.isfinite(m2)):
+        if not (m2 > _TINY and math.isfinite(m2)):  # coincident, or too near to tell
             return False
         rad[k] = _N * err[k] / math.sqrt(m2) * (1.0 + 1e-6)  # 1e-6: the product's rounding
     for k in range(_N):
@@ -252,9 +255,19 @@ def _aberth_into(q: FloatArray, zr: FloatArray, zi: FloatArray) -> bool:
             x, y = zr[k], zi[k]
             pr, pi, dr, di = _horner(q, x, y)
             bound = _HORNER_ERR * _abs_sum(aq, math.sqrt(x * x + y * y))
-            if pr * pr + pi * pi <= bound * bound:  # |p| at rounding level: a root
+            # |p| at rounding level: a root. Squares where the bound's cannot underflow (else
+            # both sides could be 0 and any point would pass); hypot below that.
+            b2 = bound * bound
+            if b2 > _TINY:
+                ap2 = pr * pr + pi * pi
+                found = ap2 <= b2
+                ap = math.sqrt(ap2)
+            else:
+                ap = math.hypot(pr, pi)
+                found = ap <= bound
+            if found:
                 done[k] = True
-                err[k] = math.sqrt(pr * pr + pi * pi) + bound
+                err[k] = ap + 2.0 * bound
                 continue
             d2 = dr * dr + di * di
             if not d2 > 0.0:  # p' = 0 (or NaN): no Newton step

@@ -2,7 +2,7 @@
 GSR plans built on them, against mpmath, a fresh solve and textbook Gauss-Seidel sweeps.
 
 The warm path may decline (then the companion QR decides), but what it certifies must be
-right: every root of the new polynomial within rounding of an approximation. The
+right: every root of the new polynomial within its inclusion disk of an approximation. The
 references are independent: mpmath's roots at 40 digits, the solver with no kept roots
 (checked against dense search in ``test_solver.py``), and GSR's eq. (38) loop written
 here with fresh ``solve_single_sensor`` calls.
@@ -200,3 +200,26 @@ def test_gsr_with_kept_roots_matches_textbook_sweeps_with_fresh_solves() -> None
         if not res.warm_feasible:
             continue  # a sensor inside its rho disk: GSR starts elsewhere than the loop
         assert abs(res.value - _textbook_gsr(p)) <= 1e-8 * res.value
+
+
+def test_tiny_roots_are_certified_only_when_right() -> None:
+    """Roots near 1e-60 and 1e-18, where ``|f3|^2`` underflows: the stopping test must not
+    take every point for a root (it did, comparing squares: 0 <= 0). What is certified is
+    right relative to each root's own size (mpmath at 120 digits)."""
+    rng = np.random.default_rng(8)
+    families = [np.array([1e-60, 2e-60, -1.5e-60, 0.3, -0.5, 0.7, 0.2 + 0.6j, 0.2 - 0.6j, 2, -3])]
+    families += [1e-18 * _random_roots(rng) for _ in range(5)]
+    for roots in families:
+        q = poly_from_roots(roots)
+        start = roots * (1.0 + 1e-3 * rng.normal(size=10))
+        zr, zi = start.real.copy(), start.imag.copy()
+        if _aberth_into(q, zr, zi):
+            import mpmath
+
+            with mpmath.workdps(120):
+                coeffs = [mpmath.mpf(1)] + [mpmath.mpf(float(v)) for v in q[::-1]]
+                ref = [complex(z) for z in mpmath.polyroots(coeffs, maxsteps=400, extraprec=400)]
+            found = list(zr + 1j * zi)
+            for z in sorted(ref, key=abs, reverse=True):
+                k = int(np.argmin([abs(z - w) for w in found]))
+                assert abs(z - found.pop(k)) <= 1e-8 * abs(z)
