@@ -234,8 +234,9 @@ def solve_checked(p11, p12, p21, p22, c1, c2, nc, r, rho, sigma_d2, sigma_theta2
     The prior is symmetrized and the problem solved only when
     :func:`~activetrack.solver_inputs.accepted_point` accepts it; otherwise ``accepted``
     is False (and the rest NaN, 0, False), for the caller to say why. ``nc =``
-    :data:`UNCHECKED` (never a norm; a flag argument would cost the Python call a tenth of
-    its time) solves without checks, ``p12`` then the off-diagonal entry (``p21`` unused).
+    :data:`UNCHECKED` (never a norm; a flag argument slowed the call from Python
+    measurably) solves without checks, ``p12`` then the off-diagonal entry (``p21``
+    unused).
     """
     if nc != UNCHECKED:  # NaN (a NaN in c) is checked, and refused
         if not accepted_point(p11, p12, p21, p22, c1, c2, nc, r, rho, sigma_d2, sigma_theta2):
