@@ -3,9 +3,10 @@ GSR plans built on them, against mpmath, a fresh solve and textbook Gauss-Seidel
 
 The warm path may decline (then the companion QR decides), but what it certifies must be
 right: every root of the new polynomial within its inclusion disk of an approximation. The
-references are independent: mpmath's roots at 40 digits, the solver with no kept roots
-(checked against dense search in ``test_solver.py``), and GSR's eq. (38) loop written
-here with fresh ``solve_single_sensor`` calls.
+references are independent: mpmath's roots at 40 digits, a dense search of the feasible
+boundary (``test_solver.brute_force``), the solver with no kept roots (itself checked
+against that search in ``test_solver.py``), and GSR's eq. (38) loop written here with
+fresh ``solve_single_sensor`` calls.
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ from activetrack.solver_scalar import (
     solve_point,
 )
 from tests.core.test_hessenberg_qr import matched_error, mp_roots, poly_from_roots
+from tests.core.test_solver import brute_force
 
 pytestmark = pytest.mark.kernels
 
@@ -146,7 +148,8 @@ def _bench_problem(rng: np.random.Generator) -> tuple:
 def test_a_solve_from_kept_roots_is_the_fresh_solve() -> None:
     """A sequence of nearby problems (the prior moving as in GSR's sweeps) solved from the
     previous solve's roots: the same value (to rounding), case and point (to the optimum's
-    flatness) as a fresh solve; the kept roots are tagged."""
+    flatness) as a fresh solve; the kept roots are tagged; and the last solve of each
+    sequence is feasible and never worse than a dense search of the feasible boundary."""
     rng = np.random.default_rng(5)
     for _ in range(60):
         L, c, r, rho, sd2, st2 = _bench_problem(rng)
@@ -161,6 +164,10 @@ def test_a_solve_from_kept_roots_is_the_fresh_solve() -> None:
             assert warm[3:] == fresh[3:]
             assert abs(warm[2] - fresh[2]) <= 1e-12 * fresh[2]
             assert np.hypot(warm[0] - fresh[0], warm[1] - fresh[1]) <= 1e-6 * r
+        s = np.array(warm[:2])
+        assert np.hypot(*(s - c)) <= r * (1 + 1e-9) and np.hypot(*s) >= rho * (1 - 1e-9)
+        ref = brute_force(L, c, r, rho, sd2, st2)
+        assert (warm[2] - ref) / ref <= 1e-9
 
 
 def _textbook_gsr(p, tol: float = 1e-9, max_sweeps: int = 100) -> float:
