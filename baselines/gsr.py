@@ -360,8 +360,7 @@ class Relaxation:
         self.sweeps = 0
         self.n_solves = 0
         self.start_value = math.nan
-        self._roots = np.empty((len(self.r), ROOTS_SIZE))  # each sensor's last f3 roots
-        self._roots[:, ROOTS_TAG] = NO_ROOTS
+        self._roots = np.zeros((len(self.r), ROOTS_SIZE))  # each sensor's last f3 roots (none)
 
     def solve(self, others: FloatArray, i: int) -> FloatArray:
         """Return sensor ``i``'s optimum given the information ``others`` (eq. 38), (2,).
