@@ -152,11 +152,9 @@ class Lookahead:
         still = r <= 0.0  # a sensor that cannot move has one option: stay
         if np.any(still):
             paths = np.where(still[:, :, None, None, None], gsr_paths[:, :, None], paths)
-        info = model.information(paths, means)  # K x (B, M, O, H, 2, 2)
         valid = model.outside_rho(paths, means, rho_eff)  # (B, M, O)
         valid[:, :, 0] = True  # GSR's rollout: its solver's candidates keep rho
-
-        scorer = _Scorer(preds, weights, problem.objective)
+        info, scorer = self._scoring(model, paths, means, preds, weights, problem.objective)
         choice, score, gsr_score = self._descend(info, valid, scorer, previous)
         b = np.arange(B)[:, None]
         plan = paths[b, np.arange(M)[None, :], choice]  # (B, M, H, 2)
@@ -201,6 +199,12 @@ class Lookahead:
                     for P, Y, (_, _, F, Qk) in zip(covs, here, preds, strict=True)
                 ]
         return paths
+
+    def _scoring(self, model, paths, means, preds, weights, objective) -> tuple:
+        """Return ``(info, scorer)`` for :meth:`_descend`: every target's per-sensor
+        information along the ``paths`` (B, M, O, H, 2), K x (B, M, O, H, 2, 2), and the
+        score of team candidates' summed information (the deterministic model)."""
+        return model.information(paths, means), _Scorer(preds, weights, objective)
 
     def _descend(self, info, valid, scorer, previous):
         """Return ``(choice (B, M), score (B,), gsr_score (B,))``: coordinate descent over

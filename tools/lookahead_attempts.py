@@ -12,7 +12,10 @@ ahead"): none is kept in the library; each is a patch of this process only.
 - ``inflate``: the information computed at distances inflated by the prediction's
   uncertainty, ``d_eff^2 = d^2 + alpha sigma^2`` (``sigma^2`` the predicted position's
   largest variance): plans that rely on standing close count less;
-- ``episode-end``: the horizon's weights cut at the episode's last step.
+- ``episode-end``: the horizon's weights cut at the episode's last step;
+- ``sampled``: each team candidate scored by the mean of its model score over
+  ``--samples`` sampled paths of the future estimate (the filter's linearization point)
+  instead of the predicted mean path alone (:class:`SampledFutures`).
 
 Prints the ratio of the look-ahead's mean trace to GSR's over 100 seeds from ``--start``
 (one batched world each, paired) with a bootstrap 95% interval. Run::
@@ -22,11 +25,13 @@ Prints the ratio of the look-ahead's mean trace to GSR's over 100 seeds from ``-
     OPENBLAS_NUM_THREADS=1 python tools/lookahead_attempts.py sigma --alpha 0.5 --start 2000
     OPENBLAS_NUM_THREADS=1 .venv/bin/python tools/lookahead_attempts.py episode-end --start 1000
     OPENBLAS_NUM_THREADS=1 python tools/lookahead_attempts.py inflate --alpha 1 --start 3000
+    OPENBLAS_NUM_THREADS=1 python tools/lookahead_attempts.py sampled --samples 16 --start 2000
 """
 
 from __future__ import annotations
 
 import argparse
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -123,6 +128,45 @@ def patch(attempt: str, alpha: float) -> None:
         hm.discount_weights = cut
 
 
+@dataclass
+class SampledFutures(la.Lookahead):
+    """The look-ahead planner scoring each team candidate by its mean model score over
+    ``samples`` paths of the future estimate (one target).
+
+    Under the EKF the estimate moves at each update by ``K nu``, whose covariance is
+    ``P(h|h-1) - P(h|h)`` (law of total covariance), and is then predicted by ``Phi``; the
+    deterministic model keeps it on the predicted mean. Here the deviations ``e(0) = 0``,
+    ``e(h+1) = Phi (e(h) + scale L(h) z(h))`` (``L L^T`` that covariance along GSR's
+    rollout, ``z`` standard normals, half of them the negatives of the others, the same
+    for every copy and call) move the point each sensor's information is computed about.
+    """
+
+    samples: int = 16
+    scale: float = 1.0
+
+    def _scoring(self, model, paths, means, preds, weights, objective):  # noqa: ANN001, ANN202
+        ((_, P0, Phi, Q),) = preds
+        B, H, n = paths.shape[0], paths.shape[3], Phi.shape[0]
+        Y = model.information(paths[:, :, :1], means)[0][:, :, 0].sum(axis=1)  # GSR's rollout
+        prior = hm.prior_sequence(P0, Y, Phi, Q)
+        jump = prior - hm.information_update(prior, Y)
+        L = np.linalg.cholesky(0.5 * (jump + jump.mT) + 1e-12 * np.eye(n))  # (B, H, n, n)
+        half = np.random.default_rng(0).standard_normal((self.samples // 2, H, n))
+        z = np.concatenate([half, -half])  # (S, H, n)
+        e, dev = np.zeros((B, len(z), n)), np.empty((B, len(z), H, 2))
+        for h in range(H):
+            dev[:, :, h] = e[..., :2]
+            e = (e + self.scale * np.einsum("bij,sj->bsi", L[:, h], z[:, h])) @ Phi.T
+        rel = paths[:, :, :, None] - (means[:, None, :, 0] + dev)[:, None, None]
+        cols = (slice(None), slice(None), None, None, None)
+        info = [sensor_information(rel, model.sigma_d2[cols], model.sigma_theta2[cols])]
+
+        def scorer(Ys: list) -> np.ndarray:  # Ys[0] (B, C, S, H, 2, 2): the samples' mean
+            return hm.rollout(P0[:, None, None], Ys[0], Phi, Q, weights)[0].mean(axis=-1)
+
+        return info, scorer  # info (B, M, O, S, H, 2, 2)
+
+
 class Watched:
     """The look-ahead planner, with what the variants read set before each plan: the
     prediction's position covariance and the steps left (the copies are in step)."""
@@ -141,18 +185,30 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument(
         "attempt",
-        choices=["none", "follow", "half-speed", "relative", "sigma", "inflate", "episode-end"],
-    )
+        choices=[
+            "none", "follow", "half-speed", "relative", "sigma", "inflate", "episode-end",
+            "sampled",
+        ],
+    )  # fmt: skip
     parser.add_argument("--start", type=int, default=2000, help="first of 100 seeds")
     parser.add_argument(
-        "--alpha", type=float, default=0.5, help="sigma: the points' scale; inflate: kappa"
+        "--alpha",
+        type=float,
+        default=0.5,
+        help="sigma: the points' scale; inflate: kappa; sampled: the deviations' scale",
     )
+    parser.add_argument("--samples", type=int, default=16, help="sampled: estimate paths")
     args = parser.parse_args()
     seeds = list(range(args.start, args.start + 100))
     gsr, _ = la.run_batched("paper", seeds)  # before the patch: GSR is unaffected by every variant
     patch(args.attempt, args.alpha)
     n_steps = World("paper").scenario.n_steps
-    look, _ = la.run_batched("paper", seeds, Watched(la.Lookahead(), n_steps))
+    search = (
+        SampledFutures(samples=args.samples, scale=args.alpha)
+        if args.attempt == "sampled"
+        else la.Lookahead()
+    )
+    look, _ = la.run_batched("paper", seeds, Watched(search, n_steps))
     idx = np.random.default_rng(0).integers(0, 100, (4000, 100))
     boot = look[idx].mean(axis=1) / gsr[idx].mean(axis=1)
     lo, hi = np.percentile(boot, [2.5, 97.5])
