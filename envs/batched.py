@@ -10,9 +10,16 @@ Seeding and reproducibility: ``reset(seed=s)`` seeds copy ``i`` with
 order of a single environment: initial conditions, then ``n + 2M`` standard normals per
 step. To avoid a Python call per copy and step, the normals are drawn in blocks of up to
 ``noise_block`` steps, never beyond the episode's last step, so a copy's generator is in
-the same state as the single environment's at every reset. (A copy that terminates early
-on ``max_trace`` has drawn the rest of its block: its next episodes then differ from a
-single environment's, though they stay reproducible.)
+the same state as the single environment's at every reset (a copy whose episode ends before
+its block is used up, terminated on ``max_trace`` or reset, has its generator put back:
+:class:`activetrack.world.World`).
+
+Gymnasium's keywords: ``render_mode`` (``"rgb_array"`` or ``"human"``) draws copy 0's
+episode, as VMAS renders its first environment; ``max_episode_steps`` truncates every
+copy's episodes after ``min(scenario.n_steps, max_episode_steps)`` steps, as the
+``TimeLimit`` that ``gymnasium.make`` adds to the single environment. Infos hold what the
+single environment's hold, batched, with Gymnasium's ``_key`` masks: ``step``, ``trace``,
+``position_error``, ``projected`` and ``n_projected`` (N, M), ``max_trace_exceeded``.
 
 Autoreset follows Gymnasium's modes (https://farama.org/Vector-Autoreset-Mode):
 ``NEXT_STEP`` (the default: the step after a copy ends resets it, returning its first
@@ -30,6 +37,7 @@ from __future__ import annotations
 
 from typing import Any
 
+import gymnasium
 import numpy as np
 from gymnasium import spaces
 from gymnasium.vector import AutoresetMode, VectorEnv
@@ -37,10 +45,11 @@ from gymnasium.vector.utils import batch_space
 
 from activetrack.problem import PlanningProblem
 from activetrack.scenarios import Scenario, make_scenario
-from activetrack.validation import FloatArray, real_array
+from activetrack.validation import FloatArray, check_int, check_seed, real_array
 from activetrack.world import World
 
-from .tracking_env import check_no_options
+from .rendering import EpisodeRecorder
+from .tracking_env import RENDER_MODES, check_no_options
 
 StepReturn = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]
 
@@ -54,6 +63,9 @@ class BatchedActiveTracking(VectorEnv):
             :func:`activetrack.envs.parallel_env`.
         autoreset_mode: a :class:`gymnasium.vector.AutoresetMode` or its value string.
         noise_block: how many steps of noise a copy draws per generator call.
+        render_mode: None, ``"rgb_array"`` or ``"human"``: :meth:`render` draws copy 0.
+        max_episode_steps: None, or truncate episodes after this many steps (at most
+            ``scenario.n_steps``).
 
     Arrays of the current state (leading axis N, read-only views of :attr:`world`, updated
     in place by every step): ``x_true``,
@@ -61,7 +73,10 @@ class BatchedActiveTracking(VectorEnv):
     ``k`` (steps taken), ``trace``.
     """
 
-    metadata: dict[str, Any] = {"autoreset_mode": AutoresetMode.NEXT_STEP}
+    metadata: dict[str, Any] = {
+        "autoreset_mode": AutoresetMode.NEXT_STEP,
+        "render_modes": list(RENDER_MODES),
+    }
 
     def __init__(
         self,
@@ -69,6 +84,8 @@ class BatchedActiveTracking(VectorEnv):
         scenario: str | Scenario = "paper",
         autoreset_mode: str | AutoresetMode = AutoresetMode.NEXT_STEP,
         noise_block: int = 64,
+        render_mode: str | None = None,
+        max_episode_steps: int | None = None,
         **overrides: Any,
     ) -> None:
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)):
@@ -82,13 +99,25 @@ class BatchedActiveTracking(VectorEnv):
             raise ValueError(
                 f"autoreset_mode must be one of {modes}, got {autoreset_mode!r}"
             ) from None
+        if render_mode is not None and render_mode not in RENDER_MODES:
+            raise ValueError(
+                f"render_mode must be None or one of {list(RENDER_MODES)}, got {render_mode!r}"
+            )
+        if max_episode_steps is not None:
+            max_episode_steps = check_int("max_episode_steps", max_episode_steps, 1)
         sc = make_scenario(scenario, **overrides)
-        self.world = World(sc, int(num_envs), noise_block=noise_block)
+        self.world = World(sc, int(num_envs), noise_block=noise_block, max_steps=max_episode_steps)
         self.scenario = sc
         self.num_envs = int(num_envs)
         self.noise_block = self.world.noise_block
-        self.metadata = {**type(self).metadata, "autoreset_mode": self.autoreset_mode}
-        self.render_mode = None
+        fps = max(1, round(1.0 / sc.dt))
+        self.metadata = {
+            **type(self).metadata, "autoreset_mode": self.autoreset_mode, "render_fps": fps
+        }  # fmt: skip
+        self.render_mode = render_mode
+        self._recorder = (
+            None if render_mode is None else EpisodeRecorder(self.world, render_mode, fps)
+        )
         self.params = self.world.params
         m = self.n_sensors = sc.n_sensors
         self.length_scale = self.world.length_scale
@@ -121,6 +150,8 @@ class BatchedActiveTracking(VectorEnv):
         """Reset all copies (or ``options["reset_mask"]``); copy i is seeded ``seed + i``."""
         N = self.num_envs
         mask = np.ones(N, dtype=bool)
+        if options is not None and not isinstance(options, dict):
+            raise ValueError(f"options must be a dict or None, got {type(options).__name__}")
         options = dict(options or {})
         if "reset_mask" in options:
             mask = np.asarray(options.pop("reset_mask"))
@@ -129,16 +160,22 @@ class BatchedActiveTracking(VectorEnv):
         check_no_options(options)
         seeds = None
         if seed is not None:
-            if isinstance(seed, (int, np.integer)) and not isinstance(seed, bool):
-                seeds = [int(seed) + i for i in range(N)]
+            if isinstance(seed, (int, np.integer)) and not isinstance(seed, (bool, np.bool_)):
+                seeds = [check_seed("seed", seed) + i for i in range(N)]
+            elif isinstance(seed, (list, tuple, np.ndarray)) and len(seed) == N:
+                seeds = [check_seed(f"seed[{i}]", s) for i, s in enumerate(seed)]
             else:
-                seeds = list(seed)
-                if len(seeds) != N:
-                    raise ValueError(f"seed must be an int or a list of {N} seeds")
+                raise ValueError(
+                    f"seed must be None, an integer >= 0 or a list of {N} seeds, got {seed!r}"
+                )
             seeds = [seeds[i] for i in np.flatnonzero(mask)]
         self.world.reset(mask, seeds)
         self._autoreset[mask] = False
         self._started = True
+        if self._recorder is not None and mask[0]:
+            self._recorder.restart()
+            if self.render_mode == "human":
+                self.render()
         return self._joint_obs(), self._infos()
 
     # Step -------------------------------------------------------------------------------------
@@ -187,6 +224,7 @@ class BatchedActiveTracking(VectorEnv):
         resetting = None
         if self.autoreset_mode == AutoresetMode.NEXT_STEP and self._autoreset.any():
             resetting = self._autoreset.copy()
+        centers = None if self._recorder is None else self._recorder.centers()
         world_step(moves, None if resetting is None else ~resetting)
         terminated, truncated = w.terminated.copy(), w.truncated.copy()
         rewards = -self.scenario.reward_scale * w.trace
@@ -195,6 +233,8 @@ class BatchedActiveTracking(VectorEnv):
             w.reset(resetting)
             rewards[resetting] = 0.0
             terminated[resetting] = truncated[resetting] = False
+        if self._recorder is not None:
+            self._record(centers, resetting is not None and resetting[0])
         done = terminated | truncated
         if self.autoreset_mode == AutoresetMode.SAME_STEP and done.any():
             idx = np.flatnonzero(done)
@@ -202,11 +242,36 @@ class BatchedActiveTracking(VectorEnv):
             infos["final_obs"] = np.full(N, None, dtype=object)
             infos["final_obs"][idx] = list(final_obs)
             infos["_final_obs"] = done.copy()
-            infos["final_info"] = {"trace": w.trace.copy(), "_trace": done.copy()}
+            infos["final_info"] = self._infos(terminated, done)
+            infos["_final_info"] = done.copy()
             w.reset(done)
+            if self._recorder is not None and done[0]:
+                self._recorder.restart()
         self._autoreset = done.copy()
-        infos.update(self._infos())
+        exceeded = terminated.copy()
+        if self.autoreset_mode == AutoresetMode.SAME_STEP:
+            exceeded[done] = False  # reset within the step: its infos are the new episode's
+        infos.update(self._infos(exceeded))
+        if self.render_mode == "human":
+            self.render()
         return w.observe(), rewards, terminated, truncated, infos
+
+    def _record(self, centers: FloatArray, reset: bool) -> None:
+        """Record copy 0's step for :meth:`render` (its new episode if it was reset)."""
+        if reset:
+            self._recorder.restart()
+        else:
+            self._recorder.record(centers)
+
+    def render(self) -> np.ndarray | None:
+        """Draw copy 0's episode so far (as the single environment draws its own): an RGB
+        array in ``rgb_array`` mode; None (a window) in ``human`` mode."""
+        if self._recorder is None:
+            gymnasium.logger.warn(
+                "render() called without a render_mode; pass render_mode='rgb_array' or 'human'."
+            )
+            return None
+        return self._recorder.render()
 
     # Observations -------------------------------------------------------------------------------
     def observe(self) -> np.ndarray:
@@ -220,8 +285,24 @@ class BatchedActiveTracking(VectorEnv):
     def _joint_obs(self) -> np.ndarray:
         return self.world.observe().reshape(self.num_envs, -1)
 
-    def _infos(self) -> dict[str, Any]:
-        return {"step": self.world.k.copy(), "trace": self.world.trace.copy()}
+    def _infos(self, exceeded: np.ndarray | None = None, mask: np.ndarray | None = None) -> dict:
+        """Return the batched infos of the single environment (``max_trace_exceeded``:
+        ``exceeded``, False if None), each with its ``_key`` mask (``mask``; all True)."""
+        w, N = self.world, self.num_envs
+        out = {
+            "step": w.k.copy(),
+            "trace": w.trace.copy(),
+            "position_error": w.position_error(),
+            "projected": w.projected.copy(),
+            "n_projected": w.n_projected.copy(),
+            "max_trace_exceeded": np.zeros(N, bool) if exceeded is None else exceeded.copy(),
+        }
+        mask = np.ones(N, bool) if mask is None else mask
+        out.update({f"_{key}": mask.copy() for key in list(out)})
+        return out
 
     def close_extras(self, **kwargs: Any) -> None:
-        """Nothing to release (no subprocesses, no windows)."""
+        """Close copy 0's rendering window, if any."""
+        recorder = getattr(self, "_recorder", None)  # None too if __init__ raised
+        if recorder is not None:
+            recorder.close()

@@ -643,3 +643,58 @@ class TrackingRenderer:
         self._fig = self._canvas = None
         self._art = {}
         self._ellipses.clear()
+
+
+class EpisodeRecorder:
+    """Copy 0's episode of a world, recorded for an environment with a render mode, and its
+    frames: the :class:`EpisodeHistory` and, made on the first frame, the renderer.
+
+    Args:
+        world: the :class:`activetrack.World` the environment steps.
+        mode: ``"rgb_array"`` or ``"human"``.
+        fps: frames per second of the ``human`` window.
+    """
+
+    def __init__(self, world: Any, mode: str, fps: float) -> None:
+        self.world, self.mode, self.fps = world, mode, fps
+        self.history = EpisodeHistory()
+        self._renderer: TrackingRenderer | None = None
+
+    def restart(self) -> None:
+        """Start a new episode's record from the world's state after its reset."""
+        self.history.clear()
+        self.history.record(self.world)  # the rho circles around the estimates
+        if self._renderer is not None:
+            self._renderer.reset()
+
+    def centers(self) -> FloatArray:
+        """Return what the next step's moves keep ``rho`` from (call before the step)."""
+        return predicted_positions(self.world)
+
+    def record(self, centers: FloatArray) -> None:
+        """Record the step just taken, whose moves kept ``rho`` from ``centers``."""
+        self.history.record(self.world, centers)
+
+    def render(self) -> np.ndarray | None:
+        """Return the current frame (``rgb_array``), or draw it in the window (``human``)."""
+        if not self.history.frames:
+            raise RuntimeError("call reset() before render()")
+        if self._renderer is None:
+            sc = self.world.scenario
+            self._renderer = TrackingRenderer(
+                self.world.params.rho, models=sc.sensor_models, pose_cov=sc.pose_covariances
+            )
+        if self.mode == "rgb_array":
+            return self._renderer.rgb_array(self.history)
+        self._renderer.show(self.history, self.fps)
+        return None
+
+    def close(self) -> None:
+        """Close the window, if any (safe to call twice)."""
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+
+    def __getstate__(self) -> dict[str, Any]:
+        # The matplotlib figure is not pickled; it is rebuilt on the next render().
+        return {**self.__dict__, "_renderer": None}

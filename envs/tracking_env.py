@@ -59,10 +59,10 @@ from pettingzoo.utils.wrappers import OrderEnforcingWrapper
 
 from activetrack.problem import PlanningProblem
 from activetrack.scenarios import Scenario, make_scenario
-from activetrack.validation import FloatArray, real_array
+from activetrack.validation import FloatArray, check_seed, real_array
 from activetrack.world import World
 
-from .rendering import EpisodeHistory, TrackingRenderer, predicted_positions
+from .rendering import EpisodeRecorder
 
 RENDER_MODES = ("human", "rgb_array")
 
@@ -137,8 +137,11 @@ class TrackingParallelEnv(ParallelEnv):
         slow, shigh = self.world.layout.state_bounds()
         self.state_space = spaces.Box(slow, shigh, dtype=np.float32)
 
-        self._history = EpisodeHistory() if render_mode is not None else None
-        self._renderer: TrackingRenderer | None = None
+        self._recorder = (
+            None
+            if render_mode is None
+            else EpisodeRecorder(self.world, render_mode, self.metadata["render_fps"])
+        )
         self._started = False
         self._obs: np.ndarray | None = None
 
@@ -207,14 +210,12 @@ class TrackingParallelEnv(ParallelEnv):
 
     def reset_arrays(self, seed: int | None = None) -> np.ndarray:
         """Start an episode; return all observations as one (M, 5 + 6M) float32 array."""
+        seed = check_seed("seed", seed)
         self.world.reset(seeds=None if seed is None else [seed])
         self._started = True
         self.agents = self.possible_agents[:]
-        if self._history is not None:
-            self._history.clear()
-            self._history.record(self.world)  # the rho circles around the estimates
-            if self._renderer is not None:
-                self._renderer.reset()
+        if self._recorder is not None:
+            self._recorder.restart()
         self._obs = self.world.observe(0)
         return self._obs
 
@@ -250,11 +251,11 @@ class TrackingParallelEnv(ParallelEnv):
     def _advance(self, step: Any, moves: FloatArray) -> tuple[np.ndarray, float, bool, bool]:
         """Run the world's ``step`` (positions or actions) and return the array results."""
         w = self.world
-        planned_from = predicted_positions(w) if self._history is not None else None
+        planned_from = None if self._recorder is None else self._recorder.centers()
         res = step(moves)  # (M, 2): a world of one copy takes it unbatched
         terminated, truncated = bool(res.terminated), bool(res.truncated)
-        if self._history is not None:
-            self._history.record(w, planned_from)
+        if self._recorder is not None:
+            self._recorder.record(planned_from)
         if terminated or truncated:
             self.agents = []  # PettingZoo: finished agents leave the list
         self._obs = w.observe(0)
@@ -301,6 +302,8 @@ class TrackingParallelEnv(ParallelEnv):
             raise RuntimeError("call reset() before observe()")
         obs = self.world.observe(0)
         if agent is not None:
+            if agent not in self.possible_agents:
+                raise ValueError(f"agent must be one of {self.possible_agents}, got {agent!r}")
             return obs[self.possible_agents.index(agent)]
         return dict(zip(self.agents, obs, strict=False))
 
@@ -325,29 +328,12 @@ class TrackingParallelEnv(ParallelEnv):
                 "render() called without a render_mode; pass render_mode='rgb_array' or 'human'."
             )
             return None
-        if not self._history.frames:
-            raise RuntimeError("call reset() before render()")
-        if self._renderer is None:
-            sc = self.scenario
-            self._renderer = TrackingRenderer(
-                self.params.rho, models=sc.sensor_models, pose_cov=sc.pose_covariances
-            )
-        if self.render_mode == "rgb_array":
-            return self._renderer.rgb_array(self._history)
-        self._renderer.show(self._history, self.metadata["render_fps"])
-        return None
+        return self._recorder.render()
 
     def close(self) -> None:
         """Close the rendering window, if any (safe to call twice)."""
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
-
-    def __getstate__(self) -> dict[str, Any]:
-        # The matplotlib figure is not pickled; it is rebuilt on the next render().
-        state = self.__dict__.copy()
-        state["_renderer"] = None
-        return state
+        if self._recorder is not None:
+            self._recorder.close()
 
     def __str__(self) -> str:
         return f"activetrack_v0({self.scenario.name}, M={self.n_sensors})"

@@ -20,6 +20,8 @@ from typing import Any
 
 import numpy as np
 
+from activetrack.validation import check_float, check_int, check_seed
+
 from .tracking_env import TrackingParallelEnv, policy_step
 
 Policy = Callable[[dict[str, np.ndarray]], dict[str, Any]]
@@ -54,6 +56,11 @@ def record_video(
         The path written.
     """
     path = pathlib.Path(path)
+    seed = check_seed("seed", seed)
+    if fps is not None:
+        fps = check_float("fps", fps, 0.1, 1000.0)  # a GIF frame lasts at most 65.535 s
+    if max_steps is not None:
+        max_steps = check_int("max_steps", max_steps, 1)
     _check_output(path)
     if env is None:
         env = TrackingParallelEnv(render_mode="rgb_array", **config)

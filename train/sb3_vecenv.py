@@ -25,6 +25,7 @@ above live only in :class:`SharedPolicyVecEnv`.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -36,6 +37,8 @@ from stable_baselines3.common.vec_env.base_vec_env import (
     VecEnvObs,
     VecEnvStepReturn,
 )
+
+from activetrack.validation import check_int, check_seed
 
 
 class ParallelCopies:
@@ -243,6 +246,7 @@ class SharedPolicyVecEnv(VecEnv):
         if seed is None:
             # Like SB3: draw from numpy's global state (which SB3's set_random_seed seeds).
             seed = int(np.random.randint(0, 2**32 - 1, dtype=np.uint32))  # noqa: NPY002
+        seed = check_seed("seed", seed)
         self._copy_seeds = [seed + i for i in range(self.copies.n_copies)]
         return [s for s in self._copy_seeds for _ in range(self.n_agents)]
 
@@ -260,9 +264,13 @@ class SharedPolicyVecEnv(VecEnv):
 
     def step_async(self, actions: np.ndarray) -> None:
         """Store the slots' actions (num_envs, A) for :meth:`step_wait`."""
-        self._actions = np.asarray(actions).reshape(
-            self.copies.n_copies, self.n_agents, *self.action_space.shape
-        )
+        a = np.asarray(actions)
+        if a.size != self.num_envs * math.prod(self.action_space.shape):
+            raise ValueError(
+                f"actions must have shape ({self.num_envs}, "
+                f"{', '.join(map(str, self.action_space.shape))}), got {a.shape}"
+            )
+        self._actions = a.reshape(self.copies.n_copies, self.n_agents, *self.action_space.shape)
 
     def step_wait(self) -> VecEnvStepReturn:
         """Step all copies, auto-resetting finished ones; return SB3's (obs, rew, done, infos)."""
@@ -356,6 +364,7 @@ def make_shared_vec_env(
     ``activetrack.envs.parallel_env``). Both give the same numbers from the same seed. Seed
     it with ``vec.seed(s)`` (or ``PPO(seed=s)``) before the first reset.
     """
+    n_copies = check_int("n_copies", n_copies, 1)
     if backend == "batched" and env_factory is None:
         return SharedPolicyVecEnv(BatchedCopies(n_copies, scenario, **overrides))
     if backend not in BACKENDS:

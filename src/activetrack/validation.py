@@ -275,3 +275,24 @@ def check_choice(name: str, value: Any, choices: Sequence[str]) -> str:
     if not isinstance(value, str) or value not in choices:
         raise ValueError(f"{name} must be one of {list(choices)}, got {value!r}")
     return value
+
+
+def check_seed(name: str, value: Any) -> int | None:
+    """Return an environment's seed: None, or an integer >= 0 (Gymnasium's rule, numpy
+    integers included, bools not)."""
+    if value is None:
+        return None
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)) or value < 0:
+        raise ValueError(f"{name} must be None or an integer >= 0, got {value!r}")
+    return int(value)
+
+
+def as_generator(name: str, seed: Any) -> np.random.Generator:
+    """Return ``np.random.default_rng(seed)`` or raise a ValueError naming ``name``."""
+    try:
+        return np.random.default_rng(seed)
+    except (TypeError, ValueError):
+        raise ValueError(
+            f"{name} must be an integer >= 0 (or a SeedSequence, BitGenerator or Generator), "
+            f"got {seed!r}"
+        ) from None

@@ -35,8 +35,10 @@ when poses are uncertain; at every step ``n + 2M`` standard normals in the paper
 process noise, then ``2M`` measurement noise, sensor-major), in general every target's
 process noise, then every target's ``2M`` measurement noise, then ``2M`` for the new fixes. With
 ``noise_block = b > 1`` the step normals are drawn ``b`` steps at a time, never past the
-episode's last step, which leaves the stream in the same state at every episode end (a
-copy terminated early on ``max_trace`` has drawn the rest of its block). A world of one
+episode's last step; a copy whose episode ends with normals of its block unused (terminated
+on ``max_trace``, or reset mid-episode) has its generator put back, at its next reset, to
+where the block began and advanced by the normals used, so every copy's stream is in the
+state a single environment's (one step a call) would be in at every reset. A world of one
 copy runs the same code on unbatched arrays (no leading axis inside a step), which is
 what makes a single environment fast.
 """
@@ -56,7 +58,7 @@ from activetrack.motion import predict, psd_factor
 from activetrack.objective import OBJECTIVES, TRACE
 from activetrack.problem import PlanningProblem, Prediction
 from activetrack.scenarios import Scenario, make_scenario
-from activetrack.validation import FloatArray
+from activetrack.validation import FloatArray, as_generator, check_int
 
 #: Steps of noise a copy draws per generator call in a world of several copies.
 DEFAULT_NOISE_BLOCK = 64
@@ -89,6 +91,9 @@ class World:
         num_copies: N >= 1.
         noise_block: steps of noise a copy draws per generator call (default 1 for one
             copy, :data:`DEFAULT_NOISE_BLOCK` otherwise; see the module docstring).
+        max_steps: truncate episodes after ``min(scenario.n_steps, max_steps)`` steps
+            (Gymnasium's ``max_episode_steps``; None: ``n_steps``); the observations' time
+            feature still counts in ``n_steps``.
 
     State (leading axis N, read-only for users): ``x_true`` (N, n), ``x_hat``/``P`` the
     posterior, ``x_pred``/``P_pred`` the prediction, ``sensors`` (N, M, 2), ``k`` steps
@@ -103,6 +108,7 @@ class World:
         num_copies: int = 1,
         *,
         noise_block: int | None = None,
+        max_steps: int | None = None,
         **overrides: Any,
     ) -> None:
         if isinstance(num_copies, bool) or not isinstance(num_copies, (int, np.integer)):
@@ -127,6 +133,10 @@ class World:
         self.n_targets = K = sc.n_targets
         self._n_noise = p.n_noise
         self._n_steps = int(sc.n_steps)
+        #: Steps after which an episode is truncated (``n_steps`` unless ``max_steps`` is less).
+        self.episode_steps = self._n_steps
+        if max_steps is not None:
+            self.episode_steps = min(self._n_steps, check_int("max_steps", max_steps, 1))
         self._max_trace = np.inf if sc.max_trace is None else float(sc.max_trace)
         self._scale = float(sc.reward_scale)
         #: The score of a configuration (eq. 12, 17); the reward is minus it at the posterior.
@@ -208,6 +218,10 @@ class World:
             np.zeros((N, self.noise_block, self._n_noise)) if self.noise_block > 1 else None
         )
         self._noise_left = np.zeros(N, dtype=np.int64)
+        # Each copy's generator state before its last block and that block's steps: what
+        # puts a generator back when its episode ends before the block is used up.
+        self._noise_from: list[dict[str, Any] | None] = [None] * N
+        self._noise_drawn = np.zeros(N, dtype=np.int64)
         # Copies not yet reset hold a valid placeholder (the prior, sensors one length scale
         # away), since whole-batch steps compute them too before discarding the result.
         # One copy keeps its state unbatched (Python numbers for the counters): a step then
@@ -334,10 +348,25 @@ class World:
         """Refill the noise blocks of copies ``rows``, never past their episode's last step."""
         b = self.noise_block
         k = self._s["k"]
-        left = np.minimum(b, np.maximum(self._n_steps - (k if self._one else k[rows]), 1))
+        left = np.minimum(b, np.maximum(self.episode_steps - (k if self._one else k[rows]), 1))
         for i, steps in zip(rows.tolist(), np.atleast_1d(left).tolist(), strict=True):
-            self._noise[i, b - steps :] = self.rng(i).standard_normal((steps, self._n_noise))
+            rng = self.rng(i)
+            self._noise_from[i] = rng.bit_generator.state
+            self._noise[i, b - steps :] = rng.standard_normal((steps, self._n_noise))
         self._noise_left[rows] = left
+        self._noise_drawn[rows] = left
+
+    def _rewind_noise(self, rows: np.ndarray) -> None:
+        """Put back the generators of copies ``rows`` that drew normals they did not use:
+        to their state before the block, advanced by the normals used (a single
+        environment's draws, one step a call, leave the same state)."""
+        for i in rows[self._noise_left[rows] > 0].tolist():
+            rng = self.rng(i)
+            rng.bit_generator.state = self._noise_from[i]
+            used = int(self._noise_drawn[i] - self._noise_left[i])
+            if used:
+                rng.standard_normal((used, self._n_noise))
+        self._noise_left[rows] = 0
 
     def _step_noise(self, sel: _Selection) -> FloatArray:
         """Return the ``n + 2M`` standard normals of this step for the selected copies."""
@@ -397,13 +426,15 @@ class World:
             return
         self._obs_cache = None  # the state changes
         rows = self._rows(sel)
+        if self._noise is not None:
+            self._rewind_noise(rows)
         if seeds is not None:
             seeds = list(seeds)
             if len(seeds) != rows.size:
                 raise ValueError(f"seeds must hold one seed per reset copy ({rows.size})")
-            for i, s in zip(rows.tolist(), seeds, strict=True):
+            for j, (i, s) in enumerate(zip(rows.tolist(), seeds, strict=True)):
                 if s is not None:
-                    self._rngs[i] = np.random.default_rng(s)
+                    self._rngs[i] = as_generator(f"seeds[{j}]", s)
         m, p = self.n_sensors, self.params
         gaussian = self.scenario.target_init == "gaussian"
         u = np.empty((rows.size, m, 2))
@@ -599,7 +630,7 @@ class World:
             truncated = self._store_one(new, bool(np.count_nonzero(projected)))
         else:
             k = st["k"][sel] + 1
-            truncated = k >= self._n_steps
+            truncated = k >= self.episode_steps
             if np.count_nonzero(projected):  # rare; the mixed-type add costs microseconds
                 st["n_projected"][sel] += projected
             if partial:
@@ -690,7 +721,7 @@ class World:
         move was pushed out of a ``rho`` disk); return ``truncated``."""
         st = self._s
         k = st["k"] + 1
-        truncated = k >= self._n_steps
+        truncated = k >= self.episode_steps
         if projected:
             st["n_projected"] = st["n_projected"] + new["projected"]
         st.update(new, k=k, truncated=truncated, ended=bool(new["terminated"]) or truncated)

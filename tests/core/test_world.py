@@ -55,6 +55,41 @@ def test_every_copy_follows_the_longhand_loop_across_episodes(config, n_copies, 
                 refs[i].restart()
 
 
+@pytest.mark.parametrize("cut", ["reset", "max_trace", "max_steps"])
+def test_episodes_cut_short_leave_every_stream_where_the_longhand_loop_leaves_it(cut):
+    # Episodes that end before the copy's block of normals is used up: reset mid-episode,
+    # terminated on max_trace (a bound the trace crosses after a few steps), or truncated
+    # by max_steps. The references draw one step a call and restart where the copy does.
+    extra = {"max_trace": 3.0} if cut == "max_trace" else {}
+    sc = at.make_scenario("paper", n_steps=9, **extra)
+    world = World(sc, 3, noise_block=64, max_steps=4 if cut == "max_steps" else None)
+    seeds = [3, 8, 13]
+    world.reset(seeds=seeds)
+    refs = [ReferenceLoop(sc, s) for s in seeds]
+    rng = np.random.default_rng(1)
+    ends = 0
+    for k in range(25):
+        a = _small_actions(rng, 3, sc.n_sensors)
+        res = world.step_actions(a)
+        expected = [ref.step(a[i]) for i, ref in enumerate(refs)]
+        np.testing.assert_allclose(res.reward, expected, rtol=1e-9)
+        for i, ref in enumerate(refs):
+            np.testing.assert_allclose(world.x_true[i], ref.x_true, rtol=1e-9, atol=1e-9)
+        done = world.terminated | world.truncated
+        if cut == "reset":
+            done = done | (np.arange(3) == k % 3)  # a copy in turn, mid-episode
+        if cut == "max_trace":
+            trace = np.array([ref.P[0, 0] + ref.P[1, 1] for ref in refs])
+            np.testing.assert_array_equal(world.terminated, trace > 3.0)
+        if cut == "max_steps":
+            np.testing.assert_array_equal(world.truncated, world.k == 4)
+        ends += np.count_nonzero(done & (world.k < sc.n_steps))
+        world.reset(done)
+        for i in np.flatnonzero(done):
+            refs[i].restart()
+    assert ends >= 6  # the episodes did end early, with normals of their blocks unused
+
+
 def test_a_step_leaves_the_other_copies_untouched():
     world = World("paper", 3)
     world.reset(seeds=[0, 1, 2])
@@ -156,6 +191,8 @@ def test_observe_and_planning_problem_per_copy():
         ({"num_copies": 0}, "num_copies"),
         ({"num_copies": True}, "num_copies"),
         ({"num_copies": 2, "noise_block": 0}, "noise_block"),
+        ({"num_copies": 2, "max_steps": 0}, "max_steps"),
+        ({"num_copies": 2, "max_steps": 2.5}, "max_steps"),
     ],
 )
 def test_bad_world_arguments_name_the_field(kwargs, match):

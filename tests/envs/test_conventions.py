@@ -153,3 +153,101 @@ def test_import_activetrack_pulls_in_neither_gymnasium_nor_pettingzoo(tmp_path):
         [sys.executable, "-c", code], capture_output=True, text=True, cwd=tmp_path, check=True
     )
     assert out.stdout.strip() == "[]"
+
+
+def _run_vec(vec, actions, seed=0):
+    """Return the (obs, reward, terminated, truncated, infos) of every step of ``vec``."""
+    out = [vec.reset(seed=seed)]
+    for a in actions:
+        out.append(vec.step(a))
+    vec.close()
+    return out
+
+
+@pytest.mark.parametrize("mode", ["next_step", "same_step"])
+@pytest.mark.parametrize(
+    "keywords",
+    [{"max_trace": 3.5}, {"max_episode_steps": 4}],
+    ids=["terminations", "max_episode_steps"],
+)
+def test_make_vec_batched_equals_the_sync_vector_of_single_envs(mode, keywords):
+    # The sync vector env steps gym.make's single environments (a TimeLimit for
+    # max_episode_steps), one step of noise a call: the batched env, drawing noise in
+    # blocks, must give the same numbers and infos across early episode ends.
+    kw = {**CONFIG, "n_steps": 9, **keywords}
+    vk = {"autoreset_mode": gym.vector.AutoresetMode(mode.capitalize().replace("_s", "S"))}
+    actions = fixed_actions(30, 4).reshape(30, 1, 4).repeat(3, axis=1)
+    actions[:, 1] *= -1.0
+    batched = gym.make_vec(ENV_ID, num_envs=3, vectorization_mode="vector_entry_point",
+                           autoreset_mode=vk["autoreset_mode"], **kw)  # fmt: skip
+    sync = gym.make_vec(ENV_ID, num_envs=3, vectorization_mode="sync", vector_kwargs=vk, **kw)
+    ours, theirs = _run_vec(batched, actions), _run_vec(sync, actions)
+    ends = 0
+    for a, b in zip(ours, theirs, strict=True):
+        np.testing.assert_array_equal(a[0], b[0])
+        for got, want in zip(a[1:-1], b[1:-1], strict=True):
+            np.testing.assert_array_equal(got, want)
+        infos, expected = a[-1], b[-1]
+        assert sorted(infos) == sorted(expected)
+        for key in ("step", "trace", "position_error", "n_projected", "max_trace_exceeded"):
+            # position_error: NumPy's hypot here, Python's math.hypot in the single env.
+            tol = 1e-15 if key == "position_error" else 0.0
+            np.testing.assert_allclose(infos[key], np.stack(expected[key]), rtol=tol, atol=0)
+            np.testing.assert_array_equal(infos["_" + key], expected["_" + key])
+        if "final_info" in expected:
+            np.testing.assert_array_equal(infos["_final_info"], expected["_final_info"])
+            done = expected["_final_info"]
+            for key in ("trace", "max_trace_exceeded"):
+                np.testing.assert_array_equal(
+                    infos["final_info"][key][done], expected["final_info"][key][done]
+                )
+        if len(a) == 5:
+            ends += int(np.count_nonzero(a[2] | a[3]))
+    assert ends >= 3
+
+
+def test_batched_render_mode_draws_copy_0_as_the_single_env_draws_its_episode():
+    actions = fixed_actions(7, 4)
+    vec = gym.make_vec(ENV_ID, num_envs=2, render_mode="rgb_array", **CONFIG)
+    single = gym.make(ENV_ID, render_mode="rgb_array", **CONFIG)
+    vec.reset(seed=5)
+    single.reset(seed=5)
+    np.testing.assert_array_equal(vec.render(), single.render())
+    ended = False
+    for a in actions:  # past the episode's end (5 steps): copy 0's next episode is drawn
+        vec.step(np.stack([a, -a]))  # after an end, the NEXT_STEP autoreset step
+        if ended:
+            single.reset()
+            ended = False
+        else:
+            ended = any(single.step(a)[2:4])
+        frame = vec.render()
+        np.testing.assert_array_equal(frame, single.render())
+        assert frame.dtype == np.uint8 and frame.ndim == 3
+    vec.close()
+    single.close()
+
+
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        ({"render_mode": "ascii"}, "render_mode"),
+        ({"max_episode_steps": 0}, "max_episode_steps"),
+        ({"max_episode_steps": "5"}, "max_episode_steps"),
+    ],
+)
+def test_bad_gymnasium_keywords_of_the_batched_env_name_the_field(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        gym.make_vec(ENV_ID, num_envs=2, **kwargs)
+
+
+@pytest.mark.parametrize("seed", [-1, 1.5, "a", True, [1, 2], np.float64(3)])
+def test_bad_seeds_name_the_seed(seed):
+    for env in (parallel_env(), CentralizedTrackingEnv()):
+        with pytest.raises(ValueError, match="seed must be None or an integer >= 0"):
+            env.reset(seed=seed)
+    batched = BatchedActiveTracking(3)
+    with pytest.raises(ValueError, match="seed"):
+        batched.reset(seed=seed)
+    with pytest.raises(ValueError, match=r"seed\[1\] must be None or an integer >= 0"):
+        batched.reset(seed=[0, -1, 2])

@@ -68,10 +68,10 @@ def test_blitted_frame_equals_a_full_redraw():
     blitted = env.render()
     fresh = TrackingRenderer(env.params.rho)
     fresh._build(human=False)
-    fresh._view = env._renderer._view  # the same view, drawn from scratch
-    fresh._ax.set_xlim(env._renderer._ax.get_xlim())
-    fresh._ax.set_ylim(env._renderer._ax.get_ylim())
-    full = fresh.rgb_array(env._history)
+    fresh._view = env._recorder._renderer._view  # the same view, drawn from scratch
+    fresh._ax.set_xlim(env._recorder._renderer._ax.get_xlim())
+    fresh._ax.set_ylim(env._recorder._renderer._ax.get_ylim())
+    full = fresh.rgb_array(env._recorder.history)
     assert np.mean(np.any(blitted != full, axis=-1)) < 0.002
 
 
@@ -107,7 +107,7 @@ def test_human_mode_draws_on_a_pyplot_figure(monkeypatch):
         warnings.simplefilter("ignore")  # Agg: "cannot show the figure"
         env.reset(seed=0)
         env.step({a: np.zeros(2) for a in env.agents})
-        fig = env._renderer._fig
+        fig = env._recorder._renderer._fig
         assert plt.fignum_exists(fig.number)
         assert len(fig.axes[0].lines[0].get_xdata()) == 2  # the true track so far
         env.close()
@@ -148,6 +148,17 @@ def test_record_video_with_a_policy_and_env(tmp_path):
         record_video(tmp_path / "x.gif", env=env, n_sensors=4)
 
 
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [({"fps": 0.0}, "fps"), ({"fps": float("nan")}, "fps"), ({"fps": "10"}, "fps"),
+     ({"max_steps": 0}, "max_steps"), ({"seed": -1}, "seed")],
+)  # fmt: skip
+def test_record_video_checks_its_arguments_before_the_episode(tmp_path, kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        record_video(tmp_path / "x.gif", scenario="paper", **kwargs)
+    assert not list(tmp_path.iterdir())
+
+
 def test_record_video_mp4_without_backend_says_so(tmp_path):
     import importlib.util
 
@@ -173,8 +184,8 @@ def test_every_preset_renders_a_few_steps(scenario, feasible_set_guard):
     for f in frames:
         assert f.dtype == np.uint8 and f.shape == (480, 480, 3)
     assert not np.array_equal(frames[0], frames[-1])
-    assert len(env._history.frames) == 4
-    assert env._history.frames[-1].n_targets == env.world.n_targets
+    assert len(env._recorder.history.frames) == 4
+    assert env._recorder.history.frames[-1].n_targets == env.world.n_targets
     env.close()
 
 
@@ -184,7 +195,7 @@ def test_frames_have_the_configured_size():
     env.step({a: np.zeros(2) for a in env.agents})
     sc = env.scenario
     r = TrackingRenderer(env.params.rho, (400, 300), 100, models=sc.sensor_models)
-    frame = r.rgb_array(env._history)
+    frame = r.rgb_array(env._recorder.history)
     assert frame.dtype == np.uint8 and frame.shape == (300, 400, 3)
 
 
@@ -196,7 +207,7 @@ def test_history_records_every_target_and_the_fixes(feasible_set_guard):
         K = w.n_targets
         before = [w.get("x_pred", 0, j)[:2].copy() for j in range(K)]
         env.step({a: np.array([0.0, 0.5]) for a in env.agents})
-        snap = env._history.frames[-1]
+        snap = env._recorder.history.frames[-1]
         assert snap.k == 1 and snap.n_targets == K
         for j in range(K):
             np.testing.assert_array_equal(snap.targets[j], w.get("x_true", 0, j)[:2])
@@ -304,7 +315,7 @@ def test_model_markers_and_their_legend_entries():
     env = parallel_env(scenario="mixed", render_mode="rgb_array", n_steps=3)
     env.reset(seed=0)
     env.render()
-    r = env._renderer
+    r = env._recorder._renderer
     entries = _legend_markers(r)
     codes = env.scenario.sensor_models.tolist()
     assert sorted(set(codes)) == [0, 1, 2]
@@ -326,7 +337,7 @@ def test_paper_legend_is_unchanged():
     env = parallel_env(scenario="paper", render_mode="rgb_array")
     env.reset(seed=0)
     env.render()
-    assert list(_legend_markers(env._renderer)) == [
+    assert list(_legend_markers(env._recorder._renderer)) == [
         "target (true)",
         "target (estimate)",
         "3-sigma bounds",
@@ -340,8 +351,8 @@ def test_uncertain_poses_show_fixes_and_two_sigma_pose_ellipses():
     env.reset(seed=4)
     env.step({a: np.array([0.5, 0.0]) for a in env.agents})
     env.render()
-    art = env._renderer._art
-    fixes = env._history.frames[-1].fixes
+    art = env._recorder._renderer._art
+    fixes = env._recorder.history.frames[-1].fixes
     cov = env.scenario.pose_covariances
     for i, mark in enumerate(art["fixes"]):
         assert mark.get_marker() == "+"
@@ -352,7 +363,7 @@ def test_uncertain_poses_show_fixes_and_two_sigma_pose_ellipses():
         d = seg - fixes[i]
         mahal = np.einsum("ki,ij,kj->k", d, np.linalg.inv(cov[i]), d)
         np.testing.assert_allclose(mahal, 4.0, rtol=1e-10)  # the 2-sigma contour
-    assert "position fixes (2-sigma)" in _legend_markers(env._renderer)
+    assert "position fixes (2-sigma)" in _legend_markers(env._recorder._renderer)
 
 
 def test_singular_pose_covariance_draws_a_segment():
@@ -403,8 +414,8 @@ def test_human_mode_draws_every_target(scenario, monkeypatch, feasible_set_guard
         warnings.simplefilter("ignore")  # Agg: "cannot show the figure"
         env.reset(seed=0)
         env.step({a: np.zeros(2) for a in env.agents})
-        fig = env._renderer._fig
-        targets = env._renderer._art["targets"]
+        fig = env._recorder._renderer._fig
+        targets = env._recorder._renderer._art["targets"]
         assert len(targets) == env.world.n_targets
         for t in targets:
             assert len(t["true"].get_xdata()) == 2
@@ -646,26 +657,26 @@ def test_missed_count_and_snapshots_come_from_the_world(feasible_set_guard):
     env.reset(seed=0)
     w = env.world
     env.render()
-    assert "missed" not in env._renderer._art["title"].get_text()
+    assert "missed" not in env._recorder._renderer._art["title"].get_text()
     counts = []
     while env.agents:
         env.step({a: np.array([0.3, 0.2]) for a in env.agents})
         env.render()
         det = w.get("detected", 0)
-        snap = env._history.frames[-1]
+        snap = env._recorder.history.frames[-1]
         np.testing.assert_array_equal(snap.detected, det)
         assert not np.shares_memory(snap.detected, det)  # a copy, not a view of the world
         missed = int(np.sum(~det))
-        title = env._renderer._art["title"].get_text()
+        title = env._recorder._renderer._art["title"].get_text()
         assert title.endswith(f"missed {missed}/{det.size}")
         counts.append(missed)
     assert 0 < min(counts) and max(counts) < 8  # some seen, some missed: a real check
-    snap = env._history.frames[-1]
+    snap = env._recorder.history.frames[-1]
     np.testing.assert_array_equal(snap.max_range, np.full(4, 12.0))
     assert len(snap.occluders) == 1
     np.testing.assert_array_equal(snap.occluders[0], [(0, -3), (4, -3), (4, 3), (0, 3)])
     # The world's immutable layout is converted once per history, not per step.
-    assert all(f.occluders is snap.occluders for f in env._history.frames)
+    assert all(f.occluders is snap.occluders for f in env._recorder.history.frames)
     env.close()
 
 
@@ -674,10 +685,10 @@ def test_unlimited_sensing_records_and_draws_none_of_it():
     env.reset(seed=0)
     env.step({a: np.zeros(2) for a in env.agents})
     env.render()
-    snap = env._history.frames[-1]
+    snap = env._recorder.history.frames[-1]
     assert snap.detected is None and snap.occluders == () and snap.max_range is None
     assert not snap.limited
-    art = env._renderer._art
+    art = env._recorder._renderer._art
     assert art["occluders"] is None and art["missed"] is None
     assert art["range"] == [] and art["sight"] == []
     assert "missed" not in art["title"].get_text()
@@ -688,12 +699,12 @@ def test_detection_probability_alone_draws_lines_but_no_occluders_or_ranges(feas
     env.reset(seed=1)
     env.step({a: np.zeros(2) for a in env.agents})
     env.render()
-    art = env._renderer._art
+    art = env._recorder._renderer._art
     assert art["occluders"] is None and art["range"] == []
     det = env.world.get("detected", 0)
     assert sum(len(_pairs(line)) for line in art["sight"]) == int(det.sum())
     assert len(_pairs(art["missed"])) == int((~det).sum())
-    labels = set(_legend_markers(env._renderer))
+    labels = set(_legend_markers(env._recorder._renderer))
     assert {"lines of sight", "missed detections"} <= labels
     assert not labels & {"occluders", "sensing range"}
 
@@ -734,7 +745,7 @@ def test_human_mode_draws_the_limited_world(monkeypatch, feasible_set_guard):
         env.reset(seed=0)
         env.step({a: np.zeros(2) for a in env.agents})
         env.render()
-        art = env._renderer._art
+        art = env._recorder._renderer._art
         (path,) = art["occluders"].get_paths()
         np.testing.assert_allclose(path.vertices[:4], [(0, -3), (4, -3), (4, 3), (0, 3)])
         det = env.world.get("detected", 0)

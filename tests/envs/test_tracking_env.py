@@ -239,6 +239,13 @@ def test_bad_actions_raise_naming_the_agent(actions, match):
         env.step(actions)
 
 
+def test_observing_an_unknown_agent_names_the_agents():
+    env = parallel_env()
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match=r"agent must be one of \['sensor_0'"):
+        env.observe("sensor_9")
+
+
 @pytest.mark.parametrize(
     "config, field",
     [

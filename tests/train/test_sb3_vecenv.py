@@ -204,9 +204,11 @@ def test_copies_reset_independently():
     assert [e.resets for e in envs] == [[100, None, None, None], [101, None, None]]
 
 
-def test_batched_and_parallel_backends_agree_exactly():
-    a = make_shared_vec_env("paper", 3, backend="batched")
-    b = make_shared_vec_env("paper", 3, backend="parallel")
+@pytest.mark.parametrize("overrides", [{}, {"max_trace": 3.5}], ids=["paper", "terminations"])
+def test_batched_and_parallel_backends_agree_exactly(overrides):
+    # With max_trace, copies end early with noise of their blocks unused (batched backend).
+    a = make_shared_vec_env("paper", 3, backend="batched", **overrides)
+    b = make_shared_vec_env("paper", 3, backend="parallel", **overrides)
     a.seed(7)
     b.seed(7)
     np.testing.assert_array_equal(a.reset(), b.reset())
@@ -233,3 +235,14 @@ def test_attribute_access_maps_slots_to_copies():
     assert vec.get_attr("marker", indices=[3, 5]) == [7, 7]  # slots 3..5 are copy 1
     with pytest.raises(AttributeError):
         vec.get_attr("marker", indices=[0])
+
+
+def test_bad_input_names_the_field():
+    with pytest.raises(ValueError, match="n_copies must be an integer >= 1"):
+        make_shared_vec_env("paper", 0, backend="parallel")
+    vec = make_shared_vec_env("paper", 2)
+    with pytest.raises(ValueError, match="seed must be None or an integer >= 0"):
+        vec.seed(-1)
+    vec.reset()
+    with pytest.raises(ValueError, match=r"actions must have shape \(6, 2\), got \(7, 2\)"):
+        vec.step(np.zeros((7, 2), np.float32))
