@@ -29,9 +29,9 @@ from activetrack.cli import (
     COMMANDS,
     add_output_arguments,
     field_default,
-    nonneg_int,
     positive_float,
     positive_int,
+    seed_int,
 )
 from activetrack.files import prepare_output_dir
 from activetrack.scenarios import PRESETS, make_scenario
@@ -75,7 +75,7 @@ def _add_simulate(sub: argparse._SubParsersAction) -> None:
         help="number of seeds (default %(default)s)",
     )
     seed = inspect.signature(simulation.run_monte_carlo).parameters["seed"].default
-    p.add_argument("--seed", type=nonneg_int, default=seed, help="first seed (default %(default)s)")
+    p.add_argument("--seed", type=seed_int, default=seed, help="first seed (default %(default)s)")
     add_output_arguments(p, Path(SIMULATE_OUT))
     p.add_argument(
         "--steps", type=positive_int, default=None, help="override the scenario's n_steps"
@@ -282,7 +282,7 @@ def _add_evaluate(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--seed",
-        type=nonneg_int,
+        type=seed_int,
         default=defaults["seed"].default,
         help="first held-out seed (default %(default)s)",
     )

@@ -36,8 +36,9 @@ from typing import Any
 
 import numpy as np
 
-from activetrack.baselines.simulation import detection_gaps, mean_ci
+from activetrack.baselines.simulation import check_planners, detection_gaps, mean_ci
 from activetrack.files import RunOutputs, prepare_output_dir
+from activetrack.validation import check_int
 
 #: Names that resolve to the planners' expert policies.
 EXPERT_NAMES = ("gsr", "gsr-restarts", "gbes", "rm", "lookahead")
@@ -148,6 +149,8 @@ def resolve_policy(spec: Any) -> Any:
             "lookahead": lambda: policies.LookaheadPolicy(scenario=None),
         }[name.lower()]()
     path = Path(name)
+    if not path.exists() and (path.suffix or len(path.parts) > 1):  # meant as a file
+        raise ValueError(f"{name}: no such policy file")
     if not path.is_file():
         raise ValueError(
             f"unknown policy {name!r}: use one of {list(EXPERT_NAMES)} or the path of a "
@@ -340,8 +343,8 @@ def evaluate(
     from activetrack.baselines import distributed
     from activetrack.envs import parallel_env
 
-    if episodes < 1:
-        raise ValueError(f"episodes must be >= 1, got {episodes}")
+    episodes = check_int("episodes", episodes, 1)
+    seed = check_int("seed", seed, 0)
     workers, address = check_batched(batched, workers, address)
     if isinstance(policies, Mapping):
         items = list(policies.items())
@@ -365,6 +368,8 @@ def evaluate(
             policy = resolve_policy(spec)
             check_compatible(policy, env, label)
             resolved.append(policy)
+        env.reset(seed=seeds[0])
+        check_planners(resolved, env.planning_problem())
     except BaseException:
         env.close()
         raise
@@ -584,12 +589,14 @@ def run_evaluation(
         **overrides,
     )
     rows = summaries(results)
-    print(f"scenario {scenario!r}, {episodes} episodes, seeds {seed}..{seed + episodes - 1}")
+    name = getattr(scenario, "name", scenario)
+    print(f"scenario {name!r}, {episodes} episodes, seeds {seed}..{seed + episodes - 1}")
     print(format_table(rows))
     if not results[-1].requested:
         print("gsr was not requested: it was evaluated on the same seeds as the ratio's reference")
     if outputs is not None:
-        meta = {"scenario": scenario, "overrides": overrides, "episodes": episodes, "seed": seed}
+        given = scenario.to_dict() if hasattr(scenario, "to_dict") else scenario  # a Scenario
+        meta = {"scenario": given, "overrides": overrides, "episodes": episodes, "seed": seed}
         paths = write_results(results, outputs, meta, plot=plot)
         print("wrote " + ", ".join(str(p) for p in paths.values()))
     return rows

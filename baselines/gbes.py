@@ -239,6 +239,24 @@ class GBES:
         """Return the number of grid combinations of ``problem`` (product of grid sizes)."""
         return math.prod(self.grid_sizes(problem))
 
+    def check(self, problem: PlanningProblem) -> int:
+        """Return the grid's number of combinations for a single ``problem``, or raise the
+        ValueError of a grid over ``max_combinations`` (the runners call this on a
+        scenario's first problem, before any run)."""
+        sizes = self.grid_sizes(problem)
+        total = math.prod(sizes)
+        if total > self.max_combinations:
+            # Sizes scale as 1 / spacing: this spacing brings the product under the cap.
+            free = max(1, sum(n > 1 for n in sizes))
+            fits = self.spacing * (total / self.max_combinations) ** (1.0 / free) * 1.01
+            raise ValueError(
+                f"GBES grid has {total:.3g} combinations ({' x '.join(map(str, sizes))} points "
+                f"at spacing {self.spacing:.4g} m), more than max_combinations="
+                f"{self.max_combinations:.3g}; use a spacing of about {fits:.3g} m or more "
+                "(activetrack simulate --gbes-spacing) or raise max_combinations"
+            )
+        return total
+
     # Planning -----------------------------------------------------------------------------
     def plan(self, problem: PlanningProblem, rng: np.random.Generator | None = None) -> FloatArray:
         """Return the grid-optimal next absolute positions, ``batch_shape + (M, 2)``.
@@ -264,14 +282,7 @@ class GBES:
                 f"search takes a single problem, got batch_shape {problem.batch_shape}; "
                 "use plan, or index the problem"
             )
-        sizes = self.grid_sizes(problem)
-        total = math.prod(sizes)
-        if total > self.max_combinations:
-            raise ValueError(
-                f"GBES grid has {total:.3g} combinations ({' x '.join(map(str, sizes))} points "
-                f"at spacing {self.spacing:.4g} m), more than max_combinations="
-                f"{self.max_combinations:.3g}; raise max_combinations or the spacing"
-            )
+        total = self.check(problem)
         cands = self.candidates(problem)
         rel, n_eval = grid_optimum(problem, cands, self.block, self.batch_elements, self.prune)
         positions = rel + problem.targets[0]

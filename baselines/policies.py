@@ -65,6 +65,13 @@ class PlannerPolicy:
 
     __call__ = plan
 
+    def check(self, problem: PlanningProblem) -> None:
+        """Raise the planner's ValueError if its settings cannot plan ``problem`` (a
+        planner without ``check`` can plan every problem)."""
+        check = getattr(self.planner, "check", None)
+        if callable(check):
+            check(problem)
+
     def __repr__(self) -> str:
         return f"{type(self).__name__}({self.planner!r})"
 

@@ -18,13 +18,13 @@ trace, RMSE and mean NEES.
 from __future__ import annotations
 
 import time
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-from activetrack.problem import Planner
+from activetrack.problem import Planner, PlanningProblem
 from activetrack.scenarios import Scenario
 from activetrack.validation import FloatArray
 from activetrack.world import World
@@ -158,6 +158,15 @@ def simulate(scenario: Scenario, planner: Planner, seed: int) -> RunRecord:
     )
 
 
+def check_planners(planners: Iterable[Any], problem: PlanningProblem) -> None:
+    """Call ``check(problem)`` of every planner that has one (GBES: its grid's size) on the
+    first problem of a run, so that settings the scenario cannot take fail before any run."""
+    for planner in planners:
+        check = getattr(planner, "check", None)
+        if callable(check):
+            check(problem)
+
+
 def mean_ci(values: FloatArray, level: float = 0.95) -> tuple[float, float, float]:
     """Return ``(mean, low, high)``: the mean and its Student-t confidence interval."""
     from scipy import stats  # lazy: scipy.stats costs ~0.5 s at import
@@ -256,6 +265,9 @@ def run_monte_carlo(
     from tqdm.auto import tqdm
 
     seeds = [int(seed) + k for k in range(runs)]
+    world = World(scenario, 1)
+    world.reset(seeds=[seeds[0]])
+    check_planners(planners.values(), world.planning_problem(0))
     bar = tqdm(total=runs * len(planners), disable=not progress, unit="run", leave=False)
     try:
         if distributed.is_distributed(workers, address):

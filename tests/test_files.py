@@ -77,8 +77,9 @@ def test_run_outputs_commit_together_or_not_at_all(tmp_path):
 def test_prepare_output_dir_refuses_results_unless_overwrite(tmp_path):
     owned = ("results.json", "tb/")
     folder = tmp_path / "new" / "deep"
-    prepare_output_dir(folder, owned)  # created
-    assert folder.is_dir()
+    prepare_output_dir(folder, owned)  # checked, made at the first write
+    assert not folder.exists()
+    folder.mkdir(parents=True)
     (folder / "notes.txt").write_text("mine")
     (folder / "tb").mkdir()
     prepare_output_dir(folder, owned)  # unrelated files and empty folders are no results
@@ -98,8 +99,10 @@ def test_prepare_output_dir_rejects_unusable_paths(tmp_path):
     (tmp_path / "file").write_text("")
     with pytest.raises(ValueError, match="is not a folder"):
         prepare_output_dir(tmp_path / "file", ("a",))
-    with pytest.raises(ValueError, match="cannot write to this folder"):
+    with pytest.raises(ValueError, match="file is not a folder"):
         prepare_output_dir(tmp_path / "file" / "sub", ("a",))
+    with pytest.raises(ValueError, match="non-empty path"):
+        prepare_output_dir("", ("a",))
     if Path("/proc/self").exists():
         with pytest.raises(ValueError, match="/proc/x: cannot write"):
             prepare_output_dir("/proc/x", ("a",))
@@ -164,3 +167,16 @@ def test_train_failing_to_write_keeps_the_previous_policy(tmp_path):
     assert load_policy(out / "policy.zip").meta["net"]["hidden"] == [8]
     assert json.loads(before["config.json"])["net"]["hidden"] == [8]
     assert temp_files(out) == []
+
+
+def test_a_run_that_writes_nothing_leaves_no_folder_and_json_is_standard(tmp_path):
+    out = prepare_output_dir(tmp_path / "a" / "b", ("results.json",))
+    assert not (tmp_path / "a").exists()  # checked in tmp_path, made at the first write
+    with out:
+        out.write_json("results.json", {"x": 1.0})
+        out.commit()
+    assert json.loads((tmp_path / "a" / "b" / "results.json").read_text()) == {"x": 1.0}
+    for bad in (float("nan"), float("inf")):
+        with pytest.raises(ValueError, match="JSON compliant"):
+            atomic_write_json(tmp_path / "x.json", {"x": bad})
+    assert not (tmp_path / "x.json").exists()

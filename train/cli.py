@@ -24,7 +24,7 @@ from typing import Any
 
 from activetrack.baselines.cli import add_ray_arguments
 from activetrack.baselines.evaluation import check_batched
-from activetrack.cli import COMMANDS, add_output_arguments, field_default, nonneg_int
+from activetrack.cli import COMMANDS, add_output_arguments, field_default, seed_int
 from activetrack.files import RunOutputs, prepare_output_dir
 from activetrack.scenarios import PRESETS
 from activetrack.train import imitation as imitation_module
@@ -81,7 +81,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     )
     common.add_argument(
         "--seed",
-        type=nonneg_int,
+        type=seed_int,
         default=signature["seed"].default,
         help="training seed (default %(default)s)",
     )
@@ -385,6 +385,8 @@ def configs(args: argparse.Namespace) -> tuple[Any, NetConfig]:
     if args.method == "ppo":
         given = _given(args, PPOConfig, _RENAMES)
         given.pop("log_std_init", None)  # part of the network config here
+        if "critic_warmup" in given and getattr(args, "init", None) is None:
+            raise ValueError("--critic-warmup trains the critic of a warm start: give --init")
         if args.no_normalize_reward:
             given["normalize_reward"] = False
         if args.keep_best:

@@ -28,7 +28,7 @@ import torch
 from stable_baselines3.common.policies import ActorCriticPolicy
 
 from activetrack.files import atomic_path
-from activetrack.train.networks import NetConfig, build_policy
+from activetrack.train.networks import LOG_STD_RANGE, NetConfig, build_policy
 
 FORMAT = "activetrack-policy/1"
 VIEWS = ("shared", "centralized")
@@ -40,9 +40,14 @@ MAX_PARAMETERS = 50_000_000
 
 
 def _box_to_dict(space: gym.spaces.Box) -> dict[str, Any]:
+    """Return the Box as standard JSON values (an infinite bound is null: unbounded)."""
+
+    def finite(v: np.ndarray) -> list[float | None]:
+        return [x if math.isfinite(x) else None for x in v.tolist()]
+
     return {
-        "low": space.low.tolist(),
-        "high": space.high.tolist(),
+        "low": finite(space.low),
+        "high": finite(space.high),
         "shape": list(space.shape),
         "dtype": str(space.dtype),
     }
@@ -83,7 +88,7 @@ def save_policy(
     buf = io.BytesIO()
     torch.save({k: v.detach().cpu() for k, v in policy.state_dict().items()}, buf)
     with atomic_path(path) as tmp, zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as zf:
-        zf.writestr("meta.json", json.dumps(meta, indent=2, default=str))
+        zf.writestr("meta.json", json.dumps(meta, indent=2, default=str, allow_nan=False))
         zf.writestr("policy.pth", buf.getvalue())
     return path
 
@@ -187,7 +192,11 @@ def _load_policy(path: Path) -> LearnedPolicy:
     try:
         state = torch.load(io.BytesIO(raw), map_location="cpu", weights_only=True)
     except Exception as exc:  # torch raises many types for a corrupt file
-        raise _PolicyFileError(f"policy.pth is not a torch state dict ({exc})") from exc
+        # The unpickler's own reason, not torch's advice to load the file unsafely.
+        _, found, rest = str(exc).partition("Unpickler error:")
+        lines = [line.strip() for line in (rest if found else str(exc)).splitlines()]
+        reason = next((line for line in lines if line), type(exc).__name__).split(". ")[0]
+        raise _PolicyFileError(f"policy.pth is not a torch state dict ({reason[:200]})") from exc
     _check_state(state, shapes)
     policy = build_policy(obs_space, act_space, net)
     policy.load_state_dict(state)
@@ -237,15 +246,19 @@ def _space_from_meta(d: Any, key: str) -> gym.spaces.Box:
     if d["dtype"] not in ("float32", "float64"):
         raise _PolicyFileError(f"{where}: dtype must be float32 or float64, got {d['dtype']!r}")
     bounds = []
-    for name in ("low", "high"):
+    for name, unbounded in (("low", -math.inf), ("high", math.inf)):
         v = d[name]
+        if isinstance(v, list):  # null: unbounded (files written before also hold Infinity)
+            v = [unbounded if x is None else x for x in v]
         if (
             not isinstance(v, list)
             or len(v) != shape[0]
             or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v)
             or any(math.isnan(x) for x in v)
         ):
-            raise _PolicyFileError(f"{where}: {name} must be a list of {shape[0]} numbers")
+            raise _PolicyFileError(
+                f"{where}: {name} must be a list of {shape[0]} numbers (null: unbounded)"
+            )
         try:
             bounds.append(np.asarray(v, dtype=d["dtype"]))
         except (OverflowError, ValueError) as exc:
@@ -277,3 +290,9 @@ def _check_state(state: Any, shapes: dict[str, tuple[int, ...]]) -> None:
             )
         if not bool(torch.isfinite(t).all()):
             raise _PolicyFileError(f"policy.pth: {key} holds NaN or infinite weights")
+        low, high = LOG_STD_RANGE  # the network's own range (its log_std_init's)
+        if key == "log_std" and not bool(((t >= low) & (t <= high)).all()):
+            raise _PolicyFileError(
+                f"policy.pth: log_std must be in [{low:g}, {high:g}], got "
+                f"{t.min().item():g}..{t.max().item():g}"
+            )

@@ -79,7 +79,8 @@ class PPOConfig:
             of the shared view is M timesteps).
         n_copies: environment copies (the shared view has ``n_copies * M`` slots).
         lr_schedule: ``"constant"`` or ``"linear"`` (decays to 0 over the PPO phase).
-        critic_warmup: timesteps of critic-only training before PPO (warm start only).
+        critic_warmup: timesteps of critic-only training before PPO (warm start only),
+            counted in ``total_timesteps`` (a longer warm-up stops at the budget).
         log_std_init: if set, overrides the initial log std (also of a warm start).
         eval_every, eval_episodes: every ``eval_every`` timesteps, evaluate the
             deterministic policy on ``eval_episodes`` validation seeds (500000, ...) and
@@ -146,6 +147,8 @@ class PPOConfig:
         c.eval_every = check_int("eval_every", c.eval_every, 0, MAX_TIMESTEPS)
         c.eval_episodes = check_int("eval_episodes", c.eval_episodes, 1, 100_000)
         c.keep_best = check_bool("keep_best", c.keep_best)
+        if c.keep_best and c.eval_every == 0:
+            raise ValueError("keep_best needs eval_every > 0 (the policies it chooses from)")
         c.view = check_choice("view", c.view, VIEWS)
         c.backend = check_choice("backend", c.backend, BACKENDS)
         c.net = NetConfig.coerce(c.net)
@@ -391,6 +394,13 @@ def train_ppo(
         cfg.backend,
         **overrides,
     )
+    rollout = cfg.n_steps * venv.num_envs
+    if cfg.batch_size > rollout:
+        venv.close()
+        raise ValueError(
+            f"batch_size must be at most the rollout, n_steps * slots = {cfg.n_steps} * "
+            f"{venv.num_envs} = {rollout}, got {cfg.batch_size}"
+        )
     model = build_ppo(venv, cfg, seed, str(out / "tb") if out is not None else None)
 
     callbacks: list[BaseCallback] = []
@@ -413,14 +423,13 @@ def train_ppo(
     remaining = cfg.total_timesteps
     if init is not None:
         init_meta = warm_start(model, init, cfg.log_std_init)
-        if cfg.critic_warmup > 0:
+        warmup = min(cfg.critic_warmup, cfg.total_timesteps)  # part of the budget
+        if warmup > 0:
             # Critic-only phase: frozen parameters get no gradient, so Adam leaves them alone.
             _set_actor_trainable(model, False)
-            model.learn(
-                cfg.critic_warmup, callback=CallbackList(list(callbacks)), tb_log_name="ppo"
-            )
+            model.learn(warmup, callback=CallbackList(list(callbacks)), tb_log_name="ppo")
             _set_actor_trainable(model, True)
-            remaining = max(0, cfg.total_timesteps - cfg.critic_warmup)
+            remaining = cfg.total_timesteps - warmup
     if remaining > 0:
         model.learn(
             remaining,

@@ -66,6 +66,25 @@ def nonneg_int(text: str) -> int:
     return value
 
 
+#: The largest seed a command takes (RLlib's; numpy and torch take it too).
+MAX_SEED = 2**31 - 1
+
+
+def seed_int(text: str) -> int:
+    """Parse a seed, an integer in [0, MAX_SEED] (argparse ``type``)."""
+    value = int(text)
+    if not 0 <= value <= MAX_SEED:
+        raise argparse.ArgumentTypeError(f"must be an integer in [0, {MAX_SEED}], got {text}")
+    return value
+
+
+def output_folder(text: str) -> Path:
+    """Parse an output folder: a non-empty path (argparse ``type``; ``""`` is not ``.``)."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError("must be a folder path, got an empty string")
+    return Path(text)
+
+
 def positive_float(text: str) -> float:
     """Parse a finite number > 0 (argparse ``type``)."""
     value = float(text)
@@ -93,7 +112,7 @@ def add_output_arguments(
     kw: dict[str, Any] = {"required": True} if required else {"default": default}
     parser.add_argument(
         "--out",
-        type=Path,
+        type=output_folder,
         help="output folder" + ("" if required else f" (default: {default or 'none'})"),
         **kw,
     )
@@ -156,6 +175,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     except OSError as exc:  # e.g. writing the outputs failed: the previous ones are kept
         print(f"{sub.prog}: error: {exc}", file=sys.stderr)
         return 1
+    except KeyboardInterrupt:  # Ctrl-C: outputs are committed together, so none are half-written
+        print(
+            f"\n{sub.prog}: interrupted (the previous outputs, if any, are kept)", file=sys.stderr
+        )
+        return 130
 
 
 if __name__ == "__main__":

@@ -114,8 +114,9 @@ def atomic_write_text(path: str | Path, text: str, encoding: str = "utf-8") -> P
 
 
 def json_text(obj: Any, *, indent: int | None = 2, default: Callable[[Any], Any] | None = None):
-    """Return ``obj`` as JSON text ending with a newline (numpy values via ``default``)."""
-    return json.dumps(obj, indent=indent, default=default) + "\n"
+    """Return ``obj`` as standard JSON text ending with a newline (numpy values via
+    ``default``); a NaN or infinity raises ``ValueError`` (JSON has neither: write None)."""
+    return json.dumps(obj, indent=indent, default=default, allow_nan=False) + "\n"
 
 
 def atomic_write_json(
@@ -163,9 +164,11 @@ class RunOutputs:
         return self.folder / name.rstrip("/")
 
     def staged(self, name: str) -> Path:
-        """Return the temporary path where ``name``'s new content goes (created empty)."""
+        """Return the temporary path where ``name``'s new content goes (created empty; the
+        folder too, if it does not exist yet)."""
         final = self.path(name)
         if name not in self._staged:
+            self.folder.mkdir(parents=True, exist_ok=True)
             self._staged[name] = _temp_path(final)
         return self._staged[name]
 
@@ -226,20 +229,28 @@ def prepare_output_dir(
 ) -> RunOutputs:
     """Check the output folder ``path`` before a run; return its :class:`RunOutputs`.
 
-    Creates the folder if needed and checks that a file can be created in it. Raises
-    ``ValueError`` naming the folder if it cannot be used, or if it already holds one of
+    Checks that the folder, or the nearest existing folder above it, can take a new file
+    (the folder itself is made when the first output is staged, so a run that fails or is
+    interrupted before writing leaves no empty folder behind). Raises ``ValueError``
+    naming the folder if it cannot be used, or if it already holds one of
     the ``owned`` names (files, or non-empty folders written as ``"name/"``) and
     ``overwrite`` is false. With ``overwrite``, owned folders are emptied now (the run
     writes into them as it goes); owned files are replaced only when the run commits, so
     the old ones survive a failed run.
     """
+    if not str(path).strip():
+        raise ValueError(f"the output folder must be a non-empty path, got {str(path)!r}")
     folder = Path(path)
     owned = tuple(owned)
     if folder.exists() and not folder.is_dir():
         raise ValueError(f"{folder}: exists and is not a folder")
+    existing = folder
+    while not existing.exists() and existing != existing.parent:
+        existing = existing.parent
+    if not existing.is_dir():
+        raise ValueError(f"{folder}: {existing} is not a folder")
     try:
-        folder.mkdir(parents=True, exist_ok=True)
-        fd, probe = tempfile.mkstemp(dir=folder, prefix=TEMP_PREFIX)
+        fd, probe = tempfile.mkstemp(dir=existing, prefix=TEMP_PREFIX)
         os.close(fd)
         os.unlink(probe)
     except OSError as exc:

@@ -67,6 +67,9 @@ def test_simulate_writes_results_and_plot(tmp_path, capsys):
         ["simulate", "--planner", "nope"],
         ["simulate", "--gbes-spacing", "-1"],
         ["simulate", "--scenario", "nope"],
+        ["simulate", "--seed", "2147483648"],
+        ["simulate", "--out", ""],
+        ["evaluate", "--policy", "rm", "--seed", "99999999999999999999999"],
     ],
 )
 def test_simulate_rejects_bad_arguments(argv, capsys):
@@ -183,3 +186,39 @@ def test_summaries_are_the_layers_help():
     sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
     helps = {c.dest: c.help for c in sub._choices_actions}
     assert helps == {name: summary for name, (_, summary) in COMMANDS.items()}
+
+
+def test_ctrl_c_is_one_line_and_exit_130(tmp_path, capsys, monkeypatch):
+    import activetrack.baselines.cli as bcli
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(bcli, "run_monte_carlo", interrupted)
+    assert main([*TINY, "--out", str(tmp_path / "res")]) == 130
+    err = capsys.readouterr().err
+    assert "activetrack simulate: interrupted" in err and "Traceback" not in err
+    assert not (tmp_path / "res").exists()  # nothing staged, no folder left behind
+
+
+def test_a_grid_gbes_cannot_search_fails_before_any_run(tmp_path, capsys):
+    # Four sensors at the paper's spacing: 400^4 combinations, over GBES's cap. The
+    # first planner (GSR) must not run: its plans are counted.
+    calls = []
+
+    class Counted(GSR):
+        def plan(self, problem, rng=None):
+            calls.append(1)
+            return super().plan(problem, rng)
+
+    from activetrack.baselines import GBES
+
+    sc = make_scenario("two_targets", n_steps=3)
+    with pytest.raises(ValueError, match=r"more than max_combinations.*--gbes-spacing"):
+        run_monte_carlo(sc, {"gsr": Counted(), "gbes": GBES()}, 2, 0, progress=False)
+    assert calls == []
+    out = tmp_path / "res"
+    argv = ["simulate", "--scenario", "two_targets", "--runs", "1", "--out", str(out)]
+    assert main([*argv, "--no-progress"]) == 2
+    assert "GBES grid has" in capsys.readouterr().err
+    assert not out.exists()

@@ -119,6 +119,19 @@ def test_errors(tmp_path):
         evaluate(["rm", "rm"], "paper", 1, SEED, progress=False)
     with pytest.raises(ValueError, match="episodes"):
         evaluate(["rm"], "paper", 0, SEED, progress=False)
+    for episodes, seed, field in [(2.5, SEED, "episodes"), (True, SEED, "episodes"),
+                                  (1, -1, "seed"), (1, "a", "seed")]:  # fmt: skip
+        with pytest.raises(ValueError, match=f"{field} must be an integer"):
+            evaluate(["rm"], "paper", episodes, seed, progress=False)
+    with pytest.raises(ValueError, match="no such policy file"):
+        evaluate([str(tmp_path / "policy.zip")], "paper", 1, SEED, progress=False)
+
+
+def test_a_scenario_object_is_written_as_its_fields(tmp_path, capsys):
+    sc = make_scenario("paper", n_steps=3)
+    run_evaluation(["rm"], sc, 2, SEED, out_dir=tmp_path / "out", plot=False, progress=False)
+    meta = json.loads((tmp_path / "out" / "episodes.json").read_text())["meta"]
+    assert meta["scenario"] == json.loads(json.dumps(sc.to_dict()))
 
 
 def test_no_training_stack_at_import():

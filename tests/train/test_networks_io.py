@@ -7,6 +7,7 @@ import json
 import subprocess
 import sys
 import zipfile
+from fractions import Fraction
 from pathlib import Path
 
 import numpy as np
@@ -63,7 +64,14 @@ def test_save_load_round_trip(tmp_path):
         train_config={"episodes": 3},
     )
     assert zipfile.ZipFile(path).namelist() == ["meta.json", "policy.pth"]
+
+    def no_constants(name):
+        raise AssertionError(f"meta.json holds {name}: not standard JSON")
+
+    meta = json.loads(zipfile.ZipFile(path).read("meta.json"), parse_constant=no_constants)
+    assert None in meta["observation_space"]["low"]  # an infinite bound is null
     loaded = load_policy(path)
+    assert loaded.policy.observation_space == policy.observation_space
     assert loaded.meta["seed"] == 7 and loaded.meta["kind"] == "bc"
     assert loaded.meta["train_config"] == {"episodes": 3}
     assert NetConfig.from_dict(loaded.meta["net"]) == net
@@ -157,6 +165,8 @@ def bad_files(good_path, members, folder):
     nan_state["action_net.bias"][0] = float("nan")
     nan_buf = io.BytesIO()
     torch.save(nan_state, nan_buf)
+    tiny_std = {k: v.clone() for k, v in state.items()}
+    tiny_std["log_std"][:] = -200.0  # finite, but exp(-200) is 0 in float32
     wide = build_policy(OBS, ACT, NetConfig(hidden=(32, 16)))
     wide_buf = io.BytesIO()
     torch.save(wide.state_dict(), wide_buf)
@@ -187,6 +197,8 @@ def bad_files(good_path, members, folder):
         "pth other net": ({**members, "policy.pth": wide_buf.getvalue()}, "has shape"),
         "pth a list": ({**members, "policy.pth": _saved([1, 2])}, "must hold a state dict"),
         "pth nan": ({**members, "policy.pth": nan_buf.getvalue()}, "NaN"),
+        "pth log_std": ({**members, "policy.pth": _saved(tiny_std)}, "log_std must be in"),
+        "pth a class": ({**members, "policy.pth": _saved(Fraction(1, 3))}, "Unsupported global"),
         # A zip bomb: 50 MB of zeros declared for a 1000-parameter network.
         "pth too large": ({**members, "policy.pth": bytes(50_000_000)}, "bytes, more than"),
     }
@@ -216,6 +228,7 @@ def test_bad_policy_files_give_a_clean_error(good_file, tmp_path):
         text = str(err.value)
         assert text.startswith(f"{bad}: "), (name, text)
         assert message in text, (name, text)
+        assert "\n" not in text and "weights_only" not in text, (name, text)
     with pytest.raises(ValueError, match="no such file"):
         load_policy(tmp_path / "missing.zip")
     with pytest.raises(ValueError, match="no such file"):

@@ -95,14 +95,24 @@ def test_warm_start_loads_the_actor_and_warms_the_critic(tmp_path):
     assert res.model.num_timesteps >= cfg.total_timesteps
     moved = res.model.policy.state_dict()
     assert not torch.equal(moved["action_net.weight"], src["action_net.weight"])
-    only_warmup = PPOConfig(**{**cfg.__dict__, "total_timesteps": 768})
+    only_warmup = PPOConfig(**{**cfg.__dict__, "total_timesteps": 768, "critic_warmup": 1536})
     res = train_ppo("paper", seed=0, config=only_warmup, init=path)
+    assert res.model.num_timesteps == 768  # the warm-up stops at the budget
     st = res.model.policy.state_dict()
     assert torch.equal(st["action_net.weight"], src["action_net.weight"])
     assert torch.all(st["log_std"] == -2.0)
     # The same seed builds the same initial critic: the warm-up trained it.
     initial = build_ppo(make_training_env("paper", 2, "shared", True, 0.99), cfg, seed=0)
     assert not torch.equal(st["value_net.weight"], initial.policy.state_dict()["value_net.weight"])
+
+
+def test_a_batch_larger_than_the_rollout_is_refused():
+    # TINY's rollout: n_steps per slot times 2 copies of 3 agents.
+    big = PPOConfig(**{**TINY.__dict__, "batch_size": TINY.n_steps * 6 + 1})
+    with pytest.raises(
+        ValueError, match=rf"batch_size must be at most the rollout.*= {TINY.n_steps * 6}"
+    ):
+        train_ppo("paper", seed=0, config=big)
 
 
 def test_warm_start_rejects_another_architecture(tmp_path):
