@@ -25,6 +25,7 @@ for workers without it raises :class:`RayNotInstalledError`, which names the ext
 
 from __future__ import annotations
 
+import socket
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from typing import Any, TypeVar
@@ -37,6 +38,9 @@ R = TypeVar("R")
 INSTALL_HINT = 'pip install "activetrack[ray]"'
 #: Resubmissions of a task whose worker died (Ray's own default is 3 as well).
 MAX_RETRIES = 3
+#: Seconds to wait for a cluster's port to answer before Ray is asked to join it (Ray
+#: itself retries an unreachable address for minutes).
+CONNECT_TIMEOUT = 5.0
 #: Jobs per CPU: small enough chunks for a steady progress bar and little lost on a retry,
 #: large enough that Ray's per-task overhead stays small beside the runs.
 JOBS_PER_CPU = 4
@@ -78,6 +82,23 @@ def check_options(workers: Any = 1, address: Any = None) -> tuple[int, str | Non
     return workers, address
 
 
+def check_reachable(address: str, timeout: float = CONNECT_TIMEOUT) -> None:
+    """Raise ``ConnectionError`` unless ``address`` (``HOST:PORT`` or ``ray://HOST:PORT``)
+    accepts a TCP connection within ``timeout`` s; other forms (``"auto"``, ``"local"``)
+    are left to Ray."""
+    host, sep, port = address.removeprefix("ray://").rpartition(":")
+    if not sep or not host or not port.isdigit():
+        return
+    try:
+        with socket.create_connection((host.strip("[]"), int(port)), timeout=timeout):
+            pass
+    except OSError as exc:
+        raise ConnectionError(
+            f"cannot reach a Ray cluster at {address!r} ({exc.strerror or exc}); start one "
+            "with `ray start --head` or check the address"
+        ) from None
+
+
 def is_distributed(workers: int, address: str | None) -> bool:
     """Return whether ``(workers, address)`` asks for Ray (else: the serial code path)."""
     return workers > 1 or address is not None
@@ -103,6 +124,7 @@ def session(workers: int = 1, address: str | None = None) -> Iterator[int]:
     started = not ray.is_initialized()
     if started:
         if address is not None:
+            check_reachable(address)
             ray.init(address=address, logging_level="warning")
         else:
             ray.init(

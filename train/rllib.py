@@ -43,6 +43,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from activetrack.baselines.distributed import check_reachable
 from activetrack.files import RunOutputs, prepare_output_dir
 from activetrack.train.networks import DEFAULT_NET, NetConfig, build_policy
 from activetrack.train.policy_io import save_policy
@@ -366,6 +367,8 @@ def ray_session(address: str | None = None, num_cpus: int | None = None) -> Iter
         # "local": a new Ray for this run, even if `ray start` left a cluster on this
         # machine (ray.init() would connect to that one).
         address, kwargs["num_cpus"] = "local", num_cpus
+    else:
+        check_reachable(address)
     ray.init(address=address, **kwargs)
     try:
         yield

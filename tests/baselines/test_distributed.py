@@ -171,3 +171,36 @@ def test_a_worker_killed_mid_study_is_retried_and_results_equal_serial(tmp_path)
         assert (a.policy, a.seeds, a.requested) == (b.policy, b.seeds, b.requested)
         for key in ("mean_trace", "rmse", "returns"):
             np.testing.assert_array_equal(getattr(b, key), getattr(a, key))
+
+
+def _closed_port() -> int:
+    """Return a local TCP port nothing listens on (bound, then released)."""
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_an_unreachable_cluster_fails_fast_with_its_address(tmp_path):
+    port = _closed_port()
+    for address in (f"127.0.0.1:{port}", f"ray://127.0.0.1:{port}"):
+        with pytest.raises(ConnectionError, match=f"cannot reach a Ray cluster at '{address}'"):
+            distributed.check_reachable(address, timeout=2.0)
+    distributed.check_reachable("auto")  # not HOST:PORT: Ray's to resolve
+    # The command line, in a fresh process (this module's Ray is already up): exit 1 in
+    # seconds (Ray alone retries for minutes), no output folder.
+    import subprocess
+    import sys
+
+    out = tmp_path / "out"
+    cmd = [sys.executable, "-m", "activetrack.cli", "simulate", "--runs", "2", "--no-progress"]
+    res = subprocess.run(
+        [*cmd, "--address", f"127.0.0.1:{port}", "--out", str(out)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert res.returncode == 1, res.stderr
+    assert f"cannot reach a Ray cluster at '127.0.0.1:{port}'" in res.stderr
+    assert "Traceback" not in res.stderr and not out.exists()
