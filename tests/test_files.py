@@ -141,7 +141,7 @@ def test_simulate_failing_to_write_keeps_the_previous_outputs(tmp_path):
     proc = run_limited([*base, "--seed", "2", "--out", str(out), "--overwrite"], 16_000)
     assert proc.returncode == 1, proc.stderr
     assert "activetrack simulate: error:" in proc.stderr and "Traceback" not in proc.stderr
-    assert "File too large" in proc.stderr
+    assert "File too large" in proc.stderr and "trajectories.png" in proc.stderr  # the file
     assert snapshot(out) == before  # both old files, consistent with each other
     assert json.loads(before["results.json"])["rm"]["seed"] == 1
     assert temp_files(out) == []

@@ -95,8 +95,10 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
         yield tmp
         _fsync_file(tmp)
         os.replace(tmp, target)
-    except BaseException:
+    except BaseException as exc:
         _unlink(tmp)
+        if isinstance(exc, OSError) and exc.filename in (None, str(tmp)):
+            exc.filename = str(target)  # the user's file, not the temporary (or no) name
         raise
     _fsync_dir(target.parent)
 
@@ -195,8 +197,8 @@ class RunOutputs:
         try:
             for tmp in self._staged.values():
                 _fsync_file(tmp)
-        except BaseException:
-            self.discard()
+        except BaseException as exc:
+            self.discard(exc)
             raise
         written = {}
         for name, tmp in self._staged.items():
@@ -210,10 +212,13 @@ class RunOutputs:
         _fsync_dir(self.folder)
         return written
 
-    def discard(self) -> None:
-        """Remove every staged temporary file (the old outputs stay)."""
-        for tmp in self._staged.values():
+    def discard(self, exc: BaseException | None = None) -> None:
+        """Remove every staged temporary file (the old outputs stay); an ``OSError`` that
+        names one of them is made to name the output it stood for."""
+        for name, tmp in self._staged.items():
             _unlink(tmp)
+            if isinstance(exc, OSError) and exc.filename == str(tmp):
+                exc.filename = str(self.path(name))
         self._staged = {}
 
     def __enter__(self) -> RunOutputs:
@@ -221,7 +226,7 @@ class RunOutputs:
 
     def __exit__(self, exc_type: Any, exc: Any, tb: Any) -> None:
         if exc_type is not None:
-            self.discard()
+            self.discard(exc)
 
 
 def prepare_output_dir(
