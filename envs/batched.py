@@ -14,8 +14,11 @@ the same state as the single environment's at every reset (a copy whose episode 
 its block is used up, terminated on ``max_trace`` or reset, has its generator put back:
 :class:`activetrack.world.World`).
 
-Gymnasium's keywords: ``render_mode`` (``"rgb_array"`` or ``"human"``) draws copy 0's
-episode, as VMAS renders its first environment; ``max_episode_steps`` truncates every
+Gymnasium's keywords: ``render_mode``: ``"rgb_array"`` records every copy's episode and
+:meth:`render` returns a tuple of N frames, as ``VectorEnv.render`` does (so Gymnasium's
+``wrappers.vector.RecordVideo`` and ``HumanRendering`` work; recording costs Python work per
+copy and step, so render with a few copies), ``"human"`` draws copy 0's episode in a
+window, as VMAS renders its first environment; ``max_episode_steps`` truncates every
 copy's episodes after ``min(scenario.n_steps, max_episode_steps)`` steps, as the
 ``TimeLimit`` that ``gymnasium.make`` adds to the single environment. Infos hold what the
 single environment's hold, batched, with Gymnasium's ``_key`` masks: ``step``, ``trace``,
@@ -63,7 +66,8 @@ class BatchedActiveTracking(VectorEnv):
             :func:`activetrack.envs.parallel_env`.
         autoreset_mode: a :class:`gymnasium.vector.AutoresetMode` or its value string.
         noise_block: how many steps of noise a copy draws per generator call.
-        render_mode: None, ``"rgb_array"`` or ``"human"``: :meth:`render` draws copy 0.
+        render_mode: None, ``"rgb_array"`` (:meth:`render` returns every copy's frame) or
+            ``"human"`` (copy 0's window).
         max_episode_steps: None, or truncate episodes after this many steps (at most
             ``scenario.n_steps``).
 
@@ -115,9 +119,9 @@ class BatchedActiveTracking(VectorEnv):
             **type(self).metadata, "autoreset_mode": self.autoreset_mode, "render_fps": fps
         }  # fmt: skip
         self.render_mode = render_mode
-        self._recorder = (
-            None if render_mode is None else EpisodeRecorder(self.world, render_mode, fps)
-        )
+        copies = {None: 0, "human": 1}.get(render_mode, self.num_envs)
+        self._recorders = [EpisodeRecorder(self.world, render_mode, fps, i) for i in range(copies)]
+        self._seeds: list[int] = [-1] * self.num_envs  # -1: not seeded (Gymnasium's "unknown")
         self.params = self.world.params
         m = self.n_sensors = sc.n_sensors
         self.length_scale = self.world.length_scale
@@ -157,7 +161,7 @@ class BatchedActiveTracking(VectorEnv):
             mask = np.asarray(options.pop("reset_mask"))
             if mask.shape != (N,) or mask.dtype != np.bool_:
                 raise ValueError(f"options['reset_mask'] must be a bool array ({N},)")
-        check_no_options(options)
+        check_no_options(options, ("reset_mask",))
         seeds = None
         if seed is not None:
             if isinstance(seed, (int, np.integer)) and not isinstance(seed, (bool, np.bool_)):
@@ -169,14 +173,25 @@ class BatchedActiveTracking(VectorEnv):
                     f"seed must be None, an integer >= 0 or a list of {N} seeds, got {seed!r}"
                 )
             seeds = [seeds[i] for i in np.flatnonzero(mask)]
+            for i, s in zip(np.flatnonzero(mask).tolist(), seeds, strict=True):
+                if s is not None:
+                    self._seeds[i] = s
         self.world.reset(mask, seeds)
         self._autoreset[mask] = False
         self._started = True
-        if self._recorder is not None and mask[0]:
-            self._recorder.restart()
-            if self.render_mode == "human":
-                self.render()
-        return self._joint_obs(), self._infos()
+        for rec in self._recorders:
+            if mask[rec.copy]:
+                rec.restart()
+        if self.render_mode == "human" and mask[0]:
+            self.render()
+        # As SyncVectorEnv: a partial reset reports (masks) the copies it reset only.
+        return self._joint_obs(), self._infos(mask=mask)
+
+    @property
+    def np_random_seed(self) -> tuple[int, ...]:
+        """Return each copy's seed of its last seeded reset (-1: never seeded), as
+        ``SyncVectorEnv.np_random_seed``."""
+        return tuple(self._seeds)
 
     # Step -------------------------------------------------------------------------------------
     def step_agents(self, actions: FloatArray) -> StepReturn:
@@ -224,7 +239,7 @@ class BatchedActiveTracking(VectorEnv):
         resetting = None
         if self.autoreset_mode == AutoresetMode.NEXT_STEP and self._autoreset.any():
             resetting = self._autoreset.copy()
-        centers = None if self._recorder is None else self._recorder.centers()
+        centers = [rec.centers() for rec in self._recorders]
         world_step(moves, None if resetting is None else ~resetting)
         terminated, truncated = w.terminated.copy(), w.truncated.copy()
         rewards = -self.scenario.reward_scale * w.trace
@@ -233,8 +248,11 @@ class BatchedActiveTracking(VectorEnv):
             w.reset(resetting)
             rewards[resetting] = 0.0
             terminated[resetting] = truncated[resetting] = False
-        if self._recorder is not None:
-            self._record(centers, resetting is not None and resetting[0])
+        for rec, c in zip(self._recorders, centers, strict=True):
+            if resetting is not None and resetting[rec.copy]:
+                rec.restart()  # its new episode
+            else:
+                rec.record(c)
         done = terminated | truncated
         if self.autoreset_mode == AutoresetMode.SAME_STEP and done.any():
             idx = np.flatnonzero(done)
@@ -245,8 +263,9 @@ class BatchedActiveTracking(VectorEnv):
             infos["final_info"] = self._infos(terminated, done)
             infos["_final_info"] = done.copy()
             w.reset(done)
-            if self._recorder is not None and done[0]:
-                self._recorder.restart()
+            for rec in self._recorders:
+                if done[rec.copy]:
+                    rec.restart()
         self._autoreset = done.copy()
         exceeded = terminated.copy()
         if self.autoreset_mode == AutoresetMode.SAME_STEP:
@@ -256,22 +275,18 @@ class BatchedActiveTracking(VectorEnv):
             self.render()
         return w.observe(), rewards, terminated, truncated, infos
 
-    def _record(self, centers: FloatArray, reset: bool) -> None:
-        """Record copy 0's step for :meth:`render` (its new episode if it was reset)."""
-        if reset:
-            self._recorder.restart()
-        else:
-            self._recorder.record(centers)
-
-    def render(self) -> np.ndarray | None:
-        """Draw copy 0's episode so far (as the single environment draws its own): an RGB
-        array in ``rgb_array`` mode; None (a window) in ``human`` mode."""
-        if self._recorder is None:
+    def render(self) -> tuple[np.ndarray, ...] | None:
+        """Draw the episodes so far (as the single environment draws its own): in
+        ``rgb_array`` mode a tuple of N RGB arrays, one per copy; in ``human`` mode copy 0's
+        in a window, returning None."""
+        if not self._recorders:
             gymnasium.logger.warn(
                 "render() called without a render_mode; pass render_mode='rgb_array' or 'human'."
             )
             return None
-        return self._recorder.render()
+        if self.render_mode == "human":
+            return self._recorders[0].render()
+        return tuple(rec.render() for rec in self._recorders)
 
     # Observations -------------------------------------------------------------------------------
     def observe(self) -> np.ndarray:
@@ -302,7 +317,6 @@ class BatchedActiveTracking(VectorEnv):
         return out
 
     def close_extras(self, **kwargs: Any) -> None:
-        """Close copy 0's rendering window, if any."""
-        recorder = getattr(self, "_recorder", None)  # None too if __init__ raised
-        if recorder is not None:
-            recorder.close()
+        """Close the rendering windows and figures, if any."""
+        for rec in getattr(self, "_recorders", []):  # none too if __init__ raised
+            rec.close()

@@ -205,30 +205,30 @@ class EpisodeHistory:
             self._occ = (occluders, polys)
         return polys
 
-    def record(self, world: Any, centers: FloatArray | None = None) -> None:
-        """Record the current step of copy 0 of ``world`` (an :class:`activetrack.World`).
+    def record(self, world: Any, centers: FloatArray | None = None, copy: int = 0) -> None:
+        """Record the current step of copy ``copy`` of ``world`` (an :class:`activetrack.World`).
 
         ``centers`` (K, 2): the predictions the step's moves kept ``rho`` from
         (:func:`predicted_positions` before the step); None: the posterior estimates (at
         reset, before any move). The fixes are recorded when the poses are uncertain; with
         limited sensing (``world.scenario.limited_sensing``) the step's detections
-        (``world.get("detected", 0)``), the world's occluders and sensing ranges.
+        (``world.get("detected", copy)``), the world's occluders and sensing ranges.
         """
-        g = world.get
+        g, i = world.get, copy
         K = world.n_targets
         p = world.params
-        x_hat = [g("x_hat", 0, j) for j in range(K)]
+        x_hat = [g("x_hat", i, j) for j in range(K)]
         limited = world.scenario.limited_sensing
         self.append(
-            g("k", 0),
-            [g("x_true", 0, j) for j in range(K)],
+            g("k", i),
+            [g("x_true", i, j) for j in range(K)],
             x_hat,
-            [g("P", 0, j) for j in range(K)],
-            g("sensors", 0),
+            [g("P", i, j) for j in range(K)],
+            g("sensors", i),
             x_hat if centers is None else centers,
-            g("fixes", 0) if p.pose_cov is not None else None,
-            detected=g("detected", 0) if limited else None,
-            occluders=world.occluders(0) if limited else None,
+            g("fixes", i) if p.pose_cov is not None else None,
+            detected=g("detected", i) if limited else None,
+            occluders=world.occluders(i) if limited else None,
             max_range=p.max_range if limited else None,
         )
 
@@ -248,9 +248,10 @@ def _segments(a: FloatArray, b: FloatArray) -> FloatArray:
     return out.reshape(-1, 2)
 
 
-def predicted_positions(world: Any) -> FloatArray:
-    """Return the predicted target positions ``p_T(k+1|k)`` of copy 0 of ``world``, (K, 2)."""
-    return np.array([world.get("x_pred", 0, j)[:2] for j in range(world.n_targets)])
+def predicted_positions(world: Any, copy: int = 0) -> FloatArray:
+    """Return the predicted target positions ``p_T(k+1|k)`` of copy ``copy`` of ``world``,
+    (K, 2)."""
+    return np.array([world.get("x_pred", copy, j)[:2] for j in range(world.n_targets)])
 
 
 def ellipse(center: FloatArray, cov: FloatArray, n_sigma: float = 3.0) -> FloatArray:
@@ -646,34 +647,35 @@ class TrackingRenderer:
 
 
 class EpisodeRecorder:
-    """Copy 0's episode of a world, recorded for an environment with a render mode, and its
-    frames: the :class:`EpisodeHistory` and, made on the first frame, the renderer.
+    """One copy's episode of a world, recorded for an environment with a render mode, and
+    its frames: the :class:`EpisodeHistory` and, made on the first frame, the renderer.
 
     Args:
         world: the :class:`activetrack.World` the environment steps.
         mode: ``"rgb_array"`` or ``"human"``.
         fps: frames per second of the ``human`` window.
+        copy: the copy of ``world`` recorded.
     """
 
-    def __init__(self, world: Any, mode: str, fps: float) -> None:
-        self.world, self.mode, self.fps = world, mode, fps
+    def __init__(self, world: Any, mode: str, fps: float, copy: int = 0) -> None:
+        self.world, self.mode, self.fps, self.copy = world, mode, fps, copy
         self.history = EpisodeHistory()
         self._renderer: TrackingRenderer | None = None
 
     def restart(self) -> None:
         """Start a new episode's record from the world's state after its reset."""
         self.history.clear()
-        self.history.record(self.world)  # the rho circles around the estimates
+        self.history.record(self.world, None, self.copy)  # rho circles about the estimates
         if self._renderer is not None:
             self._renderer.reset()
 
     def centers(self) -> FloatArray:
         """Return what the next step's moves keep ``rho`` from (call before the step)."""
-        return predicted_positions(self.world)
+        return predicted_positions(self.world, self.copy)
 
     def record(self, centers: FloatArray) -> None:
         """Record the step just taken, whose moves kept ``rho`` from ``centers``."""
-        self.history.record(self.world, centers)
+        self.history.record(self.world, centers, self.copy)
 
     def render(self) -> np.ndarray | None:
         """Return the current frame (``rgb_array``), or draw it in the window (``human``)."""

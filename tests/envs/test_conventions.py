@@ -206,26 +206,51 @@ def test_make_vec_batched_equals_the_sync_vector_of_single_envs(mode, keywords):
     assert ends >= 3
 
 
-def test_batched_render_mode_draws_copy_0_as_the_single_env_draws_its_episode():
-    actions = fixed_actions(7, 4)
+def test_batched_render_gives_every_copys_frame_as_the_sync_vector_env():
+    # Gymnasium's VectorEnv.render returns one frame per sub-environment (its vector
+    # RecordVideo and HumanRendering wrappers rely on it): the same frames as the sync
+    # vector env of single envs, across an episode's end (5 steps) and the autoreset.
+    actions = fixed_actions(7, 4).reshape(7, 1, 4).repeat(2, axis=1)
+    actions[:, 1] *= -1.0
     vec = gym.make_vec(ENV_ID, num_envs=2, render_mode="rgb_array", **CONFIG)
-    single = gym.make(ENV_ID, render_mode="rgb_array", **CONFIG)
+    sync = gym.make_vec(ENV_ID, num_envs=2, vectorization_mode="sync", render_mode="rgb_array",
+                        **CONFIG)  # fmt: skip
     vec.reset(seed=5)
-    single.reset(seed=5)
-    np.testing.assert_array_equal(vec.render(), single.render())
-    ended = False
-    for a in actions:  # past the episode's end (5 steps): copy 0's next episode is drawn
-        vec.step(np.stack([a, -a]))  # after an end, the NEXT_STEP autoreset step
-        if ended:
-            single.reset()
-            ended = False
-        else:
-            ended = any(single.step(a)[2:4])
-        frame = vec.render()
-        np.testing.assert_array_equal(frame, single.render())
-        assert frame.dtype == np.uint8 and frame.ndim == 3
+    sync.reset(seed=5)
+    for a in [None, *actions]:
+        if a is not None:
+            vec.step(a)
+            sync.step(a)
+        frames, expected = vec.render(), sync.render()
+        assert isinstance(frames, tuple) and len(frames) == 2
+        for got, want in zip(frames, expected, strict=True):
+            np.testing.assert_array_equal(got, want)
+            assert got.dtype == np.uint8 and got.ndim == 3
     vec.close()
-    single.close()
+    sync.close()
+
+
+def test_a_partial_reset_reports_the_reset_copies_and_seeds_as_sync():
+    kw = {**CONFIG, "n_steps": 9, "max_trace": 3.5}
+    vk = {"autoreset_mode": gym.vector.AutoresetMode.DISABLED}
+    vec = gym.make_vec(ENV_ID, num_envs=3, vectorization_mode="vector_entry_point", **vk, **kw)
+    sync = gym.make_vec(ENV_ID, num_envs=3, vectorization_mode="sync", vector_kwargs=vk, **kw)
+    for env in (vec, sync):
+        env.reset(seed=[4, None, 6])
+    assert vec.unwrapped.np_random_seed[::2] == sync.np_random_seed[::2] == (4, 6)
+    assert vec.unwrapped.np_random_seed[1] == -1  # never seeded: unknown
+    act = fixed_actions(1, 4).repeat(3, axis=0)
+    np.testing.assert_array_equal(vec.step(act)[2], sync.step(act)[2])  # who ended on max_trace
+    mask = np.array([False, True, False])
+    ours, theirs = (
+        vec.reset(seed=[None, 8, None], options={"reset_mask": mask}),
+        sync.reset(seed=[None, 8, None], options={"reset_mask": mask}),
+    )
+    np.testing.assert_array_equal(ours[0], theirs[0])
+    for key in ("step", "trace", "max_trace_exceeded"):
+        np.testing.assert_array_equal(ours[1]["_" + key], theirs[1]["_" + key])
+        np.testing.assert_array_equal(ours[1][key][mask], np.stack(theirs[1][key])[mask])
+    assert vec.unwrapped.np_random_seed == (4, 8, 6)
 
 
 @pytest.mark.parametrize(
