@@ -37,7 +37,13 @@ cost. With one iteration it is eq. (11) exactly.
 Zero-distance rule: a sensor at (numerically) zero distance from the estimated target,
 ``|p_T_hat - p_S|^2 < ZERO_DISTANCE2``, contributes no information that step, exactly as
 if it had been left out: its bearing is undefined there and its bearing information
-``1 / (d^2 sigma_theta^2)`` unbounded. Sensors left out of an update (``mask`` False)
+``1 / (d^2 sigma_theta^2)`` unbounded. Near-distance rule: likewise a sensor so near that
+its bearing information exceeds the prior's position information scale ``1 / tr(P11)``
+:data:`~activetrack.measurement.INFORMATION_RATIO_MAX` times (``d^2 < w_theta tr(P11) /
+INFORMATION_RATIO_MAX``; about 1e-4 m in the presets): one such update would shrink the
+position covariance by more than float64 keeps positive definite (the ratio the
+scenarios already bound for the range information), and a linearization that near the
+estimate means nothing. Sensors left out of an update (``mask`` False)
 contribute no information either. Bearing innovations are wrapped to ``[-pi, pi)``.
 :func:`update` broadcasts over leading batch axes; the arithmetic is compiled, one filter
 at a time (:mod:`activetrack.ekf_kernels`), and shared by the single and the batched

@@ -17,7 +17,7 @@ from __future__ import annotations
 import math
 
 from activetrack._jit import inline_kernel, kernel
-from activetrack.measurement import ZERO_DISTANCE2
+from activetrack.measurement import INFORMATION_RATIO_MAX, ZERO_DISTANCE2
 
 #: Floor of the conditional variance ``p11 - p01^2 / p00`` of a prior's position block,
 #: relative to ``p11``: the rounding level of the stored entries, so the 2x2 Cholesky factor
@@ -37,8 +37,12 @@ def wrap(a):
 
 
 @kernel
-def range_bearing_terms(tx, ty, z, sensors, wd, wt, orientation, mask):
+def range_bearing_terms(tx, ty, z, sensors, wd, wt, orientation, mask, near):
     """Return ``(Y_xx, Y_xy, Y_yy, b_x, b_y)`` linearized at the target position (tx, ty).
+
+    A sensor at zero distance, or nearer than its bearing information allows (``w_theta
+    near > d^2``, ``near = tr(P11) / INFORMATION_RATIO_MAX``: :func:`near_scale`), gives no
+    terms (the zero- and near-distance rules of :mod:`activetrack.ekf`).
 
     ``z``, ``sensors`` (M, 2): the measurements and the sensors' positions; ``wd``, ``wt``,
     ``orientation`` (M,) weights and orientations; ``mask`` (M,) bool, the sensors that
@@ -61,7 +65,7 @@ def range_bearing_terms(tx, ty, z, sensors, wd, wt, orientation, mask):
         dist = math.sqrt(n2)
         w_d = wd[i]
         w_t = wt[i]
-        if n2 < ZERO_DISTANCE2:  # no information at zero distance; keep the arithmetic finite
+        if n2 < ZERO_DISTANCE2 or w_t * near > n2:  # no information at (near) zero distance
             dist = 1.0
             n2 = 1.0
             w_d = 0.0
@@ -172,6 +176,13 @@ def settled(x_out, lin0, lin1):
     return step <= ITERATION_TOL * (1.0 + max(abs(lin0), abs(lin1)))
 
 
+@kernel
+def near_scale(P):
+    """Return ``tr(P11) / INFORMATION_RATIO_MAX``: a sensor whose bearing information
+    ``w_theta / d^2`` exceeds ``1 / near_scale`` is too near (:func:`range_bearing_terms`)."""
+    return (P[0, 0] + P[1, 1]) * (1.0 / INFORMATION_RATIO_MAX)
+
+
 @inline_kernel
 def update_row(x, P, z, sensors, wd, wt, orientation, mask, iterations, x_out, P_out):
     """Write one filter's EKF posterior (``x`` (n,), ``P`` (n, n), ``z``, ``sensors`` (M, 2),
@@ -179,14 +190,17 @@ def update_row(x, P, z, sensors, wd, wt, orientation, mask, iterations, x_out, P
     eq. (11), then up to ``iterations - 1`` relinearizations (the covariance once, at the
     last linearization: the iterations need only the mean)."""
     f = prior_factor(P)
-    yxx, yxy, yyy, bx, by = range_bearing_terms(x[0], x[1], z, sensors, wd, wt, orientation, mask)
+    near = near_scale(P)
+    yxx, yxy, yyy, bx, by = range_bearing_terms(
+        x[0], x[1], z, sensors, wd, wt, orientation, mask, near
+    )
     factored_into(x, P, f, yxx, yxy, yyy, bx, by, x_out, P_out, iterations == 1)
     if iterations == 1:
         return
     for _ in range(iterations - 1):
         lin0, lin1 = x_out[0], x_out[1]
         yxx, yxy, yyy, bx, by = range_bearing_terms(
-            lin0, lin1, z, sensors, wd, wt, orientation, mask
+            lin0, lin1, z, sensors, wd, wt, orientation, mask, near
         )
         cx, cy = relinearized_b(x, lin0, lin1, yxx, yxy, yyy, bx, by)
         factored_into(x, P, f, yxx, yxy, yyy, cx, cy, x_out, P_out, False)

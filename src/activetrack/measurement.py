@@ -18,6 +18,12 @@ from activetrack.validation import FloatArray
 
 #: Squared distance (m^2) below which a sensor is at the target: no information (1e-100 m).
 ZERO_DISTANCE2 = 1e-200
+#: Largest ratio of one sensor's bearing information ``w_theta / d^2`` to the prior's
+#: position information scale ``1 / tr(P11)`` that the EKF takes (the near-distance rule of
+#: :mod:`activetrack.ekf`), the same bound the scenarios put on the range information
+#: (``scenarios.INFORMATION_RATIO_MAX``): a closer sensor's bearing would shrink the
+#: position covariance beyond what float64 keeps positive definite.
+INFORMATION_RATIO_MAX = 1e10
 
 #: ``J = C(-pi/2)`` of eq. (9).
 J = np.array([[0.0, 1.0], [-1.0, 0.0]])

@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from activetrack.measurement import INFORMATION_RATIO_MAX as _INFORMATION_RATIO_MAX
 from activetrack.motion import MODELS, LinearMotionModel, make_model
 from activetrack.validation import FloatArray, UnexpectedKeywordError, real_array, spd
 
@@ -38,7 +39,9 @@ MAX_TRACE_RANGE = (1e-300, 1e300)
 #: Largest accepted ratio of the first predicted position variance to the smallest range
 #: variance: how much one update may shrink the position covariance. The position block
 #: of the posterior then keeps a condition number that float64 represents over long runs.
-INFORMATION_RATIO_MAX = 1e10
+#: (The bearing's information, which grows as a sensor nears the target, is bounded by the
+#: same ratio in the EKF itself: its near-distance rule.)
+INFORMATION_RATIO_MAX = _INFORMATION_RATIO_MAX
 
 _PER_SENSOR = ("sigma_d2", "sigma_theta2", "vmax", "rho", "orientation")
 #: Sensor model names (:class:`activetrack.sensor_models.SensorModel`, lower case).

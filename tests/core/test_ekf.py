@@ -289,3 +289,42 @@ def test_update_stays_spd_where_the_expanded_joseph_form_failed():
         np.testing.assert_array_equal(P, P.T)
         np.linalg.cholesky(P)
         assert np.all(np.isfinite(x))
+
+
+def test_near_distance_rule_drops_a_sensor_only_beyond_the_information_bound():
+    """A sensor whose bearing information ``w_theta / d^2`` would exceed ``tr(P11)``'s
+    inverse INFORMATION_RATIO_MAX times gives nothing (= the textbook update without it);
+    just outside that distance it counts in full (= the textbook update with it)."""
+    rng = np.random.default_rng(31)
+    x, P = rng.standard_normal(4), random_spd(rng, 4, scale=2.0)
+    sd2, st2 = np.array([1.0, 0.5]), np.array([0.1, 0.04])
+    d_edge = np.sqrt(np.trace(P[:2, :2]) / st2[1] / measurement.INFORMATION_RATIO_MAX)
+    for factor, counted in ((1.01, True), (0.99, False)):
+        sensors = np.stack([x[:2] + [6.0, -4.0], x[:2] + [0.0, factor * d_edge]])
+        z = measurement.sample(x[:2] + 0.2, sensors, sd2, st2, rng)
+        x_new, P_new = ekf.update(x, P, z, sensors, sd2, st2)
+        keep = slice(None) if counted else slice(0, 1)
+        x_ref, P_ref = textbook_update(x, P, z[keep], sensors[keep], sd2[keep], st2[keep])
+        # Near the bound one update shrinks P11 ~1e10-fold: compare on P's own scale.
+        np.testing.assert_allclose(P_new, P_ref, rtol=1e-6, atol=1e-12 * np.abs(P).max())
+        np.testing.assert_allclose(x_new, x_ref, rtol=1e-6, atol=1e-9)
+
+
+def test_sensors_on_the_rho_circle_of_a_tiny_rho_keep_p_spd():
+    """rho = 1e-9 m and every sensor sent onto the predicted target (the world puts it on
+    the rho circle): without the near-distance rule P lost definiteness (eigenvalue
+    -1.1e-17 of 1.8 at step 15, independent review) and then went NaN."""
+    from activetrack.envs import parallel_env
+
+    for name, q, seed in (("homogeneous", 0.0, 3), ("paper", 10.0, 1)):
+        env = parallel_env(name, n_steps=60, rho=1e-9, q=q)
+        env.reset(seed=seed)
+        w, m = env.world, env.world.n_sensors
+        while env.agents:
+            obs, rewards, *_ = env.step_positions(np.tile(w.get("x_pred", 0)[:2], (m, 1)))
+            P = w.get("P", 0)
+            np.linalg.cholesky(P)  # raises unless positive definite
+            p = P[:2, :2]  # the position block's determinant, cancellation-free for 2x2
+            assert p[0, 0] > 0 and p[0, 0] * p[1, 1] - p[0, 1] ** 2 > 0
+            assert all(np.isfinite(o).all() for o in obs.values())
+            assert all(np.isfinite(r) for r in rewards.values())
