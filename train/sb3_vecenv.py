@@ -213,8 +213,11 @@ class BatchedCopies:
         return self.env
 
     def render(self) -> list[Any]:
-        """Return nothing per copy: the batched env does not render."""
-        return [None] * self.n_copies
+        """Return each copy's frame (the batched env made with ``render_mode="rgb_array"``),
+        else None per copy."""
+        if self.env.render_mode != "rgb_array":
+            return [None] * self.n_copies
+        return list(self.env.render())
 
     def close(self) -> None:
         """Close the batched env."""

@@ -246,3 +246,26 @@ def test_bad_input_names_the_field():
     vec.reset()
     with pytest.raises(ValueError, match=r"actions must have shape \(6, 2\), got \(7, 2\)"):
         vec.step(np.zeros((7, 2), np.float32))
+
+
+def test_images_of_both_backends_are_the_copies_frames():
+    # One frame per copy (not per slot), equal across backends: each copy is drawn as the
+    # single env draws its episode.
+    vecs = [
+        make_shared_vec_env("paper", 2, backend=b, render_mode="rgb_array", n_steps=4)
+        for b in ("batched", "parallel")
+    ]
+    rng = np.random.default_rng(0)
+    for vec in vecs:
+        vec.seed(3)
+        vec.reset()
+    for _ in range(2):
+        a = _actions(rng, vecs[0].num_envs)
+        frames = [vec.get_images() for vec in vecs]
+        assert len(frames[0]) == len(frames[1]) == 2
+        for got, want in zip(*frames, strict=True):
+            assert got.dtype == np.uint8 and got.ndim == 3
+            np.testing.assert_array_equal(got, want)
+        for vec in vecs:
+            vec.step(a)
+    assert make_shared_vec_env("paper", 2).get_images() == [None, None]
