@@ -11,7 +11,10 @@ Per copy-step, one thread, ``paper`` (M = 3 sensors, a 4-state target), all in o
   with seed ``i``), a block of ``World.noise_block`` steps a call;
 - the same normals from one generator for every copy (what a shared stream would cost);
 - the ``M`` bearings' ``atan2`` a step's measurements need, compiled, nothing else around
-  them (the EKF's innovations need ``M`` more, at the predicted target).
+  them (the EKF's innovations need ``M`` more, at the predicted target);
+- two costs of copies that equal single envs after early ends and of the single env's
+  infos: saving each copy's generator state before its noise block (one save a block of
+  ``min(noise_block, n_steps)`` steps), and the infos' ``position_error`` (``World``'s).
 
 Usage: ``OPENBLAS_NUM_THREADS=1 python benchmarks/floor_step.py [--n 8192] [--steps 24]``
 (VMAS from the ``[bench]`` extra).
@@ -53,6 +56,7 @@ def _best(fn, repeats: int) -> float:
 def floor(n: int, steps: int, repeats: int = 5) -> dict[str, float]:
     """Return microseconds a copy-step of each part (see the module docstring)."""
     world = World("paper", n)
+    world.reset(seeds=list(range(n)))
     block, draws = world.noise_block, world._n_noise  # noqa: SLF001 (the world's own sizes)
     m = world.params.rho.shape[-1]
     rngs = [np.random.default_rng(i) for i in range(n)]
@@ -68,6 +72,9 @@ def floor(n: int, steps: int, repeats: int = 5) -> dict[str, float]:
         "normals_shared": per / block * _best(
             lambda: shared.standard_normal((n * block, draws)), repeats),
         "bearings": per * _best(lambda: _bearings(xy[0], xy[1]), repeats),
+        "state_saves": per / min(block, world.episode_steps) * _best(
+            lambda: [g.bit_generator.state for g in rngs], repeats),
+        "position_error": per * _best(world.position_error, repeats),
         "normals_a_step": float(draws),
     }  # fmt: skip
 
@@ -92,6 +99,8 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
     print(f"  the same, one shared generator    {f['normals_shared']:.3f}")
     print(f"  the bearings' atan2               {f['bearings']:.3f}")
     print(f"  draws + bearings: {fixed:.3f} = {100 * fixed / budget:.0f}% of twice VMAS's budget")
+    print(f"  generator state saves             {f['state_saves']:.3f}")
+    print(f"  the infos' position_error         {f['position_error']:.3f}")
     return f
 
 

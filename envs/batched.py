@@ -52,7 +52,7 @@ from activetrack.validation import FloatArray, check_int, check_seed, real_array
 from activetrack.world import World
 
 from .rendering import EpisodeRecorder
-from .tracking_env import RENDER_MODES, check_no_options
+from .tracking_env import RENDER_MODES, check_no_options, check_render_mode
 
 StepReturn = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]
 
@@ -103,10 +103,7 @@ class BatchedActiveTracking(VectorEnv):
             raise ValueError(
                 f"autoreset_mode must be one of {modes}, got {autoreset_mode!r}"
             ) from None
-        if render_mode is not None and render_mode not in RENDER_MODES:
-            raise ValueError(
-                f"render_mode must be None or one of {list(RENDER_MODES)}, got {render_mode!r}"
-            )
+        check_render_mode(render_mode)
         if max_episode_steps is not None:
             max_episode_steps = check_int("max_episode_steps", max_episode_steps, 1)
         sc = make_scenario(scenario, **overrides)

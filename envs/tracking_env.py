@@ -109,10 +109,7 @@ class TrackingParallelEnv(ParallelEnv):
     def __init__(
         self, scenario: str | Scenario = "paper", render_mode: str | None = None, **overrides: Any
     ) -> None:
-        if render_mode is not None and render_mode not in RENDER_MODES:
-            raise ValueError(
-                f"render_mode must be None or one of {RENDER_MODES}, got {render_mode!r}"
-            )
+        check_render_mode(render_mode)
         sc = make_scenario(scenario, **overrides)
         self.world = World(sc, 1)
         self.scenario = sc
@@ -337,6 +334,14 @@ class TrackingParallelEnv(ParallelEnv):
 
     def __str__(self) -> str:
         return f"activetrack_v0({self.scenario.name}, M={self.n_sensors})"
+
+
+def check_render_mode(render_mode: Any) -> None:
+    """Raise ``ValueError`` unless ``render_mode`` is None or one of :data:`RENDER_MODES`."""
+    if render_mode is not None and render_mode not in RENDER_MODES:
+        raise ValueError(
+            f"render_mode must be None or one of {list(RENDER_MODES)}, got {render_mode!r}"
+        )
 
 
 def check_no_options(options: dict[str, Any] | None, valid: tuple[str, ...] = ()) -> None:
