@@ -28,6 +28,17 @@ The search (:meth:`Lookahead.plan_prediction`), batched over copies and candidat
    occluder stops inside a ``rho`` disk is not taken (:meth:`PathModel.outside_rho
    <activetrack.baselines.horizon_paths.PathModel.outside_rho>`).
 
+3. **Pair passes**: then, for ``pair_passes`` passes, each pair of sensors in turn takes
+   its best joint move among every pair of their options, the others fixed: joint moves
+   that one sensor at a time cannot reach are rare but decide some episodes; the score
+   still never increases.
+
+Terminal cost: the episode goes on past the horizon, and where the team stands at its
+end decides the steps after it (the sensors are no faster than the target in ``paper``,
+so distance lost is not made up). Every candidate's last planned step's information is
+held for ``tail`` more steps of the covariance rollout, each weighted ``tail_weight``
+times the last step's weight: the score is the horizon's traces plus that tail's.
+
 Minimum-distance margin: the true target is not where it is predicted; a sensor placed
 on the ``rho`` circle of the predicted target ends inside the true target's ``rho`` disk
 when the prediction is off. The planner keeps ``rho + margin * sigma``, with ``sigma`` the
@@ -37,6 +48,7 @@ standard deviation of the predicted position along its principal axis, in every 
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass, field, fields
 
@@ -58,7 +70,7 @@ class LookaheadResult:
     Attributes:
         positions: next absolute positions, ``batch + (M, 2)``.
         plan: the chosen plan, ``batch + (M, H, 2)`` (``plan[..., 0, :] == positions``).
-        score: its model score, ``batch``.
+        score: its model score (the horizon's weighted traces and the tail's), ``batch``.
         gsr_plan: GSR's rollout in the model, ``batch + (M, H, 2)``.
         gsr_score: its model score, ``batch``.
     """
@@ -80,6 +92,11 @@ class Lookahead:
         headings: constant-heading options per sensor (>= 0).
         bearings: target-relative waypoint options per sensor (>= 0).
         passes: coordinate-descent passes over the sensors (>= 0).
+        pair_passes: then passes over the pairs of sensors, each pair's best joint move
+            among every pair of their options (>= 0).
+        tail: steps past the horizon in which the last step's information is held
+            (terminal cost, see the module docstring; >= 0, 0: none).
+        tail_weight: weight of each tail step relative to the horizon's last, > 0.
         margin: the ``rho`` margin in standard deviations of the predicted position, >= 0.
         gsr_tol, gsr_max_sweeps: GSR's settings for its rollout.
     """
@@ -89,7 +106,10 @@ class Lookahead:
     headings: int = 16
     bearings: int = 0
     passes: int = 1
-    margin: float = 0.5
+    pair_passes: int = 1
+    tail: int = 3
+    tail_weight: float = 2.0
+    margin: float = 0.75
     gsr_tol: float = 1e-9
     gsr_max_sweeps: int = 100
     _gsr: object = field(default=None, init=False, repr=False)
@@ -102,6 +122,9 @@ class Lookahead:
         self.headings = check_int("headings", self.headings, 0, 4096)
         self.bearings = check_int("bearings", self.bearings, 0, 4096)
         self.passes = check_int("passes", self.passes, 0, 100)
+        self.pair_passes = check_int("pair_passes", self.pair_passes, 0, 100)
+        self.tail = check_int("tail", self.tail, 0, 1000)
+        self.tail_weight = check_float("tail_weight", self.tail_weight, 1e-6, 1e6)
         self.margin = check_float("margin", self.margin, 0.0, 100.0)
         self._gsr = GSR(tol=self.gsr_tol, max_sweeps=self.gsr_max_sweeps)
 
@@ -134,6 +157,7 @@ class Lookahead:
         spread = np.max([_principal_std(P[:, :2, :2]) for _, P, _, _ in preds], axis=0)
         rho_eff = rho + self.margin * spread[:, None]
         weights = hm.discount_weights(H, self.discount)
+        weights = np.concatenate([weights, np.full(self.tail, self.tail_weight * weights[-1])])
 
         gsr_paths = self._gsr_rollout(problem, model, preds, means, start, rho_eff)
         options = [gsr_paths[:, :, None]]  # (B, M, 1, H, 2)
@@ -155,6 +179,9 @@ class Lookahead:
         valid = model.outside_rho(paths, means, rho_eff)  # (B, M, O)
         valid[:, :, 0] = True  # GSR's rollout: its solver's candidates keep rho
         info, scorer = self._scoring(model, paths, means, preds, weights, problem.objective)
+        if self.tail:  # the last step's information held past the horizon (terminal cost)
+            info = [np.concatenate([Y, np.repeat(Y[..., -1:, :, :], self.tail, -3)], -3)
+                    for Y in info]  # fmt: skip
         choice, score, gsr_score = self._descend(info, valid, scorer, previous)
         b = np.arange(B)[:, None]
         plan = paths[b, np.arange(M)[None, :], choice]  # (B, M, H, 2)
@@ -243,7 +270,45 @@ class Lookahead:
                     score = np.where(better, s[b, k], score)
             if not changed:
                 break
+        for _ in range(self.pair_passes if M > 1 else 0):
+            changed = False
+            for i, j in itertools.combinations(range(M), 2):
+                better, choice, score = self._pair_step(info, valid, scorer, choice, score, i, j)
+                changed = changed or better
+            if not changed:
+                break
         return choice, score, gsr_score
+
+    #: Largest number of candidate rows (copies x team candidates) scored in one call.
+    CHUNK_ROWS = 8192
+
+    def _pair_step(self, info, valid, scorer, choice, score, i, j) -> tuple:
+        """Return ``(changed, choice, score)`` after the best joint move of sensors i and j
+        (every pair of their options, the others fixed), scored in chunks of options of i."""
+        B, M, O = info[0].shape[:3]
+        b = np.arange(B)
+        chosen = [Ik[b[:, None], np.arange(M)[None], choice] for Ik in info]  # (B, M, H, 2, 2)
+        others = [c.sum(axis=1) - c[:, i] - c[:, j] for c in chosen]
+        rows = max(1, self.CHUNK_ROWS // max(1, B * O))  # options of i per call
+        best_s, best_k = np.full(B, np.inf), np.zeros(B, dtype=np.int64)
+        for a0 in range(0, O, rows):
+            a = np.arange(a0, min(O, a0 + rows))
+            cand = [
+                (o[:, None, None] + Ik[:, i, a][:, :, None] + Ik[:, j][:, None]).reshape(
+                    (B, a.size * O) + Ik.shape[3:]
+                )
+                for o, Ik in zip(others, info, strict=True)
+            ]
+            ok = (valid[:, i, a][:, :, None] & valid[:, j][:, None]).reshape(B, -1)
+            s = np.where(ok, scorer(cand), np.inf)
+            k = np.argmin(s, axis=1)
+            take = s[b, k] < best_s
+            best_s, best_k = np.where(take, s[b, k], best_s), np.where(take, a0 * O + k, best_k)
+        better = best_s < score
+        choice = choice.copy()
+        choice[better, i] = (best_k // O)[better]
+        choice[better, j] = (best_k % O)[better]
+        return bool(np.any(better)), choice, np.where(better, best_s, score)
 
 
 class _Scorer:

@@ -1,15 +1,20 @@
 """CPU time per step of the look-ahead policy beside GSR on the same states (``paper``).
 
 Each step of a few held-out ``paper`` episodes (the look-ahead's own closed loop) is planned
-by ``GSRPolicy`` and ``LookaheadPolicy`` (default settings) on the same planning problem;
-the median and mean CPU milliseconds per step are printed for both. Run::
+by ``GSRPolicy`` and ``LookaheadPolicy`` on the same planning problem; the median and mean
+CPU milliseconds per step are printed for both. ``--settings`` (JSON objects of
+:class:`~activetrack.baselines.lookahead.Lookahead`'s keywords, default ``{}``) times each
+setting in its own closed loop, GSR beside it. Run::
 
     OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/time_lookahead.py [--episodes 4]
+    OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/time_lookahead.py \\
+        --settings '{}' '{"tail": 0, "pair_passes": 0, "margin": 0.5}'
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import time
 
 import numpy as np
@@ -22,14 +27,23 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--episodes", type=int, default=4)
     parser.add_argument("--seed", type=int, default=1000, help="first held-out seed")
+    parser.add_argument("--settings", nargs="+", default=["{}"], help="Lookahead keywords")
     args = parser.parse_args()
-    lookahead, gsr = LookaheadPolicy(), GSRPolicy()
+    settings = [json.loads(s) for s in args.settings]
+    policies = [LookaheadPolicy(**kw) for kw in settings]  # bad keywords fail here
+    for kw, lookahead in zip(settings, policies, strict=True):
+        print(f"settings {json.dumps(kw)}")
+        time_policies(lookahead, GSRPolicy(), args.seed, args.episodes)
+
+
+def time_policies(lookahead: LookaheadPolicy, gsr: GSRPolicy, first: int, episodes: int) -> None:
+    """Print both policies' CPU ms per step on the look-ahead's closed loop."""
     times: dict[str, list[float]] = {"gsr": [], "lookahead": []}
     warm = World("paper")  # load the compiled kernels before timing
     warm.reset(seeds=[0])
     gsr.plan(warm.planning_problem(0))
     lookahead.plan(warm.planning_problem(0))
-    for seed in range(args.seed, args.seed + args.episodes):
+    for seed in range(first, first + episodes):
         world = World("paper")
         world.reset(seeds=[seed])
         while not (world.get("truncated", 0) or world.get("terminated", 0)):

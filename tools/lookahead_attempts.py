@@ -15,7 +15,14 @@ ahead"): none is kept in the library; each is a patch of this process only.
 - ``episode-end``: the horizon's weights cut at the episode's last step;
 - ``sampled``: each team candidate scored by the mean of its model score over
   ``--samples`` sampled paths of the future estimate (the filter's linearization point)
-  instead of the predicted mean path alone (:class:`SampledFutures`).
+  instead of the predicted mean path alone (:class:`SampledFutures`);
+- ``exhaustive``: after the descent, every team of options (M = 3: O^3 candidates) is
+  scored and the best kept (:class:`Exhaustive`): how far the descent is from the best
+  plan of its own options (what led to ``Lookahead.pair_passes``).
+
+Every variant patches ``Lookahead(**--settings)``; the default settings are those the
+attempts were measured with, the planner's defaults before the terminal tail and the pair
+passes (``{"tail": 0, "pair_passes": 0, "margin": 0.5}``).
 
 Prints the ratio of the look-ahead's mean trace to GSR's over 100 seeds from ``--start``
 (one batched world each, paired) with a bootstrap 95% interval. Run::
@@ -26,11 +33,14 @@ Prints the ratio of the look-ahead's mean trace to GSR's over 100 seeds from ``-
     OPENBLAS_NUM_THREADS=1 .venv/bin/python tools/lookahead_attempts.py episode-end --start 1000
     OPENBLAS_NUM_THREADS=1 python tools/lookahead_attempts.py inflate --alpha 1 --start 3000
     OPENBLAS_NUM_THREADS=1 python tools/lookahead_attempts.py sampled --samples 16 --start 2000
+    OPENBLAS_NUM_THREADS=1 python tools/lookahead_attempts.py exhaustive --episodes 200 \\
+        --settings '{"tail": 0, "pair_passes": 0, "margin": 0.75}'
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 from dataclasses import dataclass
 
 import numpy as np
@@ -42,6 +52,8 @@ from activetrack.objective import sensor_information
 from activetrack.world import World
 
 STATE: dict = {"cov": None, "left": None}
+#: The settings the attempts were measured with (the defaults before the tail and pairs).
+ATTEMPTS_BASE = {"tail": 0, "pair_passes": 0, "margin": 0.5}
 
 
 def patch(attempt: str, alpha: float) -> None:
@@ -167,6 +179,26 @@ class SampledFutures(la.Lookahead):
         return info, scorer  # info (B, M, O, S, H, 2, 2)
 
 
+class Exhaustive(la.Lookahead):
+    """The descent's plan, then the best of every team of options (three sensors)."""
+
+    def _descend(self, info, valid, scorer, previous):  # noqa: ANN001, ANN202 (as Lookahead's)
+        choice, score, gsr_score = super()._descend(info, valid, scorer, previous)
+        ((Y,),) = (info,)  # one target: (B, 3, O, H, 2, 2)
+        B, O, b = Y.shape[0], Y.shape[2], np.arange(Y.shape[0])
+        for a in range(O):  # sensor 0 at option a, sensors 1 and 2 at every pair
+            pairs = (Y[:, 1, :, None] + Y[:, 2, None]).reshape(B, O * O, *Y.shape[3:])
+            team = Y[:, 0, a, None] + pairs
+            ok = valid[:, 0, a, None, None] & valid[:, 1, :, None] & valid[:, 2, None]
+            ok = ok.reshape(B, -1)
+            s = np.where(ok, scorer([team]), np.inf)
+            k = np.argmin(s, axis=1)
+            better = s[b, k] < score
+            choice[better] = np.stack([np.full(B, a), k // O, k % O], 1)[better]
+            score = np.where(better, s[b, k], score)
+        return choice, score, gsr_score
+
+
 class Watched:
     """The look-ahead planner, with what the variants read set before each plan: the
     prediction's position covariance and the steps left (the copies are in step)."""
@@ -187,7 +219,7 @@ def main() -> None:
         "attempt",
         choices=[
             "none", "follow", "half-speed", "relative", "sigma", "inflate", "episode-end",
-            "sampled",
+            "sampled", "exhaustive",
         ],
     )  # fmt: skip
     parser.add_argument("--start", type=int, default=2000, help="first of 100 seeds")
@@ -198,18 +230,24 @@ def main() -> None:
         help="sigma: the points' scale; inflate: kappa; sampled: the deviations' scale",
     )
     parser.add_argument("--samples", type=int, default=16, help="sampled: estimate paths")
+    parser.add_argument("--episodes", type=int, default=100, help="seeds from --start")
+    parser.add_argument(
+        "--settings", default=json.dumps(ATTEMPTS_BASE), help="Lookahead keywords (JSON)"
+    )
     args = parser.parse_args()
-    seeds = list(range(args.start, args.start + 100))
+    settings = json.loads(args.settings)
+    seeds = list(range(args.start, args.start + args.episodes))
     gsr, _ = la.run_batched("paper", seeds)  # before the patch: GSR is unaffected by every variant
     patch(args.attempt, args.alpha)
     n_steps = World("paper").scenario.n_steps
     search = (
-        SampledFutures(samples=args.samples, scale=args.alpha)
+        SampledFutures(samples=args.samples, scale=args.alpha, **settings)
         if args.attempt == "sampled"
-        else la.Lookahead()
+        else (Exhaustive if args.attempt == "exhaustive" else la.Lookahead)(**settings)
     )
     look, _ = la.run_batched("paper", seeds, Watched(search, n_steps))
-    idx = np.random.default_rng(0).integers(0, 100, (4000, 100))
+    n = len(seeds)
+    idx = np.random.default_rng(0).integers(0, n, (4000, n))
     boot = look[idx].mean(axis=1) / gsr[idx].mean(axis=1)
     lo, hi = np.percentile(boot, [2.5, 97.5])
     print(f"{args.attempt}: ratio {look.mean() / gsr.mean():.4f} [{lo:.4f}, {hi:.4f}]")

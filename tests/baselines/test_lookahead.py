@@ -86,13 +86,17 @@ def test_model_covariances_equal_the_filter():
         np.testing.assert_allclose(score, traces.sum(), 1e-12)
 
 
-def _gsr_rollout_score(x, P, model, problem, H, weights, margin):
+def _gsr_rollout_score(x, P, model, problem, H, weights, margin, tail=0, tail_weight=1.0):
     """Return GSR's rollout score through the filter (independent of horizon_model), GSR
-    keeping ``rho + margin * sigma`` (sigma from the largest eigenvalue of P11)."""
+    keeping ``rho + margin * sigma`` (sigma from the largest eigenvalue of P11); with a
+    ``tail``, the team then keeps its last planned position relative to the predicted
+    target (the same information) for ``tail`` more steps, each weighted ``tail_weight``
+    times the last step."""
     gsr = GSR()
     rho = problem.rho + margin * np.sqrt(np.linalg.eigvalsh(P[:2, :2]).max())
+    weights = np.concatenate([weights, np.full(tail, tail_weight * weights[-1])])
     sensors, total = problem.sensors, 0.0
-    for h in range(H):
+    for h in range(H + tail):
         step = PlanningProblem(
             prior_cov=P[:2, :2],
             target=x[:2],
@@ -102,7 +106,11 @@ def _gsr_rollout_score(x, P, model, problem, H, weights, margin):
             sigma_d2=problem.sigma_d2,
             sigma_theta2=problem.sigma_theta2,
         )
-        sensors = gsr.plan(step)
+        if h < H:
+            sensors = gsr.plan(step)
+            offset = sensors - x[:2]
+        else:  # past the horizon: the same place relative to the predicted target
+            sensors = x[:2] + offset
         z = measurement.range_bearing(x[:2], sensors, 0.0)
         x, P_post = ekf.update(x, P, z, sensors, problem.sigma_d2, problem.sigma_theta2)
         total += weights[h] * (P_post[0, 0] + P_post[1, 1])
@@ -110,21 +118,65 @@ def _gsr_rollout_score(x, P, model, problem, H, weights, margin):
     return total
 
 
-@pytest.mark.parametrize(("discount", "margin"), [(1.0, 0.0), (0.9, 0.0), (1.0, 0.5)])
-def test_model_score_never_above_gsr_rollout(discount, margin):
+@pytest.mark.parametrize(
+    ("discount", "margin", "tail", "pairs"),
+    [(1.0, 0.0, 0, 0), (0.9, 0.0, 0, 0), (1.0, 0.5, 0, 0), (1.0, 0.5, 3, 0), (0.9, 0.0, 2, 1)],
+)
+def test_model_score_never_above_gsr_rollout(discount, margin, tail, pairs):
     rng = np.random.default_rng(1)
     for _ in range(40):
         x, P, model, problem = _random_state(rng, int(rng.integers(1, 5)))
         H = int(rng.integers(1, 12))
-        la = Lookahead(horizon=H, discount=discount, headings=8, bearings=4, margin=margin)
+        la = Lookahead(
+            horizon=H, discount=discount, headings=8, bearings=4, margin=margin, tail=tail,
+            tail_weight=2.0, pair_passes=pairs,
+        )  # fmt: skip
         previous = problem.sensors[:, None] + rng.normal(0, 2.0, (problem.n_sensors, H, 2))
         res = la.plan_prediction(problem, x, P, model.Phi, model.Q, previous)
-        ref = _gsr_rollout_score(x, P, model, problem, H, discount ** np.arange(H), margin)
+        weights = discount ** np.arange(H)
+        ref = _gsr_rollout_score(x, P, model, problem, H, weights, margin, tail, 2.0)
         assert res.score <= res.gsr_score
         # GSR stops at a relative improvement of 1e-9 per sweep: rollouts from priors that
         # agree to rounding agree to about that.
         np.testing.assert_allclose(res.gsr_score, ref, rtol=1e-7)
         assert res.score <= ref * (1 + 1e-7)
+
+
+def test_pair_passes_end_where_no_joint_move_of_two_sensors_is_better(monkeypatch):
+    # Brute force over every pair of options of every pair of sensors, one team candidate
+    # scored at a time: with two sensors that is every team (the exhaustive optimum).
+    seen = {}
+    descend = Lookahead._descend
+
+    def spy(self, info, valid, scorer, previous):
+        out = descend(self, info, valid, scorer, previous)
+        seen.update(info=info[0][0], valid=valid[0], scorer=scorer, choice=out[0][0])
+        return out
+
+    monkeypatch.setattr(Lookahead, "_descend", spy)
+    rng = np.random.default_rng(7)
+    for trial in range(12):
+        m = 2 + trial % 2
+        x, P, model, problem = _random_state(rng, m)
+        res = Lookahead(horizon=4, headings=6, bearings=2, pair_passes=5).plan_prediction(
+            problem, x, P, model.Phi, model.Q
+        )
+        info, valid, scorer, choice = (seen[k] for k in ("info", "valid", "scorer", "choice"))
+        best = np.inf
+        for i in range(m):
+            for j in range(i + 1, m):
+                for a in range(info.shape[1]):
+                    for b in range(info.shape[1]):
+                        team = list(choice)
+                        team[i], team[j] = a, b
+                        if all(valid[k, team[k]] for k in range(m)):
+                            Y = sum(info[k, team[k]] for k in range(m))
+                            best = min(best, float(scorer([Y[None, None]])[0, 0]))
+        assert res.score <= best * (1 + 1e-12)
+        if m == 2:
+            np.testing.assert_allclose(res.score, best, rtol=1e-12)
+        plain = Lookahead(horizon=4, headings=6, bearings=2, pair_passes=0)
+        assert res.score <= plain.plan_prediction(problem, x, P, model.Phi, model.Q).score
 
 
 def _feasible(problem: PlanningProblem, positions: np.ndarray) -> bool:
