@@ -10,6 +10,7 @@ import shutil
 import subprocess
 import sys
 import zipfile
+from email.parser import Parser
 from pathlib import Path
 
 import pytest
@@ -67,6 +68,38 @@ def _run(args: list, cwd: Path, timeout: float = 900) -> str:
     out = subprocess.run(args, cwd=cwd, capture_output=True, text=True, timeout=timeout)
     assert out.returncode == 0, f"{args} failed:\n{out.stdout[-3000:]}\n{out.stderr[-3000:]}"
     return out.stdout
+
+
+def _link_dependencies(metadata: str, folder: Path) -> set[str]:
+    """Link into ``folder`` (to put on a venv's path) every file of the distributions of
+    this environment that the wheel's ``metadata`` requires, without extras, transitively;
+    return their names. Each requirement must be met by the version found here."""
+    from packaging.requirements import Requirement
+    from packaging.utils import canonicalize_name
+
+    folder.mkdir()
+    todo = [(Requirement(r), "") for r in Parser().parsestr(metadata).get_all("Requires-Dist")]
+    done: set[tuple[str, str]] = set()  # (distribution, extra) whose requirements are queued
+    while todo:
+        req, extra = todo.pop()
+        if req.marker is not None and not req.marker.evaluate({"extra": extra}):
+            continue
+        name = canonicalize_name(req.name)
+        dist = importlib.metadata.distribution(name)
+        assert req.specifier.contains(dist.version, prereleases=True), (req, dist.version)
+        for e in {""} | req.extras:
+            if (name, e) not in done:
+                done.add((name, e))
+                todo += [(Requirement(r), e) for r in dist.requires or ()]
+    names = {name for name, _ in done}
+    for name in names:
+        dist = importlib.metadata.distribution(name)
+        assert dist.files, f"{name}: no RECORD"
+        site = Path(dist.locate_file(""))
+        for top in {f.parts[0] for f in dist.files} - {"..", "__pycache__"}:
+            if not (folder / top).exists():
+                (folder / top).symlink_to(site / top)
+    return names
 
 
 SMOKE = """
@@ -132,10 +165,24 @@ def test_built_wheel_installs_and_runs_in_a_fresh_venv(tmp_path):
     top = f"activetrack-{version}"
     assert {f"{top}/LICENSE", f"{top}/src/activetrack/py.typed"} <= sdist_names
 
+    # A fresh venv (not an editable install) with the wheel installed by pip; its
+    # dependencies are this environment's copies of exactly the distributions the wheel
+    # requires (Requires-Dist without extras, transitively), not downloaded again: a
+    # folder of links to them on the venv's path. So a dependency missing from the wheel's
+    # metadata is missing there too (the smoke test's imports fail), and `pip check` fails
+    # on a requirement the versions tested here do not satisfy.
     venv = tmp_path / "venv"
-    _run([sys.executable, "-m", "venv", str(venv)], cwd=tmp_path)
+    _run([sys.executable, "-m", "venv", "--without-pip", str(venv)], cwd=tmp_path)
     py = venv / "bin" / "python"
-    _run([str(py), "-m", "pip", "install", "--quiet", str(wheel)], cwd=tmp_path)
+    purelib = _run([str(py), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
+                   cwd=tmp_path).strip()  # fmt: skip
+    deps = _link_dependencies(metadata, tmp_path / "deps")
+    assert {"numpy", "scipy", "gymnasium", "pettingzoo", "numba"} <= deps
+    assert not {"activetrack", "torch", "pytest", "ray"} & deps  # no extras, not itself
+    (Path(purelib) / "activetrack_test_deps.pth").write_text(f"{tmp_path / 'deps'}\n")
+    pip = [sys.executable, "-m", "pip", "--python", str(py)]
+    _run([*pip, "install", "--quiet", "--no-deps", "--no-index", str(wheel)], cwd=tmp_path)
+    _run([*pip, "check"], cwd=tmp_path)
     work = tmp_path / "elsewhere"  # run away from the source tree
     work.mkdir()
     out = _run([str(py), "-c", SMOKE.format(version=version)], cwd=work)

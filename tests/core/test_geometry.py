@@ -88,13 +88,15 @@ def test_projection_is_nearest_feasible_point(cn, r, rho, qa, qr):
         np.testing.assert_allclose(p, geometry.unreachable_fallback(c, r))
         return
     assert feasible(p, c, r, rho, tol=1e-9)
-    # brute force: dense polar grid of the feasible set
+    # brute force: dense polar grid of the feasible set; no point of it is closer to q
+    # (the feasibility test only on the grid points closer than p, the same comparison)
     t = np.linspace(0, 2 * np.pi, 2000)
     rad = np.linspace(0, r, 400)
     grid = c + (rad[:, None, None] * np.stack([np.cos(t), np.sin(t)], -1)).reshape(-1, 2)
-    grid = grid[feasible(grid, c, r, rho, tol=0.0)]
-    best = np.min(np.linalg.norm(grid - q, axis=1))
-    assert np.linalg.norm(p - q) <= best + 1e-9
+    dist = np.linalg.norm(grid - q, axis=1)
+    closer = dist + 1e-9 < np.linalg.norm(p - q)
+    better = feasible(grid[closer], c, r, rho, tol=0.0)
+    assert not better.any(), (p, grid[closer][better][:3], dist[closer][better].min())
 
 
 def test_uniform_sampling_covers_arcs_by_length():

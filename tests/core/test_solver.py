@@ -100,21 +100,26 @@ def arc_points(arc, t):
 
 
 def mp_trace(prior_info, x, y, sd2, st2):
-    """Return f0 at (x, y) (mpmath numbers) in 40-digit arithmetic, as an mpf."""
+    """Return f0 at (x, y) (mpmath numbers) in 40-digit arithmetic, as an mpf.
+
+    The entries of M = L' + info(s) one by one, then tr(M^-1) = tr(M) / det(M) (2x2):
+    mpmath's general matrix inverse gives the same 40 digits at ten times the cost.
+    """
     mp.mp.dps = 40
     n2 = x * x + y * y
     p = [x, y]
     q = [y, -x]  # J s
-    M = mp.matrix(2, 2)
-    for i in range(2):
-        for j in range(2):
-            M[i, j] = (
-                mp.mpf(float(prior_info[i, j]))
-                + p[i] * p[j] / (mp.mpf(float(sd2)) * n2)
-                + q[i] * q[j] / (mp.mpf(float(st2)) * n2 * n2)
-            )
-    inv = M**-1
-    return inv[0, 0] + inv[1, 1]
+    sd2, st2 = mp.mpf(float(sd2)), mp.mpf(float(st2))
+    M = [
+        [
+            mp.mpf(float(prior_info[i, j]))
+            + p[i] * p[j] / (sd2 * n2)
+            + q[i] * q[j] / (st2 * n2 * n2)
+            for j in range(2)
+        ]
+        for i in range(2)
+    ]
+    return (M[0][0] + M[1][1]) / (M[0][0] * M[1][1] - M[0][1] * M[1][0])
 
 
 def mp_f0(prior_info, s, sd2, st2):

@@ -6,6 +6,8 @@ against GSR and random motion evaluated on the very same seeds.
 
 from __future__ import annotations
 
+import concurrent.futures
+import multiprocessing
 import time
 
 import numpy as np
@@ -51,11 +53,26 @@ def bc():
     return result, time.perf_counter() - t0
 
 
+@pytest.fixture(scope="module")
+def bc_trace(bc):
+    """The BC policy's (seed 0) per-episode mean traces on the held-out seeds (evaluated
+    once for both tests below)."""
+    result, _ = bc
+    return _mean_trace(result.policy)
+
+
 def _mean_trace(policy) -> np.ndarray:
+    # evaluate() adds GSR's episodes (unused here, `references` has them): batched=True
+    # runs those in one batched world; the learned policy runs episode by episode either way.
     (res,) = [
         r
         for r in evaluate(
-            {"learned": _Learned(policy)}, "paper", EVAL_EPISODES, EVAL_SEED, progress=False
+            {"learned": _Learned(policy)},
+            "paper",
+            EVAL_EPISODES,
+            EVAL_SEED,
+            progress=False,
+            batched=True,
         )
         if r.policy == "learned"
     ]
@@ -109,12 +126,12 @@ def test_fit_reduces_the_loss_and_is_deterministic():
 
 
 @pytest.mark.slow
-def test_bc_is_fast_close_to_gsr_and_better_than_rm(bc, references):
+def test_bc_is_fast_close_to_gsr_and_better_than_rm(bc, bc_trace, references):
     result, seconds = bc
     gsr, rm = references
     assert seconds < 60, f"BC took {seconds:.1f} s"
     assert len(result.data) == BC_TEST.episodes * 50 * 3
-    trace = _mean_trace(result.policy)
+    trace = bc_trace
     ratio = trace.mean() / gsr.mean()
     print(f"BC {trace.mean():.4f}, GSR {gsr.mean():.4f} (ratio {ratio:.3f}), RM {rm.mean():.4f}")
     assert ratio < 1.15
@@ -122,7 +139,7 @@ def test_bc_is_fast_close_to_gsr_and_better_than_rm(bc, references):
 
 
 @pytest.mark.slow
-def test_dagger_at_least_as_good_as_bc_on_the_same_label_budget(bc, references):
+def test_dagger_at_least_as_good_as_bc_on_the_same_label_budget(bc, bc_trace, references):
     """Same expert-label budget (40 episodes x 50 steps x 3 agents), same 20 held-out seeds,
     the median over three training seeds of each.
 
@@ -136,12 +153,29 @@ def test_dagger_at_least_as_good_as_bc_on_the_same_label_budget(bc, references):
     """
     bc_result, _ = bc
     gsr, _ = references
+    # The five other trainings are independent and deterministic (seeded, one torch thread
+    # each, labels from seeded episodes): two of them run in a second process (on the
+    # otherwise idle second core), the other three here; each returns its label count
+    # and its mean trace on the held-out seeds, the very numbers a serial loop gives.
+    jobs = [("bc", 1), ("bc", 2), ("dagger", 0), ("dagger", 1), ("dagger", 2)]
+    ctx = multiprocessing.get_context("spawn")  # a fresh interpreter: no forked torch state
+    with concurrent.futures.ProcessPoolExecutor(1, mp_context=ctx) as pool:
+        remote = {job: pool.submit(_train_and_measure, *job) for job in jobs[:2]}
+        done = {job: _train_and_measure(*job) for job in jobs[2:]}
+        done |= {job: future.result() for job, future in remote.items()}
+    done["bc", 0] = (len(bc_result.data), float(bc_trace.mean()))
     bc_traces, dagger_traces = [], []
     for seed in (0, 1, 2):
-        bc_run = bc_result if seed == 0 else train_imitation("paper", seed=seed, config=BC_TEST)
-        dagger = train_imitation("paper", seed=seed, config=DAGGER_TEST)
-        assert len(dagger.data) == len(bc_run.data)
-        bc_traces.append(_mean_trace(bc_run.policy).mean())
-        dagger_traces.append(_mean_trace(dagger.policy).mean())
+        (bc_labels, bc_mean), (dagger_labels, dagger_mean) = done["bc", seed], done["dagger", seed]
+        assert dagger_labels == bc_labels
+        bc_traces.append(bc_mean)
+        dagger_traces.append(dagger_mean)
     print(f"DAgger {dagger_traces} BC {bc_traces} GSR {gsr.mean():.4f}")
     assert np.median(dagger_traces) <= 1.05 * np.median(bc_traces)
+
+
+def _train_and_measure(method: str, seed: int) -> tuple[int, float]:
+    """Return the label count and the mean trace on the held-out seeds of BC or DAgger
+    (the tests' budgets) trained from ``seed`` (numbers: the result of a worker process)."""
+    result = train_imitation("paper", seed=seed, config=BC_TEST if method == "bc" else DAGGER_TEST)
+    return len(result.data), float(_mean_trace(result.policy).mean())
