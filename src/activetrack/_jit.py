@@ -12,8 +12,17 @@ The cache is numba's own: a ``__pycache__`` folder beside each module when that 
 writable (an editable install, a clone), else numba's user-wide cache folder
 (``~/.cache/numba`` on Linux, following the platform's user cache directory); the
 environment variable ``NUMBA_CACHE_DIR`` moves it anywhere. Deleting the cached files
-(``*.nbi``, ``*.nbc``) only costs a recompile; numba also recompiles by itself when a
-module's source changes.
+(``*.nbi``, ``*.nbc``) only costs a recompile.
+
+Numba alone recompiles a function only when *its own* file changes, yet a caller's cached
+machine code contains the kernels it calls from other files: after an edit of a callee's
+file it would load the caller's old code. So every kernel's cache entry is also stamped
+with :func:`sources_digest`, a hash of the source of every module that defines library
+kernels (:data:`KERNEL_MODULES`), of the library modules they import (their constants are
+compiled in) and of this file (the compile options): any edit of one of them makes every
+cached kernel stale, and numba compiles them again (and overwrites the stale files). A
+process whose kernel sources changed on disk after it imported them stamps its machine
+code so that no other process loads it.
 
 Kernels call kernels by name as usual: a :class:`Kernel` is typed by numba as the
 dispatcher it wraps (registered with ``numba.extending.typeof_impl`` on first use), so a
@@ -23,6 +32,12 @@ compiled caller calls the compiled callee directly.
 from __future__ import annotations
 
 import functools
+import hashlib
+import importlib.machinery
+import importlib.util
+import os
+import re
+import time
 from collections.abc import Callable
 from typing import Any, Generic, TypeVar
 
@@ -33,6 +48,28 @@ F = TypeVar("F", bound=Callable[..., Any])
 _typed = False  # whether numba knows how to type a Kernel (done once, on first compile)
 KERNELS: list[Kernel[Any]] = []  # every kernel defined so far (activetrack.kernel_cache)
 
+#: The library's modules that define kernels (importing them defines them all). Their
+#: sources key the cache (:func:`sources_digest`); a library kernel elsewhere is refused.
+KERNEL_MODULES = (
+    "activetrack.hessenberg_qr",
+    "activetrack.companion",
+    "activetrack._coefficients",
+    "activetrack.solver_steps",
+    "activetrack.solver_inputs",
+    "activetrack.solver_scalar",
+    "activetrack.objective",
+    "activetrack.ekf_kernels",
+    "activetrack.motion_kernels",
+    "activetrack.loop_kernels",
+    "activetrack.occluder_kernels",
+    "activetrack.observation_kernels",
+    "activetrack.baselines.gsr_kernel",
+)
+_PACKAGE = "activetrack"
+# When the kernel modules were imported (they all import this module first): a kernel
+# source modified later is not the source this process compiles.
+_IMPORTED_AT = time.time()
+
 
 class Kernel(Generic[F]):
     """A function compiled by numba on its first call (see the module docstring)."""
@@ -42,6 +79,10 @@ class Kernel(Generic[F]):
         self.inline = inline
         self._compiled: Callable[..., Any] | None = None
         functools.update_wrapper(self, fn)
+        module = getattr(fn, "__module__", "") or ""
+        if module.startswith(_PACKAGE + ".") and module not in KERNEL_MODULES:
+            # Its source would not key the cache: its callers could load stale code.
+            raise RuntimeError(f"{module} defines kernels: add it to _jit.KERNEL_MODULES")
         KERNELS.append(self)
 
     @property
@@ -60,9 +101,17 @@ class Kernel(Generic[F]):
         # (no zero test before every division); kernels guard their divisors, so the
         # plain-Python run (NUMBA_DISABLE_JIT=1) takes the same branches.
         options = {"inline": "always"} if self.inline else {}
-        self._compiled = numba.njit(cache=True, nogil=True, error_model="numpy", **options)(
-            self.py_func
-        )
+        options.update(nogil=True, error_model="numpy")
+        compiled = numba.njit(cache=True, **options)(self.py_func)
+        index = getattr(getattr(compiled, "_cache", None), "_cache_file", None)
+        if hasattr(index, "_source_stamp"):
+            # numba's stamp of the function's own file, and the digest of every kernel
+            # source: an index written under another digest is stale (numba compiles).
+            index._source_stamp = (index._source_stamp, sources_digest())
+        elif not numba.config.DISABLE_JIT:
+            # A numba whose cache this cannot stamp: no disk cache rather than stale code.
+            compiled = numba.njit(cache=False, **options)(self.py_func)
+        self._compiled = compiled
         return self._compiled
 
     def __call__(self, *args: Any) -> Any:
@@ -84,6 +133,85 @@ def _teach_numba() -> None:
         return typeof_impl(val.dispatcher, c)
 
     _typed = True
+
+
+@functools.cache
+def sources_digest() -> str:
+    """Return the SHA-256 (hex) of the kernels' sources: the files of
+    :data:`KERNEL_MODULES`, of every library module they import (recursively; their
+    constants are compiled into the kernels) and of this module, found without importing
+    them. A random value instead if one of them changed after this module was imported:
+    the process runs the old source, whose machine code no other process must load."""
+    files = kernel_source_files()
+    now = time.time()
+    digest = hashlib.sha256()
+    for name, path in sorted(files.items()):
+        digest.update(name.encode() + b"\0")
+        try:
+            # (A time in the future is a skewed clock, not an edit: it would never reuse.)
+            if _IMPORTED_AT < os.stat(path).st_mtime <= now:
+                return os.urandom(32).hex()
+            with open(path, "rb") as f:
+                digest.update(hashlib.sha256(f.read()).digest())
+        except OSError:  # not a file (a zip import, a frozen app): the name alone
+            digest.update(b"?")
+    return digest.hexdigest()
+
+
+# A library module an import statement names: ``from activetrack.x import (a, b)``,
+# ``from activetrack import x as y`` or ``import activetrack.x``.
+_IMPORTS = re.compile(
+    r"^(?:from\s+(activetrack(?:\.\w+)*)\s+import\s+(\([^)]*\)|[^\n]*)"
+    r"|import\s+(activetrack(?:\.\w+)*))",
+    re.MULTILINE,
+)
+
+
+def kernel_source_files() -> dict[str, str]:
+    """Return ``{module name: source file}`` of the modules :func:`sources_digest` reads:
+    :data:`KERNEL_MODULES`, this module, and the library modules they import, recursively
+    (read as text: nothing is imported but the package itself). A module whose file is
+    not found maps to ``""``."""
+    files: dict[str, str] = {}
+    todo = [*KERNEL_MODULES, __name__]
+    while todo:
+        name = todo.pop()
+        if name in files:
+            continue
+        path = files[name] = _module_file(name)
+        if not path.endswith(".py"):
+            continue
+        try:
+            with open(path, encoding="utf-8") as f:
+                text = f.read()
+        except OSError:
+            continue
+        for m in _IMPORTS.finditer(text):
+            if m[3]:
+                todo.append(m[3])
+                continue
+            for item in re.sub(r"#[^\n]*", "", m[2]).strip("()\n\t ").split(","):
+                sub = f"{m[1]}.{item.split()[0]}" if item.split() else ""
+                # ``from package import module`` names the module, else ``m[1]``'s value
+                todo.append(sub if sub and _module_file(sub) else m[1])
+    return files
+
+
+def _module_file(name: str) -> str:
+    """Return the source file of module ``name`` of the library, or ``""``, importing at
+    most its parent packages' ``__init__`` (``activetrack`` itself: already imported)."""
+    parent = name.rpartition(".")[0]
+    try:
+        if not parent:
+            spec = importlib.util.find_spec(name)
+        else:
+            outer = importlib.util.find_spec(parent)
+            paths = outer.submodule_search_locations if outer is not None else None
+            spec = importlib.machinery.PathFinder.find_spec(name, list(paths or ()))
+    except (ImportError, ValueError):
+        return ""
+    origin = getattr(spec, "origin", None)
+    return origin if isinstance(origin, str) and os.path.isfile(origin) else ""
 
 
 def kernel(fn: F) -> F:

@@ -4,8 +4,9 @@
 points use, through those entry points, and reports the time and numba's cache folders;
 ``activetrack kernels --clear`` deletes the cached machine code of the library's kernels
 instead (numba then compiles again on first use). Useful before timing anything, in a
-container image build, or after changing numba or the CPU. See :mod:`activetrack._jit` for
-how the cache works.
+container image build, or after changing numba or the CPU. An edit of a kernel source needs
+no clearing: it makes every cached kernel stale by itself (:mod:`activetrack._jit` says
+how the cache works).
 """
 
 from __future__ import annotations
@@ -18,25 +19,8 @@ from typing import Any
 
 import numpy as np
 
+from activetrack._jit import KERNEL_MODULES as KERNEL_MODULES  # what compile_all imports
 from activetrack._jit import KERNELS
-
-#: The modules whose kernels :func:`compile_all` reaches (importing them defines them all;
-#: GSR's sweeps are the planners' layer's: this command, like ``cli.py``, reaches it lazily).
-KERNEL_MODULES = (
-    "activetrack.hessenberg_qr",
-    "activetrack.companion",
-    "activetrack._coefficients",
-    "activetrack.solver_steps",
-    "activetrack.solver_inputs",
-    "activetrack.solver_scalar",
-    "activetrack.objective",
-    "activetrack.ekf_kernels",
-    "activetrack.motion_kernels",
-    "activetrack.loop_kernels",
-    "activetrack.occluder_kernels",
-    "activetrack.observation_kernels",
-    "activetrack.baselines.gsr_kernel",
-)
 
 
 def compile_all() -> dict[str, Any]:

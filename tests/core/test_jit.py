@@ -134,3 +134,111 @@ def test_the_kernels_command_rejects_an_unknown_option(capsys) -> None:
         main(["kernels", "--clean"])
     assert exc.value.code == 2
     assert "unrecognized arguments: --clean" in capsys.readouterr().err
+
+
+#: A kernel outside the library calling a library kernel from another file (the case
+#: numba's own per-file stamp misses): the x of the point within reach 1 of (cx, 0)
+#: farthest from the origin, ``cx + 1`` for cx > 0.
+_CALLER = """
+from activetrack._jit import kernel
+from activetrack.motion_kernels import fallback_point
+
+
+@kernel
+def farthest_x(cx):
+    return fallback_point(cx, 0.0, 1.0)[0]
+"""
+
+#: Prints the caller's value at cx = 2 and its cache hits and misses. With an argument,
+#: first writes that text into the callee's file, after the library was imported.
+_RUN = """
+import sys
+from pathlib import Path
+
+import activetrack.motion_kernels
+import caller
+
+assert activetrack.motion_kernels.__file__.startswith(sys.argv[1])
+if len(sys.argv) > 2:
+    Path(activetrack.motion_kernels.__file__).write_text(sys.argv[2])
+x = caller.farthest_x(2.0)
+stats = caller.farthest_x.dispatcher.stats
+print(x, sum(stats.cache_hits.values()), sum(stats.cache_misses.values()))
+"""
+
+_CALLEE_LINE = "return cx + r * (cx / nc), cy + r * (cy / nc)"
+
+
+def test_an_edit_of_a_callee_file_recompiles_its_callers(tmp_path) -> None:
+    """The disk cache follows every kernel source, not only the kernel's own file.
+
+    A copy of the library, a caller kernel in another file, a cache folder of their own;
+    each run is a new process. The caller's cached machine code holds the callee's: after
+    the callee's file changes, a run must compute with the new callee (numba alone loads
+    the caller's old code: 3.0 in the third run). An edit of a library file no kernel reads
+    keeps the cache; a file edited while a process runs (it compiled the old source) must
+    not leave machine code that a later process loads as the new source's."""
+    import activetrack
+
+    package = tmp_path / "lib" / "activetrack"
+    shutil.copytree(
+        Path(activetrack.__file__).parent, package, ignore=shutil.ignore_patterns("__pycache__")
+    )
+    (tmp_path / "caller.py").write_text(_CALLER)
+    callee = package / "motion_kernels.py"
+    original = callee.read_text()
+    assert original.count(_CALLEE_LINE) == 1
+    doubled = original.replace(_CALLEE_LINE, _CALLEE_LINE.replace("r *", "2.0 * r *"))
+    env = {
+        **os.environ,
+        "NUMBA_CACHE_DIR": str(tmp_path / "cache"),
+        "PYTHONPATH": os.pathsep.join([str(tmp_path / "lib"), str(tmp_path)]),
+    }
+    env.pop("NUMBA_DISABLE_JIT", None)
+
+    def run(*edit: str) -> tuple[float, int, int]:
+        cmd = [sys.executable, "-c", _RUN, str(package), *edit]
+        out = subprocess.run(
+            cmd, env=env, cwd=tmp_path, capture_output=True, text=True, check=True
+        ).stdout.split()
+        return float(out[0]), int(out[1]), int(out[2])
+
+    assert run() == (3.0, 0, 1)  # compiled: 2 + 1
+    with open(package / "world.py", "a") as f:  # no kernel reads it
+        f.write("\n# an edit\n")
+    assert run() == (3.0, 1, 0)  # loaded
+    callee.write_text(doubled)
+    assert run() == (4.0, 0, 1)  # the new callee: 2 + 2 * 1, compiled again
+    # The original source back while a process runs on the doubled one it imported.
+    assert run(original) == (4.0, 0, 1)
+    assert run() == (3.0, 0, 1)  # not that process's code: compiled from the file
+
+
+def test_every_library_kernel_module_keys_the_cache() -> None:
+    """Every file of the library that defines kernels (found by reading the package
+    folders ``pyproject.toml`` names) is among the sources whose digest stamps the cache,
+    and a kernel defined in another library module is refused."""
+    import tomllib
+
+    from activetrack._jit import KERNEL_MODULES, kernel_source_files
+
+    root = Path(__file__).resolve().parents[2]
+    folders = tomllib.loads((root / "pyproject.toml").read_text())["tool"]["setuptools"][
+        "package-dir"
+    ]
+    decorated = {
+        path.resolve()
+        for folder in folders.values()
+        for path in (root / folder).rglob("*.py")
+        if re.search(r"^@(inline_)?kernel\b", path.read_text(encoding="utf-8"), re.MULTILINE)
+    }
+    files = kernel_source_files()
+    assert decorated == {Path(files[name]).resolve() for name in KERNEL_MODULES}
+    assert len(decorated) == len(KERNEL_MODULES)
+
+    def elsewhere(x: float) -> float:
+        return x
+
+    elsewhere.__module__ = "activetrack.elsewhere"
+    with pytest.raises(RuntimeError, match="activetrack.elsewhere defines kernels"):
+        kernel(elsewhere)
