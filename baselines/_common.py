@@ -4,20 +4,21 @@ Every planner treats two kinds of sensor as *fixed* (not optimized):
 
 - ``r_i = 0``: the sensor cannot move and stays where it is;
 - ``||c_i|| + r_i < rho_i``: no reachable point keeps the minimum distance of eq. (16);
-  the sensor goes to :func:`activetrack.geometry.unreachable_fallback`, the reachable
+  the sensor goes to :func:`activetrack.kinematics.geometry.unreachable_fallback`, the reachable
   point farthest from the target (the least violation of eq. 16).
 
 All other sensors are *free*: their next position is searched on the curve ADB of
-Lemma 3 (:func:`activetrack.geometry.facing_boundary`). The modes are computed here once,
+Lemma 3 (:func:`activetrack.kinematics.geometry.facing_boundary`). The modes are computed here once,
 batched over the copies of a batched problem, for every planner.
 
 With K > 1 predicted targets (``problem.multi_target``) sensor ``i`` must keep ``rho_i``
 from every one: its feasible set is ``F_i = D(p_S_i, r_i) minus the union of the K open
 disks D(t_k, rho_i)``. Its boundary is a union of circular arcs
-(:func:`activetrack.feasible_set.boundary_arcs`): pieces of the reach circle outside every
+(:func:`activetrack.kinematics.feasible_set.boundary_arcs`): pieces of the reach circle outside
+every
 ``rho`` disk, and pieces of each ``rho`` circle inside the reach disk and outside the other
 ``rho`` disks. A sensor is fixed when ``r_i = 0`` (it stays) or when ``F_i`` is empty (its
-boundary has zero length); it then goes to :func:`activetrack.feasible_set.fallback`, the
+boundary has zero length); it then goes to :func:`activetrack.kinematics.feasible_set.fallback`, the
 reachable point maximizing ``min_k (||x - t_k|| - rho_i)`` (the least violation of eq. 16
 by the nearest target). For K = 1 every function is today's (bit-identical).
 """
@@ -26,11 +27,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from activetrack import feasible_set, geometry
 from activetrack._jit import as_rows
 from activetrack.baselines import gsr_kernel as gk
-from activetrack.problem import PlanningProblem
+from activetrack.kinematics import feasible_set, geometry
 from activetrack.validation import FloatArray
+from activetrack.world.problem import PlanningProblem
 
 
 def sensor_modes(problem: PlanningProblem) -> tuple[np.ndarray, FloatArray]:
@@ -61,7 +62,8 @@ def sensor_modes_multi(
     ``sensors`` (..., M, 2), ``targets`` (..., K, 2), ``r`` and ``rho`` (..., M). ``free``
     (..., M): ``r > 0`` and the feasible set is not empty; ``fixed`` (..., M, 2): the
     current position of free sensors and of those with ``r = 0``, and
-    :func:`activetrack.feasible_set.fallback` for the sensors whose feasible set is empty.
+    :func:`activetrack.kinematics.feasible_set.fallback` for the sensors whose feasible set is
+    empty.
 
     Raises:
         ValueError: as :func:`sensor_modes`.

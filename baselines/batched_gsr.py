@@ -1,7 +1,7 @@
 """Compatibility front end of GSR for a batch given as arrays.
 
 :class:`BatchedGSR` is :class:`activetrack.baselines.GSR` (without restarts) on a batched
-:class:`activetrack.problem.PlanningProblem`: :meth:`BatchedGSR.plan_batch` builds the
+:class:`activetrack.world.problem.PlanningProblem`: :meth:`BatchedGSR.plan_batch` builds the
 problem from arrays and runs GSR's compiled sweeps over the copies
 (:func:`activetrack.baselines.gsr.relax_batch`, what ``GSR().plan`` runs on a batched
 problem). New code can call ``GSR().plan`` on a batched problem directly.
@@ -20,8 +20,8 @@ from activetrack.baselines.gsr import (
     relax_batch,
     warn_warm_roots,
 )
-from activetrack.problem import PlanningProblem
 from activetrack.validation import FloatArray
+from activetrack.world.problem import PlanningProblem
 
 #: The result of :meth:`BatchedGSR.plan_batch`: ``positions`` (B, M, 2) absolute,
 #: ``value`` (B,), ``sweeps`` (B,).

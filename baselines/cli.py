@@ -34,7 +34,7 @@ from activetrack.cli import (
     seed_int,
 )
 from activetrack.files import prepare_output_dir
-from activetrack.scenarios import PRESETS, make_scenario
+from activetrack.world.scenarios import PRESETS, make_scenario
 
 #: Planner names accepted by ``simulate --planner``, and those run when none is given.
 PLANNERS = ("gsr", "gsr-restarts", "gbes", "rm", "lookahead")

@@ -1,6 +1,6 @@
 """Grid-based exhaustive search (GBES), the benchmark planner of Section V.
 
-Each free sensor's curve ADB (Lemma 3, :func:`activetrack.geometry.facing_boundary`) is
+Each free sensor's curve ADB (Lemma 3, :func:`activetrack.kinematics.geometry.facing_boundary`) is
 discretized into points at most ``spacing`` apart (the paper uses pi/200 m) and the
 combination of grid points minimizing the objective of eq. (17),
 ``tr((P11^{-1} + sum_i info_i)^{-1})``, is found exactly: the returned configuration is
@@ -26,10 +26,10 @@ allocating it. A batched problem is searched copy by copy.
 
 **Every planning problem.** With one target, Lemma 3 holds for every sensor model and
 pose covariance (docs/sensor-models-design.md), so the grid stays on the curves ADB; the
-candidates' entries are :func:`activetrack.sensor_models.information_entries` (the paper's
-case keeps :func:`activetrack.objective.sensor_information`, bit-identical). With K > 1
+candidates' entries are :func:`activetrack.models.sensor_models.information_entries` (the paper's
+case keeps :func:`activetrack.models.objective.sensor_information`, bit-identical). With K > 1
 targets the grid covers the whole boundary of each sensor's feasible set ``F_i`` (reach
-disk minus the K ``rho`` disks, :func:`activetrack.feasible_set.boundary_arcs`):
+disk minus the K ``rho`` disks, :func:`activetrack.kinematics.feasible_set.boundary_arcs`):
 each arc (reach-circle pieces outside the ``rho`` disks, ``rho``-circle pieces inside the
 reach disk) is discretized as above, its end points (the feasible circle-circle
 intersections) included once. A candidate's features are the K targets' entries (3K
@@ -49,12 +49,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from activetrack import geometry, sensor_models
 from activetrack.baselines._common import sensor_modes
-from activetrack.feasible_set import boundary_arcs
-from activetrack.objective import TRACE, TraceObjective, sensor_information
-from activetrack.problem import PlanningProblem
+from activetrack.kinematics import geometry
+from activetrack.kinematics.feasible_set import boundary_arcs
+from activetrack.models import sensor_models
+from activetrack.models.objective import TRACE, TraceObjective, sensor_information
 from activetrack.validation import FloatArray
+from activetrack.world.problem import PlanningProblem
 
 #: Relative margin of the bound test: a block combination is pruned only if its lower
 #: bound exceeds the incumbent by this factor, which covers the rounding of both.
@@ -327,7 +328,7 @@ def grid_optimum(
 def _target_features(problem: PlanningProblem, candidates: list[FloatArray]) -> list[FloatArray]:
     """Return every candidate's information entries about every target, (K_i, K, 3) each.
 
-    :func:`activetrack.sensor_models.information_entries` at ``candidate - t_k`` with the
+    :func:`activetrack.models.sensor_models.information_entries` at ``candidate - t_k`` with the
     sensor's weights, pose covariance and detection (candidates relative to
     ``problem.targets[0]``).
     """
@@ -341,7 +342,7 @@ def _target_features(problem: PlanningProblem, candidates: list[FloatArray]) -> 
         rel = p[:, None, :] + shift[None, :, :]  # (K_i, K, 2)
         di = None if det is None else (det[0][i], det[1][i])  # the expected information
         if problem.occluders is not None:
-            from activetrack.occluders import blocked  # noqa: PLC0415
+            from activetrack.models.occluders import blocked  # noqa: PLC0415
 
             seen = ~blocked(p[:, None, :] + targets[0], targets[None], problem.occluders)
             di = (*di, seen)

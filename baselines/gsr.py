@@ -42,10 +42,10 @@ from activetrack._jit import as_rows
 from activetrack.baselines import gsr_kernel as gk
 from activetrack.baselines import gsr_restarts
 from activetrack.baselines._common import raise_for_status, sensor_modes, sensor_modes_of
-from activetrack.objective import sensor_information
-from activetrack.problem import PlanningProblem
-from activetrack.solver_scalar import NO_ROOTS, ROOTS_SIZE, ROOTS_TAG, solve_point
+from activetrack.models.objective import sensor_information
+from activetrack.solvers._scalar import NO_ROOTS, ROOTS_SIZE, ROOTS_TAG, solve_point
 from activetrack.validation import FloatArray
+from activetrack.world.problem import PlanningProblem
 
 STARTS = gsr_restarts.STARTS
 
@@ -214,7 +214,7 @@ class GSR:
                    if not hasattr(problem.objective, a)]  # fmt: skip
         if missing:
             raise ValueError(
-                f"GSR's numerical steps need an objective of activetrack.objective's form "
+                f"GSR's numerical steps need an objective of activetrack.models.objective's form "
                 f"(per-target entries, combined over targets); {problem.objective!r} has no "
                 f"{', '.join(missing)}"
             )

@@ -3,7 +3,7 @@
 :func:`relax_point` is :class:`activetrack.baselines.gsr.Relaxation`'s ``relax`` from a
 feasible warm start without pattern moves (what ``GSR()`` runs): Gauss-Seidel sweeps over
 the free sensors, each solving its exact single-sensor problem (Section IV-A,
-:func:`activetrack.solver_scalar.solve_point`) given the others' information, an update
+:func:`activetrack.solvers._scalar.solve_point`) given the others' information, an update
 kept only if it lowers ``tr(Y^{-1})``, a sensor re-solved only when another one moved
 (from the roots of its previous solve, kept in an array per sensor), until a sweep
 improves by at most ``tol`` (relative), nothing is left to re-solve, or ``max_sweeps``.
@@ -19,9 +19,9 @@ import math
 import numpy as np
 
 from activetrack._jit import kernel
-from activetrack.motion_kernels import fallback_point, project_feasible_point
-from activetrack.objective import information_entries, trace_of_inverse
-from activetrack.solver_scalar import NO_ROOTS, ROOTS_SIZE, ROOTS_TAG, solve_point
+from activetrack.kinematics._kernels import fallback_point, project_feasible_point
+from activetrack.models.objective import information_entries, trace_of_inverse
+from activetrack.solvers._scalar import NO_ROOTS, ROOTS_SIZE, ROOTS_TAG, solve_point
 
 #: Sensor status of :func:`modes_row`: fine, a fixed sensor exactly on the target (no
 #: bearing), a free sensor with ``rho <= 0`` that can reach the target (no minimum; the

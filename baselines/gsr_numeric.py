@@ -5,7 +5,7 @@ sensors' information folded into the prior. On the paper's problem the single-se
 step is the exact solve of Section IV-A (:mod:`activetrack.baselines.gsr`). On every other
 problem (K targets, range-only or bearing-only sensors, uncertain position fixes, the
 worst-trace or log-determinant objective) the step is the global numerical solver of
-:mod:`activetrack.solver_numeric`: with sensor ``i``'s information removed, each target's
+:mod:`activetrack.solvers.numeric`: with sensor ``i``'s information removed, each target's
 information entries ``(a0, b0, c0)`` are the base, and the solver minimizes
 ``objective.of_targets(a0 + a_i(s), ...)`` over sensor ``i``'s feasible set (its reach
 disk outside every target's ``rho`` disk), never returning worse than the best candidate
@@ -13,7 +13,7 @@ it evaluated.
 
 The rules are GSR's: sensors with ``r = 0`` stay; the warm start is the current positions
 (a sensor inside a ``rho`` disk from its nearest feasible point,
-:func:`activetrack.feasible_set.project`); a sensor's update is kept only if it lowers
+:func:`activetrack.kinematics.feasible_set.project`); a sensor's update is kept only if it lowers
 the objective, so the result is never worse than the warm start; a sensor whose
 subproblem has not changed since its last solve (no other sensor moved) is skipped;
 sweeps stop when one improves the objective by at most ``tol`` (relative; by ``tol`` in
@@ -22,19 +22,21 @@ sensor is left to re-solve, or after ``max_sweeps``. A batch is relaxed in one v
 sweep over the copies (copies that have stopped are carried).
 
 The sweeps change only the base of a sensor's subproblem, so its candidates and its
-information there are prepared once per plan (:func:`activetrack.solver_numeric.prepare`),
+information there are prepared once per plan (:func:`activetrack.solvers.numeric.prepare`),
 and a re-solve refines from where the sensor's last solve ended
-(:class:`activetrack.solver_numeric.Prepared`, ``remember``).
+(:class:`activetrack.solvers.numeric.Prepared`, ``remember``).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from activetrack import feasible_set, sensor_models, solver_numeric
-from activetrack.occluders import line_of_sight, project_move
-from activetrack.problem import PlanningProblem
+from activetrack.kinematics import feasible_set
+from activetrack.models import sensor_models
+from activetrack.models.occluders import line_of_sight, project_move
+from activetrack.solvers import numeric as solver_numeric
 from activetrack.validation import FloatArray
+from activetrack.world.problem import PlanningProblem
 
 
 def relax(

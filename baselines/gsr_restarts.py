@@ -55,8 +55,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from activetrack import geometry
-from activetrack.objective import lemma2_rotation, sensor_information
+from activetrack.kinematics import geometry
+from activetrack.models.objective import lemma2_rotation, sensor_information
 from activetrack.validation import FloatArray
 
 if TYPE_CHECKING:
@@ -583,7 +583,8 @@ def _arc_params(run: Relaxation, s: FloatArray) -> list[tuple[int, geometry.Arc]
 
 
 def _arcs_of(run: Relaxation, i: int) -> list[geometry.Arc]:
-    """Return sensor ``i``'s curve ADB (:func:`activetrack.geometry.facing_boundary`), cached
+    """Return sensor ``i``'s curve ADB (:func:`activetrack.kinematics.geometry.facing_boundary`),
+    cached
     on ``run``."""
     cache = run.__dict__.setdefault("_adb_arcs", {})
     if i not in cache:

@@ -21,8 +21,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from activetrack.motion import predict
-from activetrack.objective import TRACE, TraceObjective, sensor_information
+from activetrack.models.motion import predict
+from activetrack.models.objective import TRACE, TraceObjective, sensor_information
 from activetrack.validation import FloatArray
 
 

@@ -2,8 +2,9 @@
 
 A path is H positions of one sensor, each within reach of the previous one. The world's
 rules apply at every step, exactly as the world applies them to a move
-(:func:`activetrack.sensor_motion.move_to`: outside every predicted target's ``rho`` disk,
-eq. 14-16; with occluders :func:`activetrack.occluders.project_move`: no step ends in or
+(:func:`activetrack.kinematics.sensor_motion.move_to`: outside every predicted target's ``rho``
+disk,
+eq. 14-16; with occluders :func:`activetrack.models.occluders.project_move`: no step ends in or
 passes through one). :class:`PathModel` holds those rules and the sensors' measurement
 models for one batch of planning problems; the paths here are built from it:
 
@@ -14,7 +15,7 @@ models for one batch of planning problems; the paths here are built from it:
 The information a sensor contributes at a planned position is eq. (17)'s (with the sensor
 models, pose uncertainty and, under limited sensing, its expected value: detection
 probability, range and line of sight to the predicted target,
-:func:`activetrack.sensor_models.information_entries`), one matrix per target.
+:func:`activetrack.models.sensor_models.information_entries`), one matrix per target.
 """
 
 from __future__ import annotations
@@ -23,12 +24,12 @@ import math
 
 import numpy as np
 
-from activetrack import sensor_models
-from activetrack.geometry import project_feasible
-from activetrack.objective import sensor_information
-from activetrack.problem import PlanningProblem
-from activetrack.sensor_motion import move_to
+from activetrack.kinematics.geometry import project_feasible
+from activetrack.kinematics.sensor_motion import move_to
+from activetrack.models import sensor_models
+from activetrack.models.objective import sensor_information
 from activetrack.validation import FloatArray
+from activetrack.world.problem import PlanningProblem
 
 
 class PathModel:
@@ -72,7 +73,7 @@ class PathModel:
         t = targets.reshape((B,) + (1,) * (prev.ndim - 3) + (K, 2))
         moved = move_to(prop, prev, t, r, rho)[0]
         if self.occluders is not None:
-            from activetrack import occluders  # noqa: PLC0415 (occluded scenarios only)
+            from activetrack.models import occluders  # noqa: PLC0415 (occluded scenarios only)
 
             moved = occluders.project_move(prev, moved, self.occluders, r)[0]
         return moved
@@ -82,7 +83,8 @@ class PathModel:
         target (B, H, K, 2) at every step, (B, M, O) bool.
 
         Only occluders break it: a move they stop short (the nearest reachable point) can
-        end inside a ``rho`` disk that :func:`activetrack.sensor_motion.move_to` kept it out
+        end inside a ``rho`` disk that :func:`activetrack.kinematics.sensor_motion.move_to` kept it
+        out
         of; without occluders every mended step keeps ``rho`` wherever any reachable point
         does, and every path is kept.
         """
@@ -117,7 +119,7 @@ class PathModel:
         if self.detect is not None:
             detect = tuple(d[row] for d in self.detect)
             if self.occluders is not None:
-                from activetrack.occluders import line_of_sight  # noqa: PLC0415
+                from activetrack.models.occluders import line_of_sight  # noqa: PLC0415
 
                 seen = line_of_sight(pos, np.broadcast_to(tgt, (B, O, H, K, 2)), self.occluders)
                 detect = (*detect, seen)

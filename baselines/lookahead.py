@@ -58,9 +58,9 @@ from activetrack.baselines import horizon_model as hm
 from activetrack.baselines import horizon_paths as hp
 from activetrack.baselines.gsr import GSR
 from activetrack.baselines.prediction_tracker import PredictionTracker
-from activetrack.problem import PlanningProblem
 from activetrack.validation import FloatArray, check_float, check_int
 from activetrack.world import World
+from activetrack.world.problem import PlanningProblem
 
 
 @dataclass(frozen=True)

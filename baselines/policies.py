@@ -23,7 +23,7 @@ Example::
         )
 
 Users who need the actions behind an expert's positions (imitation labels) get them from
-:func:`activetrack.sensor_motion.actions_to_reach`.
+:func:`activetrack.kinematics.sensor_motion.actions_to_reach`.
 """
 
 from __future__ import annotations
@@ -32,8 +32,8 @@ from typing import Any
 
 import numpy as np
 
-from activetrack.problem import Planner, PlanningProblem
 from activetrack.validation import FloatArray
+from activetrack.world.problem import Planner, PlanningProblem
 
 
 class PlannerPolicy:

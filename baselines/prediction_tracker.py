@@ -1,7 +1,7 @@
 """The filter's full prediction, recovered from the sequence of planning problems.
 
 The world's planning problems carry the full prediction (``problem.prediction``, an
-:class:`activetrack.problem.Prediction`); this module is the fallback for problems built
+:class:`activetrack.world.problem.Prediction`); this module is the fallback for problems built
 from the position part of the prediction ``x_hat(k+1|k), P(k+1|k)`` (eq. 3) only. A
 planner that looks several steps ahead also needs the velocity and the full covariance.
 Both follow from the problems of one episode and the scenario (initial estimate, motion
@@ -24,12 +24,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from activetrack import ekf
-from activetrack.motion import predict
-from activetrack.problem import PlanningProblem
-from activetrack.scenarios import PRESETS, Scenario, make_scenario
-from activetrack.tracking import LoopParams
+from activetrack.estimation import ekf
+from activetrack.models.motion import predict
 from activetrack.validation import FloatArray
+from activetrack.world.problem import PlanningProblem
+from activetrack.world.scenarios import PRESETS, Scenario, make_scenario
+from activetrack.world.tracking import LoopParams
 
 #: Relative tolerance of the check of a recovered covariance against the problem's.
 RTOL = 1e-8

@@ -4,14 +4,14 @@ Every sensor moves to a point drawn uniformly, by arc length, from its curve ADB
 (Lemma 3, Fig. 3 (a)-(c)): a random heading "towards the target" that respects the
 speed limit (eq. 15) and the minimum distance (eq. 16). Sensors that cannot move
 (``r = 0``) stay; sensors that cannot keep the minimum distance go to
-:func:`activetrack.geometry.unreachable_fallback`.
+:func:`activetrack.kinematics.geometry.unreachable_fallback`.
 
 With K > 1 predicted targets there is no single direction "towards the target": every
 free sensor moves to a point drawn uniformly by arc length from the whole boundary of its
 feasible set (the reach disk minus the K ``rho`` disks,
-:func:`activetrack.feasible_set.boundary_arcs`: reach-circle pieces outside the
+:func:`activetrack.kinematics.feasible_set.boundary_arcs`: reach-circle pieces outside the
 ``rho`` disks and ``rho``-circle pieces inside the reach disk); sensors whose feasible set
-is empty go to :func:`activetrack.feasible_set.fallback`. With one target
+is empty go to :func:`activetrack.kinematics.feasible_set.fallback`. With one target
 (any sensor model or pose covariance) the curve ADB as above.
 """
 
@@ -19,10 +19,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from activetrack import geometry
 from activetrack.baselines._common import modes_and_arcs, sensor_modes
-from activetrack.problem import PlanningProblem
+from activetrack.kinematics import geometry
 from activetrack.validation import FloatArray
+from activetrack.world.problem import PlanningProblem
 
 
 class RandomMotion:

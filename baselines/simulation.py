@@ -24,10 +24,10 @@ from typing import Any
 
 import numpy as np
 
-from activetrack.problem import Planner, PlanningProblem
-from activetrack.scenarios import Scenario
 from activetrack.validation import FloatArray
 from activetrack.world import World
+from activetrack.world.problem import Planner, PlanningProblem
+from activetrack.world.scenarios import Scenario
 
 
 @dataclass(frozen=True, eq=False)

@@ -1,6 +1,6 @@
 """Time of the occluder kernels for a batch of N copies x M sensors against a few rectangles.
 
-A seeded :func:`activetrack.occluders.random_layout` of ``--rects`` rectangles (sides 1 to 4)
+A seeded :func:`activetrack.models.occluders.random_layout` of ``--rects`` rectangles (sides 1 to 4)
 in the square ``[-10, 10]^2``; ``N x M`` sensors uniform in the square outside the
 rectangles. Timed (median of ``--repeats``, after a warm-up):
 
@@ -27,7 +27,7 @@ import time
 
 import numpy as np
 
-from activetrack import occluders as oc
+from activetrack.models import occluders as oc
 
 
 def median_ms(fn, repeats: int) -> float:

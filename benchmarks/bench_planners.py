@@ -23,7 +23,7 @@ import time
 import numpy as np
 
 from activetrack.baselines import GBES, GSR, random_problem
-from activetrack.problem import PlanningProblem
+from activetrack.world.problem import PlanningProblem
 
 
 def cpu_times(planner, problems) -> tuple[np.ndarray, list]:

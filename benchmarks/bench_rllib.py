@@ -85,8 +85,8 @@ def main() -> None:
 
     import ray
 
-    from activetrack.scenarios import make_scenario
     from activetrack.train.utils import configure_torch
+    from activetrack.world.scenarios import make_scenario
 
     configure_torch(1)
     m = make_scenario(args.scenario).n_sensors

@@ -8,7 +8,7 @@ the geometric cases mixed):
 - the time per problem of one ``solve_single_sensor_batch`` call on the whole batch,
 - the time of the first calls (compiling the kernels, or loading them from numba's cache),
 - the eigenvalues of f3's companion matrices of the speed-circle problems, per matrix:
-  the compiled QR (:func:`activetrack.companion.monic_roots`, one call on the stack)
+  the compiled QR (:func:`activetrack.solvers.companion.monic_roots`, one call on the stack)
   beside LAPACK through NumPy (``np.linalg.eigvals`` on the same stack) and through
   SciPy's ``dgeev`` one matrix per call, in the same run,
 - the median time of ``scipy.optimize.minimize(method="SLSQP")`` from 8 starts per problem
@@ -29,7 +29,7 @@ import time
 import numpy as np
 from scipy.optimize import minimize
 
-from activetrack.solver import solve_single_sensor, solve_single_sensor_batch
+from activetrack.solvers.analytic import solve_single_sensor, solve_single_sensor_batch
 
 
 def random_problems(rng: np.random.Generator, n: int) -> tuple[np.ndarray, ...]:
@@ -115,9 +115,9 @@ def companion_peers(prior, c, r, sd2, st2) -> None:
     """Print the compiled QR's time per companion matrix beside LAPACK's, same matrices."""
     from scipy.linalg import lapack
 
-    from activetrack._coefficients import sylvester_gammas
-    from activetrack.companion import monic, monic_roots
-    from activetrack.solver_steps import circle_polynomial, eig_frame, normalize
+    from activetrack.solvers._coefficients import sylvester_gammas
+    from activetrack.solvers._steps import circle_polynomial, eig_frame, normalize
+    from activetrack.solvers.companion import monic, monic_roots
 
     qs = []
     for i in range(prior.shape[0]):

@@ -1,6 +1,6 @@
 """Speed of the tasks beyond the paper, beside the peers, in one run.
 
-For every named task (:data:`activetrack.scenarios.TASKS`) and the paper:
+For every named task (:data:`activetrack.world.scenarios.TASKS`) and the paper:
 
 1. the single PettingZoo env (random actions) steps/s beside MPE2 ``simple_spread`` with
    as many agents (continuous actions), interleaved timing;
@@ -100,7 +100,7 @@ def main(argv: list[str] | None = None) -> dict:
     """Print every figure and ratio; return them as a dict."""
     import torch
 
-    from activetrack.scenarios import TASKS
+    from activetrack.world.scenarios import TASKS
 
     torch.set_num_threads(1)
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])

@@ -11,7 +11,7 @@
 
 All of them adapt the core's closed loop, :class:`activetrack.world.World`; the sensor
 motion (:func:`apply_actions`, :func:`actions_to_reach`) and the observation encoding
-(:mod:`activetrack.observation`) live in the core too. Configuration is the core
+(:mod:`activetrack.world.observation`) live in the core too. Configuration is the core
 :class:`activetrack.Scenario`: ``scenario="paper"`` or
 ``"homogeneous"`` plus any field override, e.g.
 ``parallel_env(scenario="homogeneous", n_sensors=8, rho=1.5)``.

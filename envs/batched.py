@@ -46,10 +46,10 @@ from gymnasium import spaces
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from activetrack.problem import PlanningProblem
-from activetrack.scenarios import Scenario, make_scenario
 from activetrack.validation import FloatArray, check_int, check_seed, real_array
 from activetrack.world import World
+from activetrack.world.problem import PlanningProblem
+from activetrack.world.scenarios import Scenario, make_scenario
 
 from .rendering import EpisodeRecorder
 from .tracking_env import RENDER_MODES, check_no_options, check_render_mode

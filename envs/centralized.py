@@ -6,7 +6,7 @@ same random draws, same configuration keywords) for single-agent libraries:
 - action ``Box(-1, 1, (2M,), float32)``: the agents' actions concatenated,
   ``[a_0x, a_0y, a_1x, a_1y, ...]`` (each a displacement in units of the reach, eq. 13);
 - observation ``Box(float32, (M (5 + 6M),))``: the agents' observations concatenated in
-  agent order (layout in :mod:`activetrack.observation`);
+  agent order (layout in :mod:`activetrack.world.observation`);
 - reward ``-reward_scale * tr P(k+1|k+1)_11`` (eq. 12, 17), the team's shared reward.
 
 The episode truncates itself after ``scenario.n_steps`` steps, so it is registered
@@ -27,9 +27,9 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from activetrack.problem import PlanningProblem
-from activetrack.scenarios import Scenario
 from activetrack.validation import FloatArray, real_array
+from activetrack.world.problem import PlanningProblem
+from activetrack.world.scenarios import Scenario
 
 from .tracking_env import (
     RENDER_MODES,

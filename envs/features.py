@@ -1,10 +1,10 @@
-"""Observation and global-state encoding: the core's :mod:`activetrack.observation`.
+"""Observation and global-state encoding: the core's :mod:`activetrack.world.observation`.
 
 Kept as an import path for existing code; the encoding lives in the core, where
 :meth:`activetrack.world.World.observe` assembles it.
 """
 
-from activetrack.observation import (
+from activetrack.world.observation import (
     SENSOR_DIM,
     TARGET_DIM,
     cyclic_order,

@@ -15,7 +15,7 @@ registers it is imported. From a fresh interpreter, name the module in the id, a
 from __future__ import annotations
 
 ENV_ID = "activetrack/ActiveTracking-v0"
-#: The tasks beyond the paper: registered id -> preset (:data:`activetrack.scenarios.TASKS`).
+#: The tasks beyond the paper: registered id -> preset (:data:`activetrack.world.scenarios.TASKS`).
 TASK_IDS = {
     "activetrack/TwoTargets-v0": "two_targets",
     "activetrack/RangeOnly-v0": "range_only",

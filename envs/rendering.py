@@ -77,7 +77,7 @@ TARGET_COLORS: tuple[tuple[str, str, str], ...] = (
     ("#262626", "#7f7f7f", "#7f7f7f"),
 )
 #: Marker and legend label of each sensor model code (0 range and bearing, 1 range only,
-#: 2 bearing only; :data:`activetrack.scenarios.SENSOR_MODELS`).
+#: 2 bearing only; :data:`activetrack.world.scenarios.SENSOR_MODELS`).
 MODEL_MARKERS: tuple[tuple[str, str], ...] = (
     ("o", "range & bearing"),
     ("s", "range only"),
@@ -151,7 +151,7 @@ class EpisodeHistory:
         covariance or K of them; ``sensors`` (M, 2) the true positions, ``fixes`` (M, 2)
         the believed ones (None: poses are known). Limited sensing: ``detected`` (K, M)
         bool, which sensor measured which target at step ``k`` (None: unlimited sensing);
-        ``occluders`` an :class:`activetrack.occluders.Occluders` or a sequence of (n_i, 2)
+        ``occluders`` an :class:`activetrack.models.occluders.Occluders` or a sequence of (n_i, 2)
         polygons (None: none); ``max_range`` (M,) the sensing ranges, > 0, inf for
         unlimited (None: all unlimited).
         """

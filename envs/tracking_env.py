@@ -8,7 +8,7 @@ timeline:
    exactly what a planner plans from (so :meth:`reset` ends with a prediction);
 2. the actions move the sensors within their reach ``r_i = vmax_i dt`` and outside the
    ``rho_i`` disk around the *predicted* target (eq. 13-16,
-   :func:`~activetrack.sensor_motion.apply_actions`);
+   :func:`~activetrack.kinematics.sensor_motion.apply_actions`);
 3. the true target moves (eq. 2), every sensor measures (eq. 4), the EKF updates
    (eq. 11), with the step's ``n + 2M`` standard normals drawn from the episode
    generator, in the same order as the simulation runner;
@@ -18,7 +18,7 @@ timeline:
 
 After ``scenario.n_steps`` steps every agent is truncated; if ``scenario.max_trace`` is
 set, the episode terminates as soon as the trace exceeds it. Observations are
-described in :mod:`activetrack.observation`. The loop itself is the core's
+described in :mod:`activetrack.world.observation`. The loop itself is the core's
 :class:`activetrack.world.World` (one copy); this class only adds the PettingZoo
 interface: spaces, dicts, rendering.
 
@@ -57,10 +57,10 @@ from pettingzoo import ParallelEnv
 from pettingzoo.utils.conversions import parallel_to_aec_wrapper
 from pettingzoo.utils.wrappers import OrderEnforcingWrapper
 
-from activetrack.problem import PlanningProblem
-from activetrack.scenarios import Scenario, make_scenario
 from activetrack.validation import FloatArray, check_seed, real_array
 from activetrack.world import World
+from activetrack.world.problem import PlanningProblem
+from activetrack.world.scenarios import Scenario, make_scenario
 
 from .rendering import EpisodeRecorder
 
@@ -85,7 +85,7 @@ class TrackingParallelEnv(ParallelEnv):
 
     Spaces: every agent acts in ``Box(-1, 1, (2,), float32)`` (float64 accepted): its
     displacement as a fraction of its reach ``r_i``; longer vectors are scaled onto the
-    unit disk. It observes ``Box(float32, (5 + 6M,))`` (:mod:`activetrack.observation`).
+    unit disk. It observes ``Box(float32, (5 + 6M,))`` (:mod:`activetrack.world.observation`).
     :meth:`state` is the ``6 + 6M`` global state for centralized critics.
 
     Infos (per agent, plain Python values): ``step`` k, ``trace`` the posterior
@@ -229,7 +229,8 @@ class TrackingParallelEnv(ParallelEnv):
         """Move the sensors to absolute next positions (an expert's plan) and advance.
 
         ``positions``: (M, 2) in agent order, or ``{agent: (2,)}``. A move beyond reach or
-        into a ``rho`` disk is mended as :func:`activetrack.sensor_motion.move_to` says; a
+        into a ``rho`` disk is mended as :func:`activetrack.kinematics.sensor_motion.move_to` says;
+        a
         planner's feasible positions are executed exactly.
         """
         agents = self._running_agents()
@@ -305,7 +306,7 @@ class TrackingParallelEnv(ParallelEnv):
         return dict(zip(self.agents, obs, strict=False))
 
     def state(self) -> np.ndarray:
-        """Return the global state (6 + 6M float32, :mod:`activetrack.observation`)."""
+        """Return the global state (6 + 6M float32, :mod:`activetrack.world.observation`)."""
         if not self._started:
             raise RuntimeError("call reset() before state()")
         return self.world.state(0)

@@ -26,7 +26,7 @@ at the current commit). The recording is what the code did, not an independent t
 pins behaviour, it does not prove it right (the other tests do that).
 
 Reading a failure: the process noise is ``noise_factor @ w`` with ``noise_factor`` from
-``eigh`` of the discrete ``Q`` (``activetrack.motion``), whose eigenvalues come in equal
+``eigh`` of the discrete ``Q`` (``activetrack.models.motion``), whose eigenvalues come in equal
 x/y pairs; a last-bit change of ``Q`` (or another LAPACK) rotates the eigenvectors within
 each pair and changes a seed's trajectory by O(1) from the first step, not in the last
 bits. The batched environment's copy i is not bit-equal to the single environment seeded

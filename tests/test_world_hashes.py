@@ -26,7 +26,7 @@ RECORDED = json.loads(record.OUT.read_text())
 
 
 def test_every_preset_is_recorded() -> None:
-    from activetrack.scenarios import PRESETS
+    from activetrack.world.scenarios import PRESETS
 
     assert sorted(RECORDED) == sorted(PRESETS)
 

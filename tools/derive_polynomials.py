@@ -1,9 +1,9 @@
 """Derive the Case-I polynomials of the single-sensor problem and print ``_coefficients.py``.
 
-This script is the source of ``src/activetrack/_coefficients.py``: the committed module is
+This script is the source of ``src/activetrack/solvers/_coefficients.py``: the committed module is
 exactly what it prints::
 
-    python tools/derive_polynomials.py > src/activetrack/_coefficients.py
+    python tools/derive_polynomials.py > src/activetrack/solvers/_coefficients.py
     python tools/derive_polynomials.py --check   # exit status 1 if the committed file differs
 
 Derivation (paper Section IV-A, Case I; equation numbers of the paper):
@@ -60,7 +60,7 @@ import sympy as sp
 from sympy.printing.str import StrPrinter
 
 ROOT = Path(__file__).resolve().parents[1]
-TARGET = ROOT / "src" / "activetrack" / "_coefficients.py"
+TARGET = ROOT / "src" / "activetrack" / "solvers" / "_coefficients.py"
 
 x, y, X, Y = sp.symbols("x y X Y", real=True)
 l1, l2, a, b, c1, c2 = sp.symbols("l1 l2 a b c1 c2", real=True)

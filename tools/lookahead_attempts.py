@@ -48,7 +48,7 @@ import numpy as np
 from activetrack.baselines import horizon_model as hm
 from activetrack.baselines import horizon_paths as hp
 from activetrack.baselines import lookahead as la
-from activetrack.objective import sensor_information
+from activetrack.models.objective import sensor_information
 from activetrack.world import World
 
 STATE: dict = {"cov": None, "left": None}

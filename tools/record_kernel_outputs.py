@@ -44,7 +44,7 @@ def mixed_layout(rng: np.random.Generator, n: int) -> list[np.ndarray]:
 
 def occluder_cases(out: dict) -> None:
     """Add the occluder functions' results on random layouts to ``out``."""
-    from activetrack import occluders as oc
+    from activetrack.models import occluders as oc
 
     dirs = np.stack([np.cos(np.arange(16) * np.pi / 8), np.sin(np.arange(16) * np.pi / 8)], -1)
     for seed in range(30):
@@ -73,8 +73,8 @@ def occluder_cases(out: dict) -> None:
 
 def motion_cases(out: dict) -> None:
     """Add the sensor moves' results on random states to ``out``."""
-    from activetrack import geometry
-    from activetrack import sensor_motion as sm
+    from activetrack.kinematics import geometry
+    from activetrack.kinematics import sensor_motion as sm
 
     rng = np.random.default_rng(5)
     for i in range(20):
@@ -96,7 +96,7 @@ def motion_cases(out: dict) -> None:
 def gsr_cases(out: dict) -> None:
     """Add GSR's plans of random three-sensor problems (batched, then one by one)."""
     from activetrack.baselines import GSR
-    from activetrack.problem import PlanningProblem
+    from activetrack.world.problem import PlanningProblem
 
     rng = np.random.default_rng(7)
     B = 300
@@ -123,7 +123,7 @@ def gsr_cases(out: dict) -> None:
 def solver_cases(out: dict) -> None:
     """The single-sensor solver on 2,000 of ``bench_solver.py``'s random problems (seed 0),
     one call each (checked) and in one batch."""
-    from activetrack.solver import solve_single_sensor, solve_single_sensor_batch
+    from activetrack.solvers.analytic import solve_single_sensor, solve_single_sensor_batch
     from benchmarks.bench_solver import random_problems
 
     prior, c, r, rho, sd2, st2 = random_problems(np.random.default_rng(0), 2000)
@@ -144,8 +144,8 @@ def solver_cases(out: dict) -> None:
 
 def world_cases(out: dict) -> None:
     """Add every task's observations and states along seeded random-action episodes."""
-    from activetrack.scenarios import TASKS
     from activetrack.world import World
+    from activetrack.world.scenarios import TASKS
 
     for task in ["paper", "homogeneous", *TASKS]:
         for n in (1, 7):
@@ -167,7 +167,7 @@ def world_cases(out: dict) -> None:
 
 def layout_cases(out: dict) -> None:
     """Add 300 random layouts: their vertices and every array of their Occluders."""
-    from activetrack import occluders as oc
+    from activetrack.models import occluders as oc
 
     clear = np.array([[8.0, 0.0], [0.0, 0.0]])
     for seed in range(300):

@@ -18,8 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
-from activetrack.scenarios import PRESETS
 from activetrack.world import World
+from activetrack.world.scenarios import PRESETS
 
 STEPS = 60
 SEEDS = (3, 4, 5)

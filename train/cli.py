@@ -26,13 +26,13 @@ from activetrack.baselines.cli import add_ray_arguments
 from activetrack.baselines.evaluation import check_batched
 from activetrack.cli import COMMANDS, add_output_arguments, field_default, seed_int
 from activetrack.files import RunOutputs, prepare_output_dir
-from activetrack.scenarios import PRESETS
 from activetrack.train import imitation as imitation_module
 from activetrack.train.imitation import DAGGER_DEFAULTS, ImitationConfig, train_imitation
 from activetrack.train.networks import ACTIVATIONS, NetConfig
 from activetrack.train.policy_io import VIEWS, load_policy, save_policy
 from activetrack.train.ppo import LR_SCHEDULES, OUTPUTS, PPOConfig, train_ppo
 from activetrack.train.utils import DEFAULT_THREADS, MAX_THREADS, check_int, configure_torch
+from activetrack.world.scenarios import PRESETS
 
 #: CLI option (argparse dest) -> config field, where the names differ.
 _RENAMES = {"lr": "learning_rate"}
@@ -439,7 +439,7 @@ def _run_imitation(
     threads: int,
     progress: bool,
 ) -> int:
-    from activetrack.scenarios import make_scenario
+    from activetrack.world.scenarios import make_scenario
 
     expert = None
     if args.expert == "lookahead":

@@ -3,7 +3,7 @@
 The expert is :class:`activetrack.baselines.policies.GSRPolicy`: at every step it solves
 the planning problem of the environment (``env.planning_problem()``) and returns the
 sensors' next positions; the label of each agent is the action that reaches its position
-(:func:`activetrack.sensor_motion.actions_to_reach`). With parameter sharing every
+(:func:`activetrack.kinematics.sensor_motion.actions_to_reach`). With parameter sharing every
 (agent, step) pair is one sample ``(observation, expert action)``; the *label budget*
 counts them.
 
@@ -38,7 +38,7 @@ import numpy as np
 import torch
 from stable_baselines3.common.policies import ActorCriticPolicy
 
-from activetrack.sensor_motion import actions_to_reach
+from activetrack.kinematics.sensor_motion import actions_to_reach
 from activetrack.train.networks import DEFAULT_NET, NetConfig, build_policy, mean_action
 from activetrack.train.utils import (
     DEFAULT_THREADS,

@@ -476,6 +476,6 @@ def train_ppo(
 
 
 def _scenario_dict(scenario: Any, overrides: dict[str, Any]) -> dict[str, Any]:
-    from activetrack.scenarios import make_scenario
+    from activetrack.world.scenarios import make_scenario
 
     return make_scenario(scenario, **overrides).to_dict()

@@ -430,7 +430,7 @@ def train_rllib_ppo(
         outputs = out_dir
     elif out_dir is not None:
         outputs = prepare_output_dir(out_dir, OUTPUTS, overwrite)
-    from activetrack.scenarios import make_scenario
+    from activetrack.world.scenarios import make_scenario
 
     scenario_dict = make_scenario(scenario, **overrides).to_dict()  # checks the overrides
     algo_config = rllib_ppo_config(scenario, cfg, seed, **overrides)

@@ -12,27 +12,30 @@ environment ids are registered by ``import activetrack.envs``.
 
 import importlib.metadata as _metadata
 
-from activetrack.ekf import ExtendedKalmanFilter
-from activetrack.motion import (
+from activetrack import _aliases
+from activetrack.estimation.ekf import ExtendedKalmanFilter
+from activetrack.models.motion import (
     LinearMotionModel,
     constant_acceleration,
     constant_velocity,
     from_continuous,
     from_matrices,
 )
-from activetrack.objective import (
+from activetrack.models.objective import (
     lemma2_rotation,
     posterior_position_covariance,
     posterior_trace,
 )
-from activetrack.problem import Planner, PlanningProblem, Prediction
-from activetrack.scenarios import PRESETS, Scenario, make_scenario
-from activetrack.solver import (
+from activetrack.solvers.analytic import (
     BatchSolution,
     SingleSensorSolution,
     solve_single_sensor,
     solve_single_sensor_batch,
 )
+from activetrack.world.problem import Planner, PlanningProblem, Prediction
+from activetrack.world.scenarios import PRESETS, Scenario, make_scenario
+
+_aliases.install()
 
 try:
     __version__: str = _metadata.version("activetrack")

@@ -51,18 +51,19 @@ KERNELS: list[Kernel[Any]] = []  # every kernel defined so far (activetrack.kern
 #: The library's modules that define kernels (importing them defines them all). Their
 #: sources key the cache (:func:`sources_digest`); a library kernel elsewhere is refused.
 KERNEL_MODULES = (
-    "activetrack.hessenberg_qr",
-    "activetrack.companion",
-    "activetrack._coefficients",
-    "activetrack.solver_steps",
-    "activetrack.solver_inputs",
-    "activetrack.solver_scalar",
-    "activetrack.objective",
-    "activetrack.ekf_kernels",
-    "activetrack.motion_kernels",
-    "activetrack.loop_kernels",
-    "activetrack.occluder_kernels",
-    "activetrack.observation_kernels",
+    "activetrack.solvers.hessenberg_qr",
+    "activetrack.solvers.companion",
+    "activetrack.solvers._coefficients",
+    "activetrack.solvers._steps",
+    "activetrack.solvers._inputs",
+    "activetrack.solvers._scalar",
+    "activetrack.models.objective",
+    "activetrack.estimation._kernels",
+    "activetrack.kinematics._kernels",
+    "activetrack.models._motion_kernels",
+    "activetrack.world._loop_kernels",
+    "activetrack.models._occluder_kernels",
+    "activetrack.world._observation_kernels",
     "activetrack.baselines.gsr_kernel",
 )
 _PACKAGE = "activetrack"

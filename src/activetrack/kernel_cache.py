@@ -28,12 +28,12 @@ def compile_all() -> dict[str, Any]:
     calling every entry point that runs kernels once (compiling or loading from the cache)."""
     for name in KERNEL_MODULES:
         importlib.import_module(name)
-    from activetrack.companion import monic_roots, real_roots_scalar
-    from activetrack.solver import (
+    from activetrack.solvers.analytic import (
         case1_critical_points,
         solve_single_sensor,
         solve_single_sensor_batch,
     )
+    from activetrack.solvers.companion import monic_roots, real_roots_scalar
 
     start = time.perf_counter()
     prior = np.array([[2.0, 0.3], [0.3, 1.0]])
@@ -62,9 +62,11 @@ def _world_and_planners() -> None:
     """Run the entry points of the world's kernels (moves, EKF, occluders, rays) and of
     GSR's sweeps once: a step of one copy and of two copies of every kind of task, an
     occluder layout drawn, GSR on a single and on a batched problem."""
-    from activetrack import observation  # noqa: PLC0415
     from activetrack.baselines import GSR  # noqa: PLC0415 (the planners' layer, lazily)
-    from activetrack.world import World  # noqa: PLC0415
+    from activetrack.world import (
+        World,  # noqa: PLC0415
+        observation,  # noqa: PLC0415
+    )
 
     for scenario in ("paper", "uncertain_poses", "urban", "urban_random"):
         for copies in (1, 2):

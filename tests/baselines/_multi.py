@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from activetrack.objective import TRACE
-from activetrack.problem import PlanningProblem
+from activetrack.models.objective import TRACE
+from activetrack.world.problem import PlanningProblem
 
 
 def multi_problem(

@@ -11,7 +11,7 @@ import pytest
 
 from activetrack.baselines import GSR, RandomMotion, run_monte_carlo
 from activetrack.cli import main
-from activetrack.scenarios import make_scenario
+from activetrack.world.scenarios import make_scenario
 
 
 def test_simulate_writes_results_and_plot(tmp_path, capsys):

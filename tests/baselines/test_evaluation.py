@@ -191,7 +191,7 @@ def test_evaluation_nees_and_trace_equal_the_simulation_runners():
     from activetrack.baselines import GSR
     from activetrack.baselines.evaluation import evaluate
     from activetrack.baselines.simulation import simulate
-    from activetrack.scenarios import make_scenario
+    from activetrack.world.scenarios import make_scenario
 
     sc = make_scenario("mixed", n_steps=10)
     (ev,) = evaluate(["gsr"], sc, 3, 1000, progress=False)

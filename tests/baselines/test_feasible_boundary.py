@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from activetrack.baselines._common import sensor_modes, sensor_modes_multi
-from activetrack.feasible_set import boundary_arcs as feasible_arcs
-from activetrack.feasible_set import fallback
-from activetrack.problem import PlanningProblem
+from activetrack.kinematics.feasible_set import boundary_arcs as feasible_arcs
+from activetrack.kinematics.feasible_set import fallback
+from activetrack.world.problem import PlanningProblem
 from tests.baselines._multi import dense_boundary, multi_problem
 
 

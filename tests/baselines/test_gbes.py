@@ -8,10 +8,10 @@ import math
 import numpy as np
 import pytest
 
-from activetrack import geometry
 from activetrack.baselines import GBES, random_problem
 from activetrack.baselines.gbes import _BlockSearch, _entries
-from activetrack.objective import sensor_information
+from activetrack.kinematics import geometry
+from activetrack.models.objective import sensor_information
 
 
 def _naive_optimum(problem, spacing):
@@ -168,7 +168,7 @@ def test_gbes_refuses_a_too_fine_grid_before_building_it():
 
 
 def test_gbes_plans_a_batch_copy_by_copy():
-    from activetrack.problem import PlanningProblem
+    from activetrack.world.problem import PlanningProblem
 
     rng = np.random.default_rng(33)
     singles = [random_problem(rng, 2) for _ in range(4)]

@@ -9,10 +9,10 @@ import math
 import numpy as np
 import pytest
 
-from activetrack import geometry
 from activetrack.baselines import GBES
 from activetrack.baselines.gbes import _target_features, _TargetsSearch
-from activetrack.objective import LOGDET, TRACE, WORST_TRACE
+from activetrack.kinematics import geometry
+from activetrack.models.objective import LOGDET, TRACE, WORST_TRACE
 from tests.baselines._multi import dense_boundary, multi_problem
 
 OBJECTIVES = [TRACE, WORST_TRACE, LOGDET]
@@ -180,7 +180,7 @@ def test_multi_target_block_bound_is_below_every_configuration(objective):
 
 
 def test_gbes_plans_a_multi_target_batch_copy_by_copy():
-    from activetrack.problem import PlanningProblem
+    from activetrack.world.problem import PlanningProblem
 
     rng = np.random.default_rng(70)
     singles = [multi_problem(rng, 2, 2) for _ in range(3)]

@@ -9,11 +9,11 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from activetrack import geometry
 from activetrack.baselines import GBES, GSR, random_problem
 from activetrack.baselines.gsr import Relaxation
 from activetrack.baselines.gsr_restarts import mirror
-from activetrack.problem import PlanningProblem
+from activetrack.kinematics import geometry
+from activetrack.world.problem import PlanningProblem
 
 
 @st.composite
@@ -262,7 +262,7 @@ def test_gsr_refuses_an_objective_it_cannot_solve_exactly():
 
 
 def test_gsr_plans_other_objectives_numerically_never_worse_than_its_start():
-    from activetrack.objective import LOGDET, WORST_TRACE
+    from activetrack.models.objective import LOGDET, WORST_TRACE
 
     rng = np.random.default_rng(3)
     for obj in (LOGDET, WORST_TRACE):
@@ -302,7 +302,7 @@ def _dense_min(others, c, r, rho, sd2, st2):
 def test_the_sweeps_solver_call_is_the_global_optimum_of_the_subproblem():
     """Relaxation.solve calls the solver's kernel directly: on GSR's own subproblems its
     point is feasible and no worse than a dense search of the feasible set (eq. 38)."""
-    from activetrack.objective import sensor_information
+    from activetrack.models.objective import sensor_information
 
     rng = np.random.default_rng(5)
     for _ in range(10):

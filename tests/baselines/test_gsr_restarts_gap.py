@@ -27,11 +27,11 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.optimize import minimize
 
-from activetrack import geometry
 from activetrack.baselines import GBES, GSR
 from activetrack.baselines.gsr import Relaxation
 from activetrack.baselines.gsr_restarts import _ArcSet
-from activetrack.problem import PlanningProblem
+from activetrack.kinematics import geometry
+from activetrack.world.problem import PlanningProblem
 
 #: Grid combinations of the reference's exhaustive search.
 COMBINATIONS = 2_000_000

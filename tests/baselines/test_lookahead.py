@@ -1,6 +1,6 @@
 """Tests of the receding-horizon planner (activetrack.baselines.lookahead).
 
-Independent computations: the EKF of activetrack.ekf driven as the world drives it (the
+Independent computations: the EKF of activetrack.estimation.ekf driven as the world drives it (the
 filter's square-root update and prediction) for the planning model's covariances and for
 GSR's rollout score; the world's own state for the recovered prediction and for the
 explicit path that the problem's prediction must reproduce bit for bit; the world's
@@ -13,14 +13,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from activetrack import ekf, measurement
 from activetrack.baselines import GSR, Lookahead, LookaheadPlanner, LookaheadPolicy
 from activetrack.baselines import horizon_model as hm
 from activetrack.baselines.lookahead import run_batched
 from activetrack.baselines.prediction_tracker import PredictionTracker
-from activetrack.motion import constant_velocity, predict
-from activetrack.problem import PlanningProblem
+from activetrack.estimation import ekf
+from activetrack.models import measurement
+from activetrack.models.motion import constant_velocity, predict
 from activetrack.world import World
+from activetrack.world.problem import PlanningProblem
 
 
 def _random_state(rng: np.random.Generator, m: int = 3):

@@ -1,8 +1,8 @@
 """The receding-horizon planner on every task (several targets, sensor models, uncertain
 poses, occluders and limited sensing).
 
-Independent computations: the world's own filter (activetrack.tracking.filter_update on
-noise-free measurements from activetrack.sensor_models.measure, each target moving exactly
+Independent computations: the world's own filter (activetrack.world.tracking.filter_update on
+noise-free measurements from activetrack.models.sensor_models.measure, each target moving exactly
 as predicted) for the planning model's covariances; the predicted means by repeated
 multiplication with each target's Phi; the world's constraint check
 (reach and every target's rho disk at every planned step) and dense sampling of every planned
@@ -16,10 +16,10 @@ import numpy as np
 import pytest
 from matplotlib.path import Path
 
-from activetrack import sensor_models, tracking
 from activetrack.baselines import GSR, Lookahead, LookaheadPlanner
-from activetrack.problem import PlanningProblem
-from activetrack.world import World
+from activetrack.models import sensor_models
+from activetrack.world import World, tracking
+from activetrack.world.problem import PlanningProblem
 from tests.core.helpers import in_any, segments_enter
 
 TASKS = ["two_targets", "range_only", "bearing_only", "mixed", "uncertain_poses", "urban",

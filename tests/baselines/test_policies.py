@@ -19,7 +19,7 @@ import pytest
 from activetrack import make_scenario
 from activetrack.baselines.policies import PlannerPolicy
 from activetrack.envs import ENV_ID, env, parallel_env
-from activetrack.sensor_motion import actions_to_reach
+from activetrack.kinematics.sensor_motion import actions_to_reach
 
 simulation = pytest.importorskip("activetrack.baselines.simulation")
 

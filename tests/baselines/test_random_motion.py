@@ -8,8 +8,8 @@ from scipy import stats
 
 from activetrack.baselines import RandomMotion
 from activetrack.baselines._common import sensor_modes
-from activetrack.objective import LOGDET
-from activetrack.problem import PlanningProblem
+from activetrack.models.objective import LOGDET
+from activetrack.world.problem import PlanningProblem
 from tests.baselines._multi import dense_boundary, multi_problem
 
 

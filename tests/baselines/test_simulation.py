@@ -6,8 +6,9 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from activetrack import ExtendedKalmanFilter, make_scenario, measurement
+from activetrack import ExtendedKalmanFilter, make_scenario
 from activetrack.baselines import GSR, RandomMotion, mean_ci, run_monte_carlo, simulate
+from activetrack.models import measurement
 
 
 class _Towards:
@@ -104,7 +105,7 @@ def test_two_target_runs_record_every_target_and_plot(tmp_path):
     from activetrack.baselines import GSR
     from activetrack.baselines.plotting import plot_trajectories
     from activetrack.baselines.simulation import simulate
-    from activetrack.scenarios import make_scenario
+    from activetrack.world.scenarios import make_scenario
 
     sc = make_scenario("two_targets", n_steps=4)
     rec = simulate(sc, GSR(), 0)

@@ -7,11 +7,12 @@ import pytest
 from scipy import stats
 
 import activetrack as at
-from activetrack import ekf, measurement, motion
+from activetrack.estimation import ekf
+from activetrack.models import measurement, motion
 from tests.core.helpers import random_spd, textbook_h, textbook_update
 from tests.envs.reference import ekf_update as reference_ekf_update
 
-# The EKF is compiled (activetrack.ekf_kernels): make test also runs these as plain Python.
+# The EKF is compiled (activetrack.estimation._kernels): make test also runs these as plain Python.
 pytestmark = pytest.mark.kernels
 
 

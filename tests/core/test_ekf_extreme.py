@@ -2,7 +2,7 @@
 definite, every state and trace finite.
 
 The loop uses the core kernels only (the initial conditions of :class:`activetrack.world.World`,
-:func:`~activetrack.tracking.advance`, :func:`activetrack.motion.predict`); the sensors
+:func:`~activetrack.world.tracking.advance`, :func:`activetrack.models.motion.predict`); the sensors
 move by random feasible displacements (within their reach ``r``, pushed out to ``rho``
 from the predicted target), standing in for a planner. Positive definiteness is checked
 independently with LAPACK's Cholesky factorization of every posterior and prediction.
@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 
 import activetrack as at
-from activetrack import motion, scenarios, tracking
-from activetrack.world import World
+from activetrack.models import motion
+from activetrack.world import World, scenarios, tracking
 
 
 def random_feasible_move(sensors, x_pred, r, rho, rng):

@@ -10,11 +10,11 @@ import numpy as np
 import pytest
 from scipy import optimize
 
-from activetrack import ekf
-from activetrack.scenarios import make_scenario
+from activetrack.estimation import ekf
 from activetrack.world import World
+from activetrack.world.scenarios import make_scenario
 
-# The EKF is compiled (activetrack.ekf_kernels): make test also runs these as plain Python.
+# The EKF is compiled (activetrack.estimation._kernels): make test also runs these as plain Python.
 pytestmark = pytest.mark.kernels
 
 USES = {0: (1.0, 1.0), 1: (1.0, 0.0), 2: (0.0, 1.0)}  # range-and-bearing, range, bearing

@@ -1,7 +1,7 @@
 """The K-target feasible set: membership, projection, boundary arcs, sampling, fallback.
 
 References: dense sampling of the plane (brute-force nearest feasible point), the
-single-target geometry of :mod:`activetrack.geometry`, bisection walks to the boundary,
+single-target geometry of :mod:`activetrack.kinematics.geometry`, bisection walks to the boundary,
 and distances written out longhand here.
 """
 
@@ -10,8 +10,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from activetrack import feasible_set as fs
-from activetrack import geometry
+from activetrack.kinematics import feasible_set as fs
+from activetrack.kinematics import geometry
 
 
 def feasible_longhand(s, center, r, targets, rho, tol=1e-9):

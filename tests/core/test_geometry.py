@@ -5,9 +5,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from activetrack import geometry
+from activetrack.kinematics import geometry
 
-# The moves are compiled (activetrack.motion_kernels): make test also runs these as plain Python.
+# The moves are compiled (activetrack.kinematics._kernels): make test also runs these as plain
+# Python.
 pytestmark = pytest.mark.kernels
 
 

@@ -17,7 +17,7 @@ import mpmath
 import numpy as np
 import pytest
 
-from activetrack.companion import (
+from activetrack.solvers.companion import (
     IM_TOL,
     RE_TOL,
     _balanced_companion_into,
@@ -25,7 +25,7 @@ from activetrack.companion import (
     monic_roots,
     real_roots_scalar,
 )
-from activetrack.hessenberg_qr import balance, hessenberg_eigvals
+from activetrack.solvers.hessenberg_qr import balance, hessenberg_eigvals
 
 pytestmark = pytest.mark.kernels
 

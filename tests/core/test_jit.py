@@ -42,7 +42,7 @@ def test_kernels_call_kernels_and_keep_the_python_function() -> None:
 #: other library kernel module's cached machine code is copied into the test's cache first.
 #: One of ``compile_all``'s direct calls reaches it (``case1_critical_points``), and it
 #: compiles in about a second where compiling every kernel takes a minute.
-LEFT_OUT = "activetrack._coefficients"
+LEFT_OUT = "activetrack.solvers._coefficients"
 
 
 def _prime_cache(cache: Path) -> set[str]:
@@ -141,7 +141,7 @@ def test_the_kernels_command_rejects_an_unknown_option(capsys) -> None:
 #: farthest from the origin, ``cx + 1`` for cx > 0.
 _CALLER = """
 from activetrack._jit import kernel
-from activetrack.motion_kernels import fallback_point
+from activetrack.kinematics._kernels import fallback_point
 
 
 @kernel
@@ -155,12 +155,12 @@ _RUN = """
 import sys
 from pathlib import Path
 
-import activetrack.motion_kernels
+import activetrack.kinematics._kernels
 import caller
 
-assert activetrack.motion_kernels.__file__.startswith(sys.argv[1])
+assert activetrack.kinematics._kernels.__file__.startswith(sys.argv[1])
 if len(sys.argv) > 2:
-    Path(activetrack.motion_kernels.__file__).write_text(sys.argv[2])
+    Path(activetrack.kinematics._kernels.__file__).write_text(sys.argv[2])
 x = caller.farthest_x(2.0)
 stats = caller.farthest_x.dispatcher.stats
 print(x, sum(stats.cache_hits.values()), sum(stats.cache_misses.values()))

@@ -1,19 +1,18 @@
-"""The compiled closed-loop arithmetic (:mod:`activetrack.loop_kernels`) against NumPy
+"""The compiled closed-loop arithmetic (:mod:`activetrack.world._loop_kernels`) against NumPy
 longhand, and the world's one-call step against its stage-by-stage step.
 
 The stage-by-stage step (target motion, measurement, EKF, prediction, each its own call)
 is checked against the paper's longhand loop in ``test_world.py``; here the one-call step
-(:func:`activetrack.loop_kernels.advance_rows`, ``advance_observe_row``) must give the same
+(:func:`activetrack.world._loop_kernels.advance_rows`, ``advance_observe_row``) must give the same
 states, rewards and observations on every task it serves.
 """
 
 import numpy as np
 import pytest
 
-from activetrack import tracking
-from activetrack.motion import predict
-from activetrack.scenarios import make_scenario
-from activetrack.world import World
+from activetrack.models.motion import predict
+from activetrack.world import World, tracking
+from activetrack.world.scenarios import make_scenario
 from tests.core.helpers import random_spd
 
 pytestmark = pytest.mark.kernels

@@ -6,7 +6,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from activetrack import measurement
+from activetrack.models import measurement
 
 coord = st.floats(-50, 50, allow_nan=False)
 

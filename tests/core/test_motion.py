@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 import activetrack as at
-from activetrack.motion import make_model
+from activetrack.models.motion import make_model
 
 
 @pytest.mark.parametrize("dt", [0.05, 0.1, 1.0])

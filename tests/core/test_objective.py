@@ -7,7 +7,7 @@ from hypothesis import strategies as st
 
 import activetrack as at
 from activetrack.linalg2 import rotation
-from activetrack.objective import TRACE
+from activetrack.models.objective import TRACE
 from tests.core.helpers import random_spd, textbook_h
 
 

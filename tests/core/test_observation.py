@@ -1,9 +1,9 @@
-"""Bounds and dimensions of the observation encoding (activetrack.observation)."""
+"""Bounds and dimensions of the observation encoding (activetrack.world.observation)."""
 
 import numpy as np
 import pytest
 
-from activetrack import observation as features
+from activetrack.world import observation as features
 
 
 def test_bounds_and_dimensions():
@@ -83,7 +83,7 @@ def test_paper_blocks_follow_the_docstring_entry_by_entry():
 def test_bad_orders_and_masks_are_refused_before_the_kernels():
     """The kernels index with ``order`` unchecked: a table out of range, of the wrong shape
     or type is a ValueError naming it (and line_of_sight's ``where`` likewise)."""
-    from activetrack import occluders as oc
+    from activetrack.models import occluders as oc
 
     target, sensor = np.zeros((2, 5)), np.zeros((2, 3, 6))
     for bad in ([[0, 1, 3], [1, 2, 0], [2, 0, 1]], [[0, 1], [1, 0]], np.zeros((3, 3)),

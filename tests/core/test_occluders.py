@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from matplotlib.path import Path
 
-from activetrack import occluders as oc
+from activetrack.models import occluders as oc
 
 SQUARE = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
 # An L: the notch x > 1, y > 1 is outside; (1, 1) is its reflex vertex.
@@ -621,7 +621,7 @@ def test_rays_written_into_float32_views_equal_the_float64_readings_cast():
     """What the observation does (its rays written in place): the same values as the float64
     readings rounded once to float32, for a view that reshapes in place and for one that
     does not (written back); the rest of the array untouched."""
-    from activetrack.observation import RAY_DIRECTIONS, RAY_MAX, ray_readings
+    from activetrack.world.observation import RAY_DIRECTIONS, RAY_MAX, ray_readings
 
     rng = np.random.default_rng(12)
     polys = mixed_layout(rng)

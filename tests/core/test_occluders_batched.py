@@ -12,7 +12,7 @@ import pickle
 import numpy as np
 import pytest
 
-from activetrack import occluders as oc
+from activetrack.models import occluders as oc
 from tests.core.test_occluders import SQUARE, adversarial_segments, sampled_blocked
 
 BOUNDS = (-3.0, -3.0, 3.0, 3.0)

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from activetrack.objective import TRACE
-from activetrack.problem import PlanningProblem, Prediction
+from activetrack.models.objective import TRACE
+from activetrack.world.problem import PlanningProblem, Prediction
 from tests.core.helpers import random_spd
 
 FIELDS = ("prior_cov", "target", "sensors", "r", "rho", "sigma_d2", "sigma_theta2")

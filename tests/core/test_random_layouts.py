@@ -1,6 +1,6 @@
 """Random occluder layouts, one per episode and copy (``random_occluders``; the
 ``urban_random`` task). References: matplotlib's polygon membership on dense samples of
-every move, line of sight and start disk (independent of activetrack.occluders), the
+every move, line of sight and start disk (independent of activetrack.models.occluders), the
 single-copy world (a copy of a batched world equals the world of one copy with its seed),
 and the per-copy planning problems."""
 
@@ -9,8 +9,8 @@ import pytest
 from matplotlib.path import Path
 
 from activetrack.baselines import GSR
-from activetrack.scenarios import make_scenario
 from activetrack.world import World
+from activetrack.world.scenarios import make_scenario
 from tests.core.helpers import in_any as _inside
 from tests.core.helpers import segments_enter as _enters
 
@@ -188,7 +188,7 @@ def test_compiled_rectangles_are_the_numpy_draws():
     the NumPy draws do (same rectangles to rounding, the same state afterwards), over
     layouts where the clearance rejects many draws; a batch of layouts equals the layouts
     drawn one at a time."""
-    from activetrack import occluders as oc
+    from activetrack.models import occluders as oc
 
     bounds, sizes = np.array([-6.0, -5.0, 7.0, 4.0]), np.array([1.0, 3.5])
     clear = np.array([[0.0, 0.0], [2.0, 1.0], [-3.0, -2.0]])

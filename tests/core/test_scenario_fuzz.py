@@ -13,7 +13,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import activetrack as at
-from activetrack import scenarios
+from activetrack.world import scenarios
 from tests.core.test_ekf_extreme import run_closed_loop
 
 FIELDS = [f.name for f in dataclasses.fields(at.Scenario) if f.init]

@@ -11,8 +11,8 @@ import pytest
 from scipy import stats
 
 from activetrack.baselines.simulation import detection_gaps
-from activetrack.scenarios import make_scenario
 from activetrack.world import World
+from activetrack.world.scenarios import make_scenario
 
 
 def test_defaults_are_unlimited_and_change_nothing():
@@ -161,7 +161,7 @@ def test_the_iterated_filter_is_consistent_on_the_urban_tasks(name):
 def test_expected_information_matches_monte_carlo_over_detections():
     # E[detected J] over the detection draws and the range test, against the closed form
     # p 1[|p| <= R] J of information_entries(..., detect=...).
-    from activetrack import sensor_models
+    from activetrack.models import sensor_models
 
     rng = np.random.default_rng(5)
     rel = rng.normal(size=(200, 3, 2)) * 4
@@ -179,7 +179,7 @@ def test_expected_information_matches_monte_carlo_over_detections():
 
 
 def test_problem_score_counts_expected_information():
-    from activetrack.problem import PlanningProblem
+    from activetrack.world.problem import PlanningProblem
 
     rng = np.random.default_rng(6)
     for _ in range(20):
@@ -210,7 +210,7 @@ def test_problem_score_counts_expected_information():
                          ("max_range", float("nan")), ("max_range", (1.0, 2.0))],
 )  # fmt: skip
 def test_problem_rejects_bad_limits(field, value):
-    from activetrack.problem import PlanningProblem
+    from activetrack.world.problem import PlanningProblem
 
     with pytest.raises(ValueError, match=field):
         PlanningProblem(np.eye(2), np.zeros(2), np.ones((3, 2)), 1.0, 0.5, 1.0, 0.1,
@@ -221,7 +221,7 @@ def test_gsr_closes_in_on_a_target_out_of_range():
     # Out of range the expected information is 0 wherever a sensor can reach: GSR moves it
     # its full reach towards the nearest predicted target (outside rho), never worse.
     from activetrack.baselines import GSR
-    from activetrack.problem import PlanningProblem
+    from activetrack.world.problem import PlanningProblem
 
     sensors = np.array([[20.0, 0.0], [0.0, 3.0]])
     prob = PlanningProblem(np.eye(2), np.zeros(2), sensors, 1.0, 0.5, 1.0, 0.1,
@@ -234,8 +234,8 @@ def test_gsr_closes_in_on_a_target_out_of_range():
 
 @pytest.mark.slow
 def test_solver_never_worse_than_dense_search_with_limits():
-    from activetrack import solver_numeric
-    from activetrack.objective import TRACE
+    from activetrack.models.objective import TRACE
+    from activetrack.solvers import numeric as solver_numeric
 
     from .test_solver_numeric import dense_feasible_points, random_case
 
@@ -283,8 +283,8 @@ def _scaled(x, target, prior_info, w_d, w_theta, pose_cov, scale):
 def test_score_counts_no_information_through_an_occluder():
     # A sensor behind a wall contributes nothing; moved into the open it contributes its
     # information of eq. (17) (longhand).
-    from activetrack.occluders import Occluders
-    from activetrack.problem import PlanningProblem
+    from activetrack.models.occluders import Occluders
+    from activetrack.world.problem import PlanningProblem
 
     wall = Occluders.from_polygons([[(2.0, -1.0), (3.0, -1.0), (3.0, 1.0), (2.0, 1.0)]])
     prob = PlanningProblem(np.eye(2), np.zeros(2), np.array([[5.0, 0.0]]), 1.0, 0.5, 1.0, 0.1,
@@ -302,8 +302,8 @@ def test_gsr_plans_around_an_occluder():
     # A sensor behind a wall: GSR moves it where it sees the target (its expected
     # information), never worse than staying.
     from activetrack.baselines import GSR
-    from activetrack.occluders import Occluders
-    from activetrack.problem import PlanningProblem
+    from activetrack.models.occluders import Occluders
+    from activetrack.world.problem import PlanningProblem
 
     wall = Occluders.from_polygons([[(2.0, -0.3), (3.0, -0.3), (3.0, 0.3), (2.0, 0.3)]])
     start = np.array([[3.5, 0.0]])

@@ -7,9 +7,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from activetrack import ekf, measurement, objective
-from activetrack import sensor_models as sm
-from activetrack.sensor_models import SensorModel
+from activetrack.estimation import ekf
+from activetrack.models import measurement, objective
+from activetrack.models import sensor_models as sm
+from activetrack.models.sensor_models import SensorModel
 
 MODELS = [SensorModel.RANGE_BEARING, SensorModel.RANGE, SensorModel.BEARING]
 ALL = np.array([0, 1, 2, 0, 1, 2])

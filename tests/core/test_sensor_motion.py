@@ -3,10 +3,11 @@
 import numpy as np
 import pytest
 
-from activetrack.geometry import project_feasible
-from activetrack.sensor_motion import actions_to_reach, apply_actions, move_to
+from activetrack.kinematics.geometry import project_feasible
+from activetrack.kinematics.sensor_motion import actions_to_reach, apply_actions, move_to
 
-# The moves are compiled (activetrack.motion_kernels): make test also runs these as plain Python.
+# The moves are compiled (activetrack.kinematics._kernels): make test also runs these as plain
+# Python.
 pytestmark = pytest.mark.kernels
 
 

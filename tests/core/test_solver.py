@@ -21,7 +21,7 @@ import pytest
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
-from activetrack.solver import (
+from activetrack.solvers.analytic import (
     BatchSolution,
     SingleSensorSolution,
     case1_critical_points,
@@ -591,7 +591,7 @@ def test_derivation_script_regenerates_the_coefficients():
         check=True,
         timeout=600,
     ).stdout
-    committed = (ROOT / "src" / "activetrack" / "_coefficients.py").read_text()
+    committed = (ROOT / "src" / "activetrack" / "solvers" / "_coefficients.py").read_text()
     assert out == committed
 
 

@@ -3,7 +3,7 @@
 References, computed independently of the solver's candidates and refinement:
 
 - the paper's case (K = 1, range and bearing, known pose, trace): the analytic solver of
-  Section IV-A (:func:`activetrack.solver.solve_single_sensor`), its value recomputed
+  Section IV-A (:func:`activetrack.solvers.analytic.solve_single_sensor`), its value recomputed
   here from eq. (17) written out longhand;
 - every other case: a dense search of F (a uniform grid over the reach disk, kept where
   feasible, plus dense samples of every circle, kept where feasible), with the objective
@@ -15,9 +15,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from activetrack import solver_numeric
-from activetrack.objective import LOGDET, TRACE, WORST_TRACE
-from activetrack.solver import solve_single_sensor
+from activetrack.models.objective import LOGDET, TRACE, WORST_TRACE
+from activetrack.solvers import numeric as solver_numeric
+from activetrack.solvers.analytic import solve_single_sensor
 
 from .helpers import random_spd
 

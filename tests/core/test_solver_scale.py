@@ -22,7 +22,7 @@ import pytest
 from hypothesis import HealthCheck, assume, event, given, settings
 from hypothesis import strategies as st
 
-from activetrack.solver import solve_single_sensor, solve_single_sensor_batch
+from activetrack.solvers.analytic import solve_single_sensor, solve_single_sensor_batch
 from tests.core import test_solver
 from tests.core.test_solver import brute_force, rotation
 
@@ -321,8 +321,8 @@ def test_the_range_edges_are_decided_alike_by_the_scalar_and_the_batched_solver(
     """At ``||c|| = 1e5 r`` and ``rho = 1e-9 r`` computed as products, where the quotients
     round past the bound, both solvers accept (one rule decides both, compiled) and agree
     bit for bit; one float further out, both refuse, naming the parameter."""
-    from activetrack.solver_inputs import MAX_DISTANCE_RATIO
-    from activetrack.solver_steps import RHO_FLOOR
+    from activetrack.solvers._inputs import MAX_DISTANCE_RATIO
+    from activetrack.solvers._steps import RHO_FLOOR
 
     prior = np.array([[2.0, 0.3], [0.3, 1.0]])
     cases = [(r, MAX_DISTANCE_RATIO * r, 0.5 * r) for r in _edge_reaches(MAX_DISTANCE_RATIO, True)]

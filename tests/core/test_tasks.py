@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from activetrack import PlanningProblem, observation
-from activetrack.objective import LOGDET, TRACE, WORST_TRACE
-from activetrack.scenarios import TASKS, make_scenario
-from activetrack.world import World
+from activetrack import PlanningProblem
+from activetrack.models.objective import LOGDET, TRACE, WORST_TRACE
+from activetrack.world import World, observation
+from activetrack.world.scenarios import TASKS, make_scenario
 
 RUNS = 200
 #: GSR's sweeps per step in the Monte Carlo runs (see :func:`_nees_runs`).
@@ -33,7 +33,7 @@ def test_every_task_is_a_valid_scenario_with_its_layout():
         assert w.state(0).shape == (d + M * rays + 1,)
         low, high = w.layout.bounds()
         assert np.all(obs >= low) and np.all(obs <= high)
-    from activetrack.scenarios import EXTENSIONS
+    from activetrack.world.scenarios import EXTENSIONS
 
     # The paper's record names no field beyond the paper; a task's names what it uses.
     assert not set(EXTENSIONS) & set(make_scenario("paper").to_dict())

@@ -1,12 +1,12 @@
-"""The loop kernel's pieces (:mod:`activetrack.tracking`) against longhand computations."""
+"""The loop kernel's pieces (:mod:`activetrack.world.tracking`) against longhand computations."""
 
 import math
 
 import numpy as np
 import pytest
 
-from activetrack import tracking
-from activetrack.scenarios import make_scenario
+from activetrack.world import tracking
+from activetrack.world.scenarios import make_scenario
 
 
 @pytest.mark.parametrize("preset", ["paper", "two_targets", "mixed"])

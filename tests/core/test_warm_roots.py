@@ -15,15 +15,15 @@ import numpy as np
 import pytest
 
 from activetrack.baselines import GSR, random_problem
-from activetrack.companion import IM_TOL, RE_TOL, _aberth_into, accepted_roots_from
-from activetrack.objective import sensor_information
-from activetrack.solver import solve_single_sensor
-from activetrack.solver_scalar import (
+from activetrack.models.objective import sensor_information
+from activetrack.solvers._scalar import (
     NO_ROOTS,
     ROOTS_SIZE,
     ROOTS_TAG,
     solve_point,
 )
+from activetrack.solvers.analytic import solve_single_sensor
+from activetrack.solvers.companion import IM_TOL, RE_TOL, _aberth_into, accepted_roots_from
 from tests.core.test_hessenberg_qr import matched_error, mp_roots, poly_from_roots
 from tests.core.test_solver import brute_force
 
@@ -41,7 +41,7 @@ def _random_roots(rng: np.random.Generator) -> np.ndarray:
 
 
 def _accepted(z: np.ndarray) -> list[float]:
-    """Return the acceptance rule of :mod:`activetrack.companion` applied to roots ``z``."""
+    """Return the acceptance rule of :mod:`activetrack.solvers.companion` applied to roots ``z``."""
     keep = (np.abs(z.imag) <= IM_TOL) & (np.abs(z.real) <= 1 + RE_TOL)
     return sorted(np.clip(z.real[keep], -1.0, 1.0))
 

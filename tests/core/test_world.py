@@ -177,7 +177,9 @@ def test_observe_and_planning_problem_per_copy():
     obs, state = world.observe(), world.state()
     assert obs.shape == (3, 4, 29) and obs.dtype == np.float32 and state.shape == (3, 30)
     for i in range(3):
-        P, _ = at.observation.decode_target(obs[i, 0, :5], world.scenario.dt, world.length_scale)
+        P, _ = at.world.observation.decode_target(
+            obs[i, 0, :5], world.scenario.dt, world.length_scale
+        )
         np.testing.assert_allclose(P, world.P_pred[i, :2, :2], rtol=1e-6)  # float32
         problem = world.planning_problem(i)
         np.testing.assert_array_equal(problem.target, world.x_pred[i, :2])

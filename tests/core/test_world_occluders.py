@@ -1,14 +1,14 @@
 """Occluders in the world: sensors never end in or pass through one; no measurement
 through one. References: dense sampling of every move and line of sight, each sample
-tested with matplotlib's polygon membership (independent of activetrack.occluders)."""
+tested with matplotlib's polygon membership (independent of activetrack.models.occluders)."""
 
 import numpy as np
 import pytest
 from matplotlib.path import Path
 
-from activetrack import occluders
-from activetrack.scenarios import make_scenario
+from activetrack.models import occluders
 from activetrack.world import World
+from activetrack.world.scenarios import make_scenario
 from tests.core.helpers import in_any as _in_any
 from tests.core.helpers import segments_enter as _segments_enter
 
@@ -96,8 +96,10 @@ def test_bad_occluders_name_the_field(value, match):
 
 
 def test_problem_rejects_occluders_that_are_not_occluders():
-    from activetrack.problem import PlanningProblem
+    from activetrack.world.problem import PlanningProblem
 
-    with pytest.raises(ValueError, match="occluders must be an activetrack.occluders.Occluders"):
+    with pytest.raises(
+        ValueError, match="occluders must be an activetrack.models.occluders.Occluders"
+    ):
         PlanningProblem(np.eye(2), np.zeros(2), np.ones((3, 2)), 1.0, 0.5, 1.0, 0.1,
                         occluders=[[(0, 0), (1, 0), (0, 1)]])  # fmt: skip

@@ -3,7 +3,7 @@
 Written from the paper, not from activetrack's kernels: the constant-velocity model of
 eq. (39) discretized by hand, the measurement of eq. (4), the EKF update of eq. (11) with
 the full 2M x 2M innovation covariance, and the draw order documented by
-:mod:`activetrack.tracking` (2M uniforms for the sensors; then per step n process and 2M
+:mod:`activetrack.world.tracking` (2M uniforms for the sensors; then per step n process and 2M
 measurement standard normals). Only the square root used to colour the process noise is
 taken from the scenario, because it defines which target path a seed gives.
 """

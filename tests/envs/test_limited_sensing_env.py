@@ -1,11 +1,11 @@
 """The environments on a limited-sensing scenario: spaces, the detection flags and the
-range-finder rays of the observation (layout in activetrack.observation)."""
+range-finder rays of the observation (layout in activetrack.world.observation)."""
 
 import numpy as np
 from pettingzoo.test import parallel_api_test
 
 from activetrack.envs import parallel_env
-from activetrack.observation import EXT_SENSOR_DIM, EXT_TARGET_DIM, RAY_MAX, RAYS
+from activetrack.world.observation import EXT_SENSOR_DIM, EXT_TARGET_DIM, RAY_MAX, RAYS
 
 WALL = [[(0.0, -3.0), (4.0, -3.0), (4.0, 3.0), (0.0, 3.0)]]
 

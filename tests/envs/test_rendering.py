@@ -19,7 +19,7 @@ from activetrack.envs.rendering import (
     TrackingRenderer,
     ellipse,
 )
-from activetrack.scenarios import TASKS
+from activetrack.world.scenarios import TASKS
 
 #: The commit whose renderer drew the paper's frames before several targets existed.
 PAPER_RENDERER_COMMIT = "1a245c2942c68c7c6ede434c7756f5ba8ed60a79"
@@ -28,17 +28,18 @@ REPO = pathlib.Path(__file__).resolve().parents[2]
 
 @pytest.fixture
 def feasible_set_guard(monkeypatch):
-    """Several-target worlds import ``activetrack.feasible_set`` on every step; until that
+    """Several-target worlds import ``activetrack.kinematics.feasible_set`` on every step; until
+    that
     module exists, stand in a stub that fails if a projection is ever needed (the tests
     keep the sensors out of every rho disk)."""
-    if importlib.util.find_spec("activetrack.feasible_set") is None:
-        stub = types.ModuleType("activetrack.feasible_set")
+    if importlib.util.find_spec("activetrack.kinematics.feasible_set") is None:
+        stub = types.ModuleType("activetrack.kinematics.feasible_set")
 
         def project(*args, **kwargs):
             raise AssertionError("a sensor entered a rho disk: the test needs feasible_set")
 
         stub.project = project
-        monkeypatch.setitem(sys.modules, "activetrack.feasible_set", stub)
+        monkeypatch.setitem(sys.modules, "activetrack.kinematics.feasible_set", stub)
 
 
 def test_rgb_array_frames_show_the_episode():
@@ -645,7 +646,7 @@ def test_first_frame_has_no_lines_of_sight_and_no_count():
 
 
 def _limited_env(render_mode="rgb_array", **kw):
-    from activetrack.scenarios import make_scenario
+    from activetrack.world.scenarios import make_scenario
 
     sc = make_scenario("two_targets", occluders=[[(0, -3), (4, -3), (4, 3), (0, 3)]],
                        max_range=12.0, p_detect=0.8, sensor_center=(-6.0, 0.0), **kw)  # fmt: skip

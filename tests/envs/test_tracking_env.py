@@ -9,7 +9,7 @@ from gymnasium.utils import seeding
 
 from activetrack import make_scenario
 from activetrack.envs import parallel_env
-from activetrack.observation import decode_sensors, decode_target
+from activetrack.world.observation import decode_sensors, decode_target
 
 from .reference import ReferenceLoop
 

@@ -1,0 +1,269 @@
+"""The planning objective: trace of the posterior position covariance, eq. (12), (17)-(19).
+
+By Lemma 1 the posterior position covariance after all sensors measure is
+``(P11^{-1} + sum_i H_i^T R_i^{-1} H_i)^{-1}`` (eq. 12), where each sensor at relative
+position ``p_i = p_S_i - p_T_hat`` contributes the information
+``p p^T / (sigma_d^2 p^T p) + J p p^T J^T / (sigma_theta^2 (p^T p)^2)`` (eq. 17).
+Lemma 2 rotates the prior information into its eigenbasis (eq. 18).
+
+Every function is vectorized over a leading batch axis of relative positions
+(shape (..., M, 2)): exhaustive search evaluates millions of candidate configurations.
+
+:class:`TraceObjective` (:data:`TRACE`) is the objective as one piece: the function of the
+total information ``Y`` (eq. 12, 17) that every planner calls to score a candidate
+configuration, through :attr:`activetrack.world.problem.PlanningProblem.objective`. Another
+objective (a sum over targets, ``log det``) plugs in there as another object with the
+same methods; planners that rely on the form of ``tr(Y^{-1})`` (GSR's exact single-sensor
+step of Section IV-A) check its ``name``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from activetrack._jit import kernel
+from activetrack.linalg2 import inv2, rotation, trace_inv2
+from activetrack.validation import (
+    FloatArray,
+    as_finite,
+    check_trailing_shape,
+    positive,
+    spd,
+)
+
+
+@kernel
+def information_entries(x, y, sigma_d2, sigma_theta2):
+    """Return ``(a, b, c)``: the entries ``[[a, b], [b, c]]`` of the information of a sensor
+    at relative position ``(x, y)`` (eq. 17). A kernel on floats, and (its ``py_func``,
+    the same source) elementwise on arrays, real or complex."""
+    xx, xy, yy = x * x, x * y, y * y
+    n2 = xx + yy
+    wd = 1.0 / (sigma_d2 * n2)
+    wt = 1.0 / (sigma_theta2 * n2 * n2)
+    return wd * xx + wt * yy, (wd - wt) * xy, wd * yy + wt * xx
+
+
+@kernel
+def trace_of_inverse(a, b, c):
+    """Return ``tr([[a, b], [b, c]]^{-1}) = (a + c) / (ac - b^2)`` (a kernel on floats; its
+    ``py_func`` elementwise on arrays)."""
+    return (a + c) / (a * c - b * b)
+
+
+def sensor_information(
+    rel: FloatArray, sigma_d2: FloatArray, sigma_theta2: FloatArray
+) -> FloatArray:
+    """Return each sensor's position information ``H_i^T R_i^{-1} H_i`` (eq. 17), (..., M, 2, 2).
+
+    Unchecked kernel: ``rel`` must be non-zero and finite, variances positive.
+    """
+    a, b, c = information_entries.py_func(rel[..., 0], rel[..., 1], sigma_d2, sigma_theta2)
+    # Filled in place: three np.stack calls cost ~10x more on GSR's single (2,) sensors.
+    out = np.empty(np.shape(a) + (2, 2), dtype=np.result_type(a, b, c))  # complex steps too
+    out[..., 0, 0] = a
+    out[..., 0, 1] = b
+    out[..., 1, 0] = b
+    out[..., 1, 1] = c
+    return out
+
+
+def total_information(
+    prior_info: FloatArray, rel: FloatArray, sigma_d2: FloatArray, sigma_theta2: FloatArray
+) -> FloatArray:
+    """Return the posterior position information ``P11^{-1} + sum_i info_i`` (..., 2, 2)."""
+    return prior_info + sensor_information(rel, sigma_d2, sigma_theta2).sum(axis=-3)
+
+
+class TraceObjective:
+    """The objective of eq. (17), ``phi(Y) = tr(Y^{-1})``, of the total information ``Y``.
+
+    ``Y = P11^{-1} + sum_i info_i`` is 2x2 symmetric positive definite. Methods take
+    either the matrices (..., 2, 2) or their independent entries ``a = Y11``, ``b = Y12``,
+    ``c = Y22`` (arrays of any broadcastable shapes): exhaustive search adds the entries of
+    per-sensor candidates by broadcasting and never forms matrices. ``phi`` is convex on
+    positive definite matrices, so its tangent plane (:meth:`tangent`) is a lower bound
+    everywhere (GBES's branch and bound relies on that).
+    """
+
+    name = "trace"
+
+    def combine(self, values: FloatArray, axis: int = -1) -> FloatArray:
+        """Return the per-target values (the ``axis`` over targets) combined: their sum."""
+        return np.sum(values, axis=axis)
+
+    def of_targets(self, a: FloatArray, b: FloatArray, c: FloatArray) -> FloatArray:
+        """Return the objective of K targets' information entries (..., K), combined: (...)."""
+        return self.combine(self.of_entries(a, b, c))
+
+    def of_covariances(self, P: FloatArray) -> FloatArray:
+        """Return the objective of K targets' position covariances (..., K, n, n): (...)."""
+        return self.combine(self.of_covariance(P))
+
+    def of_entries(self, a: FloatArray, b: FloatArray, c: FloatArray) -> FloatArray:
+        """Return ``tr([[a, b], [b, c]]^{-1}) = (a + c) / (ac - b^2)``."""
+        return trace_of_inverse.py_func(a, b, c)
+
+    def of_information(self, Y: FloatArray) -> FloatArray:
+        """Return ``tr(Y^{-1})`` for total information matrices ``Y`` (..., 2, 2) (eq. 12, 17).
+
+        Reads ``Y[..., 0, 1]`` as the off-diagonal entry (``Y`` is symmetric).
+        """
+        return self.of_entries(Y[..., 0, 0], Y[..., 0, 1], Y[..., 1, 1])
+
+    def of_covariance(self, P: FloatArray) -> FloatArray:
+        """Return the objective of position covariances: the trace of ``P11``.
+
+        ``P`` (..., n, n) is ``P11`` itself (n = 2) or a whole state covariance whose
+        top-left 2x2 block is the position's (read in place, no slice).
+        """
+        return P[..., 0, 0] + P[..., 1, 1]
+
+    def tangent(
+        self, a: FloatArray, b: FloatArray, c: FloatArray
+    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        """Return ``(phi, ga, gb, gc)`` at ``Y = [[a, b], [b, c]]``: value and entry gradient.
+
+        ``phi(Y + dY) ~ phi + ga da + gb db + gc dc`` for ``dY = [[da, db], [db, dc]]``:
+        the gradient of ``tr(Y^{-1})`` with respect to ``Y`` is ``G = -Y^{-2}``, and
+        ``<G, dY> = G11 da + 2 G12 db + G22 dc``, so ``gb = 2 G12``.
+        """
+        det = a * c - b * b
+        # Y^{-1} = [[c, -b], [-b, a]] / det; the gradient is minus its square.
+        p, q, s = c / det, -b / det, a / det
+        return (a + c) / det, -(p * p + q * q), -2.0 * q * (p + s), -(s * s + q * q)
+
+    def gradient(self, Y: FloatArray) -> FloatArray:
+        """Return ``d tr(Y^{-1}) / dY = -Y^{-2}`` for symmetric ``Y`` (..., 2, 2)."""
+        _, ga, gb, gc = self.tangent(Y[..., 0, 0], Y[..., 0, 1], Y[..., 1, 1])
+        half = 0.5 * gb
+        return np.stack([np.stack([ga, half], -1), np.stack([half, gc], -1)], -2)
+
+    def __repr__(self) -> str:
+        return "TRACE"
+
+
+#: The trace objective of eq. (17), the default of every planning problem; with K targets
+#: the sum of their traces.
+TRACE = TraceObjective()
+
+
+class WorstTraceObjective(TraceObjective):
+    """The largest of the targets' posterior position traces (``max_k tr(Y_k^{-1})``).
+
+    Per target the same function as :class:`TraceObjective`; only :meth:`combine` differs.
+    For K = 1 it equals :data:`TRACE`.
+    """
+
+    name = "worst_trace"
+
+    def combine(self, values: FloatArray, axis: int = -1) -> FloatArray:
+        """Return the largest per-target value."""
+        return np.max(values, axis=axis)
+
+    def __repr__(self) -> str:
+        return "WORST_TRACE"
+
+
+class LogDetObjective(TraceObjective):
+    """The sum over targets of ``log det P_k = -log det Y_k`` (D-optimality).
+
+    Invariant to the length unit up to a constant, and the log-volume of each target's
+    uncertainty ellipse; convex in ``Y_k``.
+    """
+
+    name = "logdet"
+
+    def of_entries(self, a: FloatArray, b: FloatArray, c: FloatArray) -> FloatArray:
+        """Return ``-log det([[a, b], [b, c]]) = -log(ac - b^2)``."""
+        return -np.log(a * c - b * b)
+
+    def of_covariance(self, P: FloatArray) -> FloatArray:
+        """Return ``log det P11`` of position covariances (or whole state covariances)."""
+        return np.log(P[..., 0, 0] * P[..., 1, 1] - P[..., 0, 1] * P[..., 1, 0])
+
+    def tangent(
+        self, a: FloatArray, b: FloatArray, c: FloatArray
+    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        """Return ``(phi, ga, gb, gc)``; ``d(-log det Y) = -tr(Y^{-1} dY)``."""
+        det = a * c - b * b
+        return -np.log(det), -c / det, 2.0 * b / det, -a / det
+
+    def __repr__(self) -> str:
+        return "LOGDET"
+
+
+#: The largest target's trace.
+WORST_TRACE = WorstTraceObjective()
+#: The sum of the targets' log-determinants.
+LOGDET = LogDetObjective()
+#: The objectives by name (:attr:`activetrack.Scenario.objective`).
+OBJECTIVES: dict[str, TraceObjective] = {o.name: o for o in (TRACE, WORST_TRACE, LOGDET)}
+
+
+def _check(prior_cov: ArrayLike, rel: ArrayLike, sigma_d2: ArrayLike, sigma_theta2: ArrayLike):
+    prior_cov = check_trailing_shape("prior_cov", spd("prior_cov", prior_cov), (2, 2))
+    rel = check_trailing_shape("rel_positions", as_finite("rel_positions", rel), (2,))
+    if rel.ndim < 2:
+        raise ValueError(f"rel_positions must have shape (..., M, 2), got {rel.shape}")
+    if np.any(np.hypot(rel[..., 0], rel[..., 1]) == 0.0):
+        raise ValueError(
+            "rel_positions must be non-zero: a sensor exactly on the target has no bearing"
+        )
+    m = rel.shape[-2]
+    sd2 = positive("sigma_d2", sigma_d2)
+    st2 = positive("sigma_theta2", sigma_theta2)
+    for name, s in (("sigma_d2", sd2), ("sigma_theta2", st2)):
+        if s.ndim > 0 and s.shape[-1] != m:
+            raise ValueError(
+                f"{name} must be a scalar or have {m} entries (one per sensor), got {s.shape}"
+            )
+    return prior_cov, rel, sd2, st2
+
+
+def posterior_position_covariance(
+    prior_cov: ArrayLike, rel_positions: ArrayLike, sigma_d2: ArrayLike, sigma_theta2: ArrayLike
+) -> FloatArray:
+    """Return the posterior position covariance of eq. (12)/(17), shape (..., 2, 2).
+
+    Args:
+        prior_cov: predicted position covariance ``P(k+1|k)_11``, shape (2, 2) or (..., 2, 2).
+        rel_positions: next sensor positions minus the predicted target position, (..., M, 2).
+        sigma_d2: range noise variances, scalar or (M,).
+        sigma_theta2: bearing noise variances, scalar or (M,).
+    """
+    prior_cov, rel, sd2, st2 = _check(prior_cov, rel_positions, sigma_d2, sigma_theta2)
+    return inv2(total_information(inv2(prior_cov), rel, sd2, st2))
+
+
+def posterior_trace(
+    prior_cov: ArrayLike, rel_positions: ArrayLike, sigma_d2: ArrayLike, sigma_theta2: ArrayLike
+) -> FloatArray:
+    """Return the objective of eq. (17): the trace of :func:`posterior_position_covariance`."""
+    prior_cov, rel, sd2, st2 = _check(prior_cov, rel_positions, sigma_d2, sigma_theta2)
+    return trace_inv2(total_information(inv2(prior_cov), rel, sd2, st2))
+
+
+def lemma2_rotation(prior_info: ArrayLike) -> tuple[FloatArray, FloatArray]:
+    """Return ``(phi0, lambdas)`` with ``prior_info = C(phi0) diag(l1, l2) C(-phi0)``, l1 >= l2.
+
+    Lemma 2: in the frame ``s = C(-phi0) p`` the prior information is diagonal and the
+    objective keeps its form (eq. 18). Batched over leading axes.
+    """
+    A = np.asarray(prior_info, dtype=np.float64)
+    a, b, c = A[..., 0, 0], A[..., 0, 1], A[..., 1, 1]
+    phi0 = 0.5 * np.arctan2(2.0 * b, a - c)  # eigenvector angle of the larger eigenvalue
+    mean = 0.5 * (a + c)
+    rad = np.hypot(0.5 * (a - c), b)
+    return phi0, np.stack([mean + rad, mean - rad], axis=-1)
+
+
+def to_eigenframe(phi0: FloatArray | float, p: FloatArray) -> FloatArray:
+    """Return ``s = C(-phi0) p`` for points ``p`` of shape (..., 2)."""
+    return np.einsum("...ij,...j->...i", rotation(-np.asarray(phi0)), p)
+
+
+def from_eigenframe(phi0: FloatArray | float, s: FloatArray) -> FloatArray:
+    """Return ``p = C(phi0) s`` for points ``s`` of shape (..., 2)."""
+    return np.einsum("...ij,...j->...i", rotation(np.asarray(phi0)), s)

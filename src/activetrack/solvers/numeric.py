@@ -1,0 +1,985 @@
+"""A global numerical single-sensor solver: any measurement model, pose uncertainty, K targets.
+
+The subproblem of Gauss-Seidel relaxation for sensor ``i`` with the other sensors folded
+in (``docs/sensor-models-design.md``, section 4; the paper's eq. 22-24 generalized):
+
+    minimize over s in F:  f(s) = objective.of_targets(a0 + ai(s), b0 + bi(s), c0 + ci(s))
+
+where ``(a0, b0, c0)`` (..., K) are the entries of each target's information without
+sensor ``i`` (prior plus the other sensors, eq. 12), ``(ai, bi, ci)(s)`` is sensor ``i``'s
+information about each target (:func:`activetrack.models.sensor_models.information_entries`,
+eq. 17 with the model's weights and the effective noise of an uncertain pose) and ``F``
+is the feasible set of :mod:`activetrack.kinematics.feasible_set` (eq. 15-16 with K targets).
+
+Method (deterministic, batched over leading axes without Python loops over the batch):
+
+1. Candidates. On the reach circle a uniform grid of ``n_boundary`` angles plus, around
+   the direction to each target, angles at offsets ``+-sigma {1/8, ..., 4}`` and 0, where
+   ``sigma = max(| |t - p| - r |, rho) / r`` is the angular width of the target's well
+   (the bearing information grows as the inverse squared distance, so where the reach
+   circle passes near a target ``f`` varies on that scale); on each ``rho`` circle
+   ``n_boundary`` uniform angles (its own target is at constant distance). Every pairwise
+   circle intersection (the arcs' ends, where constrained optima sit). With K >= 2 a
+   square grid of ``n_interior x n_interior`` points over the reach disk: the optimum
+   need not lie on the boundary (Lemma 3 holds per target only); with K = 1 it does
+   (Lemma 3 holds for every measurement model and pose covariance), so no interior grid.
+   Infeasible candidates get the value ``+inf`` (ragged arc sets become masks). All
+   candidates are evaluated in one call.
+2. Refinement. From the best ``N_LOCAL_ARC`` local minima (no neighbour lower) of each
+   circle, steps on the angle; from the best ``N_LOCAL_PLANE`` local minima of the
+   interior grids, steps in the plane. Derivatives are central differences with a step
+   ``FD_STEP`` of the local length scale (the distance to the nearest target, capped by
+   the radius). Steps minimize a local model within a trust radius that starts at the
+   grid spacing and shrinks by 4 after a rejected step: Newton's quadratic model for a
+   smooth objective (TRACE, LOGDET); for an objective that takes the maximum over
+   targets (WORST_TRACE, nonsmooth where two targets tie), the maximum of the per-target
+   quadratic models, minimized over its kinks as in SQP for minimax problems. A step is
+   accepted only when its point is feasible and strictly better. A start stops when its
+   proposed step falls below ``CONVERGED`` of the local scale; for a smooth objective
+   also after an accepted step shorter than ``SETTLED`` of it (Newton's next step would
+   be of the order of its square, below the resolution of the difference quotients); and
+   after ``MAX_MISSES`` steps leaving F (the optimum nearby lies on another piece of the
+   boundary: a circle intersection, which is a candidate, or an arc, which has its own
+   starts). In large batches the converged rows drop out.
+3. The answer is the best point evaluated (grid, intersections, accepted steps), so it is
+   never worse than any candidate. When no candidate is feasible (``F`` empty), the
+   answer is :func:`activetrack.kinematics.feasible_set.fallback` and its value. The returned value
+   is ``f`` at the returned absolute position.
+
+Gauss-Seidel relaxation solves the same sensor's subproblem once per sweep with another
+base: :func:`prepare` computes everything that does not depend on the base once (the
+candidates, their feasibility, the sensor's information there, the neighbour tables of
+the local-minimum test), :func:`solve_prepared` the rest. A prepared batch with
+``remember`` set (the relaxation's own) starts the next solve's refinement, in the rows
+whose starts come from the same candidates, where the last one ended; the answer is then
+the same local minima to the refinement's tolerance, not bit for bit.
+
+Occluders (``occluders``): a candidate or refinement step counts as feasible only if the
+sensor's straight move to it is not blocked (:func:`activetrack.models.occluders.blocked`: it
+neither crosses nor ends in an occluder), so the answer lies in the reachable set the
+world's moves keep to (:func:`activetrack.models.occluders.project_move`); the information about
+a target is counted only where its predicted position is in sight. The objective jumps
+across shadow boundaries, which the candidates resolve only to their spacing.
+
+Special cases: ``r = 0`` returns the sensor's position (its only reachable point, feasible
+or the fallback); a point at zero distance from a target gets no information about it
+(the rule of :mod:`activetrack.models.sensor_models`); with ``rho = 0`` and a target within reach
+an infimum that is not attained (the bearing information unbounded) is approached only
+to the resolution of the candidates.
+
+Computation is relative to the sensor's position (rounding scales with the reach, not
+with the absolute coordinates); the returned positions are absolute.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+
+from activetrack.kinematics import feasible_set
+from activetrack.models.objective import TRACE, TraceObjective
+from activetrack.models.occluders import blocked
+from activetrack.models.sensor_models import information_entries
+from activetrack.validation import FloatArray
+
+#: Multipliers of a target's angular well width at which extra angles are placed.
+WELL_OFFSETS = np.array(
+    [0.0, 0.125, -0.125, 0.25, -0.25, 0.5, -0.5, 1.0, -1.0, 2.0, -2.0, 4.0, -4.0]
+)
+#: Local minima refined per circle and in the interior.
+N_LOCAL_ARC = 2
+N_LOCAL_PLANE = 3
+#: Rings and angles of the log-polar grid around each target (interior, K >= 2).
+POLAR_RINGS = 8
+POLAR_ANGLES = 12
+#: Finite-difference step in units of the local length scale.
+FD_STEP = 1e-4
+#: A refinement step shorter than this fraction of the local length scale ends it.
+CONVERGED = 1e-7
+#: An accepted step shorter than this fraction of the local scale ends a start (smooth
+#: objectives: Newton's next step would be of the order of its square).
+SETTLED = 1e-4
+#: Infeasible steps after which a start stops.
+MAX_MISSES = 1
+#: Batches of at least this many rows drop their converged rows during refinement.
+COMPACT_ROWS = 64
+_TINY = 1e-300
+
+
+def _finite(x: FloatArray) -> FloatArray:
+    """Return ``x`` with non-finite entries (a difference quotient at a target) set to 0."""
+    return np.where(np.isfinite(x), x, 0.0)
+
+
+class _Problem:
+    """The flattened batch (B rows), relative to each sensor's position, and ``f``."""
+
+    def __init__(
+        self, base, center, r, targets, rho, w_d, w_theta, pose_cov, objective, detect=None,
+        occluders=None,
+    ):  # fmt: skip
+        """Flatten the batch; ``base=None`` leaves the base to :meth:`with_base`."""
+        center = np.asarray(center, dtype=np.float64)
+        targets = np.asarray(targets, dtype=np.float64)
+        r, rho = np.asarray(r, dtype=np.float64), np.asarray(rho, dtype=np.float64)
+        w_d, w_theta = np.asarray(w_d, dtype=np.float64), np.asarray(w_theta, dtype=np.float64)
+        k = targets.shape[-2]
+        shapes = [
+            center.shape[:-1], targets.shape[:-2], r.shape, rho.shape, w_d.shape, w_theta.shape,
+        ]  # fmt: skip
+        if base is not None:
+            base = tuple(np.asarray(x, dtype=np.float64) for x in base)
+            shapes += [x.shape[:-1] for x in base]
+        if pose_cov is not None:
+            pose_cov = np.asarray(pose_cov, dtype=np.float64)
+            shapes.append(pose_cov.shape[:-2])
+        if detect is not None:
+            detect = tuple(np.asarray(x, dtype=np.float64) for x in detect)
+            shapes += [x.shape for x in detect]
+        self.shape = np.broadcast_shapes(*shapes)
+        self.k = k
+        flat = self._flat
+        self.center = flat(center, (2,))
+        if base is not None:
+            self.a0, self.b0, self.c0 = (flat(x, (k,)) for x in base)
+        self.t_abs = flat(targets, (k, 2))
+        self.t = self.t_abs - self.center[:, None, :]
+        self.r, self.rho = flat(r), flat(rho)
+        self.wd = flat(w_d)[:, None, None]
+        self.wt = flat(w_theta)[:, None, None]
+        self.pc = None if pose_cov is None else flat(pose_cov, (2, 2))[:, None, None]
+        self.pc_abs = None if pose_cov is None else self.pc[:, 0]
+        self.objective = objective
+        self.minimax = k > 1 and _is_max(objective)
+        self.zero = np.zeros((len(self.r), 2))
+        self.origins, self.radii = feasible_set.circles(self.zero, self.r, self.t, self.rho)
+        # The line of sight (activetrack.models.occluders), or None; a layout per copy (batched
+        # over the batch's first axis) is gathered to one per flattened row.
+        if occluders is not None and occluders.batched:
+            lead = np.arange(self.shape[0]).reshape((-1,) + (1,) * (len(self.shape) - 1))
+            occluders = occluders[np.broadcast_to(lead, self.shape).ravel()]
+        self.occ = occluders
+        self.det = self.det_abs = None
+        if occluders is not None and detect is None:
+            detect = (np.ones(self.shape), np.full(self.shape, np.inf))
+        if detect is not None:  # the expected information (p_detect, max_range^2)
+            p_det, r2 = flat(detect[0]), flat(detect[1])
+            self.det = (p_det[:, None, None], r2[:, None, None])
+            self.det_abs = (p_det[:, None], r2[:, None])
+            finite = np.isfinite(r2)
+            if np.any(finite):
+                # The objective jumps where a target leaves the range: candidates and arc
+                # refinement on each range circle, just inside (0 where unlimited).
+                rad = np.where(finite, np.sqrt(np.where(finite, r2, 0.0)) * (1.0 - 1e-9), 0.0)
+                self.origins = np.concatenate([self.origins, self.t], axis=1)
+                self.radii = np.concatenate(
+                    [self.radii, np.broadcast_to(rad[:, None], self.t.shape[:-1])], axis=1
+                )
+
+    def _flat(self, x: FloatArray, tail: tuple[int, ...] = ()) -> FloatArray:
+        """Return ``x`` broadcast to the batch and flattened, (B,) + tail."""
+        if x.shape != self.shape + tail:
+            x = np.broadcast_to(x, self.shape + tail)
+        return x.reshape((int(np.prod(self.shape)),) + tail)
+
+    def with_base(self, base: tuple[FloatArray, FloatArray, FloatArray]) -> _Problem:
+        """Return this (flattened) batch with the base entries ``(a0, b0, c0)``, each (B, K)."""
+        sub = object.__new__(_Problem)
+        sub.__dict__.update(vars(self))
+        sub.a0, sub.b0, sub.c0 = (np.asarray(x, dtype=np.float64) for x in base)
+        return sub
+
+    def entries(self, pts: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Return the sensor's information entries at points (B, C, 2) (relative), 3 x (B, C, K)."""
+        rel = pts[:, :, None, :] - self.t[:, None, :, :]
+        det = self.det
+        if self.occ is not None:  # no information about a target it cannot see
+            seen = ~blocked((pts + self.center[:, None])[:, :, None, :],
+                            self.t_abs[:, None, :, :], self.occ)  # fmt: skip
+            det = (*det, seen)
+        return information_entries(rel, self.wd, self.wt, self.pc, det)
+
+    def at_absolute(self, positions: FloatArray) -> FloatArray:
+        """Return ``f`` at absolute positions (B, 2), (B,)."""
+        rel = positions[:, None, :] - self.t_abs
+        det = self.det_abs
+        if self.occ is not None:
+            det = (*det, ~blocked(positions[:, None, :], self.t_abs, self.occ))
+        a, b, c = information_entries(rel, self.wd[:, 0], self.wt[:, 0], self.pc_abs, det)
+        return self.objective.of_targets(self.a0 + a, self.b0 + b, self.c0 + c)
+
+    def take(self, rows: np.ndarray) -> _Problem:
+        """Return the sub-batch of the given rows."""
+        sub = object.__new__(_Problem)
+        for key, value in vars(self).items():
+            if key in ("det", "det_abs") and value is not None:  # (p_detect, range^2)
+                value = tuple(v[rows] for v in value)
+            elif key == "occ" and value is not None:  # a layout per row, or one shared
+                value = value[rows]
+            sub.__dict__[key] = value[rows] if isinstance(value, np.ndarray) else value
+        return sub
+
+    def f(self, pts: FloatArray) -> FloatArray:
+        """Return the objective at points (B, C, 2) relative to the sensor, (B, C)."""
+        return self.value(self.entries(pts))
+
+    def value(self, info: tuple[FloatArray, FloatArray, FloatArray]) -> FloatArray:
+        """Return the objective from the sensor's information entries 3 x (B, C, K), (B, C)."""
+        a, b, c = info
+        a0, b0, c0 = self.a0[:, None], self.b0[:, None], self.c0[:, None]
+        return self.objective.of_targets(a0 + a, b0 + b, c0 + c)
+
+    def pieces(self, pts: FloatArray) -> FloatArray:
+        """Return the smooth pieces of ``f`` at points (B, C, 2): (B, C, P).
+
+        For a maximum over targets (``WORST_TRACE``) the per-target values (P = K), whose
+        maximum is ``f``; otherwise ``f`` itself (P = 1), smooth.
+        """
+        if not self.minimax:
+            return self.f(pts)[..., None]
+        a, b, c = self.entries(pts)
+        a0, b0, c0 = self.a0[:, None], self.b0[:, None], self.c0[:, None]
+        return self.objective.of_entries(a0 + a, b0 + b, c0 + c)
+
+    def combine(self, pieces: FloatArray) -> FloatArray:
+        """Return ``f`` from its pieces (..., P)."""
+        return np.max(pieces, axis=-1) if self.minimax else pieces[..., 0]
+
+    def feasible(self, pts: FloatArray) -> np.ndarray:
+        """Return whether points (B, C, 2) lie in F (with the tolerance), (B, C); with
+        occluders also reachable: the straight move there is not blocked."""
+        ok = feasible_set.contains(
+            pts, self.zero[:, None], self.r[:, None], self.t[:, None], self.rho[:, None]
+        )
+        if self.occ is not None and np.any(ok):
+            c = self.center[:, None, :]
+            ok &= ~blocked(np.broadcast_to(c, pts.shape), pts + c, self.occ)
+        return ok
+
+    def masked(self, pts: FloatArray) -> FloatArray:
+        """Return ``f`` at points (B, C, 2), ``+inf`` where infeasible."""
+        return np.where(self.feasible(pts), self.f(pts), np.inf)
+
+    def scale(self, pts: FloatArray) -> FloatArray:
+        """Return the distance from points (B, C, 2) to the nearest target, (B, C)."""
+        e = pts[:, :, None, :] - self.t[:, None, :, :]
+        return np.min(np.hypot(e[..., 0], e[..., 1]), axis=-1)
+
+
+def _is_max(objective: TraceObjective) -> bool:
+    """Return whether the objective combines its targets by their maximum (``WORST_TRACE``)."""
+    probe = np.array([1.0, 3.0, 2.0])
+    return bool(objective.combine(probe) == 3.0 and objective.combine(-probe) == -1.0)
+
+
+def _circle_points(o: FloatArray, rad: FloatArray, th: FloatArray) -> FloatArray:
+    """Return ``o + rad (cos th, sin th)`` for matching leading shapes, (..., 2)."""
+    out = np.empty(th.shape + (2,))
+    out[..., 0] = np.cos(th)
+    out[..., 1] = np.sin(th)
+    out *= rad[..., None]
+    out += o
+    return out
+
+
+def _arc_candidates(p: _Problem, n_boundary: int) -> list[tuple[FloatArray, ...]]:
+    """Return two groups of circle candidates ``(origins, radii, angles, points)``.
+
+    Shapes (B, n, 2), (B, n), (B, n, M), (B, n, M, 2): the reach circle (n = 1) with
+    ``n_boundary`` uniform angles plus the well angles around each target's direction,
+    sorted; the ``rho`` circles (n = K) with ``n_boundary`` uniform angles (a circle's own
+    target is at constant distance, so it has no well).
+    """
+    b = len(p.r)
+    dist = np.hypot(p.t[..., 0], p.t[..., 1])  # reach circle's centre -> targets (B, K)
+    phi = np.arctan2(p.t[..., 1], p.t[..., 0])
+    width = np.maximum(np.abs(dist - p.r[:, None]), p.rho[:, None])
+    # Wider wells are resolved by the uniform grid (spacing 2 pi / n_boundary).
+    sigma = np.minimum(width / np.maximum(p.r[:, None], _TINY), 0.25)
+    well = (phi[..., None] + sigma[..., None] * WELL_OFFSETS).reshape(b, -1)
+    uniform = np.linspace(-np.pi, np.pi, n_boundary, endpoint=False)
+    th0 = np.concatenate([np.broadcast_to(uniform, (b, n_boundary)), well], axis=-1)
+    th0 = np.sort(np.mod(th0 + np.pi, 2.0 * np.pi) - np.pi, axis=-1)[:, None]
+    th1 = np.broadcast_to(uniform, (b, p.origins.shape[1] - 1, n_boundary))
+    groups = []
+    for sl, th in ((slice(0, 1), th0), (slice(1, None), th1)):
+        o, rad = p.origins[:, sl], p.radii[:, sl]
+        pts = _circle_points(o[:, :, None, :], np.broadcast_to(rad[..., None], th.shape), th)
+        groups.append((o, rad, th, pts))
+    return groups
+
+
+@functools.lru_cache(maxsize=8)
+def _unit_grid(n: int) -> tuple[FloatArray, np.ndarray]:
+    """Return the ``n x n`` square grid over [-1, 1]^2 (n n, 2) and the indices in the unit disk."""
+    u = np.linspace(-1.0, 1.0, n)
+    grid = np.stack(np.meshgrid(u, u, indexing="ij"), -1).reshape(-1, 2)
+    inside = np.flatnonzero(np.hypot(grid[:, 0], grid[:, 1]) <= 1.0)
+    grid.flags.writeable = inside.flags.writeable = False
+    return grid, inside
+
+
+def _interior_candidates(p: _Problem, n_interior: int) -> tuple[FloatArray, np.ndarray, FloatArray]:
+    """Return the square grid over the reach disk (B, n n, 2), the indices inside the disk,
+    and the spacing (B,)."""
+    grid, inside = _unit_grid(n_interior)
+    pts = p.r[:, None, None] * grid
+    return pts, inside, p.r * (2.0 / max(n_interior - 1, 1))
+
+
+def _polar_candidates(p: _Problem) -> tuple[FloatArray, FloatArray]:
+    """Return log-polar grids around each target (B, K, R, A, 2) and their ring steps (B, K, R).
+
+    Near a target ``f`` varies on the scale of the distance to it (the bearing information
+    grows as its inverse square), so an interior optimum there (possible with K >= 2: the
+    other targets pull elsewhere) needs a grid that is finer closer in: ``POLAR_RINGS``
+    rings from ``1.3 rho`` (at least ``1e-3 r``) out to ``r`` in geometric progression,
+    ``POLAR_ANGLES`` angles each.
+    """
+    inner = 1.3 * np.maximum(p.rho, 1e-3 * p.r)
+    outer = np.maximum(p.r, 2.0 * inner)
+    frac = np.arange(POLAR_RINGS) / (POLAR_RINGS - 1)
+    radii = inner[:, None] * (outer / inner)[:, None] ** frac  # (B, R)
+    ang = np.linspace(-np.pi, np.pi, POLAR_ANGLES, endpoint=False)
+    unit = np.stack([np.cos(ang), np.sin(ang)], -1)  # (A, 2)
+    pts = p.t[:, :, None, None, :] + radii[:, None, :, None, None] * unit
+    step = np.broadcast_to(radii[:, None, :] * (2.0 * np.pi / POLAR_ANGLES), pts.shape[:3])
+    return pts, step
+
+
+def _model_max(f: FloatArray, g: FloatArray, H: FloatArray, d: FloatArray) -> FloatArray:
+    """Return ``max_k q_k(d)`` for 1-D piece models ``q_k = f_k + g_k d + H_k d^2 / 2``.
+
+    ``f, g, H`` (..., P); steps ``d`` (..., S); returns (..., S).
+    """
+    dd = d[..., :, None]
+    return np.max(f[..., None, :] + dd * (g[..., None, :] + 0.5 * H[..., None, :] * dd), axis=-1)
+
+
+def _step_1d(f: FloatArray, g: FloatArray, H: FloatArray, delta: FloatArray) -> FloatArray:
+    """Return the step in ``[-delta, delta]`` minimizing the model ``max_k q_k`` (..., ).
+
+    Candidates: both ends, each piece's vertex, every root of ``q_i - q_j`` (the kinks);
+    for one piece this is the trust-region Newton step.
+    """
+    n = f.shape[-1]
+    if n == 1:  # a smooth objective: the trust-region Newton step
+        g, H = g[..., 0], H[..., 0]
+        step = np.where(H > 0, -g / np.where(H > 0, H, 1.0), -np.sign(g) * delta)
+        return np.clip(step, -delta, delta)
+    cands = [-delta[..., None], delta[..., None]]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        cands.append(np.where(H > 0, -g / np.where(H > 0, H, 1.0), 0.0))
+        if n > 1:
+            i, j = np.triu_indices(n, k=1)
+            a = 0.5 * (H[..., i] - H[..., j])
+            b = g[..., i] - g[..., j]
+            c = f[..., i] - f[..., j]
+            disc = b * b - 4.0 * a * c
+            sq = np.sqrt(np.maximum(disc, 0.0))
+            q = -0.5 * (b + np.where(b >= 0, sq, -sq))
+            r1 = np.where(a != 0, q / np.where(a != 0, a, 1.0), np.inf)
+            r2 = np.where(q != 0, c / np.where(q != 0, q, 1.0), np.inf)
+            lin = np.where(b != 0, -c / np.where(b != 0, b, 1.0), np.inf)
+            tiny = np.abs(a) * np.maximum(delta[..., None], _TINY) <= 1e-12 * np.abs(b)
+            r1 = np.where(tiny, lin, np.where(disc >= 0, r1, np.inf))
+            r2 = np.where(tiny, lin, np.where(disc >= 0, r2, np.inf))
+            cands += [r1, r2]
+    d = np.concatenate(cands, axis=-1)
+    d = np.where(np.isfinite(d), np.clip(d, -delta[..., None], delta[..., None]), delta[..., None])
+    model = _model_max(f, g, H, d)
+    best = np.argmin(model, axis=-1)
+    return np.take_along_axis(d, best[..., None], axis=-1)[..., 0]
+
+
+def _quad(f: FloatArray, g: FloatArray, H: FloatArray, d: FloatArray) -> FloatArray:
+    """Return 2-D piece models at steps: f (..., P), g (..., P, 2), H (..., P, 3), d (..., S, 2)."""
+    x, y = d[..., :, None, 0], d[..., :, None, 1]
+    h11, h12, h22 = H[..., None, :, 0], H[..., None, :, 1], H[..., None, :, 2]
+    lin = g[..., None, :, 0] * x + g[..., None, :, 1] * y
+    return f[..., None, :] + lin + 0.5 * (h11 * x * x + 2.0 * h12 * x * y + h22 * y * y)
+
+
+def _clip_norm(d: FloatArray, delta: FloatArray) -> FloatArray:
+    """Return steps ``d`` (..., S, 2) scaled into the disk of radius ``delta`` (...)."""
+    norm = np.hypot(d[..., 0], d[..., 1])
+    lim = delta[..., None]
+    scale = np.where(norm > lim, lim / np.maximum(norm, _TINY), 1.0)
+    return np.where(np.isfinite(d), d * scale[..., None], 0.0)
+
+
+def _newton_2d(g: FloatArray, H: FloatArray, delta: FloatArray) -> FloatArray:
+    """Return each piece's trust-region Newton step (gradient step if ``H`` not PD), (..., P, 2)."""
+    h11, h12, h22 = H[..., 0], H[..., 1], H[..., 2]
+    det = h11 * h22 - h12 * h12
+    pd = (h11 > 0) & (det > 0)
+    sdet = np.where(pd, det, 1.0)
+    nx = -(h22 * g[..., 0] - h12 * g[..., 1]) / sdet
+    ny = -(-h12 * g[..., 0] + h11 * g[..., 1]) / sdet
+    gn = np.maximum(np.hypot(g[..., 0], g[..., 1]), _TINY)
+    lim = delta[..., None]
+    sx = np.where(pd, nx, -g[..., 0] * lim / gn)
+    sy = np.where(pd, ny, -g[..., 1] * lim / gn)
+    return _clip_norm(np.stack([sx, sy], -1), delta)
+
+
+def _step_2d(f: FloatArray, g: FloatArray, H: FloatArray, delta: FloatArray) -> FloatArray:
+    """Return the step in the disk ``|d| <= delta`` minimizing the model ``max_k q_k``, (..., 2).
+
+    Candidates: each piece's Newton step; for each pair, the minimum of their model
+    along the line where their linear models agree (a kink curve), weighted by the SQP
+    multipliers (the least-norm convex combination of their gradients); for each triple, the
+    point where the three linear models agree. One piece: the trust-region Newton step.
+    """
+    n = f.shape[-1]
+    if n == 1:  # a smooth objective: the trust-region Newton step
+        return _newton_2d(g, H, delta)[..., 0, :]
+    cands = [_newton_2d(g, H, delta)]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        if n > 1:
+            i, j = np.triu_indices(n, k=1)
+            nv = g[..., i, :] - g[..., j, :]
+            n2 = np.maximum(nv[..., 0] ** 2 + nv[..., 1] ** 2, _TINY)
+            d0 = nv * ((f[..., j] - f[..., i]) / n2)[..., None]
+            e = np.stack([-nv[..., 1], nv[..., 0]], -1) / np.sqrt(n2)[..., None]
+            # Lagrangian weights: the convex combination of the two gradients of least norm
+            # (zero at a kink minimum), as in SQP for minimax.
+            lam = np.clip(-np.sum(g[..., j, :] * nv, -1) / n2, 0.0, 1.0)[..., None]
+            Hm = lam * H[..., i, :] + (1.0 - lam) * H[..., j, :]
+            gm = lam * g[..., i, :] + (1.0 - lam) * g[..., j, :]
+            hd = np.stack(
+                [
+                    Hm[..., 0] * d0[..., 0] + Hm[..., 1] * d0[..., 1],
+                    Hm[..., 1] * d0[..., 0] + Hm[..., 2] * d0[..., 1],
+                ],
+                -1,
+            )
+            slope = np.sum((gm + hd) * e, -1)
+            curv = Hm[..., 0] * e[..., 0] ** 2 + 2 * Hm[..., 1] * e[..., 0] * e[..., 1]
+            curv = curv + Hm[..., 2] * e[..., 1] ** 2
+            t = np.where(
+                curv > 0, -slope / np.where(curv > 0, curv, 1.0), -np.sign(slope) * delta[..., None]
+            )
+            cands.append(_clip_norm(d0 + t[..., None] * e, delta))
+        if n > 2:
+            i, j, k = (np.array(x) for x in zip(*_triples(n), strict=True))
+            u, v = g[..., i, :] - g[..., j, :], g[..., i, :] - g[..., k, :]
+            ru, rv = f[..., j] - f[..., i], f[..., k] - f[..., i]
+            det = u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
+            sdet = np.where(det != 0, det, 1.0)
+            x = (ru * v[..., 1] - rv * u[..., 1]) / sdet
+            y = (u[..., 0] * rv - v[..., 0] * ru) / sdet
+            cands.append(
+                _clip_norm(
+                    np.stack([np.where(det != 0, x, 0.0), np.where(det != 0, y, 0.0)], -1), delta
+                )
+            )
+    d = np.concatenate(cands, axis=-2)
+    model = np.max(_quad(f, g, H, d), axis=-1)
+    best = np.argmin(np.where(np.isfinite(model), model, np.inf), axis=-1)
+    return np.take_along_axis(d, best[..., None, None], axis=-2)[..., 0, :]
+
+
+def _triples(n: int) -> list[tuple[int, int, int]]:
+    """Return the index triples ``i < j < k < n``."""
+    return [(i, j, k) for i in range(n) for j in range(i + 1, n) for k in range(j + 1, n)]
+
+
+_ARC_STENCIL = np.array([0.0, 1.0, -1.0])
+_PLANE_STENCIL = np.array(
+    [[0.0, 0.0], [1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0], [1.0, 1.0]]
+)
+
+
+#: Difference quotients of the arc stencil (values at 0, +h, -h): h g and h^2 H.
+_ARC_DIFF = np.array([[0.0, 0.5, -0.5], [-2.0, 1.0, 1.0]])
+#: Difference quotients of the plane stencil (values at _PLANE_STENCIL): h g_x, h g_y,
+#: h^2 H_xx, h^2 H_xy, h^2 H_yy.
+_PLANE_DIFF = np.array(
+    [
+        [0.0, 0.5, -0.5, 0.0, 0.0, 0.0],
+        [0.0, 0.0, 0.0, 0.5, -0.5, 0.0],
+        [-2.0, 1.0, 1.0, 0.0, 0.0, 0.0],
+        [1.0, -1.0, 0.0, -1.0, 0.0, 1.0],
+        [-2.0, 0.0, 0.0, 1.0, 1.0, 0.0],
+    ]
+)
+
+_ARC_POWERS = np.array([[1.0], [2.0]])
+_PLANE_POWERS = np.array([[1.0], [1.0], [2.0], [2.0], [2.0]])
+
+
+def _stencils(p: _Problem, o: FloatArray, rad: FloatArray, th: FloatArray, x: FloatArray) -> dict:
+    """Return values, pieces and difference-quotient derivatives at arc angles and points.
+
+    ``o, rad, th`` (B, ma, ...) arc starts (circle origin, radius, angle), ``x`` (B, mp, 2)
+    plane points; all stencils are evaluated in one call of the objective.
+    """
+    b, ma = th.shape
+    mp = x.shape[1]
+    pa = _circle_points(o, rad, th)
+    centres = np.concatenate([pa, x], axis=1)
+    scale = p.scale(centres)
+    feas = p.feasible(centres)
+    ha = FD_STEP * np.minimum(scale[:, :ma] / np.maximum(rad, _TINY), 1.0)
+    tha = th[..., None] + ha[..., None] * _ARC_STENCIL
+    pts = [_circle_points(o[:, :, None], rad[..., None], tha).reshape(b, -1, 2)]
+    if mp:
+        hp = FD_STEP * np.minimum(scale[:, ma:], p.r[:, None])
+        pts.append((x[:, :, None, :] + hp[..., None, None] * _PLANE_STENCIL).reshape(b, -1, 2))
+    vals = p.pieces(np.concatenate(pts, axis=1) if mp else pts[0])
+    npc = vals.shape[-1]
+    va = vals[:, : 3 * ma].reshape(b, ma, 3, npc)
+    da = _finite((_ARC_DIFF @ va) / ha[..., None, None] ** _ARC_POWERS)
+    out = {
+        "fa": np.where(feas[:, :ma], p.combine(va[..., 0, :]), np.inf),
+        "pa": va[..., 0, :],
+        "ga": da[..., 0, :],
+        "Ha": da[..., 1, :],
+        "ha": ha,
+    }
+    if mp:
+        vp = vals[:, 3 * ma :].reshape(b, mp, 6, npc)
+        dp = _finite((_PLANE_DIFF @ vp) / hp[..., None, None] ** _PLANE_POWERS).swapaxes(-1, -2)
+        out.update(
+            fp=np.where(feas[:, ma:], p.combine(vp[..., 0, :]), np.inf),
+            pp=vp[..., 0, :],
+            gp=dp[..., :2],
+            Hp=dp[..., 2:],
+            hp=hp,
+        )
+    return out
+
+
+_ARC_KEYS = ("th", "fa", "pa", "ga", "Ha", "ha", "da", "active_a", "o", "rad", "miss_a")
+_PLANE_KEYS = ("x", "fp", "pp", "gp", "Hp", "hp", "dp", "active_p", "miss")
+
+
+def _iterate(p: _Problem, st: dict) -> None:
+    """Take one trust-region step for every active start of ``st`` (updated in place)."""
+    sa = np.where(st["active_a"], _step_1d(st["pa"], st["ga"], st["Ha"], st["da"]), 0.0)
+    # Converged: a step below CONVERGED of the local scale changes f by its square.
+    st["active_a"] &= np.abs(sa) > (CONVERGED / FD_STEP) * st["ha"]
+    plane = st["x"].shape[1] > 0
+    if plane:
+        sp = _step_2d(st["pp"], st["gp"], st["Hp"], st["dp"])
+        sp = np.where(st["active_p"][..., None], sp, 0.0)
+        norm = np.hypot(sp[..., 0], sp[..., 1])
+        st["active_p"] &= norm > (CONVERGED / FD_STEP) * st["hp"]
+    if not (st["active_a"].any() or (plane and st["active_p"].any())):
+        return  # every start has converged: nothing to evaluate
+    # A smooth objective converges quadratically under Newton's steps: after an accepted
+    # step shorter than SETTLED of the local scale the next would change f by less than
+    # the rounding of the difference quotients, so the start ends there.
+    settle = 0.0 if p.minimax else SETTLED / FD_STEP
+    settled_a = np.abs(sa) <= settle * st["ha"]
+    if plane:
+        settled_p = norm <= settle * st["hp"]
+        new = _stencils(p, st["o"], st["rad"], st["th"] + sa, st["x"] + sp)
+        new["x"] = st["x"] + sp
+    else:
+        new = _stencils(p, st["o"], st["rad"], st["th"] + sa, st["x"])
+    new["th"] = st["th"] + sa
+    acc_a = st["active_a"] & (new["fa"] < st["fa"])
+    # An arc step leaving F ends the arc at another circle: that end (a circle
+    # intersection) is a candidate itself, so MAX_MISSES such steps stop the start.
+    st["miss_a"] = st["miss_a"] + (st["active_a"] & ~np.isfinite(new["fa"]))
+    st["active_a"] &= (st["miss_a"] < MAX_MISSES) & ~(acc_a & settled_a)
+    for key in ("th", "fa", "pa", "ga", "Ha", "ha"):
+        mask = acc_a.reshape(acc_a.shape + (1,) * (new[key].ndim - acc_a.ndim))
+        st[key] = np.where(mask, new[key], st[key])
+    st["da"] = np.where(acc_a, np.maximum(st["da"], 2.0 * np.abs(sa)), 0.25 * np.abs(sa))
+    if not plane:
+        return
+    acc_p = st["active_p"] & (new["fp"] < st["fp"])
+    # Plane steps leaving F MAX_MISSES times (each shrinking the trust radius): the
+    # optimum nearby lies on the boundary, which the arc refinement covers; stop.
+    st["miss"] = st["miss"] + ~np.isfinite(new["fp"])
+    st["active_p"] &= (st["miss"] < MAX_MISSES) & ~(acc_p & settled_p)
+    for key in _PLANE_KEYS[:6]:
+        mask = acc_p.reshape(acc_p.shape + (1,) * (new[key].ndim - acc_p.ndim))
+        st[key] = np.where(mask, new[key], st[key])
+    st["dp"] = np.where(acc_p, np.maximum(st["dp"], 2.0 * norm), 0.25 * norm)
+
+
+def _refine(
+    p: _Problem,
+    arcs: tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray],
+    plane: tuple[FloatArray, FloatArray, FloatArray],
+    n_iter: int,
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """Return the refined points (B, m, 2) and values (B, m) (``+inf`` where none started),
+    and the final angles (B, ma) and plane points (B, mp, 2).
+
+    ``arcs = (origin (B, ma, 2), radius (B, ma), theta (B, ma), value (B, ma), delta)``,
+    ``plane = (x (B, mp, 2), value (B, mp), delta (B, mp))``; a start with value ``+inf``
+    does not start (otherwise the value is recomputed at the start). One evaluation of all
+    stencils per iteration. Models are per piece (:meth:`_Problem.pieces`). Rows whose
+    starts have all converged drop out of the batch (when they are at least half of it).
+    """
+    o, rad, th, fa, da = arcs
+    x, fp, dp = plane
+    st = {"pp": fp[..., None], "gp": x[..., None, :], "Hp": np.zeros(fp.shape + (1, 3))}
+    st.update(hp=fp, fp=fp)
+    st.update(_stencils(p, o, rad, th, x))
+    st.update(th=th, x=x, o=o, rad=rad, da=da, dp=dp)
+    st["fa"] = np.where(np.isfinite(fa), st["fa"], np.inf)
+    st["fp"] = np.where(np.isfinite(fp), st["fp"], np.inf)
+    st["active_a"], st["active_p"] = np.isfinite(st["fa"]), np.isfinite(st["fp"])
+    st["miss"] = np.zeros(fp.shape, dtype=np.int64)
+    st["miss_a"] = np.zeros(fa.shape, dtype=np.int64)
+    if len(p.r) < COMPACT_ROWS:  # small batches: no compaction, stop when all converged
+        for _ in range(n_iter):
+            _iterate(p, st)
+            if not (st["active_a"].any() or st["active_p"].any()):
+                break
+        pts = np.concatenate([_circle_points(o, rad, st["th"]), st["x"]], axis=1)
+        return pts, np.concatenate([st["fa"], st["fp"]], axis=1), st["th"], st["x"]
+    full = {key: st[key].copy() for key in _ARC_KEYS + _PLANE_KEYS}
+    rows = np.arange(len(p.r))
+    sub = p
+    for _ in range(n_iter):
+        _iterate(sub, st)
+        busy = st["active_a"].any(axis=1) | st["active_p"].any(axis=1)
+        if not busy.all() and 2 * np.count_nonzero(busy) <= len(busy):
+            for key in full:
+                full[key][rows] = st[key]
+            rows = rows[busy]
+            st = {key: full[key][rows] for key in full}
+            if len(rows) == 0:
+                break
+            sub = p.take(rows)
+    for key in full:
+        full[key][rows] = st[key]
+    pts = np.concatenate([_circle_points(o, rad, full["th"]), full["x"]], axis=1)
+    return pts, np.concatenate([full["fa"], full["fp"]], axis=1), full["th"], full["x"]
+
+
+def solve_sensor(
+    base: tuple[FloatArray, FloatArray, FloatArray],
+    center: FloatArray,
+    r: FloatArray | float,
+    targets: FloatArray,
+    rho: FloatArray | float,
+    w_d: FloatArray | float,
+    w_theta: FloatArray | float,
+    pose_cov: FloatArray | None = None,
+    objective: TraceObjective = TRACE,
+    *,
+    n_boundary: int = 64,
+    n_interior: int = 16,
+    n_iter: int = 30,
+    detect: tuple[FloatArray, FloatArray] | None = None,
+    occluders: object = None,
+) -> tuple[FloatArray, FloatArray]:
+    """Return ``(positions (..., 2), values (...))``: the best next position of one sensor.
+
+    Unchecked kernel (callers pass validated arrays), batched over leading axes ``...``.
+
+    Args:
+        base: ``(a0, b0, c0)``, each (..., K): every target's information entries without
+            this sensor (SPD: prior plus the other sensors).
+        center: the sensor's current position (..., 2).
+        r: its reach (...), >= 0.
+        targets: the K predicted target positions (..., K, 2).
+        rho: its minimum distance to every target (...), >= 0.
+        w_d, w_theta: its measurement weights (...)
+        (:func:`activetrack.models.sensor_models.weights`).
+        pose_cov: its pose covariance (..., 2, 2) PSD, or None.
+        objective: a K-target objective of :mod:`activetrack.models.objective`.
+        n_boundary: uniform angles per boundary circle.
+        n_interior: points per side of the square interior grid.
+        n_iter: refinement iterations (one batched evaluation each).
+        detect: ``(p_detect, max_range**2)`` (...): the sensor's information counts at its
+            expected value (:func:`activetrack.models.sensor_models.detection_factor`); None:
+            always measured.
+        occluders: an :class:`activetrack.models.occluders.Occluders` (shared, or batched over
+            the first batch axis): no information about a target hidden from a point (the
+            line of sight); None: an open plane. The
+            objective then jumps across shadow boundaries, which the candidates resolve
+            only to their spacing (no candidates are placed on the boundaries).
+
+    Returns ``values = f(positions)``; positions lie in ``F`` (to the tolerance of
+    :func:`activetrack.kinematics.feasible_set.contains`) unless ``F`` is empty (then the fallback).
+    """
+    p = _Problem(
+        base, center, r, targets, rho, w_d, w_theta, pose_cov, objective, detect, occluders
+    )
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        prepared = Prepared(p, n_boundary, n_interior, n_iter)
+    positions, values = solve_prepared(prepared, (p.a0, p.b0, p.c0))
+    return positions.reshape(p.shape + (2,)), values.reshape(p.shape)
+
+
+def _cyclic(n_rings: int, n: int) -> np.ndarray:
+    """Return the neighbours (n_rings n, 4) of points on rings of ``n`` cyclic angles:
+    the previous and next angle, and the same angle on the previous and next ring (-1
+    where there is none)."""
+    ring, ang = np.divmod(np.arange(n_rings * n), n)
+    return np.stack(
+        [
+            ring * n + (ang - 1) % n,
+            ring * n + (ang + 1) % n,
+            np.where(ring > 0, (ring - 1) * n + ang, -1),
+            np.where(ring < n_rings - 1, (ring + 1) * n + ang, -1),
+        ],
+        -1,
+    )
+
+
+def _grid_neighbours(n: int, inside: np.ndarray) -> np.ndarray:
+    """Return the 4 neighbours (len(inside), 4) of the square grid points ``inside`` (flat
+    indices of an ``n x n`` grid), as positions in ``inside`` (-1 outside the disk)."""
+    where = np.full(n * n, -1)
+    where[inside] = np.arange(len(inside))
+    i, j = np.divmod(inside, n)
+    out = []
+    for di, dj in ((-1, 0), (1, 0), (0, -1), (0, 1)):
+        ii, jj = i + di, j + dj
+        ok = (ii >= 0) & (ii < n) & (jj >= 0) & (jj < n)
+        out.append(np.where(ok, where[np.where(ok, ii * n + jj, 0)], -1))
+    return np.stack(out, -1)
+
+
+@functools.lru_cache(maxsize=64)
+def _tables(
+    nv: int, n0: int, n1: int, nc: int, k: int, n_interior: int
+) -> tuple[np.ndarray, np.ndarray, int]:
+    """Return the candidates' neighbours (C, 4), the start groups (G, n) and how many of
+    the groups are circles, for the layout of :class:`Prepared` (``C`` stands for none).
+
+    Neighbours: the previous and next angle on each circle (cyclic); the 4 grid neighbours
+    inside the disk; on the polar grids the previous and next angle (cyclic) and the same
+    angle on the previous and next ring of the same target. Groups: the reach circle, each
+    of the ``nc`` circles about the targets (``rho``, then the sensing ranges), and
+    (``n_interior > 0``) the square grid and the K polar grids.
+    """
+    # Circles: only the neighbouring angles (no rings across circles).
+    nbr = [
+        np.full((nv, 4), -1),
+        np.concatenate([nv + _cyclic(1, n0)[:, :2], np.full((n0, 2), -1)], 1),
+        np.concatenate([nv + n0 + _cyclic(nc, n1)[:, :2], np.full((nc * n1, 2), -1)], 1),
+    ]
+    groups = [nv + np.arange(n0)] + [nv + n0 + c * n1 + np.arange(n1) for c in range(nc)]
+    arc_groups = len(groups)
+    if n_interior:
+        inside = _unit_grid(n_interior)[1]
+        start, ng = nv + n0 + nc * n1, len(inside)
+        g_nbr = _grid_neighbours(n_interior, inside)
+        p_nbr = _cyclic(k * POLAR_RINGS, POLAR_ANGLES)
+        # Polar rings of different targets are not neighbours.
+        ring = np.arange(k * POLAR_RINGS * POLAR_ANGLES) // POLAR_ANGLES % POLAR_RINGS
+        p_nbr[:, 2] = np.where(ring > 0, p_nbr[:, 2], -1)
+        p_nbr[:, 3] = np.where(ring < POLAR_RINGS - 1, p_nbr[:, 3], -1)
+        nbr.append(np.where(g_nbr >= 0, start + g_nbr, -1))
+        nbr.append(np.where(p_nbr >= 0, start + ng + p_nbr, -1))
+        groups += [start + np.arange(ng), start + ng + np.arange(k * POLAR_RINGS * POLAR_ANGLES)]
+    nbr = np.concatenate(nbr, axis=0)
+    c = len(nbr)
+    table = np.full((len(groups), max(len(g) for g in groups)), c)
+    for i, g in enumerate(groups):
+        table[i, : len(g)] = g
+    neighbours = np.where(nbr >= 0, nbr, c)
+    neighbours.flags.writeable = table.flags.writeable = False
+    return neighbours, table, arc_groups
+
+
+class Prepared:
+    """The part of a batch of subproblems that does not depend on the base ``(a0, b0, c0)``.
+
+    The candidates (:func:`_arc_candidates`, the circle intersections, with K >= 2 the
+    interior and polar grids), their feasibility, the sensor's information entries at them
+    and the refinement start each would be depend only on the sensor's reach disk, the
+    targets, ``rho``, the weights and the pose covariance, which Gauss-Seidel relaxation
+    keeps fixed over its sweeps while the base (the other sensors' information) changes.
+    Built once by :func:`prepare`, solved for any base by :func:`solve_prepared`.
+
+    Candidates are laid out as [circle intersections, reach circle (sorted angles),
+    ``rho`` circles, interior grid points inside the disk, polar grids]; ``neighbours``
+    (C, 4) and the start ``groups`` (G, n) index them, with ``C`` standing for "none"
+    (value ``+inf``).
+    """
+
+    def __init__(self, p: _Problem, n_boundary: int, n_interior: int, n_iter: int):
+        b, k = len(p.r), p.k
+        self.problem, self.n_iter = p, n_iter
+        #: With ``remember``, each solve keeps its starts and where they ended (``last``);
+        #: the next solve refines from there the rows whose starts are the same candidates.
+        self.remember, self.last = False, None
+        (o0, r0, th0, pts0), (o1, r1, th1, pts1) = _arc_candidates(p, n_boundary)
+        n0, n1 = th0.shape[-1], th1.shape[-1]
+        pts_v, ok_v = feasible_set.pair_points(p.origins, p.radii)
+        nc = th1.shape[1]  # circles about the targets
+        nv, na = pts_v.shape[1], n0 + nc * n1
+        self.nv, self.na = nv, na
+        # Arc candidates: circle origin, radius, angle and initial trust radius.
+        self.arc_o = np.concatenate([np.repeat(o0, n0, axis=1), np.repeat(o1, n1, axis=1)], axis=1)
+        self.arc_r = np.concatenate([np.repeat(r0, n0, axis=1), np.repeat(r1, n1, axis=1)], axis=1)
+        self.arc_th = np.concatenate([th0.reshape(b, -1), th1.reshape(b, -1)], axis=1)
+        pts_a = np.concatenate([pts0.reshape(b, -1, 2), pts1.reshape(b, -1, 2)], axis=1)
+        # The trust radius of an arc start: the larger gap to a neighbouring angle, at
+        # least the uniform spacing in units of the local scale (repeated angles: gap 0).
+        reach = []
+        for th in (th0, th1):
+            gap = np.diff(th, axis=-1, append=th[..., :1] + 2.0 * np.pi)
+            reach.append(np.maximum(gap, np.roll(gap, 1, axis=-1)).reshape(b, -1))
+        local_scale = p.scale(pts_a) / np.maximum(self.arc_r, _TINY)
+        self.arc_d = np.maximum(
+            np.concatenate(reach, axis=1),
+            (2.0 * np.pi / n_boundary) * np.minimum(local_scale, 1.0),
+        )
+        parts = [pts_v, pts_a]
+        self.interior = k > 1 and n_interior > 0
+        self.plane_x = np.zeros((b, 0, 2))
+        self.plane_d = np.zeros((b, 0))
+        if self.interior:
+            grid, inside, spacing = _interior_candidates(p, n_interior)
+            polar, polar_step = _polar_candidates(p)
+            ng = len(inside)
+            self.plane_x = np.concatenate([grid[:, inside], polar.reshape(b, -1, 2)], axis=1)
+            self.plane_d = np.concatenate(
+                [
+                    np.broadcast_to(spacing[:, None], (b, ng)),
+                    np.broadcast_to(polar_step[..., None], polar.shape[:-1]).reshape(b, -1),
+                ],
+                axis=1,
+            )
+            parts.append(self.plane_x)
+        self.pts = np.concatenate(parts, axis=1)
+        self.neighbours, self.groups, self.arc_groups = _tables(
+            nv, n0, n1, nc, k, n_interior if self.interior else 0
+        )
+        # Start attributes indexed by candidate (and "none", the last index).
+        c = self.pts.shape[1]
+        at = {"arc_o": (nv, 2), "arc_r": (nv, 0), "arc_th": (nv, 0), "arc_d": (nv, 0)}
+        if self.interior:
+            at.update(plane_x=(nv + na, 2), plane_d=(nv + na, 0))
+        for key, (first, width) in at.items():
+            value = getattr(self, key)
+            full = np.zeros((b, c + 1) + ((width,) if width else ()))
+            full[:, first : first + value.shape[1]] = value
+            setattr(self, key, full)
+        feasible = p.feasible(self.pts)
+        feasible[:, :nv] &= ok_v
+        self.feasible = feasible
+        self.info = p.entries(self.pts)
+
+    def take(self, rows: np.ndarray) -> Prepared:
+        """Return the sub-batch of the given rows."""
+        sub = object.__new__(Prepared)
+        sub.__dict__.update(vars(self))
+        sub.problem = self.problem.take(rows)
+        sub.last, sub.remember = None, False
+        for key in ("arc_o", "arc_r", "arc_th", "arc_d", "plane_x", "plane_d", "pts", "feasible"):
+            setattr(sub, key, getattr(self, key)[rows])
+        sub.info = tuple(x[rows] for x in self.info)
+        return sub
+
+    def starts(self, vals: FloatArray) -> tuple[tuple[FloatArray, ...], tuple[FloatArray, ...]]:
+        """Return the refinement starts for candidate values ``vals`` (B, C).
+
+        ``N_LOCAL_ARC`` best local minima (no neighbour lower) of each circle and
+        ``N_LOCAL_PLANE`` of the square and of the polar grids, as
+        ``arcs = (origin, radius, theta, value, delta)`` and ``plane = (x, value, delta)``.
+        """
+        b = len(vals)
+        ext = np.concatenate([vals, np.full((b, 1), np.inf)], axis=1)
+        local = vals <= ext[:, self.neighbours].min(axis=-1)
+        ext[:, :-1] = np.where(local & np.isfinite(vals), vals, np.inf)
+        grouped = ext[:, self.groups]  # (B, G, n)
+        order = np.argsort(grouped, axis=-1, kind="stable")[..., :N_LOCAL_PLANE]
+        idx = self.groups[np.arange(len(self.groups))[:, None], order]  # (B, G, m)
+        rows = np.arange(b)[:, None]
+        value = grouped[rows[..., None], np.arange(len(self.groups))[:, None], order]
+        ga = self.arc_groups
+        self.chosen = idx
+        ia = idx[:, :ga, :N_LOCAL_ARC].reshape(b, -1)
+        fa = value[:, :ga, :N_LOCAL_ARC].reshape(b, -1)
+        arcs = (
+            self.arc_o[rows, ia], self.arc_r[rows, ia], self.arc_th[rows, ia], fa,
+            self.arc_d[rows, ia],
+        )  # fmt: skip
+        if not self.interior:
+            empty = np.zeros((b, 0))
+            return arcs, (np.zeros((b, 0, 2)), empty, empty)
+        ip = idx[:, ga:].reshape(b, -1)
+        plane = (self.plane_x[rows, ip], value[:, ga:].reshape(b, -1), self.plane_d[rows, ip])
+        return arcs, plane
+
+
+def prepare(
+    center: FloatArray,
+    r: FloatArray,
+    targets: FloatArray,
+    rho: FloatArray,
+    w_d: FloatArray,
+    w_theta: FloatArray,
+    pose_cov: FloatArray | None = None,
+    objective: TraceObjective = TRACE,
+    *,
+    n_boundary: int = 64,
+    n_interior: int = 16,
+    n_iter: int = 30,
+    detect: tuple[FloatArray, FloatArray] | None = None,
+    occluders: object = None,
+) -> Prepared:
+    """Return the base-independent part of a batch of subproblems, flattened to B rows.
+
+    Arguments as :func:`solve_sensor` without ``base`` (their leading axes broadcast to
+    the batch shape, flattened row-major).
+    """
+    p = _Problem(
+        None, center, r, targets, rho, w_d, w_theta, pose_cov, objective, detect, occluders
+    )
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        return Prepared(p, n_boundary, n_interior, n_iter)
+
+
+def solve_prepared(
+    prepared: Prepared, base: tuple[FloatArray, FloatArray, FloatArray]
+) -> tuple[FloatArray, FloatArray]:
+    """Return ``(positions (B, 2), values (B,))`` of :func:`solve_sensor` for a prepared batch.
+
+    ``base`` ``(a0, b0, c0)``, each (B, K), for the rows of ``prepared``.
+    """
+    p = prepared.problem.with_base(base)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        pts, _ = _solve(p, prepared)
+    positions = pts + p.center
+    # The value at the returned (absolute) positions, as a caller computes it: it differs
+    # from the value found in relative coordinates by the rounding of the addition.
+    return positions, p.at_absolute(positions)
+
+
+def _solve(p: _Problem, cand: Prepared) -> tuple[FloatArray, FloatArray]:
+    """Return the best points (B, 2) relative to the sensors and their values (B,).
+
+    All candidates (arcs, circle intersections, interior grid) are evaluated in one call.
+    With one target there is no interior grid: the optimum lies on the boundary (Lemma 3
+    holds for every measurement model and pose covariance, ``docs/sensor-models-design.md``
+    section 5).
+    """
+    vals = np.where(cand.feasible, p.value(cand.info), np.inf)
+    arcs, plane = cand.starts(vals)
+    chosen = cand.chosen
+    if cand.last is not None:
+        # A repeated solve (Gauss-Seidel's next sweep, the base changed a little): rows
+        # whose starts come from the same candidates refine from where those ended.
+        same = np.all(chosen == cand.last[0], axis=(1, 2))
+        arcs = arcs[:2] + (np.where(same[:, None], cand.last[1], arcs[2]),) + arcs[3:]
+        plane = (np.where(same[:, None, None], cand.last[2], plane[0]),) + plane[1:]
+    pts_r, vals_r, th_r, x_r = _refine(p, arcs, plane, cand.n_iter)
+    if cand.remember:
+        cand.last = (chosen, th_r, x_r)
+    all_pts = np.concatenate([pts_r, cand.pts], axis=1)
+    all_vals = np.concatenate([vals_r, vals], axis=1)
+    best = np.argmin(all_vals, axis=1)
+    rows = np.arange(len(best))
+    s, value = all_pts[rows, best], all_vals[rows, best]
+    empty = ~np.isfinite(value)
+    if np.any(empty):  # F empty: no candidate is feasible
+        fb = feasible_set.fallback(p.zero, p.r, p.t, p.rho)
+        s = np.where(empty[:, None], fb, s)
+        value = np.where(empty, p.f(s[:, None])[:, 0], value)
+    return s, value

@@ -1,0 +1,7 @@
+"""The world: the closed tracking loop, batched over copies (``World``), the
+scenarios it runs, one step's kernels, the observation and the planning problem.
+"""
+
+from activetrack.world.world import DEFAULT_NOISE_BLOCK, StepResult, World
+
+__all__ = ["DEFAULT_NOISE_BLOCK", "StepResult", "World"]
