@@ -56,31 +56,26 @@ def segments_enter(paths, a, b, n=201):
     return in_any(paths, pts).reshape(n, -1).any(axis=0)
 
 
-def misspecify_filter(world, r_scale=1.0, q_scale=1.0):
+def misspecify_filter(world, r_scale):
     """Return ``world`` with a mis-modelled filter: it assumes measurement noise
-    ``r_scale * R`` and process noise ``q_scale * Q``, while the world still draws the
-    true target and measurements with R and Q (before its first reset).
+    ``r_scale * R`` while the world still draws the measurements with R (call before the
+    first reset).
 
     The filter reads the weights ``1/sigma^2`` (``params.weights``; in the one-target
-    compiled step, the table's W columns) and each target's ``Q``; the draws read
-    ``noise_std`` (the table's STD columns) and ``noise_factor``, left unchanged.
+    compiled step, the table's W columns); the draws read ``noise_std`` (the table's STD
+    columns), left unchanged.
     """
     import dataclasses
 
-    from activetrack import loop_kernels, tracking
+    from activetrack import loop_kernels
 
-    p = world.params
-    wd, wt = p.weights
-    targets = tuple(tracking.TargetParams(t.Phi, q_scale * t.Q, t.noise_factor) for t in p.targets)
-    world.params = dataclasses.replace(
-        p, weights=(wd / r_scale, wt / r_scale), Q=q_scale * p.Q, targets=targets
-    )
+    wd, wt = world.params.weights
+    world.params = dataclasses.replace(world.params, weights=(wd / r_scale, wt / r_scale))
     if world._fused:
-        table, mats = (a.copy() for a in world._fused_args)
+        table = world._fused_args[0].copy()
         table[:, loop_kernels.W_D] /= r_scale
         table[:, loop_kernels.W_T] /= r_scale
-        mats[2] *= q_scale  # (Phi, noise factor, Q)
-        world._fused_args = (table, mats)
+        world._fused_args = (table, world._fused_args[1])
     return world
 
 
@@ -94,7 +89,10 @@ def nees_band(run_means, dim=2, level=0.99):
     one chi-square(2 runs) draw per run nor that of chi-square(2 runs steps) describes
     the statistic. Each run's average is one i.i.d. sample: the band is the t-interval
     ``dim +- t(level; runs - 1) s / sqrt(runs)`` with ``s`` the runs' sample standard
-    deviation (the central limit theorem on the mean of ``runs`` averages).
+    deviation (the central limit theorem on the mean of ``runs`` averages). On range_only
+    with 200 runs its 95% half-width is 0.068: the chi-square(2 runs) band's (0.28) is 4
+    times as wide, the chi-square(2 runs steps) band's (0.039) too narrow by 1.7. 99%
+    by default: the suite checks a dozen such statistics on fixed seeds.
     """
     x = np.asarray(run_means, dtype=np.float64)
     n = x.size
