@@ -14,6 +14,7 @@ import pytest
 
 from activetrack import make_scenario
 from activetrack.baselines import GBES, GSR, RandomMotion, run_monte_carlo
+from tests.core.helpers import nees_band
 
 
 @pytest.mark.slow
@@ -33,7 +34,12 @@ def test_gsr_matches_gbes_and_beats_random_motion_on_the_paper_preset():
     # Random motion: clearly worse, in the mean and in most runs.
     assert rm.mean() >= 1.5 * gsr.mean()
     assert np.mean(rm > gsr) >= 0.75
-    # Consistent filter under GSR: the mean position NEES is near 2 (two dimensions).
-    assert 1.0 < res["gsr"].nees.mean() < 3.5
+    # Consistent filter under GSR: the mean over runs of each run's time-averaged
+    # position NEES lies in the 99% band of that statistic (tests.core.helpers.nees_band,
+    # about 2 +- 0.3 for 20 runs; this was 1.0 < mean < 3.5). 20 runs do not resolve a
+    # 10% error in R (-7% to +9% in the mean NEES): tests/core/test_tasks.py checks that
+    # on this preset with 400 runs.
+    lo, hi = nees_band(res["gsr"].nees)
+    assert lo <= res["gsr"].nees.mean() <= hi, (res["gsr"].nees.mean(), (lo, hi))
     # Violations only come from sensors the target has passed within rho - r (no choice).
     assert res["gsr"].max_violation <= 0.1

@@ -3,7 +3,8 @@ sensor; a sensor that does not detect a target contributes no measurement of it.
 
 References: distances recomputed from the world's true positions, a binomial interval for
 the detection frequency, the EKF's closed form without information (posterior = prior),
-chi-square bands for the NEES, and run lengths counted by a plain loop.
+bands for the mean over runs of each run's time-averaged NEES
+(:func:`tests.core.helpers.nees_band`), and run lengths counted by a plain loop.
 """
 
 import numpy as np
@@ -13,6 +14,7 @@ from scipy import stats
 from activetrack.baselines.simulation import detection_gaps
 from activetrack.world import World
 from activetrack.world.scenarios import make_scenario
+from tests.core.helpers import nees_band
 
 
 def test_defaults_are_unlimited_and_change_nothing():
@@ -106,12 +108,14 @@ def test_detection_gaps_against_a_loop():
 @pytest.mark.slow
 def test_filter_is_consistent_with_missed_detections():
     # 200 GSR-driven runs of the range-only team, each sensor detecting with probability
-    # 0.6: the mean over runs of each run's time-averaged position NEES lies in the
-    # chi-square(2) band. (Sparser information, a range limit added or the mixed team,
-    # makes the EKF's linearization errors show: the mean leaves the band.) GSR stops after
-    # its first sweep, as in tests/core/test_tasks.py: the sensors still go where GSR sends
-    # them, and the mean NEES is 2.077 (1 sweep), 2.083 (3 sweeps), 2.106 (converged), in
-    # the band [1.732, 2.287] each time, one sweep in a fifth of the converged runs' time.
+    # 0.6: the mean over runs of each run's time-averaged position NEES lies in the 99%
+    # band of that statistic (tests.core.helpers.nees_band). (Sparser information, a
+    # range limit added or the mixed team, makes the EKF's linearization errors show: the
+    # mean leaves the band.) GSR stops after its first sweep, as in
+    # tests/core/test_tasks.py: the sensors still go where GSR sends them, and the mean
+    # NEES is 2.077 (1 sweep), 2.083 (3 sweeps), 2.106 (converged), one sweep in a fifth
+    # of the converged runs' time. On these seeds 2.074 is 1.8 standard errors above 2
+    # (the band: 2.6; seeds 50000..: 1.4).
     from activetrack.baselines import GSR
 
     runs = 200
@@ -123,13 +127,14 @@ def test_filter_is_consistent_with_missed_detections():
         out.append(w.position_nees())
         missed += int((~w.get("detected")).sum())
     assert missed > 0
-    lo, hi = stats.chi2.ppf([0.025, 0.975], 2 * runs) / runs
-    mean = float(np.mean(out))
-    assert lo <= mean <= hi, mean
+    run_means = np.mean(out, axis=0)
+    lo, hi = nees_band(run_means)
+    mean = float(run_means.mean())
+    assert lo <= mean <= hi, (mean, (lo, hi))
 
 
-def _urban_nees(name: str, runs: int = 200, **overrides) -> float:
-    """Return the mean over ``runs`` random-motion runs of each run's time-averaged NEES."""
+def _urban_nees(name: str, runs: int = 200, **overrides) -> np.ndarray:
+    """Return each of ``runs`` random-motion runs' time-averaged NEES, shape (runs,)."""
     from activetrack.baselines import RandomMotion
 
     w = World(name, runs, **overrides)
@@ -140,22 +145,24 @@ def _urban_nees(name: str, runs: int = 200, **overrides) -> float:
         problem = w.planning_problem()
         w.step(np.stack([planner.plan(problem[i], rngs[i]) for i in range(runs)]))
         out.append(w.position_nees())
-    return float(np.mean(out))
+    return np.mean(out, axis=0)
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("name", ["urban", "urban_random"])
 def test_the_iterated_filter_is_consistent_on_the_urban_tasks(name):
     # 200 runs moving at random (the target unmeasured in about 30% of the steps, gaps of
-    # up to the whole episode): the iterated EKF's mean NEES lies in the chi-square(2)
-    # band. The plain EKF (one linearization at a prediction that is meters off when the
-    # target reappears) leaves it on the fixed layout.
-    lo, hi = stats.chi2.ppf([0.025, 0.975], 2 * 200) / 200
-    mean = _urban_nees(name)
-    assert lo <= mean <= hi, (name, mean)
+    # up to the whole episode): the iterated EKF's mean NEES lies in the 99% band of that
+    # statistic (tests.core.helpers.nees_band). The plain EKF (one linearization at a
+    # prediction that is meters off when the target reappears) is above its band on the
+    # fixed layout. Standard errors above 2 (the band: 2.6): urban 1.1, urban_random 0.7,
+    # the plain EKF on urban 3.4 (mean 2.54).
+    run_means = _urban_nees(name)
+    lo, hi = nees_band(run_means)
+    assert lo <= run_means.mean() <= hi, (name, run_means.mean(), (lo, hi))
     if name == "urban":
         plain = _urban_nees(name, filter_iterations=1)
-        assert plain > hi, plain
+        assert plain.mean() > nees_band(plain)[1], plain.mean()
 
 
 def test_expected_information_matches_monte_carlo_over_detections():

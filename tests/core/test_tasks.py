@@ -2,17 +2,19 @@
 
 Each check compares with an independent computation: the paper's own arithmetic on a
 one-target problem, per-target sums, the observation decoded by hand, the chi-square
-distribution of a consistent filter's NEES over Monte Carlo runs.
+distribution of a consistent filter's NEES over Monte Carlo runs (a band for the mean of
+the runs' time-averaged NEES, :func:`tests.core.helpers.nees_band`, that a filter with its
+measurement noise 10% off leaves).
 """
 
 import numpy as np
 import pytest
-from scipy import stats
 
 from activetrack import PlanningProblem
 from activetrack.models.objective import LOGDET, TRACE, WORST_TRACE
 from activetrack.world import World, observation
 from activetrack.world.scenarios import TASKS, make_scenario
+from tests.core.helpers import misspecify_filter, nees_band
 
 RUNS = 200
 #: GSR's sweeps per step in the Monte Carlo runs (see :func:`_nees_runs`).
@@ -139,8 +141,9 @@ def test_world_get_targets_axis_and_per_target_fields():
     np.testing.assert_array_equal(one.get("x_true", 0, 1), w.get("x_true", 0, 1))
 
 
-def _nees_runs(name: str, **overrides) -> np.ndarray:
-    """Return the position NEES (steps, runs, K) of RUNS GSR-driven episodes of a task.
+def _nees_runs(name: str, runs: int = RUNS, r_scale: float = 1.0, **overrides) -> np.ndarray:
+    """Return the position NEES (steps, runs, K) of ``runs`` GSR-driven episodes of a task,
+    the filter assuming ``r_scale`` times the true measurement noise.
 
     GSR stops after its first sweep (:data:`SWEEPS`): the sensors go where GSR sends them
     (each to its optimum given the others, close to rho, where the measurements are most
@@ -154,8 +157,10 @@ def _nees_runs(name: str, **overrides) -> np.ndarray:
     """
     from activetrack.baselines import GSR
 
-    w = World(name, RUNS, **overrides)
-    w.reset(seeds=list(range(20_000, 20_000 + RUNS)))
+    w = World(name, runs, **overrides)
+    if r_scale != 1.0:
+        misspecify_filter(w, r_scale=r_scale)
+    w.reset(seeds=list(range(20_000, 20_000 + runs)))
     planner, out = GSR(max_sweeps=SWEEPS), []
     while not w.truncated.all():
         w.step(planner.plan(w.planning_problem()))
@@ -163,30 +168,44 @@ def _nees_runs(name: str, **overrides) -> np.ndarray:
     return np.array(out)
 
 
-def _band(runs: int) -> tuple[float, float]:
-    """Return the 95% band of the mean of ``runs`` chi-square(2) values."""
-    lo, hi = stats.chi2.ppf([0.025, 0.975], 2 * runs) / runs
-    return float(lo), float(hi)
-
-
 @pytest.mark.slow
 @pytest.mark.parametrize("name", [t for t in TASKS if not make_scenario(t).limited_sensing])
 def test_filter_is_consistent_on_every_task(name):
-    # Mean over 200 runs of each run's time-averaged position NEES (per target): a
-    # consistent filter's is a mean of chi-square(2) variables, inside the band. (The
-    # urban tasks: tests/core/test_sensing_limits.py, 200 random-motion runs each; GSR's
-    # 200 runs take minutes there, docs/tasks.md gives their figure and command.)
-    nees = _nees_runs(name)
-    lo, hi = _band(RUNS)
-    for k in range(nees.shape[-1]):
-        mean = float(nees[..., k].mean())
+    # The mean over 200 runs of each run's time-averaged position NEES (per target) lies
+    # in the 99% band of that statistic (tests.core.helpers.nees_band: runs independent,
+    # steps not). On these seeds the mean is 1.75 standard errors above 2 on bearing_only,
+    # 1.8 on uncertain_poses, 1.9 and 0.5 on two_targets, 1.3 on mixed, 1.05 on
+    # range_only (the band: 2.6): the EKF's linearization leaves the nonlinear tasks' NEES
+    # 2-5% high, which 200 runs about resolve (two_targets' second target on seeds
+    # 40000.. is 3.1 above). A 10% error in R: the next test. (The urban tasks:
+    # tests/core/test_sensing_limits.py, 200 random-motion runs each; GSR's 200 runs take
+    # minutes there, docs/tasks.md gives their figure and command.)
+    run_means = _nees_runs(name).mean(axis=0)
+    for k in range(run_means.shape[-1]):
+        lo, hi = nees_band(run_means[:, k])
+        mean = float(run_means[:, k].mean())
         assert lo <= mean <= hi, (name, k, mean, (lo, hi))
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize("r_scale", [1.0, 0.9, 1.1])
+def test_nees_band_catches_a_filter_with_its_measurement_noise_10_percent_off(r_scale):
+    # The paper's preset, 400 runs (a few seconds): the true filter's statistic inside the
+    # 99% band (0.4 standard errors above 2), the filter assuming 0.9 R or 1.1 R outside
+    # it (about +9% and -7% in the mean NEES: 6.2 and -5.1 standard errors). The band of
+    # one chi-square draw per run these tests used before, chi2.ppf([0.025, 0.975],
+    # 2 runs) / runs = [1.81, 2.20] for 400 runs, holds both (2.19 and 1.86).
+    run_means = _nees_runs("paper", runs=2 * RUNS, r_scale=r_scale).mean(axis=(0, 2))
+    lo, hi = nees_band(run_means)
+    mean = float(run_means.mean())
+    assert (lo <= mean <= hi) == (r_scale == 1.0), (r_scale, mean, (lo, hi))
+
+
+@pytest.mark.slow
 def test_a_filter_ignoring_pose_uncertainty_is_not_consistent():
-    # The same 200 runs with a filter that ignores the fix errors: outside the band (its
-    # mean NEES is about 4.9 where the accounting filter's is about 2.1).
-    _, hi = _band(RUNS)
-    mean = float(_nees_runs("uncertain_poses", account_pose=False).mean())
-    assert mean > hi, mean
+    # The same 200 runs with a filter that ignores the fix errors: above the band of its
+    # statistic (its mean NEES is about 4.9, 4.5 standard errors above 2, where the
+    # accounting filter's is about 2.07).
+    run_means = _nees_runs("uncertain_poses", account_pose=False).mean(axis=(0, 2))
+    _, hi = nees_band(run_means)
+    assert run_means.mean() > hi, run_means.mean()

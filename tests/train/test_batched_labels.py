@@ -30,11 +30,24 @@ def test_batched_dagger_labels_equal_the_serial_ones():
     serial = train_imitation("paper", seed=5, config=CONFIG, n_steps=12)
     batched = train_imitation("paper", seed=5, config=CONFIG, n_steps=12, batched=True)
     assert len(batched.data) == len(serial.data) == CONFIG.episodes * 12 * 3
-    # GSR's plans agree to its tolerance (about 1e-8 m here); the learner trained on them
-    # to float32 rounding, so round 1's learner moves agree to about that too.
-    np.testing.assert_allclose(batched.data.obs, serial.data.obs, rtol=1e-4, atol=1e-5)
-    np.testing.assert_allclose(batched.data.actions, serial.data.actions, rtol=1e-4, atol=1e-5)
-    np.testing.assert_allclose(batched.rollout_traces, serial.rollout_traces, rtol=1e-4)
+    # Round 0 (the expert alone): GSR's plans agree to about 1e-8 m, far below the
+    # float32 rounding of the stored observations and labels, which come out bit for bit
+    # equal. Round 1: the learner acts on all its copies' observations in one call in the
+    # batch and on one copy's M rows serially; float32 matrix products round differently
+    # with the batch size (up to about one float32 epsilon on values of order 1), so its
+    # moves, and the states and labels that follow, differ by rounding: at most 0.75
+    # float32 epsilon (values up to 3.4 in size) here, allowed 2. The float64 rollout
+    # traces inherit the moves' 1e-7 relative differences smoothed by the filter: 1.7e-10
+    # relative here, allowed 1e-8.
+    half = len(serial.data) // 2  # round 0's rows, then round 1's
+    np.testing.assert_array_equal(batched.data.obs[:half], serial.data.obs[:half])
+    np.testing.assert_array_equal(batched.data.actions[:half], serial.data.actions[:half])
+    eps = float(np.finfo(np.float32).eps)
+    np.testing.assert_allclose(batched.data.obs, serial.data.obs, rtol=2 * eps, atol=2 * eps)
+    np.testing.assert_allclose(
+        batched.data.actions, serial.data.actions, rtol=2 * eps, atol=2 * eps
+    )
+    np.testing.assert_allclose(batched.rollout_traces, serial.rollout_traces, rtol=1e-8)
 
 
 def test_batched_lookahead_labels_on_a_task_equal_the_serial_ones():
