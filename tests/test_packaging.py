@@ -14,11 +14,14 @@ from email.parser import Parser
 from pathlib import Path
 
 import pytest
+import yaml  # pyyaml, in the dev extra
 
 import activetrack
 
-tomllib = pytest.importorskip("tomllib")  # Python >= 3.11
-yaml = pytest.importorskip("yaml")
+try:
+    import tomllib  # Python >= 3.11
+except ModuleNotFoundError:  # 3.10: the same parser as the tomli package (in the dev extra)
+    import tomli as tomllib
 
 ROOT = Path(__file__).resolve().parents[1]
 PROJECT = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]

@@ -17,29 +17,40 @@ float32 observation equal to the recorded float32 (stored as the shortest decima
 gives it back), every int, bool, string, list length and dict key equal, and SHA-256
 digests of whole observation arrays equal. The one-world refactor reproduced every case
 exactly (commit 35208e7; one ulp in one position error, see ``RTOL``). The square-root
-EKF that came after it (SPD by construction) changes P in the last bits, so each case now
-has tolerances in ``RTOL``, with the reason beside them: 1e-6 relative where no planner
-closes the loop (close-range sensors amplify it to ~1e-8), 1e-5 where GSR's flat optima
-amplify it further; float32 observations within a float32 ulp. A future change that
-must reproduce today's results exactly should re-record (``tools/record_regression.py``
-at the current commit). The recording is what the code did, not an independent truth: it
-pins behaviour, it does not prove it right (the other tests do that).
+EKF that came after it (SPD by construction) changes P in the last bits, so every case now
+has float tolerances in ``RTOL``, with the reason beside them: 1e-6 relative where no
+planner closes the loop (close-range sensors amplify it to ~1e-8), 1e-5 where GSR's flat
+optima amplify it further; float32 observations within a float32 ulp. The tolerances apply
+to floats only: ints, bools, strings, lengths and keys are still compared exactly, and so
+are the values that only compare bit for bit (``EXACT_ONLY``: observation digests,
+``equals_single``, GSR's solve and sweep counts) except at the places listed in
+``NOT_EXACT``, each with its reason and the weaker comparison that still holds there (the
+digests of observations after an update are not comparable; every batched copy must now
+equal its single env bit for bit; sweep counts within one where GSR's stopping test moved;
+solve counts within what the same sweeps allow). A future change that must reproduce
+today's results exactly should re-record (``tools/record_regression.py`` at the current
+commit). The recording is what the code did, not an independent truth: it pins behaviour,
+it does not prove it right (the other tests do that).
 
 Reading a failure: the process noise is ``noise_factor @ w`` with ``noise_factor`` from
 ``eigh`` of the discrete ``Q`` (``activetrack.models.motion``), whose eigenvalues come in equal
 x/y pairs; a last-bit change of ``Q`` (or another LAPACK) rotates the eigenvectors within
 each pair and changes a seed's trajectory by O(1) from the first step, not in the last
-bits. The batched environment's copy i is not bit-equal to the single environment seeded
-``s + i`` (the recording's ``equals_single`` data): stacked (N, n) matrix products round
-differently from per-copy vectors, so reproducing both needs each path's operations and
-shapes kept. Recording twice, and with 1 or 2 BLAS threads, gave byte-identical files.
+bits. In the recording the batched environment's copy i was not always bit-equal to the
+single environment seeded ``s + i`` (its ``equals_single`` data): stacked (N, n) matrix
+products rounded differently from per-copy vectors. Today every copy equals its single
+environment bit for bit, and the test asserts that (``NOT_EXACT``). Recording twice,
+and with 1 or 2 BLAS threads, gave byte-identical files.
 """
 
 from __future__ import annotations
 
 import importlib.util
 import json
+import re
 import sys
+from collections.abc import Callable
+from fnmatch import fnmatch
 from functools import cache
 from pathlib import Path
 from typing import Any
@@ -51,8 +62,8 @@ REPO = Path(__file__).resolve().parents[1]
 DATA = REPO / "tests" / "data" / "regression_bb51820.json"
 RECORDED_AT = "bb518205aff6ebdc562250b19fb081941ffb6378"
 
-#: Per-case relative tolerance (0 = exact), each with a one-line reason. None today.
-#: Rounding-level differences since the recording, with their reasons: (rtol, atol).
+#: Per-case float tolerances (rtol, atol) for the rounding-level differences since the
+#: recording, each with its reason; a case not listed is compared bit for bit (none today).
 _EKF = (
     "the EKF update in square-root form (SPD by construction, hardening issue) rounds "
     "differently from the expanded Joseph form: P differs in the last bits"
@@ -166,11 +177,88 @@ FIXED: dict[str, tuple[int, tuple[str, ...], str]] = {
 FLOAT32 = ("obs", "state", "final_obs", "last_obs", "reset_obs", "reset_state")
 FLOAT32_TOL = (3e-6, 1e-6)
 
-#: Recorded values that are only comparable bit for bit: skipped where a tolerance applies
-#: (a hash of float32 observations; whether a batched copy equalled a single env bitwise;
-#: how many single-sensor solves and sweeps GSR took, which a last-bit change can move by
-#: one: a copy stops when a re-solve returns its position bit for bit).
+#: Recorded values that only compare bit for bit: a digest of float32 observations, whether
+#: a batched copy equalled its single env bitwise, and how many single-sensor solves and
+#: sweeps GSR took. They are compared exactly in every case, a case with a tolerance too,
+#: except at the places in :data:`NOT_EXACT`.
 EXACT_ONLY = ("sha256", "equals_single", "n_solves", "sweeps")
+
+
+def _digest_not_comparable(expected: dict, actual: dict, key: str, where: str) -> None:
+    """Assert only that a digest is still recorded (64 hex digits)."""
+    assert isinstance(actual[key], str) and len(actual[key]) == 64, where
+    int(actual[key], 16)
+
+
+def _bitwise_equal_now(expected: dict, actual: dict, key: str, where: str) -> None:
+    """Assert that every batched copy equals its single env bit for bit (``equal`` all
+    True, ``obs_diff`` and ``reward_diff`` all 0), for as many copies as recorded."""
+    e, a = expected[key], actual[key]
+    assert sorted(a) == sorted(e), f"{where}: keys differ"
+    n = len(e["equal"])
+    assert a["equal"] == [True] * n, f"{where}: a copy differs from its single env: {a}"
+    assert a["obs_diff"] == [0.0] * n and a["reward_diff"] == [0.0] * n, f"{where}: {a}"
+
+
+def _one_sweep_apart(expected: dict, actual: dict, key: str, where: str) -> None:
+    """Assert that each sweep count is within one of the recorded one."""
+    e, a = np.asarray(expected[key]), np.asarray(actual[key])
+    assert e.shape == a.shape and a.dtype.kind == "i", where
+    assert np.abs(a - e).max(initial=0) <= 1, f"{where}: {a.tolist()} vs {e.tolist()}"
+
+
+def _solves_of_the_same_sweeps(expected: dict, actual: dict, key: str, where: str) -> None:
+    """Assert that the sweep count is the recorded one and the solve count differs from the
+    recorded one only in sweeps after the first: the first solves every sensor, each later
+    one between 0 and M (a sensor whose problem did not change bitwise is skipped), so the
+    two differ by at most (sweeps - 1) M."""
+    assert actual["sweeps"] == expected["sweeps"], f"{where}: sweeps differ"
+    m = len(expected["positions"])
+    bound = (expected["sweeps"] - 1) * m
+    assert type(actual[key]) is int, where
+    assert abs(actual[key] - expected[key]) <= bound, (
+        f"{where}: {actual[key]} solves, recorded {expected[key]} (at most {bound} apart)"
+    )
+
+
+#: Where an :data:`EXACT_ONLY` value cannot be compared bit for bit, how it is compared and
+#: why (``fnmatch`` patterns of the key's path without list indices). Everywhere else (the
+#: digests of the observations at reset, ``batched_gsr.m5.sweeps``, ``planners``' GSR
+#: sweeps, ...) recording and code agree and are compared exactly.
+NOT_EXACT: dict[str, tuple[Callable[[dict, dict, str, str], None], str]] = {
+    "*.steps.obs.sha256": (
+        _digest_not_comparable,
+        "the digest of a step's float32 observations (all agents; only the first agent's "
+        "were recorded as values, compared within FLOAT32_TOL): any observation one float32 "
+        "ulp off (the square-root EKF) changes it. The observations at reset precede every "
+        "update and their digests are compared exactly; tests/test_world_hashes.py pins "
+        "today's observations bit for bit",
+    ),
+    "*.steps.reset_obs.sha256": (
+        _digest_not_comparable,
+        "a mid-episode reset's observations come after updates of the same episode's "
+        "generator state and filter (as *.steps.obs.sha256)",
+    ),
+    "*.steps.equals_single": (
+        _bitwise_equal_now,
+        "the recording's batched copies differed from their single envs by up to ~5e-15 in "
+        "the reward at some steps (stacked products rounding differently, module docstring); "
+        "today every copy equals its single env bit for bit at every step, which is asserted "
+        "instead (it implies every recorded True)",
+    ),
+    "batched_gsr.m3.sweeps": (
+        _one_sweep_apart,
+        "a copy's sweeps stop when the improvement falls below the tolerance; the QR roots' "
+        "last bits (issue 17) move it across the threshold at the last sweep in 3 of 200 "
+        "copies: one sweep more or less",
+    ),
+    "planners.problems.gsr.n_solves": (
+        _solves_of_the_same_sweeps,
+        "a sensor is solved again only if its problem changed bitwise since its last solve; "
+        "the QR roots' last bits (issue 17) decide that in 2 of 52 problems (16 vs 19 and "
+        "10 vs 9 solves, same sweeps)",
+    ),
+}
 
 
 def _load_tool() -> Any:
@@ -206,8 +294,10 @@ def assert_same(
     """Assert that ``actual`` equals ``expected`` (JSON values), floats within tolerances.
 
     ``rtol = atol = 0``: bit for bit (``assert_array_equal``); otherwise floats are
-    compared with ``assert_allclose(rtol=rtol, atol=atol)``, the :data:`EXACT_ONLY` keys
-    are skipped, and everything else is compared exactly.
+    compared with ``assert_allclose(rtol=rtol, atol=atol)`` and everything else (ints,
+    bools, strings, lengths, keys, the :data:`EXACT_ONLY` values) exactly, but for the
+    :data:`EXACT_ONLY` values at the places in :data:`NOT_EXACT`, which are compared as
+    listed there.
     """
     where = path or "<root>"
     tolerant = bool(rtol or atol)
@@ -216,6 +306,12 @@ def assert_same(
         assert sorted(actual) == sorted(expected), f"{where}: keys differ"
         for key in expected:
             if tolerant and key in EXACT_ONLY:
+                pattern = re.sub(r"\[\d+\]", "", f"{path}.{key}")
+                rules = [rule for p, (rule, _) in NOT_EXACT.items() if fnmatch(pattern, p)]
+                if rules:
+                    rules[0](expected, actual, key, f"{path}.{key}")
+                else:
+                    assert_same(expected[key], actual[key], 0.0, f"{path}.{key}", 0.0)
                 continue
             r, a = rtol, atol
             if tolerant and key in FLOAT32:

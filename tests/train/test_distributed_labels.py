@@ -80,7 +80,6 @@ def test_train_command_checks_workers_before_training(tmp_path, capsys):
         assert not (tmp_path / method).exists()
 
 
-@pytest.mark.slow
 def _without_timings(obj):
     """Return parsed JSON without the wall-clock entries (``ms_per_step``)."""
     if isinstance(obj, dict):
@@ -90,6 +89,7 @@ def _without_timings(obj):
     return obj
 
 
+@pytest.mark.slow
 def test_a_trained_policy_evaluated_on_workers_equals_serial(tmp_path):
     """The learned policy is shipped to the workers: same episodes as in this process."""
     common = ["--seed", "2", "--hidden", "16", "16", "--no-progress"]

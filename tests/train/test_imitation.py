@@ -1,12 +1,10 @@
-"""Imitation of GSR on the ``paper`` preset: BC quality, DAgger vs BC on the same label budget.
+"""Imitation of GSR on the ``paper`` preset: BC quality, DAgger on the same label budget.
 
 Both are measured on 20 held-out seeds (1000..1019; training episodes use seeds >= 10^6)
 against GSR and random motion evaluated on the very same seeds.
 """
 
 from __future__ import annotations
-
-import time
 
 import numpy as np
 import pytest
@@ -46,17 +44,14 @@ def references():
 
 @pytest.fixture(scope="module")
 def bc():
-    t0 = time.perf_counter()
-    result = train_imitation("paper", seed=0, config=BC_TEST)
-    return result, time.perf_counter() - t0
+    return train_imitation("paper", seed=0, config=BC_TEST)
 
 
 @pytest.fixture(scope="module")
 def bc_trace(bc):
     """The BC policy's (seed 0) per-episode mean traces on the held-out seeds (evaluated
     once for both tests below)."""
-    result, _ = bc
-    return _mean_trace(result.policy)
+    return _mean_trace(bc.policy)
 
 
 def _mean_trace(policy) -> np.ndarray:
@@ -124,10 +119,9 @@ def test_fit_reduces_the_loss_and_is_deterministic():
 
 
 @pytest.mark.slow
-def test_bc_is_fast_close_to_gsr_and_better_than_rm(bc, bc_trace, references):
-    result, seconds = bc
+def test_bc_is_close_to_gsr_and_better_than_rm(bc, bc_trace, references):
+    result = bc
     gsr, rm = references
-    assert seconds < 60, f"BC took {seconds:.1f} s"
     assert len(result.data) == BC_TEST.episodes * 50 * 3
     trace = bc_trace
     ratio = trace.mean() / gsr.mean()
@@ -137,37 +131,48 @@ def test_bc_is_fast_close_to_gsr_and_better_than_rm(bc, bc_trace, references):
 
 
 @pytest.mark.slow
-def test_dagger_at_least_as_good_as_bc_on_the_same_label_budget(bc, bc_trace, references):
-    """Same expert-label budget (40 episodes x 50 steps x 3 agents), same 20 held-out seeds,
-    the median over three training seeds of each.
+def test_dagger_on_bcs_label_budget_beats_rm_and_its_median_run_is_within_10pc_of_gsr(
+    bc, bc_trace, references
+):
+    """DAgger spends exactly BC's expert-label budget (40 episodes x 50 steps x 3 agents).
+    On the 20 held-out seeds (paired 95% Student-t intervals over the episodes):
 
-    Tolerance: DAgger's median may exceed BC's by at most 5%. One training run is too noisy
-    to compare: this test prints (``pytest -s tests/train/test_imitation.py -k dagger``)
-    DAgger 3.24, 2.36, 2.41 and BC 2.33, 2.35, 2.56 for seeds 0, 1, 2 (GSR 2.27), where the
-    single-seed version of it printed DAgger 2.30 and BC 2.31 one commit earlier (27d4a82),
-    before changes of 1e-15 in the world's arithmetic that move GSR's labels by about 1e-7:
-    a DAgger run sometimes fails badly, and DAgger is not reliably better than BC on this
-    preset (see the README).
+    - the policy of each of three training seeds tracks better than random motion: the
+      interval of the mean of DAgger_i - RM_i lies below 0;
+    - per episode, the median of the three policies' traces is within 10% of GSR's on
+      average: the interval of the mean of median_i - 1.1 GSR_i lies below 0 (10%, the
+      modelling error the project's tests must detect). The median, because one training
+      run in three may fail (seed 2 of this budget scores about 43% above GSR).
+
+    Not claimed: an order between DAgger and BC. Their difference is dominated by the
+    training seed, which three seeds per method cannot establish; the README reports DAgger
+    not better than BC at equal labels. The paired intervals of DAgger - BC (seed 0's BC)
+    are printed (``pytest -s tests/train/test_imitation.py -k dagger``), not asserted.
     """
-    bc_result, _ = bc
-    gsr, _ = references
-    # The five other trainings, serially (scale-out goes through Ray, not a process pool;
-    # under `make test` the second core runs the plain-Python kernel tests anyway).
-    jobs = [("bc", 1), ("bc", 2), ("dagger", 0), ("dagger", 1), ("dagger", 2)]
-    done = {job: _train_and_measure(*job) for job in jobs}
-    done["bc", 0] = (len(bc_result.data), float(bc_trace.mean()))
-    bc_traces, dagger_traces = [], []
+    gsr, rm = references
+    traces = []
     for seed in (0, 1, 2):
-        (bc_labels, bc_mean), (dagger_labels, dagger_mean) = done["bc", seed], done["dagger", seed]
-        assert dagger_labels == bc_labels
-        bc_traces.append(bc_mean)
-        dagger_traces.append(dagger_mean)
-    print(f"DAgger {dagger_traces} BC {bc_traces} GSR {gsr.mean():.4f}")
-    assert np.median(dagger_traces) <= 1.05 * np.median(bc_traces)
+        result = train_imitation("paper", seed=seed, config=DAGGER_TEST)
+        assert len(result.data) == len(bc.data) == BC_TEST.episodes * 50 * 3
+        trace = _mean_trace(result.policy)
+        traces.append(trace)
+        low, high = _paired_interval(trace - rm)
+        bc_low, bc_high = _paired_interval(trace - bc_trace)
+        print(
+            f"DAgger seed {seed}: {trace.mean():.4f} (GSR {gsr.mean():.4f}, BC seed 0 "
+            f"{bc_trace.mean():.4f}, RM {rm.mean():.4f}); DAgger - RM [{low:.3f}, "
+            f"{high:.3f}], DAgger - BC [{bc_low:.3f}, {bc_high:.3f}]"
+        )
+        assert high < 0, f"DAgger seed {seed} is not better than RM: [{low}, {high}]"
+    median = np.median(traces, axis=0)
+    low, high = _paired_interval(median - 1.1 * gsr)
+    print(f"median of DAgger's runs {median.mean():.4f}; median - 1.1 GSR [{low:.3f}, {high:.3f}]")
+    assert high < 0, f"DAgger's median run is not within 10% of GSR: [{low}, {high}]"
 
 
-def _train_and_measure(method: str, seed: int) -> tuple[int, float]:
-    """Return the label count and the mean trace on the held-out seeds of BC or DAgger
-    (the tests' budgets) trained from ``seed``."""
-    result = train_imitation("paper", seed=seed, config=BC_TEST if method == "bc" else DAGGER_TEST)
-    return len(result.data), float(_mean_trace(result.policy).mean())
+def _paired_interval(diff: np.ndarray, level: float = 0.95) -> tuple[float, float]:
+    """Return the Student-t ``level`` interval of the mean of paired differences."""
+    from scipy import stats
+
+    half = stats.t.ppf(0.5 + level / 2, len(diff) - 1) * stats.sem(diff)
+    return float(diff.mean() - half), float(diff.mean() + half)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -11,7 +12,14 @@ import torch
 from activetrack.train.imitation import Dataset, fit
 from activetrack.train.networks import NetConfig, build_policy
 from activetrack.train.policy_io import load_policy, save_policy
-from activetrack.train.ppo import PPOConfig, build_ppo, make_training_env, train_ppo, warm_start
+from activetrack.train.ppo import (
+    VALIDATION_SEED,
+    PPOConfig,
+    build_ppo,
+    make_training_env,
+    train_ppo,
+    warm_start,
+)
 from activetrack.train.utils import params_vector
 
 NET = NetConfig(hidden=(32, 32))
@@ -133,3 +141,60 @@ def test_linear_learning_rate_schedule():
     assert model.lr_schedule(0.25) == pytest.approx(2.5e-4)
     with pytest.raises(ValueError, match="lr_schedule"):
         build_ppo(model.env, PPOConfig(lr_schedule="cosine"), seed=0)
+
+
+def test_keep_best_saves_the_policy_with_the_best_validation_trace(tmp_path):
+    """With ``eval_every`` the policy is evaluated on the validation seeds after every
+    rollout; ``keep_best`` saves the best of them, not the last. Seed 1 of this tiny run
+    scores best at its first evaluation and worse at every later one (a high learning rate),
+    so keeping the last policy would be a different, worse policy."""
+    cfg = PPOConfig(
+        **{
+            **TINY.__dict__,
+            "total_timesteps": 960,
+            "n_copies": 1,
+            "n_steps": 32,  # 96 timesteps per rollout (3 slots)
+            "batch_size": 96,
+            "learning_rate": 3e-3,
+            "eval_every": 96,
+            "eval_episodes": 4,
+            "keep_best": True,
+            "net": NetConfig(hidden=(16, 16)),
+        }
+    )
+    episode = {"n_steps": 10}  # the scenario's episode length, in training and validation
+    best = train_ppo("paper", seed=1, config=cfg, out_dir=tmp_path / "best", **episode)
+    last = train_ppo(
+        "paper", seed=1, config=replace(cfg, keep_best=False), out_dir=tmp_path / "last", **episode
+    )
+    assert best.validation == last.validation  # the same run; only what is saved differs
+    steps, traces = zip(*best.validation, strict=True)
+    assert list(steps) == list(range(96, 961, 96))  # one evaluation every eval_every steps
+    logged = json.loads((tmp_path / "best" / "config.json").read_text())["validation"]
+    assert logged == [list(entry) for entry in best.validation]
+    k = int(np.argmin(traces))
+    assert k < len(traces) - 1 and traces[-1] > traces[k], traces  # a worse later policy
+
+    # The saved files, loaded and run on the validation seeds by the loop below: keep_best
+    # saved the policy that scored traces[k] (bit for bit), without it the final policy
+    # (updated once more after the last evaluation, which runs as the last rollout ends)
+    # is saved, and it scores worse.
+    assert _validation_trace(tmp_path / "best" / "policy.zip", 4, **episode) == traces[k]
+    final = load_policy(tmp_path / "last" / "policy.zip").policy
+    np.testing.assert_array_equal(params_vector(final), params_vector(last.model.policy))
+    assert _validation_trace(tmp_path / "last" / "policy.zip", 4, **episode) > traces[k]
+
+
+def _validation_trace(path, episodes: int, **overrides) -> float:
+    """Return the mean trace of the saved policy ``path`` over the validation seeds."""
+    from activetrack.envs import parallel_env
+
+    learned = load_policy(path)
+    env = parallel_env("paper", **overrides)
+    traces = []
+    for seed in range(VALIDATION_SEED, VALIDATION_SEED + episodes):
+        obs, _ = env.reset(seed=seed)
+        while env.agents:
+            obs, _, _, _, infos = env.step(learned.act(obs))
+            traces.append(infos["sensor_0"]["trace"])
+    return float(np.mean(traces))
