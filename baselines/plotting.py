@@ -177,7 +177,7 @@ def plot_comparison(
     if missing:
         raise ValueError(f"results {missing} hold no per-step traces")
     plt = _pyplot()
-    from matplotlib.ticker import NullFormatter, ScalarFormatter
+    from matplotlib.ticker import LogLocator, NullFormatter, ScalarFormatter
 
     fig, (ax, bx) = plt.subplots(
         1, 2, figsize=(11.0, 4.6), gridspec_kw={"width_ratios": [2.2, 1.0]}
@@ -207,6 +207,7 @@ def plot_comparison(
     bx.set_title("run's mean trace; mean, 95% CI")
     for axis in (ax, bx):
         axis.set_yscale("log")
+        axis.yaxis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0)))  # labels within a decade
         axis.yaxis.set_major_formatter(ScalarFormatter())
         axis.yaxis.set_minor_formatter(NullFormatter())
         axis.grid(True, which="both", alpha=0.3)
