@@ -3,6 +3,8 @@ PYTHON ?= python3
 VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
+# The demo needs only the project itself (core, envs, baselines): no torch, RL or Ray.
+DEMO_STAMP := $(VENV)/.installed-demo
 DEMO_RUNS ?= 20
 
 .PHONY: install demo test test-fast lint bench clean
@@ -13,11 +15,20 @@ $(STAMP): pyproject.toml
 	# torch first and pinned, so pip never pulls a multi-GB CUDA build for the [rl] extra.
 	$(PY) -m pip install --quiet "torch==2.13.0"
 	$(PY) -m pip install --quiet -e ".[rl,dev,ray]"
-	touch $(STAMP)
+	touch $(STAMP) $(DEMO_STAMP)
+
+$(DEMO_STAMP): pyproject.toml
+	test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet -e .
+	touch $(DEMO_STAMP)
 
 install: $(STAMP)
 
-demo: $(STAMP)
+# The first run in a clone compiles the planners' numba kernels (about a minute or two,
+# the "(compiling)" step of the progress bar and "plan_time_warmup_ms" of results.json); numba
+# caches them in __pycache__, so later runs start at once.
+demo: $(DEMO_STAMP)
 	$(VENV)/bin/activetrack simulate --scenario paper --planner gsr --planner gbes --planner rm \
 		--runs $(DEMO_RUNS) --seed 0 --out results/demo --overwrite
 

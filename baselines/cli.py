@@ -1,7 +1,8 @@
 """The baselines' commands: ``activetrack simulate`` and ``activetrack evaluate``.
 
 - ``simulate``: the closed-loop comparison of planners of Section V (Monte Carlo over
-  seeds), a results table, ``OUT/results.json`` and a Fig. 4 style ``OUT/trajectories.png``;
+  seeds), a results table, ``OUT/results.json``, a Fig. 4 style ``OUT/trajectories.png``
+  (the first seed) and ``OUT/comparison.png`` (every run: the traces over time);
 - ``evaluate``: policies (planners or trained ``policy.zip`` files) in the environment on
   held-out seeds (:mod:`activetrack.baselines.evaluation`).
 
@@ -40,7 +41,7 @@ from activetrack.world.scenarios import PRESETS, make_scenario
 PLANNERS = ("gsr", "gsr-restarts", "gbes", "rm", "lookahead")
 DEFAULT_PLANNERS = ("gsr", "gbes", "rm")
 #: The files ``simulate`` writes in its output folder.
-SIMULATE_OUTPUTS = ("results.json", "trajectories.png")
+SIMULATE_OUTPUTS = ("results.json", "trajectories.png", "comparison.png")
 #: ``simulate``'s own defaults (no library function has them).
 SIMULATE_RUNS, SIMULATE_OUT = 20, "results/simulate"
 
@@ -57,8 +58,9 @@ def _add_simulate(sub: argparse._SubParsersAction) -> None:
         help=COMMANDS["simulate"][1],
         description=(
             "Run every --planner on --runs seeds (seed, seed+1, ...) of a scenario, print mean "
-            "trace and RMSE with 95% intervals of the mean, and write OUT/results.json and "
-            "OUT/trajectories.png (the first seed, Fig. 4 style)."
+            "trace and RMSE with 95% intervals of the mean, and write OUT/results.json, "
+            "OUT/trajectories.png (the first seed, Fig. 4 style) and OUT/comparison.png (the "
+            "planners' traces over time, mean and 95% band, over all runs)."
         ),
     )
     p.add_argument("--scenario", default="paper", choices=sorted(PRESETS), help="preset")
@@ -106,7 +108,9 @@ def _add_simulate(sub: argparse._SubParsersAction) -> None:
         help="look-ahead planner's horizon in steps "
         f"(default {field_default(Lookahead, 'horizon')})",
     )
-    p.add_argument("--no-plot", action="store_true", help="do not write trajectories.png")
+    p.add_argument(
+        "--no-plot", action="store_true", help="do not write trajectories.png and comparison.png"
+    )
     p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     add_ray_arguments(p, "runs")
     p.set_defaults(func=_cmd_simulate, parser=p)
@@ -231,13 +235,18 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     with outputs:
         outputs.write_json("results.json", summaries, default=json_default)
         if not args.no_plot:
-            from activetrack.baselines.plotting import plot_trajectories
+            from activetrack.baselines.plotting import plot_comparison, plot_trajectories
 
             first = {name: res.records[0] for name, res in results.items()}
             plot_trajectories(
                 first,
                 outputs.staged("trajectories.png"),
-                title=f"scenario {scenario.name!r}, seed {args.seed}",
+                title=f"scenario {scenario.name!r}, seed {args.seed} (one run)",
+            )
+            plot_comparison(
+                results,
+                outputs.staged("comparison.png"),
+                title=f"scenario {scenario.name!r}, {args.runs} runs (seeds {args.seed}..{last})",
             )
         written = outputs.commit()
     for path in written.values():

@@ -2,7 +2,9 @@
 
 - :func:`plot_trajectories`: one panel per planner with the sensors' trajectories, the
   true and the estimated target track, and the 3-sigma ellipses of the posterior position
-  covariance every few steps (the paper's Fig. 4);
+  covariance every few steps (the paper's Fig. 4): one run, a sanity check;
+- :func:`plot_comparison`: the study's comparison over all runs: each planner's trace of
+  ``P(k|k)_11`` per step (mean and 95% band) and its runs' mean traces;
 - :func:`plot_evaluation`: box plots of per-episode mean traces and their ratios to GSR's
   (the figure of ``activetrack evaluate``);
 - :func:`save_figure`: every figure is written to a temporary file and renamed into place.
@@ -19,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from activetrack.baselines.simulation import RunRecord
+from activetrack.baselines.simulation import MonteCarloResult, RunRecord, mean_ci
 from activetrack.files import atomic_path
 from activetrack.validation import FloatArray
 
@@ -68,6 +70,15 @@ _TARGET_COLORS = (
     ("teal", "c"),
     ("saddlebrown", "orange"),
 )
+#: Sensor colours, none of them a target's (tab10 without its red, orange, pink and cyan).
+_SENSOR_COLORS = (
+    "tab:blue", "tab:green", "tab:purple", "tab:olive", "tab:gray", "navy", "goldenrod",
+    "yellowgreen",
+)  # fmt: skip
+#: Planner colours and line styles of the comparison figure, in the order the planners are
+#: given (the styles keep planners that nearly coincide, GSR and GBES, both visible).
+_PLANNER_COLORS = ("tab:green", "tab:blue", "tab:orange", "tab:purple", "tab:brown", "tab:gray")
+_PLANNER_STYLES = ("-", "--", "-.", ":")
 
 
 def plot_trajectories(
@@ -93,12 +104,15 @@ def plot_trajectories(
     if not isinstance(ellipse_every, int) or ellipse_every < 1:
         raise ValueError(f"ellipse_every must be an integer >= 1, got {ellipse_every!r}")
     plt = _pyplot()
+    from matplotlib.lines import Line2D
+
     n = len(records)
-    fig, axes = plt.subplots(1, n, figsize=(5.2 * n, 5.0), squeeze=False)
-    colors = plt.get_cmap("tab10").colors
+    fig, axes = plt.subplots(
+        1, n, figsize=(5.2 * n + 2.6, 5.0), squeeze=False, layout="constrained"
+    )
     for ax, (name, rec) in zip(axes[0], records.items(), strict=True):
         for i in range(rec.sensors.shape[1]):
-            col = colors[(i + 2) % len(colors)]
+            col = _SENSOR_COLORS[i % len(_SENSOR_COLORS)]
             xy = rec.sensors[:, i]
             ax.plot(xy[:, 0], xy[:, 1], "-", color=col, lw=1.2, label=f"sensor {i + 1}")
             ax.plot(*xy[0], "o", color=col, ms=5)
@@ -113,6 +127,8 @@ def plot_trajectories(
             true_col, est_col = _TARGET_COLORS[j % len(_TARGET_COLORS)]
             ax.plot(truth[:, 0], truth[:, 1], "-", color=true_col, lw=1.5, label=f"{tag} (true)")
             ax.plot(est[:, 0], est[:, 1], "--", color=est_col, lw=1.2, label=f"{tag} (estimate)")
+            ax.plot(*truth[0, :2], "o", color=true_col, ms=5)
+            ax.plot(*truth[-1, :2], "s", color=true_col, ms=5)
             for k in range(0, len(est), ellipse_every):
                 e = ellipse_points(est[k], cov[k])
                 ax.plot(e[:, 0], e[:, 1], "-", color=est_col, lw=0.6, alpha=0.7)
@@ -121,7 +137,80 @@ def plot_trajectories(
         ax.set_xlabel("x (m)")
         ax.set_ylabel("y (m)")
         ax.grid(True, alpha=0.3)
-    axes[0][0].legend(loc="best", fontsize=8)
+    # The lines' own entries, then what the markers and thin curves mean (proxies: they
+    # are drawn many times, in every colour).
+    handles, _ = axes[0][0].get_legend_handles_labels()
+    handles += [
+        Line2D([], [], ls="", marker="o", color="0.3", ms=5, label="start (k = 0)"),
+        Line2D([], [], ls="", marker="s", color="0.3", ms=5, label="end"),
+        Line2D([], [], color="tab:red", lw=0.6, alpha=0.7,
+               label=f"3-sigma ellipse of P(k|k), every {ellipse_every} steps"),
+    ]  # fmt: skip
+    fig.legend(handles=handles, loc="outside right center", fontsize=8)
+    if title:
+        fig.suptitle(title)
+    return save_figure(fig, path)
+
+
+def plot_comparison(
+    results: Mapping[str, MonteCarloResult], path: str | Path, *, title: str | None = None
+) -> Path:
+    """Draw the study's comparison of planners over all its runs and save it to ``path``.
+
+    Left: each planner's trace of ``P(k|k)_11`` per step, the mean over the runs and its
+    95% Student-t band (:func:`~activetrack.baselines.simulation.mean_ci` per step; a run
+    that ended early on ``max_trace`` counts until its end). Right: each run's mean trace
+    (points, the same seeds for every planner) and their mean with its 95% interval. Log
+    scales: planners several times apart stay readable together.
+
+    Args:
+        results: planner name -> its :class:`MonteCarloResult` with ``traces``.
+        path: the image file to write (the format follows the suffix, e.g. ``.png``).
+        title: optional figure title.
+
+    Returns:
+        The path written.
+    """
+    if not results:
+        raise ValueError("results must hold at least one planner's study")
+    missing = [name for name, r in results.items() if r.traces is None]
+    if missing:
+        raise ValueError(f"results {missing} hold no per-step traces")
+    plt = _pyplot()
+    from matplotlib.ticker import LogLocator, NullFormatter, ScalarFormatter
+
+    fig, (ax, bx) = plt.subplots(
+        1, 2, figsize=(11.0, 4.6), gridspec_kw={"width_ratios": [2.2, 1.0]}
+    )
+    jitter = np.random.default_rng(0)  # the points' horizontal spread only
+    for i, (name, res) in enumerate(results.items()):
+        col = _PLANNER_COLORS[i % len(_PLANNER_COLORS)]
+        traces = np.asarray(res.traces, np.float64)
+        steps = np.arange(1, traces.shape[1] + 1)
+        stats = np.array([mean_ci(col_[np.isfinite(col_)]) for col_ in traces.T])
+        runs = traces.shape[0]
+        style = _PLANNER_STYLES[i % len(_PLANNER_STYLES)]
+        ax.plot(steps, stats[:, 0], style, color=col, lw=1.8, label=f"{name} (mean of {runs})")
+        ax.fill_between(steps, stats[:, 1], stats[:, 2], color=col, alpha=0.2, lw=0)
+        mean, lo, hi = mean_ci(res.mean_trace)
+        x = i + jitter.uniform(-0.18, 0.18, res.mean_trace.size)
+        bx.plot(x, res.mean_trace, "o", color=col, ms=3.5, alpha=0.6)
+        bx.errorbar(i + 0.32, mean, yerr=[[mean - lo], [hi - mean]], fmt="D", color="k",
+                    ms=5, capsize=4)  # fmt: skip
+    ax.set_xlabel("step k")
+    ax.set_ylabel("trace of P(k|k)$_{11}$ (m$^2$)")
+    ax.set_title("trace per step: mean over the runs, 95% band")
+    ax.legend(loc="best", fontsize=8)
+    bx.set_xticks(range(len(results)), list(results))
+    bx.set_xlim(-0.5, len(results) - 0.3)
+    bx.set_ylabel("mean trace of a run (m$^2$)")
+    bx.set_title("run's mean trace; mean, 95% CI")
+    for axis in (ax, bx):
+        axis.set_yscale("log")
+        axis.yaxis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0)))  # labels within a decade
+        axis.yaxis.set_major_formatter(ScalarFormatter())
+        axis.yaxis.set_minor_formatter(NullFormatter())
+        axis.grid(True, which="both", alpha=0.3)
     if title:
         fig.suptitle(title)
     fig.tight_layout()

@@ -167,6 +167,20 @@ def check_planners(planners: Iterable[Any], problem: PlanningProblem) -> None:
             check(problem)
 
 
+def warm_up(planner: Planner, problem: PlanningProblem) -> float:
+    """Plan once on ``problem``, untimed in the study, and return the seconds it took.
+
+    The first call of a planner in a process compiles its kernels (or loads them from
+    numba's cache: up to a minute and more on a fresh clone), which would otherwise be
+    counted as that step's planning time. The plan is thrown away and drawn with its own
+    generator, so the runs' results do not change (planners are functions of the problem
+    and the generator they are given).
+    """
+    t0 = time.perf_counter()
+    planner.plan(problem, np.random.default_rng(0))
+    return time.perf_counter() - t0
+
+
 def mean_ci(values: FloatArray, level: float = 0.95) -> tuple[float, float, float]:
     """Return ``(mean, low, high)``: the mean and its Student-t confidence interval."""
     from scipy import stats  # lazy: scipy.stats costs ~0.5 s at import
@@ -194,6 +208,11 @@ class MonteCarloResult:
         no_detection, longest_gap: per-run fraction of steps without a measurement of a
             target and longest such run (:func:`detection_gaps`); None with unlimited
             sensing.
+        traces: every run's trace of ``P(k|k)_11`` per step, shape (runs, T) (NaN after
+            a run that ended early on ``max_trace``): the study's comparison over time.
+        warmup_time: the untimed first plan before the runs (s): its kernels compiled or
+            loaded from the cache (:func:`warm_up`), so that ``plan_times`` time planning
+            only; None when Ray's workers ran the study (each warms itself).
     """
 
     name: str
@@ -207,6 +226,8 @@ class MonteCarloResult:
     records: list[RunRecord] = field(default_factory=list)
     no_detection: FloatArray | None = None
     longest_gap: np.ndarray | None = None
+    traces: FloatArray | None = None
+    warmup_time: float | None = None
 
     def summary(self) -> dict[str, Any]:
         """Return JSON-friendly summary statistics with 95% intervals of the means."""
@@ -222,9 +243,14 @@ class MonteCarloResult:
         out["plan_time_ms_median"] = float(np.median(self.plan_times) * 1e3)
         out["plan_time_ms_mean"] = float(np.mean(self.plan_times) * 1e3)
         out["plan_time_ms_max"] = float(np.max(self.plan_times) * 1e3)
+        # The first plan of a fresh process compiles the kernels (or loads them from
+        # numba's cache): timed apart, not as a plan.
+        warm = self.warmup_time
+        out["plan_time_warmup_ms"] = None if warm is None else float(warm * 1e3)
         out["max_violation"] = self.max_violation
         out["n_terminated"] = self.n_terminated
-        out["seeds"] = [self.seeds[0], self.seeds[-1]]
+        # Consecutive seeds, both ends included (runs = last - first + 1).
+        out["seed_range"] = {"first": self.seeds[0], "last": self.seeds[-1]}
         if self.no_detection is not None:
             out["no_detection"] = float(np.mean(self.no_detection))
             out["longest_gap"] = int(np.max(self.longest_gap))
@@ -267,7 +293,10 @@ def run_monte_carlo(
     seeds = [int(seed) + k for k in range(runs)]
     world = World(scenario, 1)
     world.reset(seeds=[seeds[0]])
-    check_planners(planners.values(), world.planning_problem(0))
+    problem = world.planning_problem(0)
+    check_planners(planners.values(), problem)
+    # Serially each planner is warmed here; Ray's workers warm themselves (simulate_seeds).
+    warmup: dict[str, float | None] = dict.fromkeys(planners)
     bar = tqdm(total=runs * len(planners), disable=not progress, unit="run", leave=False)
     try:
         if distributed.is_distributed(workers, address):
@@ -275,6 +304,8 @@ def run_monte_carlo(
         else:
             records = {}
             for name, planner in planners.items():
+                bar.set_description(f"{name} (compiling)")
+                warmup[name] = warm_up(planner, problem)
                 bar.set_description(name)
                 recs = []
                 for s in seeds:
@@ -283,11 +314,18 @@ def run_monte_carlo(
                 records[name] = recs
     finally:
         bar.close()
-    return {name: _result(name, seeds, recs, keep_records) for name, recs in records.items()}
+    return {
+        name: _result(name, seeds, recs, keep_records, warmup[name])
+        for name, recs in records.items()
+    }
 
 
 def simulate_seeds(scenario: Scenario, planner: Planner, seeds: list[int]) -> list[RunRecord]:
-    """Return :func:`simulate` on each of ``seeds`` (one Ray task's chunk of a study)."""
+    """Return :func:`simulate` on each of ``seeds`` (one Ray task's chunk of a study), after
+    :func:`warm_up` on the first seed's problem (a worker process compiles too)."""
+    world = World(scenario, 1)
+    world.reset(seeds=[seeds[0]])
+    warm_up(planner, world.planning_problem(0))
     return [simulate(scenario, planner, s) for s in seeds]
 
 
@@ -316,8 +354,14 @@ def _records_on_ray(
     }
 
 
-def _result(name: str, seeds: list[int], recs: list[RunRecord], keep: int) -> MonteCarloResult:
+def _result(
+    name: str, seeds: list[int], recs: list[RunRecord], keep: int, warmup: float | None
+) -> MonteCarloResult:
     """Return the :class:`MonteCarloResult` of one planner's runs (in seed order)."""
+    steps = max(len(r.trace) for r in recs)
+    traces = np.full((len(recs), steps), np.nan)
+    for i, r in enumerate(recs):
+        traces[i, : len(r.trace)] = r.trace
     return MonteCarloResult(
         name=name,
         seeds=seeds,
@@ -330,4 +374,6 @@ def _result(name: str, seeds: list[int], recs: list[RunRecord], keep: int) -> Mo
         records=recs[: max(0, keep)],
         no_detection=None if recs[0].seen is None else np.array([r.no_detection for r in recs]),
         longest_gap=None if recs[0].seen is None else np.array([r.longest_gap for r in recs]),
+        traces=traces,
+        warmup_time=warmup,
     )

@@ -16,10 +16,10 @@ motion (:func:`apply_actions`, :func:`actions_to_reach`) and the observation enc
 ``"homogeneous"`` plus any field override, e.g.
 ``parallel_env(scenario="homogeneous", n_sensors=8, rho=1.5)``.
 
-Importing the package only registers the ids (entry-point strings); the environment
-modules load on first use of a name below (PEP 562), so registering is cheap. From a
-fresh interpreter, ``gymnasium.make("activetrack.envs:activetrack/ActiveTracking-v0")``
-imports this package first (Gymnasium has no plugin auto-loading).
+The ids are registered by ``import activetrack`` already (:mod:`activetrack._registry`);
+importing this package registers them again, idempotently, and the environment modules
+load on first use of a name below (PEP 562). From a fresh interpreter
+``gymnasium.make("activetrack:activetrack/ActiveTracking-v0")`` imports activetrack first.
 """
 
 from __future__ import annotations

@@ -123,7 +123,7 @@ class BatchedActiveTracking(VectorEnv):
         m = self.n_sensors = sc.n_sensors
         self.length_scale = self.world.length_scale
 
-        low, high = self.world.layout.bounds()
+        low, high = self.world.layout.bounds(self.length_scale)
         self.single_observation_space = spaces.Box(
             np.tile(low, m), np.tile(high, m), dtype=np.float32
         )

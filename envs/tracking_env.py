@@ -122,7 +122,8 @@ class TrackingParallelEnv(ParallelEnv):
         self.agents: list[str] = []
         self.length_scale = self.world.length_scale
 
-        low, high = self.world.layout.bounds()
+        # Some bounds scale with the length scale (activetrack.world.observation, "Bounds").
+        low, high = self.world.layout.bounds(self.length_scale)
         # One space object per agent, returned as is (PettingZoo seeds them separately);
         # the dicts are also exposed as attributes for libraries that still read them.
         self.observation_spaces = {
@@ -131,7 +132,7 @@ class TrackingParallelEnv(ParallelEnv):
         self.action_spaces = {
             a: spaces.Box(-1.0, 1.0, (2,), dtype=np.float32) for a in self.possible_agents
         }
-        slow, shigh = self.world.layout.state_bounds()
+        slow, shigh = self.world.layout.state_bounds(self.length_scale)
         self.state_space = spaces.Box(slow, shigh, dtype=np.float32)
 
         self._recorder = (
@@ -196,7 +197,8 @@ class TrackingParallelEnv(ParallelEnv):
 
         The generator is ``np.random.default_rng(seed)`` (the simulation runner's world
         generator); with ``seed=None`` the previous generator continues. This environment
-        takes no ``options``.
+        takes no ``options`` (PettingZoo's probe ``{"options": ...}`` is ignored silently,
+        any other key with a warning).
         """
         check_no_options(options)
         obs = self.reset_arrays(seed)
@@ -345,16 +347,25 @@ def check_render_mode(render_mode: Any) -> None:
         )
 
 
-def check_no_options(options: dict[str, Any] | None, valid: tuple[str, ...] = ()) -> None:
-    """Warn about keys of ``options`` that are not in ``valid`` (they are ignored).
+#: Option keys every reset accepts and ignores silently: PettingZoo's ``api_test`` and
+#: ``parallel_api_test`` reset with ``options={"options": 1}`` to probe that ``reset``
+#: takes an ``options`` argument (PettingZoo 1.24-1.27).
+PROBE_OPTIONS = ("options",)
 
-    A warning, not an error: PettingZoo's API test resets with ``options={"options": 1}``.
+
+def check_no_options(options: dict[str, Any] | None, valid: tuple[str, ...] = ()) -> None:
+    """Warn about keys of ``options`` that are neither in ``valid`` nor
+    :data:`PROBE_OPTIONS` (they are ignored); raise ``ValueError`` if ``options`` is not a
+    dict or None.
+
+    A warning, not an error, as Gymnasium's environments ignore options they do not take;
+    but a misspelt key (``"reset_mak"``) should not pass unnoticed.
     """
     if options is None:
         return
     if not isinstance(options, dict):
         raise ValueError(f"options must be a dict or None, got {type(options).__name__}")
-    unknown = sorted(str(k) for k in options if k not in valid)
+    unknown = sorted(str(k) for k in options if k not in valid and k not in PROBE_OPTIONS)
     if unknown:
         warnings.warn(
             f"reset() ignores unknown options {unknown} (valid: {list(valid)})",

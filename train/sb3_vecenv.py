@@ -174,7 +174,7 @@ class BatchedCopies:
         self.env = BatchedActiveTracking(n_copies, scenario, autoreset_mode="Disabled", **overrides)
         m = self.env.n_sensors
         self.agents = [f"sensor_{i}" for i in range(m)]
-        low, high = self.env.world.layout.bounds()
+        low, high = self.env.world.layout.bounds(self.env.length_scale)
         self.observation_space = gym.spaces.Box(low, high, dtype=np.float32)
         self.action_space = gym.spaces.Box(-1.0, 1.0, (2,), dtype=np.float32)
         self.n_copies = int(n_copies)

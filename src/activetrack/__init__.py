@@ -6,13 +6,17 @@ covariance objective (eq. 12, 17-19), the analytic single-sensor optimum (Sectio
 the planning problem and scenario presets. The layers ``activetrack.envs``,
 ``activetrack.baselines`` and ``activetrack.train`` build on it, in that order.
 
-Importing this package imports none of those layers, nor Gymnasium or PettingZoo: the
-environment ids are registered by ``import activetrack.envs``.
+Importing this package imports none of those layers, nor Gymnasium or PettingZoo, yet it
+registers the environment ids (``activetrack/ActiveTracking-v0`` and the tasks) with both:
+at once with a framework already imported, else as soon as it is imported
+(:mod:`activetrack._registry`). So ``import activetrack`` then
+``gymnasium.make("activetrack/ActiveTracking-v0")`` works, as does Gymnasium's
+``gymnasium.register_envs(activetrack)``.
 """
 
 import importlib.metadata as _metadata
 
-from activetrack import _aliases
+from activetrack import _aliases, _registry
 from activetrack.estimation.ekf import ExtendedKalmanFilter
 from activetrack.models.motion import (
     LinearMotionModel,
@@ -63,3 +67,5 @@ __all__ = [
     "solve_single_sensor",
     "solve_single_sensor_batch",
 ]
+
+_registry.install()

@@ -56,8 +56,12 @@ def test_simulate_writes_results_and_plot(tmp_path, capsys):
     ref = run_monte_carlo(sc, {"gsr": GSR(), "rm": RandomMotion()}, 2, 3, progress=False)
     assert data["gsr"]["mean_trace"] == pytest.approx(np.mean(ref["gsr"].mean_trace))
     assert data["rm"]["rmse"] == pytest.approx(np.mean(ref["rm"].rmse))
-    png = (out / "trajectories.png").read_bytes()
-    assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 10_000
+    for name in ("trajectories.png", "comparison.png"):
+        png = (out / name).read_bytes()
+        assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 10_000
+    # Consecutive seeds named as a range, both ends included; the warm-up timed apart.
+    assert data["gsr"]["seed_range"] == {"first": 3, "last": 4} and "seeds" not in data["gsr"]
+    assert data["gsr"]["plan_time_warmup_ms"] >= 0.0
 
 
 @pytest.mark.parametrize(
@@ -121,7 +125,7 @@ def test_out_with_results_needs_overwrite(tmp_path, capsys):
     capsys.readouterr()
     assert main([*TINY, "--seed", "2", "--out", str(out), "--no-plot"]) == 2
     err = capsys.readouterr().err
-    assert "already holds results (results.json, trajectories.png)" in err
+    assert "already holds results (results.json, trajectories.png, comparison.png)" in err
     assert "--overwrite" in err
     assert (out / "results.json").read_bytes() == first
     # With --overwrite and --no-plot: new results, the old figure removed, other files kept.

@@ -118,3 +118,78 @@ def test_two_target_runs_record_every_target_and_plot(tmp_path):
     np.testing.assert_array_equal(rec.position_covs[0, 1], w.get("P", 0, 1)[:2, :2])
     path = plot_trajectories({"gsr": rec}, tmp_path / "t.png")
     assert path.stat().st_size > 1000
+
+
+class _Counting(_Towards):
+    """:class:`_Towards` that records the problems it is asked to plan."""
+
+    def __init__(self):
+        self.problems = []
+
+    def plan(self, problem, rng):
+        self.problems.append(problem)
+        return super().plan(problem, rng)
+
+
+def test_the_first_plan_is_a_warm_up_outside_the_timings():
+    # One untimed plan on the first seed's first problem before the runs (the compile of a
+    # fresh process), then exactly one timed plan per step; the runs are unchanged.
+    sc = make_scenario("paper", n_steps=5, max_trace=None)
+    planner = _Counting()
+    res = run_monte_carlo(sc, {"c": planner}, 3, seed=4, progress=False, keep_records=3)
+    assert len(planner.problems) == 1 + 3 * 5 == 1 + res["c"].plan_times.size
+    first = simulate(sc, _Counting(), 4)
+    np.testing.assert_array_equal(planner.problems[0].sensors, planner.problems[1].sensors)
+    for k, rec in enumerate(res["c"].records):
+        np.testing.assert_array_equal(rec.trace, simulate(sc, _Towards(), 4 + k).trace)
+    np.testing.assert_array_equal(res["c"].records[0].sensors, first.sensors)
+    s = res["c"].summary()
+    assert s["plan_time_warmup_ms"] >= 0.0 and "seeds" not in s
+    assert s["seed_range"] == {"first": 4, "last": 6}  # both ends included: 3 runs
+    # Every run's per-step trace, as the runs recorded it.
+    np.testing.assert_array_equal(res["c"].traces, [r.trace for r in res["c"].records])
+
+
+def test_traces_of_runs_ended_early_are_padded_with_nan():
+    sc = make_scenario("paper", n_steps=9, max_trace=3.5)
+    res = run_monte_carlo(sc, {"rm": RandomMotion()}, 4, seed=0, progress=False, keep_records=4)
+    r = res["rm"]
+    lengths = [len(rec.trace) for rec in r.records]
+    assert r.n_terminated >= 1 and min(lengths) < 9  # the case is exercised
+    for row, rec in zip(r.traces, r.records, strict=True):
+        np.testing.assert_array_equal(row[: len(rec.trace)], rec.trace)
+        assert np.isnan(row[len(rec.trace) :]).all()
+
+
+def test_comparison_figure_plots_every_runs_mean_trace_and_its_band(tmp_path, monkeypatch):
+    from activetrack.baselines import plotting
+
+    sc = make_scenario("paper", n_steps=6, max_trace=None)
+    res = run_monte_carlo(sc, {"towards": _Towards(), "rm": RandomMotion()}, 4, progress=False)
+    drawn = []
+    monkeypatch.setattr(plotting, "save_figure", lambda fig, path: drawn.append(fig) or path)
+    plotting.plot_comparison(res, tmp_path / "c.png")
+    ax, bx = drawn[0].axes
+    for line, band, r in zip(ax.lines, ax.collections, res.values(), strict=True):
+        # The mean over the 4 runs and its Student-t 95% band, step by step.
+        traces = np.asarray(r.traces)
+        half = stats.t.ppf(0.975, 3) * traces.std(axis=0, ddof=1) / 2.0
+        np.testing.assert_allclose(line.get_ydata(), traces.mean(axis=0), rtol=1e-12)
+        verts = band.get_paths()[0].vertices  # the band's outline: upper edge, lower edge
+        lo, hi = traces.mean(0) - half, traces.mean(0) + half
+        for y in (lo, hi):
+            assert all(np.isclose(verts[:, 1], v, rtol=1e-12).any() for v in y)
+    # Right: each run's mean trace as a point.
+    points = [ln.get_ydata() for ln in bx.lines if ln.get_marker() == "o"]
+    for got, r in zip(points, res.values(), strict=True):
+        np.testing.assert_array_equal(got, r.mean_trace)
+    # The trajectory figure names what its markers and ellipses are.
+    plotting.plot_trajectories({k: r.records[0] for k, r in res.items()}, tmp_path / "t.png")
+    labels = [t.get_text() for t in drawn[1].legends[0].get_texts()]
+    assert {"start (k = 0)", "end"} <= set(labels) and any("3-sigma" in t for t in labels)
+    lines = drawn[1].axes[0].lines
+    from matplotlib.colors import to_hex
+
+    sensor_cols = {to_hex(ln.get_color()) for ln in lines if ln.get_label().startswith("sensor")}
+    assert len(sensor_cols) == 3  # the paper's 3 sensors, each its own colour
+    assert not sensor_cols & {to_hex("tab:red"), to_hex("k")}  # none a target's colour

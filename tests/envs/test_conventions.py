@@ -276,3 +276,53 @@ def test_bad_seeds_name_the_seed(seed):
         batched.reset(seed=seed)
     with pytest.raises(ValueError, match=r"seed\[1\] must be None or an integer >= 0"):
         batched.reset(seed=[0, -1, 2])
+
+
+@pytest.mark.parametrize("preset", ["paper", "mixed", "uncertain_poses"])
+def test_sensor_constant_entries_lie_in_the_ranges_a_scenario_accepts(preset):
+    # Entries 2-5 of every sensor block: ln(sigma_d / L) and ln(sigma_theta) within the
+    # scenario's accepted variance ranges (0 too in the extended layout: a sensor without
+    # that measurement), r / L and rho / L in [0, 1] as L >= rho + r.
+    from activetrack.world import scenarios
+
+    env = parallel_env(preset)
+    L, layout = env.length_scale, env.world.layout
+    d2, t2 = scenarios.SIGMA_D2_RANGE, scenarios.SIGMA_THETA2_RANGE
+    low = [np.log(d2[0]) / 2 - np.log(L), np.log(t2[0]) / 2, 0.0, 0.0]
+    high = [np.log(d2[1]) / 2 - np.log(L), np.log(t2[1]) / 2, 1.0, 1.0]
+    if layout.extended:
+        low, high = np.minimum(low, 0.0), np.maximum(high, 0.0)
+    box = env.observation_space(env.possible_agents[0])
+    obs, _ = env.reset(seed=0)
+    for j in range(env.scenario.n_sensors):
+        at = layout.target_dim + layout.sensor_dim * j + 2
+        np.testing.assert_allclose(box.low[at : at + 4], low, rtol=1e-6)
+        np.testing.assert_allclose(box.high[at : at + 4], high, rtol=1e-6)
+        assert (box.low[at : at + 4] < box.high[at : at + 4]).all()  # no degenerate entry
+        if layout.extended:  # the pose standard deviations: sqrt(POSE_COV_MAX) / L at most
+            assert box.high[at + 7] == box.high[at + 8] == np.float32(1e4 / L)
+    assert all(box.contains(o) for o in obs.values())
+
+
+def test_unbounded_entries_are_clipped_at_the_documented_bounds():
+    from activetrack.world import observation as ob
+
+    # A target far off, fast, with a huge and a tiny variance, and one near: the near
+    # one's entries are the formulas exactly, the far one's the formulas clipped.
+    L, dt = 2.0, 0.5
+    near = np.array([1.0, -2.0, 0.3, 0.4]), np.diag([0.5, 2.0, 1.0, 1.0])
+    far = np.array([3e7, -3e7, 8e6, -8e6]), np.diag([1e50, 1e-50, 1.0, 1.0])
+    sensors = np.array([[0.0, 0.0], [5.0, 1.0]])
+    for (x, P), clipped in ((near, False), (far, True)):
+        target, sensor = ob.features([x], [P], sensors, np.zeros((2, 4)), dt, L, False)
+        want_t = [0.5 * np.log(P[0, 0] / L**2), 0.5 * np.log(P[1, 1] / L**2), 0.0,
+                  x[2] * dt / L, x[3] * dt / L]  # fmt: skip
+        want_s = (sensors - x[:2]) / L
+        if clipped:
+            want_t = np.clip(want_t, [-50, -50, -1, -1e6, -1e6], [50, 50, 1, 1e6, 1e6])
+            want_s = np.clip(want_s, -1e6, 1e6)
+            assert np.abs(want_t).max() == 1e6 and np.abs(want_s).max() == 1e6  # reached
+        np.testing.assert_allclose(target, want_t, rtol=1e-15, atol=0)
+        np.testing.assert_allclose(sensor[:, :2], want_s, rtol=1e-15, atol=0)
+    low, high = ob.observation_bounds(2)
+    assert (low[:2] == -50).all() and (high[3:5] == 1e6).all() and (high[5:7] == 1e6).all()

@@ -6,6 +6,8 @@ finite rewards and observations or raises a ``ValueError`` naming the agent (or 
 argument), and the environment stays usable: a valid step afterwards succeeds.
 """
 
+import warnings
+
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
@@ -138,3 +140,13 @@ def test_unknown_reset_options_warn():
     for e in (parallel_env("paper"), CentralizedTrackingEnv("paper"), BatchedActiveTracking(2)):
         with pytest.warns(UserWarning, match="unknown options"):
             e.reset(seed=0, options={"bogus": 1})
+
+
+def test_pettingzoo_probe_option_is_ignored_silently():
+    # PettingZoo's api_test and parallel_api_test reset with options={"options": 1}.
+    for e in (parallel_env("paper"), CentralizedTrackingEnv("paper"), BatchedActiveTracking(2)):
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            e.reset(seed=0, options={"options": 1})
+        with pytest.warns(UserWarning, match=r"unknown options \['bogus'\]"):
+            e.reset(seed=0, options={"options": 1, "bogus": 2})

@@ -155,7 +155,8 @@ def advance_observe_row(
     (M, D) float32 (:func:`activetrack.world._observation_kernels.features_row` of the prediction
     ``x_next``, ``P_next`` and the new positions, in the agents' views
     :func:`activetrack.world._observation_kernels.windows_row`; ``target``, ``sensor`` its work
-    arrays, no detection flags): the single environment's step in one call."""
+    arrays, no detection flags; the unbounded entries clipped as there): the single
+    environment's step in one call."""
     out = advance_row(
         moves, absolute, sensors, x_true, x_pred, P_pred, noise, table, mats, sensors_out,
         projected, x_true_out, x_post, P_post, x_next, P_next, scratch, z, every,

@@ -22,19 +22,32 @@ import numpy as np
 
 from activetrack._jit import kernel
 
+#: The clip of the entries that have no bound by nature (:mod:`activetrack.world.observation`,
+#: "Bounds"): positions and displacements per step over ``L`` to [-POSITION_MAX,
+#: POSITION_MAX], log standard deviations ``ln(sigma / L)`` to [-LOG_STD_MAX, LOG_STD_MAX].
+POSITION_MAX = 1.0e6
+LOG_STD_MAX = 50.0
+
+
+@kernel
+def clip(v, bound):
+    """Return ``v`` clipped to ``[-bound, bound]``."""
+    return min(max(v, -bound), bound)
+
 
 @kernel
 def target_block(x, P, dt, L, out, o):
     """Write the paper's target block of prediction ``x`` (n,), ``P`` (n, n) into
     ``out[o:o + 5]``: log standard deviations and correlation of the position, velocity
-    times ``dt / L`` (0 for a state without velocity)."""
+    times ``dt / L`` (0 for a state without velocity), the unbounded entries clipped
+    (:data:`LOG_STD_MAX`, :data:`POSITION_MAX`)."""
     pxx, pyy, pxy = P[0, 0], P[1, 1], P[0, 1]
-    out[o] = 0.5 * math.log(pxx / L**2)
-    out[o + 1] = 0.5 * math.log(pyy / L**2)
+    out[o] = clip(0.5 * math.log(pxx / L**2), LOG_STD_MAX)
+    out[o + 1] = clip(0.5 * math.log(pyy / L**2), LOG_STD_MAX)
     out[o + 2] = pxy / math.sqrt(pxx * pyy)
     if x.shape[0] >= 4:
-        out[o + 3] = x[2] * (dt / L)
-        out[o + 4] = x[3] * (dt / L)
+        out[o + 3] = clip(x[2] * (dt / L), POSITION_MAX)
+        out[o + 4] = clip(x[3] * (dt / L), POSITION_MAX)
     else:
         out[o + 3] = 0.0
         out[o + 4] = 0.0
@@ -44,7 +57,8 @@ def target_block(x, P, dt, L, out, o):
 def features_row(x, P, fixes, constants, dt, L, extended, detected, flags, target, sensor):
     """Write one copy's target blocks ``target`` (TD,) and sensor blocks ``sensor``
     (M, 2 + C + flags) (``x`` (K, n), ``P`` (K, n, n), ``fixes`` (M, 2); ``detected``
-    (K, M) gives the ``flags`` detection entries, none for 0)."""
+    (K, M) gives the ``flags`` detection entries, none for 0); relative positions clipped
+    to :data:`POSITION_MAX`."""
     K, M, C = x.shape[0], fixes.shape[0], constants.shape[1]
     if extended:  # positions relative to the targets' centroid
         ox, oy = x[0, 0], x[0, 1]
@@ -54,15 +68,15 @@ def features_row(x, P, fixes, constants, dt, L, extended, detected, flags, targe
         ox *= 1.0 / K
         oy *= 1.0 / K
         for k in range(K):
-            target[7 * k] = (x[k, 0] - ox) * (1.0 / L)
-            target[7 * k + 1] = (x[k, 1] - oy) * (1.0 / L)
+            target[7 * k] = clip((x[k, 0] - ox) * (1.0 / L), POSITION_MAX)
+            target[7 * k + 1] = clip((x[k, 1] - oy) * (1.0 / L), POSITION_MAX)
             target_block(x[k], P[k], dt, L, target, 7 * k + 2)
     else:  # relative to the predicted target
         ox, oy = x[0, 0], x[0, 1]
         target_block(x[0], P[0], dt, L, target, 0)
     for j in range(M):
-        sensor[j, 0] = (fixes[j, 0] - ox) / L
-        sensor[j, 1] = (fixes[j, 1] - oy) / L
+        sensor[j, 0] = clip((fixes[j, 0] - ox) / L, POSITION_MAX)
+        sensor[j, 1] = clip((fixes[j, 1] - oy) / L, POSITION_MAX)
         for c in range(C):
             sensor[j, 2 + c] = constants[j, c]
         for k in range(flags):

@@ -70,6 +70,22 @@ occluder edge over :data:`RAY_MAX` (1: nothing within ``RAY_MAX`` m). Sizes: sen
 block ``12 + K``, observation ``7K + (12 + K) M (+ RAYS)``; the global state holds every
 agent's rays (``M RAYS``) before ``k / n_steps``.
 :class:`Layout` says which layout a scenario uses and its sizes and bounds.
+
+**Bounds** (:meth:`Layout.bounds`, the spaces' boxes). Bounded by definition: the
+correlations (in [-1, 1]), the one-hot and detection entries and the rays (in [0, 1]), the
+elapsed fraction of the global state (in [0, 1]), ``r / L`` and ``rho / L`` (in [0, 1]:
+``L >= rho_i + r_i``, :func:`length_scale`), and the other sensor constants by the ranges
+a scenario accepts (:mod:`activetrack.world.scenarios`): ``ln(sigma_d / L)`` by
+``SIGMA_D2_RANGE``, ``ln(sigma_theta)`` by ``SIGMA_THETA2_RANGE``, the pose standard
+deviations over ``L`` by ``POSE_COV_MAX`` (each range widened to hold 0, the entry of a
+sensor without that quantity). Unbounded by nature: a target that outruns the team takes
+the relative positions and the velocity anywhere, and a lost target's standard deviations
+grow without limit. These are clipped: positions and displacements per step over ``L``
+to +-:data:`POSITION_MAX` (1e6: a sensor moves at most ``r <= L`` a step, so its own
+motion takes a million steps to get there), ``ln(sigma / L)`` to +-:data:`LOG_STD_MAX`
+(50: ``sigma`` between 2e-22 L and 5e21 L). Far beyond any tracking, the clips change no
+value of a working episode; the inverse maps (:func:`decode_target`,
+:func:`decode_sensors`) hold inside them.
 """
 
 from __future__ import annotations
@@ -82,7 +98,13 @@ from activetrack._jit import as_rows
 from activetrack.models.sensor_models import USES
 from activetrack.validation import FloatArray
 from activetrack.world import _observation_kernels as obk
-from activetrack.world.scenarios import Scenario
+from activetrack.world._observation_kernels import LOG_STD_MAX, POSITION_MAX
+from activetrack.world.scenarios import (
+    POSE_COV_MAX,
+    SIGMA_D2_RANGE,
+    SIGMA_THETA2_RANGE,
+    Scenario,
+)
 
 TARGET_DIM = 5
 SENSOR_DIM = 6
@@ -156,19 +178,27 @@ class Layout:
             pose[:, 2] = np.where(both, cov[:, 0, 1] / np.where(both, sx * sy, 1.0), 0.0)
         return np.concatenate([base, onehot, pose], -1)
 
-    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        """Return float32 ``(low, high)`` of one agent's observation (inf where unbounded)."""
+    def bounds(self, length_scale: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Return float32 ``(low, high)`` of one agent's observation (module docstring,
+        "Bounds"); without the ``length_scale`` L the log noise entries and the pose
+        standard deviations are left unbounded (their bounds scale with L)."""
         if not self.extended:
-            return observation_bounds(self.n_sensors)
+            return observation_bounds(self.n_sensors, length_scale)
         low = np.full(self.obs_dim, -np.inf, dtype=np.float32)
         high = np.full(self.obs_dim, np.inf, dtype=np.float32)
         for k in range(self.n_targets):
             b = EXT_TARGET_DIM * k
+            _clipped(low, high, [b, b + 1, b + 5, b + 6], POSITION_MAX)
+            _clipped(low, high, [b + 2, b + 3], LOG_STD_MAX)
             low[b + 4], high[b + 4] = -1.0, 1.0
         for j in range(self.n_sensors):
             b = self.target_dim + self.sensor_dim * j
-            low[b + 4 : b + 11] = 0.0  # r, rho, one-hot, pose standard deviations
+            _clipped(low, high, [b, b + 1], POSITION_MAX)
+            _sensor_constant_bounds(low, high, b, length_scale, with_zero=True)
+            low[b + 6 : b + 11] = 0.0  # one-hot, pose standard deviations
             high[b + 6 : b + 9] = 1.0
+            if length_scale is not None:
+                high[b + 9 : b + 11] = np.sqrt(POSE_COV_MAX) / length_scale
             low[b + 11], high[b + 11] = -1.0, 1.0
             low[b + 12 : b + 12 + self.flags] = 0.0  # detection flags
             high[b + 12 : b + 12 + self.flags] = 1.0
@@ -176,14 +206,38 @@ class Layout:
             low[-self.rays :], high[-self.rays :] = 0.0, 1.0
         return low, high
 
-    def state_bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        """Return float32 ``(low, high)`` of the global state."""
-        low, high = self.bounds()
+    def state_bounds(self, length_scale: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Return float32 ``(low, high)`` of the global state (:meth:`bounds`, every
+        agent's rays, and the elapsed fraction in [0, 1])."""
+        low, high = self.bounds(length_scale)
         if self.rays:  # every agent's rays instead of one agent's
             extra = np.float32(np.ones(self.rays * (self.n_sensors - 1)))
             low = np.concatenate([low, 0.0 * extra]).astype(np.float32)
             high = np.concatenate([high, extra]).astype(np.float32)
         return np.append(low, np.float32(0.0)), np.append(high, np.float32(1.0))
+
+
+def _clipped(low: np.ndarray, high: np.ndarray, idx: list[int], bound: float) -> None:
+    """Set the bounds of the clipped entries ``idx`` to ``[-bound, bound]``."""
+    low[idx], high[idx] = -bound, bound
+
+
+def _sensor_constant_bounds(
+    low: np.ndarray, high: np.ndarray, b: int, L: float | None, with_zero: bool
+) -> None:
+    """Set the bounds of entries 2-5 of the sensor block at ``b``: ``ln(sigma_d / L)`` and
+    ``ln(sigma_theta)`` by the ranges a scenario accepts (with 0 if ``with_zero``: the
+    extended layout's entry of a sensor without that measurement; float32 of the float64
+    ends, which hold every float32 entry rounded from a value between them), ``r / L`` and
+    ``rho / L`` in [0, 1]."""
+    if L is not None:
+        lo_d, hi_d = (0.5 * np.log(v / L**2) for v in SIGMA_D2_RANGE)
+        lo_t, hi_t = (0.5 * np.log(v) for v in SIGMA_THETA2_RANGE)
+        if with_zero:
+            lo_d, hi_d, lo_t, hi_t = min(lo_d, 0), max(hi_d, 0), min(lo_t, 0), max(hi_t, 0)
+        low[b + 2 : b + 4] = np.float32([lo_d, lo_t])
+        high[b + 2 : b + 4] = np.float32([hi_d, hi_t])
+    low[b + 4 : b + 6], high[b + 4 : b + 6] = 0.0, 1.0
 
 
 def layout_of(sc: Scenario) -> Layout:
@@ -427,27 +481,33 @@ def ray_readings(positions: FloatArray, occ: object, out: np.ndarray | None = No
     return occluders._rays_into(positions, RAY_DIRECTIONS, occ, RAY_MAX, RAY_MAX, out)
 
 
-def observation_bounds(n_sensors: int) -> tuple[np.ndarray, np.ndarray]:
-    """Return float32 ``(low, high)`` of one agent's observation (inf where unbounded).
+def observation_bounds(
+    n_sensors: int, length_scale: float | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """Return float32 ``(low, high)`` of one agent's observation in the paper's layout.
 
-    Only the correlation (in [-1, 1]) and the reach and minimum distance (>= 0) have finite
-    bounds. The others have none by nature: a target that outruns the team takes the
-    relative positions anywhere, and a lost target's log standard deviations grow without
-    limit; a finite box would be a promise the dynamics do not keep (Gymnasium's checker
-    notes the infinite bounds as advisory warnings).
+    The correlation in [-1, 1]; the relative positions, velocity and log standard
+    deviations clipped; ``r / L`` and ``rho / L`` in [0, 1]; the log noise entries by the
+    ranges a scenario accepts, given the ``length_scale`` L, else unbounded (module
+    docstring, "Bounds").
     """
     low = np.full(obs_dim(n_sensors), -np.inf, dtype=np.float32)
     high = np.full(obs_dim(n_sensors), np.inf, dtype=np.float32)
+    _clipped(low, high, [0, 1], LOG_STD_MAX)
     low[2], high[2] = -1.0, 1.0  # correlation coefficient
-    for j in range(n_sensors):  # r / L and rho / L are >= 0
+    _clipped(low, high, [3, 4], POSITION_MAX)
+    for j in range(n_sensors):
         b = TARGET_DIM + SENSOR_DIM * j
-        low[b + 4 : b + 6] = 0.0
+        _clipped(low, high, [b, b + 1], POSITION_MAX)
+        _sensor_constant_bounds(low, high, b, length_scale, with_zero=False)
     return low, high
 
 
-def state_bounds(n_sensors: int) -> tuple[np.ndarray, np.ndarray]:
-    """Return float32 ``(low, high)`` of the global state."""
-    low, high = observation_bounds(n_sensors)
+def state_bounds(
+    n_sensors: int, length_scale: float | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """Return float32 ``(low, high)`` of the global state in the paper's layout."""
+    low, high = observation_bounds(n_sensors, length_scale)
     return np.append(low, np.float32(0.0)), np.append(high, np.float32(1.0))
 
 
