@@ -66,3 +66,15 @@ def test_a_seeds_records_do_not_depend_on_its_batch(task: str) -> None:
                     b[i], a[i0], err_msg=f"{task} {name} {field}: seed {SEED} in "
                     f"{len(res.seeds)} episodes from {res.seeds[0]}"
                 )  # fmt: skip
+
+
+def test_a_large_batch_gives_the_same_episode() -> None:
+    """70 copies (over GSR's 256 prepared sensor rows, so each sensor is prepared when it
+    is solved, and over the solver's 64 rows, so converged rows drop out of refinement):
+    the seed's records equal its own alone, on the random-occluder task."""
+    task, steps = "urban_random", 3
+    (alone,) = evaluate(["gsr"], task, 1, SEED, progress=False, batched=True, n_steps=steps)
+    (many,) = evaluate(["gsr"], task, 70, SEED - 40, progress=False, batched=True, n_steps=steps)
+    i = many.seeds.index(SEED)
+    for field in RECORDS:
+        np.testing.assert_array_equal(getattr(many, field)[i], getattr(alone, field)[0], field)
