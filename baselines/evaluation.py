@@ -289,14 +289,15 @@ def run_batched(
     one batched :class:`~activetrack.world.World` (the policy plans every copy at once).
 
     The world's copies are the environment's episodes (same seeds, same draws), so a
-    deterministic planner's rows equal the serial ones to its tolerance: GSR's numerical
-    steps settle to about 1e-7 m differently in a batch than alone (the candidates of the
-    other copies change the rounding), which leaves smooth tasks' rows equal to about 1e-6
-    relative; where the plan can switch between near-tied positions (occluders), a copy's
-    episode can take the other branch, so only the statistics agree. A copy's row does
-    not depend on the batch: the same seed gives the same row bit for bit alone or among
-    any other copies. ``ms_per_step`` is the batch's CPU time per decision divided by the
-    number of copies, after a warm-up decision (the batch's first, planned twice).
+    deterministic planner's rows equal the serial ones to its tolerance: the batched
+    world rounds its stacked products differently from the single environment, GSR's
+    numerical steps settle to about 1e-7 m differently in response, which leaves smooth
+    tasks' rows equal to about 1e-6 relative; where the plan can switch between near-tied
+    positions (occluders), a copy's episode can take the other branch, so only the
+    statistics agree. A copy's row does not depend on the batch: the same seed gives the
+    same row bit for bit alone (a batch of one) or among any other copies.
+    ``ms_per_step`` is the batch's CPU time per decision divided by the number of copies,
+    after a warm-up decision (the batch's first, planned twice).
     ``on_step(k)`` is called after every step with the number of copies that stepped.
     """
     from activetrack.world import World

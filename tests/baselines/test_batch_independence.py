@@ -78,3 +78,31 @@ def test_a_large_batch_gives_the_same_episode() -> None:
     i = many.seeds.index(SEED)
     for field in RECORDS:
         np.testing.assert_array_equal(getattr(many, field)[i], getattr(alone, field)[0], field)
+
+
+@pytest.mark.parametrize("task", ["paper", "homogeneous"])
+def test_lookahead_plans_a_copy_without_a_plan_as_alone(task: str) -> None:
+    """In a batch where some copies continue their last plan and others do not (their
+    sensors were moved elsewhere), each copy's plan equals the plan of a planner that saw
+    only that copy: the continuing ones from their own last plan, the others afresh."""
+    from activetrack.baselines.lookahead import LookaheadPlanner
+
+    n, moved = 6, [1, 2, 4]
+    world = World(task, n, n_steps=STEPS)
+    world.reset(seeds=list(range(SEED, SEED + n)))
+    together = LookaheadPlanner(None, horizon=3)
+    alone = [LookaheadPlanner(None, horizon=3) for _ in range(n)]
+    first = world.planning_problem()
+    step1 = together.plan(first)
+    for b in range(n):
+        np.testing.assert_array_equal(alone[b].plan(first[[b]])[0], step1[b])
+    # The moved copies stay where they are: their sensors are not where the plan put them.
+    executed = step1.copy()
+    executed[moved] = first.sensors[moved]
+    world.step(executed)
+    second = world.planning_problem()
+    step2 = together.plan(second)
+    for b in range(n):
+        if b in moved:
+            alone[b].reset()  # a copy that continues nothing: no warm start
+        np.testing.assert_array_equal(alone[b].plan(second[[b]])[0], step2[b], err_msg=str(b))
