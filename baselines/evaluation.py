@@ -7,9 +7,14 @@ whatever the actions), and their differences are paired.
 
 Per episode (steps 1..n_steps, as in :mod:`activetrack.baselines.simulation`): the mean
 trace of the posterior position covariance, the RMSE of the position estimate and the
-return (sum of rewards). Per policy: the means with Student-t 95% intervals, and the ratio
-of its mean trace to GSR's with a paired bootstrap 95% interval. GSR is always evaluated
-(the ratio's reference) even when it is not asked for; it is then reported separately.
+return (sum of rewards). Per policy: the mean trace with its BCa bootstrap 95% interval
+(:func:`bootstrap_ci`: the episode traces are positive and heavy-tailed, and a Student-t
+interval of them can reach below zero) and its median, the RMSE and return with Student-t
+95% intervals, and the ratio of its mean trace to GSR's with a paired BCa bootstrap 95%
+interval. GSR is always evaluated (the ratio's reference) even when it is not asked for;
+it is then reported separately. ``ms_per_step`` is the CPU time (``time.process_time``)
+per decision (one ``plan`` or ``act`` call, per copy in a batched run), measured after
+one warm-up decision that is not counted (the compiled kernels' first compilation).
 
 A policy is an expert with ``plan(problem) -> next positions`` (e.g.
 :class:`~activetrack.baselines.policies.GSRPolicy`; its positions are executed with
@@ -29,6 +34,7 @@ the same results.
 from __future__ import annotations
 
 import time
+import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -36,6 +42,7 @@ from typing import Any
 
 import numpy as np
 
+from activetrack.baselines.plotting import short_labels
 from activetrack.baselines.simulation import check_planners, detection_gaps, mean_ci
 from activetrack.files import RunOutputs, prepare_output_dir
 from activetrack.validation import check_int
@@ -55,7 +62,8 @@ class PolicyEvaluation:
         requested: False for GSR when it was only added as the ratio's reference.
         nees: per-episode mean position NEES (2 for a consistent filter; the mean over
             targets), NaN where the environment has no world to read it from.
-        ms_per_step: per-episode mean time of the policy's decision (plan or act) per step.
+        ms_per_step: per-episode mean CPU time (ms) of the policy's decision (plan or act)
+            per step, after a warm-up decision.
         no_detection, longest_gap: per-episode fraction of steps without a measurement of
             a target and the longest such run
             (:func:`activetrack.baselines.simulation.detection_gaps`); None with unlimited
@@ -75,13 +83,16 @@ class PolicyEvaluation:
 
     def summary(self, reference: PolicyEvaluation | None = None) -> dict[str, Any]:
         """Return the JSON summary; the ratio is to ``reference``'s mean trace (GSR)."""
-        mt, mt_lo, mt_hi = mean_ci(self.mean_trace)
+        mt = float(np.mean(self.mean_trace))
+        mt_lo, mt_hi = bootstrap_ci(self.mean_trace)
         rm, rm_lo, rm_hi = mean_ci(self.rmse)
         ret, ret_lo, ret_hi = mean_ci(self.returns)
         out: dict[str, Any] = {
             "policy": self.policy,
+            "label": short_labels([self.policy])[0],
             "mean_trace": mt,
             "mean_trace_ci95": [mt_lo, mt_hi],
+            "median_trace": float(np.median(self.mean_trace)),
             "rmse": rm,
             "rmse_ci95": [rm_lo, rm_hi],
             "mean_return": ret,
@@ -105,10 +116,63 @@ class PolicyEvaluation:
         return out
 
 
+#: Bootstrap resamples of the intervals, and resamples per vectorized batch (memory).
+N_RESAMPLES, RESAMPLE_BATCH = 9999, 500
+
+
+def _bootstrap(data: tuple[np.ndarray, ...], statistic: Any, level: float) -> tuple[float, float]:
+    """Return scipy's BCa bootstrap interval of ``statistic`` over paired ``data`` (the
+    episodes resampled jointly), from a fixed generator: the interval is reproducible.
+
+    Fewer than two episodes, or data whose every resample gives the same statistic: the
+    statistic itself at both ends (there is no spread to estimate).
+    """
+    from scipy import stats  # lazy: scipy.stats costs ~0.5 s at import
+
+    point = float(statistic(*data, axis=-1))
+    if data[0].size < 2:
+        return point, point
+    # Degenerate data (GSR's ratio to itself) make BCa's acceleration 0/0: scipy warns
+    # and gives NaN, handled below.
+    with warnings.catch_warnings(), np.errstate(invalid="ignore", divide="ignore"):
+        warnings.simplefilter("ignore", stats.DegenerateDataWarning)
+        res = stats.bootstrap(
+            data, statistic, n_resamples=N_RESAMPLES, batch=RESAMPLE_BATCH, vectorized=True,
+            paired=True, axis=-1, confidence_level=level, method="BCa",
+            rng=np.random.default_rng(0),
+        )  # fmt: skip
+    dist = res.bootstrap_distribution
+    if np.ptp(dist) <= 1e-12 * abs(point):  # no spread: BCa's acceleration is 0/0
+        return point, point
+    lo, hi = float(res.confidence_interval.low), float(res.confidence_interval.high)
+    if not (np.isfinite(lo) and np.isfinite(hi)):
+        raise ValueError(f"no bootstrap interval for {data[0].size} episodes: {lo}, {hi}")
+    return lo, hi
+
+
+def _mean(x: np.ndarray, axis: int = -1) -> np.ndarray:
+    return np.mean(x, axis=axis)
+
+
+def _ratio(x: np.ndarray, y: np.ndarray, axis: int = -1) -> np.ndarray:
+    return np.mean(x, axis=axis) / np.mean(y, axis=axis)
+
+
+def bootstrap_ci(values: np.ndarray, level: float = 0.95) -> tuple[float, float]:
+    """Return a BCa bootstrap interval of the mean of ``values`` (scipy.stats.bootstrap).
+
+    For a positive, skewed quantity (the episodes' mean traces): its ends are means of
+    resamples, so they lie within the sample's range (never below its minimum, never
+    negative), and BCa corrects the bias and skewness of the mean's distribution.
+    """
+    v = np.asarray(values, dtype=np.float64)
+    return _bootstrap((v,), _mean, level)
+
+
 def paired_ratio_ci(
-    values: np.ndarray, reference: np.ndarray, n_boot: int = 2000, level: float = 0.95
+    values: np.ndarray, reference: np.ndarray, level: float = 0.95
 ) -> tuple[float, float]:
-    """Return a paired bootstrap interval of ``mean(values) / mean(reference)``.
+    """Return a paired BCa bootstrap interval of ``mean(values) / mean(reference)``.
 
     Episodes are resampled jointly (the same seeds for both), which keeps the pairing.
     The bootstrap generator is fixed, so the interval is reproducible.
@@ -116,11 +180,7 @@ def paired_ratio_ci(
     values, reference = np.asarray(values, float), np.asarray(reference, float)
     if values.shape != reference.shape:
         raise ValueError("paired ratio needs the same episodes for both policies")
-    rng = np.random.default_rng(0)
-    idx = rng.integers(0, values.size, size=(n_boot, values.size))
-    ratios = values[idx].mean(1) / reference[idx].mean(1)
-    lo, hi = np.quantile(ratios, [0.5 - level / 2, 0.5 + level / 2])
-    return float(lo), float(hi)
+    return _bootstrap((values, reference), _ratio, level)
 
 
 def resolve_policy(spec: Any) -> Any:
@@ -173,11 +233,25 @@ def _reset_policy(policy: Any, seed: int) -> None:
         reset(seed)
 
 
-def run_episode(env: Any, policy: Any, seed: int) -> tuple[float, ...]:
+def warm_up(env: Any, policy: Any, seed: int) -> None:
+    """Make one decision of ``policy`` on the first observation of the episode ``seed``
+    and forget it (the policy reset again): compiles what its first call compiles, so
+    that the timing of the episodes counts none of it."""
+    _reset_policy(policy, seed)
+    obs, _ = env.reset(seed=seed)
+    if callable(getattr(policy, "plan", None)):
+        policy.plan(env.unwrapped.planning_problem())
+    else:
+        getattr(policy, "act", policy)(obs)
+    _reset_policy(policy, seed)
+
+
+def run_episode(env: Any, policy: Any, seed: int, on_step: Any = None) -> tuple[float, ...]:
     """Return ``(mean_trace, rmse, return, mean_nees, ms_per_step, no_detection,
     longest_gap)`` of one episode of ``policy`` from ``seed`` (``ms_per_step``: the
-    policy's decision time per step; the last two as
-    :func:`activetrack.baselines.simulation.detection_gaps`, NaN without a world)."""
+    policy's CPU time per decision in ms; the last two as
+    :func:`activetrack.baselines.simulation.detection_gaps`, NaN without a world).
+    ``on_step()`` is called after every step (progress)."""
     from activetrack.envs import policy_step
 
     _reset_policy(policy, seed)
@@ -194,6 +268,8 @@ def run_episode(env: Any, policy: Any, seed: int) -> tuple[float, ...]:
         if world is not None:
             seen.append(world.get("detected", 0).any(axis=-1))
         total += float(rewards[first])
+        if on_step is not None:
+            on_step()
     errors_arr = np.asarray(errors)
     gaps = detection_gaps(np.array(seen)) if world is not None else (np.nan, np.nan)
     return (
@@ -207,23 +283,29 @@ def run_episode(env: Any, policy: Any, seed: int) -> tuple[float, ...]:
 
 
 def run_batched(
-    scenario: Any, overrides: dict[str, Any], policy: Any, seeds: list[int]
+    scenario: Any, overrides: dict[str, Any], policy: Any, seeds: list[int], on_step: Any = None
 ) -> list[tuple[float, ...]]:
     """Return :func:`run_episode`'s rows for a planner policy, each seed's episode a copy of
     one batched :class:`~activetrack.world.World` (the policy plans every copy at once).
 
     The world's copies are the environment's episodes (same seeds, same draws), so a
-    deterministic planner's rows equal the serial ones to its tolerance: GSR's numerical
-    steps settle to about 1e-7 m differently in a batch than alone (the candidates of the
-    other copies change the rounding), which leaves smooth tasks' rows equal to about 1e-6
-    relative; where the plan can switch between near-tied positions (occluders), a copy's
-    episode can take the other branch, so only the statistics agree. ``ms_per_step`` is
-    the batch's decision time per step divided by the number of copies.
+    deterministic planner's rows equal the serial ones to its tolerance: the batched
+    world rounds its stacked products differently from the single environment, GSR's
+    numerical steps settle to about 1e-7 m differently in response, which leaves smooth
+    tasks' rows equal to about 1e-6 relative; where the plan can switch between near-tied
+    positions (occluders), a copy's episode can take the other branch, so only the
+    statistics agree. A copy's row does not depend on the batch: the same seed gives the
+    same row bit for bit alone (a batch of one) or among any other copies.
+    ``ms_per_step`` is the batch's CPU time per decision divided by the number of copies,
+    after a warm-up decision (the batch's first, planned twice).
+    ``on_step(k)`` is called after every step with the number of copies that stepped.
     """
     from activetrack.world import World
 
     world = World(scenario, len(seeds), **overrides)
     world.reset(seeds=seeds)
+    _reset_policy(policy, seeds[0])
+    policy.plan(world.planning_problem())  # warm-up (compilation), not timed
     _reset_policy(policy, seeds[0])
     n = len(seeds)
     live = np.ones(n, dtype=bool)
@@ -231,9 +313,9 @@ def run_batched(
     traces, errors, nees, seen = columns
     totals, seconds, steps = np.zeros(n), 0.0, 0
     while live.any():
-        start = time.perf_counter()
+        start = time.process_time()
         positions = policy.plan(world.planning_problem())
-        seconds += time.perf_counter() - start
+        seconds += time.process_time() - start
         rows = np.flatnonzero(live)
         res = world.step(positions, rows)
         totals[rows] += np.asarray(res.reward, dtype=np.float64).reshape(-1)
@@ -244,6 +326,8 @@ def run_batched(
             nees[i].append(float(world.position_nees(i)))
             seen[i].append(world.get("detected", i).any(axis=-1))
         live &= ~(world.terminated | world.truncated)
+        if on_step is not None:
+            on_step(len(rows))
     ms = 1e3 * seconds / (n * steps)
     return [
         (
@@ -280,16 +364,16 @@ def batchable(policy: Any) -> bool:
 
 
 def _timed(policy: Any) -> tuple[Any, list[float]]:
-    """Return ``policy`` behind a proxy that adds its decisions' seconds to the list."""
+    """Return ``policy`` behind a proxy that adds its decisions' CPU seconds to the list."""
     from types import SimpleNamespace
 
     seconds = [0.0]
 
     def timing(fn: Any) -> Any:
         def call(arg: Any) -> Any:
-            start = time.perf_counter()
+            start = time.process_time()
             out = fn(arg)
-            seconds[0] += time.perf_counter() - start
+            seconds[0] += time.process_time() - start
             return out
 
         return call
@@ -373,25 +457,35 @@ def evaluate(
     except BaseException:
         env.close()
         raise
-    bar = tqdm(total=episodes * len(items), disable=not progress, unit="ep", leave=False)
+    # Progress in steps (an episode's or a batch's), each policy under its short label.
+    n_steps = env.unwrapped.world.scenario.n_steps
+    names = short_labels([label for label, _ in items])
+    bar = tqdm(
+        total=episodes * n_steps * len(items), disable=not progress, unit="step", leave=False,
+        unit_scale=True,
+    )  # fmt: skip
     try:
         if distributed.is_distributed(workers, address):
             per_policy = _episodes_on_ray(
-                scenario, overrides, resolved, seeds, workers, address, bar
+                scenario, overrides, resolved, seeds, workers, address, bar, n_steps
             )
         else:
             per_policy = []
-            for (label, _), policy in zip(items, resolved, strict=True):
-                bar.set_description(label)
+            for name, policy in zip(names, resolved, strict=True):
+                bar.set_description(name)
+                done = bar.n
                 if batched and batchable(policy):
-                    per_policy.append(run_batched(scenario, overrides, policy, seeds))
-                    bar.update(len(seeds))
-                    continue
-                rows = []
-                for s in seeds:
-                    rows.append(run_episode(env, policy, s))
-                    bar.update()
-                per_policy.append(rows)
+                    per_policy.append(
+                        run_batched(scenario, overrides, policy, seeds, on_step=bar.update)
+                    )
+                else:
+                    warm_up(env, policy, seeds[0])
+                    rows = []
+                    for s in seeds:
+                        rows.append(run_episode(env, policy, s, on_step=bar.update))
+                        bar.update(done + len(rows) * n_steps - bar.n)  # ended early
+                    per_policy.append(rows)
+                bar.update(done + len(seeds) * n_steps - bar.n)
     finally:
         bar.close()
         env.close()
@@ -424,6 +518,7 @@ def run_episodes(
 
     env = parallel_env(scenario, **overrides)
     try:
+        warm_up(env, policy, seeds[0])
         return [run_episode(env, policy, s) for s in seeds]
     finally:
         env.close()
@@ -437,6 +532,7 @@ def _episodes_on_ray(
     workers: int,
     address: str | None,
     bar: Any,
+    n_steps: int,
 ) -> list[list[tuple[float, float, float, float, float]]]:
     """Return every policy's episode rows, computed as Ray tasks over chunks of ``seeds``."""
     from activetrack.baselines import distributed
@@ -446,7 +542,7 @@ def _episodes_on_ray(
         parts = distributed.chunks(seeds, distributed.JOBS_PER_CPU * cpus)
         jobs = [(scenario, overrides, policy, part) for policy in policies for part in parts]
         done = distributed.run_tasks(
-            run_episodes, jobs, on_done=lambda i: bar.update(len(jobs[i][3]))
+            run_episodes, jobs, on_done=lambda i: bar.update(len(jobs[i][3]) * n_steps)
         )
     return [
         [row for chunk in done[k : k + len(parts)] for row in chunk]
@@ -464,22 +560,30 @@ def _gsr_of(results: Sequence[PolicyEvaluation]) -> PolicyEvaluation:
 def summaries(results: Sequence[PolicyEvaluation]) -> list[dict[str, Any]]:
     """Return the JSON summary of each result, with its ratio to GSR's mean trace."""
     ref = _gsr_of(results)
-    return [r.summary(ref) for r in results]
+    rows = [r.summary(ref) for r in results]
+    for row, label in zip(rows, short_labels([r.policy for r in results]), strict=True):
+        row["label"] = label  # distinct among these results
+    return rows
 
 
 def format_table(rows: Sequence[dict[str, Any]]) -> str:
-    """Return the summaries as a plain-text table (GSR added only for the ratio is marked)."""
+    """Return the summaries as a plain-text table (GSR added only for the ratio is marked).
+
+    Policies by their short label (a policy file's folder; the full path is the JSON's
+    ``policy``); the mean trace with its bootstrap interval, then its median; ``CPU
+    ms/decision`` is ``ms_per_step`` (CPU time per decision after a warm-up).
+    """
+    width = max([len("policy")] + [len(r.get("label", r["policy"])) + 12 for r in rows])
     head = (
-        f"{'policy':<34} {'mean trace [95% CI]':>26} {'RMSE':>7} {'NEES':>5} {'ms/step':>8} "
-        f"{'return':>8} {'ratio to GSR':>22}"
+        f"{'policy':<{width}} {'mean trace [95% CI]':>26} {'median':>8} {'RMSE':>7} "
+        f"{'NEES':>5} {'CPU ms/decision':>15} {'return':>8} {'ratio to GSR':>22}"
     )
     lines = [head, "-" * len(head)]
     for r in rows:
-        name = r["policy"] + ("" if r["requested"] else " (reference)")
-        if len(name) > 34:
-            name = "..." + name[-31:]
+        name = r.get("label", r["policy"]) + ("" if r["requested"] else " (reference)")
         lo, hi = r["mean_trace_ci95"]
-        trace = f"{r['mean_trace']:.4f} [{lo:.4f}, {hi:.4f}]"
+        trace = f"{r['mean_trace']:.4g} [{lo:.4g}, {hi:.4g}]"
+        median = "-" if r.get("median_trace") is None else f"{r['median_trace']:.4g}"
         ratio = "-"
         if r["ratio_to_gsr"] is not None:
             rlo, rhi = r["ratio_to_gsr_ci95"]
@@ -487,7 +591,7 @@ def format_table(rows: Sequence[dict[str, Any]]) -> str:
         nees = "-" if r.get("nees") is None else f"{r['nees']:.2f}"
         ms = "-" if r.get("ms_per_step") is None else f"{r['ms_per_step']:.3g}"
         line = (
-            f"{name:<34} {trace:>26} {r['rmse']:>7.3f} {nees:>5} {ms:>8} "
+            f"{name:<{width}} {trace:>26} {median:>8} {r['rmse']:>7.3f} {nees:>5} {ms:>15} "
             f"{r['mean_return']:>8.2f} {ratio:>22}"
         )
         if "no_detection" in r:  # limited sensing: steps without a measurement, longest run

@@ -85,7 +85,7 @@ def relax(
             if sub.size == 0:
                 continue
             others = tuple(totals[e][sub] - entries[e][sub, :, i] for e in range(3))
-            pos, val = solver_numeric.solve_prepared(prepared.rows(sub, i), others)
+            pos, val = prepared.solve(sub, i, others)
             changed[sub, i] = False
             better = val < value[sub]
             if not np.any(better):
@@ -160,13 +160,18 @@ def _approach(problem, s, value, current, r, targets, rho, det, weights, occ):
 
 
 class _Prepared:
-    """Every sensor's candidates and information there (:class:`solver_numeric.Prepared`).
+    """Every sensor's candidates and information there (:class:`solver_numeric.Prepared`),
+    and where each copy's last solve of each sensor ended.
 
     They do not change over the sweeps (the reach disk, the targets and ``rho`` are
     fixed; only the other sensors' information does), so a small batch prepares all
     sensors of all copies once, in one call; a large batch (whose preparation is
     vectorized over its copies anyway) prepares sensor ``i``'s rows when it solves them,
     which bounds the memory to one sensor's candidates.
+
+    A re-solve of sensor ``i`` in copy ``b`` refines from where its previous solve in that
+    copy ended (``Prepared.remember``), whichever other copies are solved with it: the
+    memory is kept per copy, so a copy's plan is the same alone or in any batch.
     """
 
     #: Batches of at most this many sensor rows (copies x M) are prepared at once.
@@ -180,7 +185,8 @@ class _Prepared:
         self.m = M
         self.all = None
         self.b = B
-        self.each: dict[int, solver_numeric.Prepared] = {}  # sensor -> its rows of all copies
+        # sensor -> (starts chosen, final angles, final plane points, solved before), per copy
+        self.memory: dict[int, tuple[np.ndarray, FloatArray, FloatArray, np.ndarray]] = {}
         if B * M <= self.ROWS:
             self.all = self._prepare(np.arange(B)[:, None], np.arange(M)[None, :])
 
@@ -195,15 +201,34 @@ class _Prepared:
         )  # fmt: skip
 
     def rows(self, sub: np.ndarray, i: int) -> solver_numeric.Prepared:
-        """Return the prepared subproblems of sensor ``i`` in copies ``sub``."""
+        """Return the prepared subproblems of sensor ``i`` in copies ``sub`` (no memory)."""
         if self.all is not None:
-            if len(sub) < self.b:
-                return self.all.take(sub * self.m + i)
-            if i not in self.each:
-                self.each[i] = self.all.take(np.arange(self.b) * self.m + i)
-                self.each[i].remember = True
-            return self.each[i]
+            return self.all.take(sub * self.m + i)
         return self._prepare(sub, np.array(i))
+
+    def solve(
+        self, sub: np.ndarray, i: int, base: tuple[FloatArray, FloatArray, FloatArray]
+    ) -> tuple[FloatArray, FloatArray]:
+        """Return :func:`solver_numeric.solve_prepared` of sensor ``i`` in copies ``sub``
+        with the others' entries ``base``, each copy refining from its own last solve."""
+        prepared = self.rows(sub, i)
+        prepared.remember = True
+        memory = self.memory.get(i)
+        if memory is not None:
+            prepared.last = tuple(x[sub] for x in memory)
+        out = solver_numeric.solve_prepared(prepared, base)
+        chosen, th, x = prepared.last[:3]
+        if memory is None:
+            memory = (
+                np.zeros((self.b,) + chosen.shape[1:], chosen.dtype),
+                np.zeros((self.b,) + th.shape[1:]),
+                np.zeros((self.b,) + x.shape[1:]),
+                np.zeros(self.b, dtype=bool),
+            )
+            self.memory[i] = memory
+        memory[0][sub], memory[1][sub], memory[2][sub] = chosen, th, x
+        memory[3][sub] = True
+        return out
 
 
 def _warm_start(

@@ -32,7 +32,9 @@ def predicted_means(x_pred: FloatArray, Phi: FloatArray, horizon: int) -> FloatA
     x = np.asarray(x_pred, dtype=np.float64)
     for h in range(horizon):
         out[..., h, :] = x
-        x = x @ Phi.T
+        # Row by row (a matrix product of all copies at once rounds a row differently
+        # with another number of rows): a copy's means do not depend on its batch.
+        x = np.add.reduce(x[..., None, :] * Phi, axis=-1)
     return out
 
 
@@ -116,10 +118,21 @@ def rollout(
             posts[..., h, :, :] = post
         if h + 1 < H:
             P = predict_covariance(post, Phi, Q, x0)
-    score = traces @ np.asarray(weights, dtype=np.float64)
+    score = weighted_sum(traces, weights)
     if posts is not None:
         return score, traces, posts
     return score, traces
+
+
+def weighted_sum(values: FloatArray, weights: FloatArray) -> FloatArray:
+    """Return ``sum_h weights[h] values[..., h]``, (...), each row summed on its own.
+
+    Not ``values @ weights``: a matrix-vector product over many rows rounds a row
+    differently with another number of rows, and a copy's plan must not depend on the
+    batch it is planned in.
+    """
+    w = np.asarray(weights, dtype=np.float64)
+    return np.add.reduce(np.asarray(values, dtype=np.float64) * w, axis=-1)
 
 
 def prior_sequence(P_pred: FloatArray, Y: FloatArray, Phi: FloatArray, Q: FloatArray) -> FloatArray:

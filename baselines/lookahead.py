@@ -137,6 +137,8 @@ class Lookahead:
         Phi: FloatArray | None = None,
         Q: FloatArray | None = None,
         previous: FloatArray | None = None,
+        *,
+        fresh: np.ndarray | None = None,
     ) -> LookaheadResult:
         """Return the plan for ``problem`` given the full prediction.
 
@@ -144,7 +146,9 @@ class Lookahead:
         ``x_hat(k+1|k), P(k+1|k)`` whose position parts are ``problem.target`` and
         ``problem.prior_cov``; ``Phi``, ``Q`` the motion model (eq. 2-3). All four
         ``None`` (the default): ``problem.prediction``'s. ``previous`` (batch + (M, H, 2))
-        is the last plan, whose shift by one step is a warm-start option.
+        is the last plan, whose shift by one step is a warm-start option; ``fresh``
+        (batch, bool) marks the copies whose ``previous`` is no plan of theirs: they get
+        no warm-start option (the plan of a copy is the same alone or in any batch).
         """
         preds = _predictions(problem, x_pred, P_pred, Phi, Q)
         shape, M, H = problem.batch_shape, problem.n_sensors, self.horizon
@@ -178,6 +182,8 @@ class Lookahead:
             paths = np.where(still[:, :, None, None, None], gsr_paths[:, :, None], paths)
         valid = model.outside_rho(paths, means, rho_eff)  # (B, M, O)
         valid[:, :, 0] = True  # GSR's rollout: its solver's candidates keep rho
+        if previous is not None and fresh is not None:  # no warm start: as if not offered
+            valid[np.asarray(fresh, dtype=bool).reshape(B), :, 1] = False
         info, scorer = self._scoring(model, paths, means, preds, weights, problem.objective)
         if self.tail:  # the last step's information held past the horizon (terminal cost)
             info = [np.concatenate([Y, np.repeat(Y[..., -1:, :, :], self.tail, -3)], -3)
@@ -330,7 +336,7 @@ class _Scorer:
             ],
             axis=-1,
         )  # (B, C, H, K)
-        return self.objective.combine(values) @ self.weights
+        return hm.weighted_sum(self.objective.combine(values), self.weights)
 
 
 def _predictions(problem, x_pred, P_pred, Phi, Q) -> list[tuple]:
@@ -386,8 +392,8 @@ class LookaheadPlanner:
     Warm start: the planner keeps each copy's last plan. The next problem's option 1 is
     that plan shifted by one step where the copy continues it (its sensors stand where
     the plan's first step put them; with the tracker: the tracker continues the episode),
-    "stay" for a copy that does not; with no copy continuing (or no plan yet) there is
-    no warm-start option.
+    none for a copy that does not (as if it were planned alone: a copy's plan does not
+    depend on the batch it is planned in).
 
     Args:
         scenario: for the fallback only, the scenario the problems come from (name or
@@ -432,7 +438,8 @@ class LookaheadPlanner:
             if new.all():
                 previous = None
             elif np.any(new):
-                # A copy that continues no plan has none: "stay" is its warm-start option.
+                # A copy that continues no plan has no warm start: its option 1 ("stay", a
+                # stand-in) is not offered, as when it is planned alone.
                 start = problem.sensors.reshape(B, M, 1, 2)
                 previous = np.where(new[:, None, None, None], start, previous)
         res = self.search.plan_prediction(
@@ -442,6 +449,7 @@ class LookaheadPlanner:
             Phi,
             Q,
             None if previous is None else previous.reshape(shape + previous.shape[-3:]),
+            fresh=None if previous is None or new is None else new,
         )
         self._previous = res.plan.reshape(B, M, -1, 2)
         self.last_result = res

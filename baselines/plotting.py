@@ -217,12 +217,26 @@ def plot_comparison(
     return save_figure(fig, path)
 
 
-def short_label(label: str) -> str:
-    """Return ``DIR/policy.zip`` for a long policy path (the last folder and the file)."""
-    path = Path(label)
-    if label.endswith(".zip") and path.parent.name:
-        return f"{path.parent.name}/{path.name}"
-    return label
+def short_labels(labels: Sequence[str]) -> list[str]:
+    """Return short labels for policies: a policy file's folder name
+    (``runs/bc1000/policy.zip`` -> ``bc1000``), a name as it is.
+
+    Where two files would share a label, they keep as many trailing folders as tell
+    them apart (``a/bc/policy.zip``, ``b/bc/policy.zip`` -> ``a/bc``, ``b/bc``).
+    """
+    paths = [Path(x) for x in labels]
+    files = [p.suffix == ".zip" and len(p.parts) > 1 for p in paths]
+    depth = 1
+    while True:
+        out = [
+            "/".join(p.parent.parts[-depth:]) if f else x
+            for x, p, f in zip(labels, paths, files, strict=True)
+        ]
+        deepest = max((len(p.parent.parts) for p, f in zip(paths, files, strict=True) if f),
+                      default=0)  # fmt: skip
+        if len(set(out)) == len(out) or depth >= deepest:
+            return out if len(set(out)) == len(out) else list(labels)
+        depth += 1
 
 
 def plot_evaluation(results: Sequence[Any], path: str | Path, title: str = "") -> Path:
@@ -232,15 +246,18 @@ def plot_evaluation(results: Sequence[Any], path: str | Path, title: str = "") -
     (``policy``, ``seeds``, ``mean_trace``), one of them GSR's on the same seeds. Left:
     each episode's mean trace; right: each episode's mean trace over GSR's on the same
     seed (the paired comparison). Both on a log scale, so that random motion (several
-    times GSR's trace) and policies within a few percent of GSR are readable together.
+    times GSR's trace) and policies within a few percent of GSR are readable together;
+    an axis spanning less than a decade (no power of ten or only one inside) gets evenly
+    spaced labelled ticks instead of the decades'. Policies are named by their short
+    labels (:func:`short_labels`).
     """
     plt = _pyplot()
-    from matplotlib.ticker import NullFormatter, ScalarFormatter
+    from matplotlib.ticker import MaxNLocator, NullFormatter, NullLocator, ScalarFormatter
 
     gsr = next((r for r in results if r.policy.lower() == "gsr"), None)
     if gsr is None:
         raise ValueError("the results hold no GSR evaluation (the ratio's reference)")
-    labels = [short_label(r.policy) for r in results]
+    labels = short_labels([r.policy for r in results])
     ticks = range(1, len(results) + 1)
     fig, (ax, bx) = plt.subplots(1, 2, figsize=(2.5 + 1.5 * len(results), 4.4))
     ax.boxplot([r.mean_trace for r in results], showmeans=True)
@@ -251,7 +268,11 @@ def plot_evaluation(results: Sequence[Any], path: str | Path, title: str = "") -
     bx.set_ylabel("episode mean trace / GSR's (same seed)")
     for axis in (ax, bx):
         axis.set_yscale("log")
-        axis.yaxis.set_major_formatter(ScalarFormatter())
+        lo, hi = axis.get_ylim()
+        if np.floor(np.log10(hi)) - np.ceil(np.log10(lo)) < 1:  # fewer than two decades in view
+            axis.yaxis.set_major_locator(MaxNLocator(nbins=6))
+            axis.yaxis.set_minor_locator(NullLocator())
+        axis.yaxis.set_major_formatter(ScalarFormatter(useOffset=False))
         axis.yaxis.set_minor_formatter(NullFormatter())
         axis.set_xticks(ticks, labels, rotation=25, ha="right")
         axis.legend(loc="upper right", fontsize=8)

@@ -131,6 +131,15 @@ IMPROVED: dict[str, tuple[str, str]] = {
     ),
 }
 
+#: Evaluation summaries' entries redefined or added by design since the recording (issue
+#: 35): the intervals of the mean trace and of the ratio to GSR are BCa bootstrap ones (their
+#: coverage is tested in tests/baselines/test_evaluation.py), ``label`` and
+#: ``median_trace`` are new. They are left out of both sides; the rest is compared as usual.
+REDEFINED: dict[str, tuple[str, ...]] = dict.fromkeys(
+    ["evaluation", "evaluation_reference"],
+    ("mean_trace_ci95", "ratio_to_gsr_ci95", "label", "median_trace"),
+)
+
 #: Dicts that gained keys by design since the recording, per case: the key of the dict, and
 #: why. The recorded keys must still be there with their values; the new ones are tested
 #: where they were added.
@@ -395,6 +404,17 @@ def test_case_reproduces_recording(name: str) -> None:
             assert all(all(row["equals_single"]["equal"]) for row in actual["steps"])
         expected, actual = (
             {**case, "steps": _until(case["steps"], k, kept)} for case in (expected, actual)
+        )
+    if name in REDEFINED:
+        expected, actual = (
+            {
+                **case,
+                "summaries": [
+                    {k: v for k, v in row.items() if k not in REDEFINED[name]}
+                    for row in case["summaries"]
+                ],
+            }
+            for case in (expected, actual)
         )
     if name in GAINED:
         key = GAINED[name][0]

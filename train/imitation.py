@@ -142,6 +142,7 @@ def rollout_labels(
     seeds: list[int],
     learner: Callable[[np.ndarray], np.ndarray] | None = None,
     beta: float = 1.0,
+    on_step: Callable[[int], None] | None = None,
 ) -> tuple[Dataset, list[float]]:
     """Return the expert-labelled states visited on ``seeds`` and each episode's mean trace.
 
@@ -154,6 +155,7 @@ def rollout_labels(
     ``default_rng([seed, 1])``, as the simulation runner) and the mixing coin is
     ``default_rng([seed, 2])``. So an episode's labels do not depend on which episodes ran
     before it, and seeds split over Ray workers give the same labels as one loop.
+    ``on_step(1)`` is called after every step (progress).
     """
     obs_list, act_list, traces = [], [], []
     for s in seeds:
@@ -178,6 +180,8 @@ def rollout_labels(
                 actions = learner(obs)
                 obs_dict, _, _, _, infos = env.step(dict(zip(agents, actions, strict=True)))
             episode_trace.append(infos[agents[0]]["trace"])
+            if on_step is not None:
+                on_step(1)
         traces.append(float(np.mean(episode_trace)))
     data = Dataset(np.concatenate(obs_list).astype(np.float32), np.concatenate(act_list))
     return data, traces
@@ -190,6 +194,7 @@ def rollout_labels_batched(
     seeds: list[int],
     learner: Callable[[np.ndarray], np.ndarray] | None = None,
     beta: float = 1.0,
+    on_step: Callable[[int], None] | None = None,
 ) -> tuple[Dataset, list[float]]:
     """Return :func:`rollout_labels`' data for a batched expert, every episode a copy of one
     :class:`~activetrack.world.World`: the expert labels all copies with one ``plan`` call
@@ -198,7 +203,8 @@ def rollout_labels_batched(
     The same seeds, coins and episodes as :func:`rollout_labels`, the data in the same
     order (episode by episode); the labels equal the serial ones to the planner's
     tolerance (:func:`activetrack.baselines.evaluation.run_batched`). ``learner`` maps
-    observations (R, D) to actions (R, 2) for any number of rows R.
+    observations (R, D) to actions (R, 2) for any number of rows R. ``on_step(k)`` is
+    called after every step with the number of copies that stepped (progress).
     """
     from activetrack.world import World
 
@@ -235,6 +241,8 @@ def rollout_labels_batched(
         for i in rows.tolist():
             trace_by[i].append(float(world.get("trace", i)))
         live &= ~(world.terminated | world.truncated)
+        if on_step is not None:
+            on_step(len(rows))
     obs_all = np.concatenate([np.stack(o) for o in obs_by]).reshape(-1, obs.shape[-1])
     act_all = np.concatenate([np.stack(a) for a in act_by]).reshape(-1, 2)
     data = Dataset(obs_all.astype(np.float32), act_all)
@@ -276,13 +284,19 @@ def _labels_on_ray(
     beta: float,
     threads: int,
     cpus: int,
+    on_episodes: Callable[[int], None] | None = None,
 ) -> tuple[Dataset, list[float]]:
-    """Return :func:`label_seeds` over ``seeds``, as Ray tasks on chunks, joined in order."""
+    """Return :func:`label_seeds` over ``seeds``, as Ray tasks on chunks, joined in order
+    (``on_episodes(k)`` called as a chunk of ``k`` episodes completes)."""
     from activetrack.baselines import distributed
 
     parts = distributed.chunks(seeds, distributed.JOBS_PER_CPU * cpus)
     jobs = [(scenario, overrides, expert, part, policy, beta, threads) for part in parts]
-    done = distributed.run_tasks(label_seeds, jobs)
+    done = distributed.run_tasks(
+        label_seeds,
+        jobs,
+        on_done=None if on_episodes is None else (lambda i: on_episodes(len(jobs[i][3]))),
+    )
     data = Dataset(
         np.concatenate([d.obs for d, _ in done]), np.concatenate([d.actions for d, _ in done])
     )
@@ -299,8 +313,10 @@ def fit(
     generator: torch.Generator | None = None,
     log: Callable[[str, float, int], None] | None = None,
     step0: int = 0,
+    on_epoch: Callable[[int], None] | None = None,
 ) -> list[float]:
-    """Train the actor's mean action on ``data`` by MSE; return the mean loss of each epoch."""
+    """Train the actor's mean action on ``data`` by MSE; return the mean loss of each epoch
+    (``on_epoch(1)`` called after each, for progress)."""
     obs = torch.as_tensor(data.obs)
     target = torch.as_tensor(data.actions)
     n = len(data)
@@ -327,6 +343,8 @@ def fit(
         losses.append(total / n)
         if log is not None:
             log("imitation/mse", losses[-1], step0 + epoch)
+        if on_epoch is not None:
+            on_epoch(1)
     policy.eval()
     return losses
 
@@ -421,25 +439,40 @@ def train_imitation(
     losses, traces = [], []
     from tqdm.auto import tqdm
 
+    # Progress of the two parts that take the time: labelling (environment steps, every
+    # round's episodes) and training (epochs, every round's).
+    n_steps = env.unwrapped.world.scenario.n_steps
+    labelling = tqdm(
+        total=cfg.episodes * n_steps, desc="labelling", unit="step", unit_scale=True,
+        disable=not progress, position=0,
+    )  # fmt: skip
+    training = tqdm(
+        total=cfg.iterations * cfg.epochs, desc="training", unit="epoch",
+        disable=not progress, position=1,
+    )  # fmt: skip
     # One Ray for all rounds (started once); the serial loop uses this process's env.
     ray_or_none = distributed.session(workers, address) if on_ray else contextlib.nullcontext(1)
-    with ray_or_none as cpus:
-        for i, idx in enumerate(tqdm(splits, desc="imitation rounds", disable=not progress)):
+    with ray_or_none as cpus, labelling, training:
+        for i, idx in enumerate(splits):
             round_seeds = [seeds[j] for j in idx]
             learner, beta = (None, 1.0) if i == 0 else (policy, cfg.beta**i)
+            labelling.set_postfix_str(f"round {i + 1}/{len(splits)}")
+            done = labelling.n
             if on_ray:
                 new, tr = _labels_on_ray(
-                    scenario, overrides, expert, round_seeds, learner, beta, threads, cpus
-                )
+                    scenario, overrides, expert, round_seeds, learner, beta, threads, cpus,
+                    on_episodes=lambda k: labelling.update(k * n_steps),
+                )  # fmt: skip
             elif batched:
                 act = None if learner is None else learner_fn(learner)
                 new, tr = rollout_labels_batched(
-                    scenario, overrides, expert, round_seeds, act, beta
+                    scenario, overrides, expert, round_seeds, act, beta, labelling.update
                 )
-            elif learner is None:
-                new, tr = rollout_labels(env, expert, round_seeds)
             else:
-                new, tr = rollout_labels(env, expert, round_seeds, learner_fn(learner), beta)
+                act = None if learner is None else learner_fn(learner)
+                new, tr = rollout_labels(env, expert, round_seeds, act, beta, labelling.update)
+            # Episodes that ended early: the round's share of the bar, whole.
+            labelling.update(done + len(round_seeds) * n_steps - labelling.n)
             data = data.extend(new)
             traces.append(float(np.mean(tr)))
             epoch_losses = fit(
@@ -452,6 +485,7 @@ def train_imitation(
                 gen,
                 log,
                 step0=i * cfg.epochs,
+                on_epoch=training.update,
             )
             losses.append(epoch_losses[-1])
             if log is not None:

@@ -13,6 +13,7 @@ from scipy import stats
 from activetrack import make_scenario
 from activetrack.baselines import GSR, RandomMotion
 from activetrack.baselines.evaluation import (
+    bootstrap_ci,
     evaluate,
     format_table,
     paired_ratio_ci,
@@ -51,9 +52,12 @@ def test_summary_statistics_are_independent_computations(rm_and_gsr):
     rm, gsr = rm_and_gsr
     r = rows[0]
     assert r["policy"] == "rm"
-    half = stats.t.ppf(0.975, EPISODES - 1) * np.std(rm.mean_trace, ddof=1) / np.sqrt(EPISODES)
     assert r["mean_trace"] == pytest.approx(np.mean(rm.mean_trace))
-    assert r["mean_trace_ci95"] == pytest.approx([r["mean_trace"] - half, r["mean_trace"] + half])
+    assert r["median_trace"] == pytest.approx(np.median(rm.mean_trace))
+    lo, hi = r["mean_trace_ci95"]  # a bootstrap interval: within the sample's range
+    assert rm.mean_trace.min() <= lo <= r["mean_trace"] <= hi <= rm.mean_trace.max()
+    half = stats.t.ppf(0.975, EPISODES - 1) * np.std(rm.rmse, ddof=1) / np.sqrt(EPISODES)
+    assert r["rmse_ci95"] == pytest.approx([np.mean(rm.rmse) - half, np.mean(rm.rmse) + half])
     assert r["rmse"] == pytest.approx(np.mean(rm.rmse))
     assert r["mean_return"] == pytest.approx(np.mean(rm.returns))
     assert r["ratio_to_gsr"] == pytest.approx(np.mean(rm.mean_trace) / np.mean(gsr.mean_trace))
@@ -228,3 +232,187 @@ def test_batched_is_checked(tmp_path, capsys):
         evaluate(["gsr"], "paper", 1, SEED, progress=False, batched="yes")
     with pytest.raises(ValueError, match="batched runs in this process"):
         evaluate(["gsr"], "paper", 1, SEED, progress=False, batched=True, workers=2)
+
+
+def _coverage_band(reps: int, level: float = 0.95) -> tuple[float, float]:
+    """Return the central 99% range of the covered fraction of ``reps`` intervals whose
+    true coverage is ``level`` (binomial)."""
+    lo, hi = stats.binom.ppf([0.005, 0.995], reps, level)
+    return lo / reps, hi / reps
+
+
+def test_mean_trace_interval_covers_the_mean_of_a_heavy_tailed_quantity(monkeypatch):
+    """Lognormal episodes (positive, right-skewed, like the traces): the nominal 95%
+    interval covers the true mean exp(mu + s^2 / 2) in a binomial band around 95% of 1000
+    samples (a 10% narrower interval covers about 92.4% and fails)."""
+    import activetrack.baselines.evaluation as ev
+
+    monkeypatch.setattr(ev, "N_RESAMPLES", 1999)  # the Monte Carlo error of each end only
+    rng = np.random.default_rng(35)
+    mu, sigma, n, reps = 0.0, 0.5, 100, 1000
+    truth = np.exp(mu + sigma**2 / 2)
+    covered = 0
+    for _ in range(reps):
+        x = rng.lognormal(mu, sigma, n)
+        lo, hi = bootstrap_ci(x)
+        assert x.min() <= lo <= np.mean(x) <= hi <= x.max()
+        covered += lo <= truth <= hi
+    band = _coverage_band(reps)
+    assert band[0] <= covered / reps <= band[1], (covered, band)
+
+
+def test_paired_ratio_interval_covers_the_ratio_of_means(monkeypatch):
+    """Paired lognormal episodes y = x z (z independent of x): mean(y) / mean(x) estimates
+    E[z] = exp(m + s^2 / 2); its nominal 95% interval covers it in the binomial band."""
+    import activetrack.baselines.evaluation as ev
+
+    monkeypatch.setattr(ev, "N_RESAMPLES", 1999)
+    rng = np.random.default_rng(36)
+    n, reps, m, s = 100, 1000, 0.1, 0.2
+    truth = np.exp(m + s**2 / 2)
+    covered = 0
+    for _ in range(reps):
+        x = rng.lognormal(0.0, 0.5, n)
+        y = x * rng.lognormal(m, s, n)
+        lo, hi = paired_ratio_ci(y, x)
+        covered += lo <= truth <= hi
+    band = _coverage_band(reps)
+    assert band[0] <= covered / reps <= band[1], (covered, band)
+
+
+def test_mean_trace_interval_never_below_the_sample_minimum():
+    """One episode 100 times the others' trace: a Student-t interval reaches below zero
+    (the issue's 10.28 [-1.84, 22.41]); the bootstrap's stays above the sample minimum."""
+    x = np.r_[np.full(19, 0.2), 40.0] + np.linspace(0.0, 0.01, 20)
+    lo, hi = bootstrap_ci(x)
+    assert x.min() <= lo < np.mean(x) < hi <= x.max()
+    half = stats.t.ppf(0.975, x.size - 1) * np.std(x, ddof=1) / np.sqrt(x.size)
+    assert np.mean(x) - half < 0.0  # what the t interval gave
+
+
+def test_table_names_policy_files_by_their_folder(rm_and_gsr):
+    """Long policy paths: the table shows the folder name whole, the JSON the full path."""
+    import copy
+
+    long = "/home/user/experiments/verify3/runs/bc1000_la/policy.zip"
+    results = copy.copy(rm_and_gsr)
+    results[0] = copy.copy(rm_and_gsr[0])
+    results[0].policy = long
+    rows = summaries(results)
+    assert rows[0]["policy"] == long and rows[0]["label"] == "bc1000_la"
+    table = format_table(rows)
+    assert "bc1000_la " in table and "..." not in table and "median" in table
+    assert "CPU ms/decision" in table
+    # Two files in folders of the same name keep the folder above as well.
+    other = copy.copy(rm_and_gsr[0])
+    other.policy = "/home/user/b/bc1000_la/policy.zip"
+    labels = [r["label"] for r in summaries([results[0], other, rm_and_gsr[1]])]
+    assert labels == ["runs/bc1000_la", "b/bc1000_la", "gsr"]
+
+
+def _figure_of(results, monkeypatch):
+    import activetrack.baselines.plotting as plotting
+
+    saved = {}
+
+    def keep(fig, path, dpi=plotting.DPI):
+        saved["fig"] = fig
+        return path
+
+    monkeypatch.setattr(plotting, "save_figure", keep)
+    plotting.plot_evaluation(results, "unused.png")
+    return saved["fig"]
+
+
+@pytest.mark.parametrize("spread", [1.02, 1.5, 30.0])
+def test_evaluation_plot_has_labelled_ticks(spread, monkeypatch):
+    """Both axes carry at least two labelled ticks inside their limits, for data spanning
+    2% (less than a decade, where the decades' ticks leave none), 50% and 30 times."""
+    from types import SimpleNamespace
+
+    rng = np.random.default_rng(5)
+    gsr = 0.3 * rng.uniform(1.0, 1.01, 20)
+    other = gsr * rng.uniform(1.0, spread, 20)
+    results = [
+        SimpleNamespace(policy="runs/bc/policy.zip", seeds=list(range(20)), mean_trace=other),
+        SimpleNamespace(policy="gsr", seeds=list(range(20)), mean_trace=gsr),
+    ]
+    fig = _figure_of(results, monkeypatch)
+    fig.canvas.draw()
+    for axis in fig.axes:
+        lo, hi = axis.get_ylim()
+        shown = [
+            t for t in axis.yaxis.get_major_ticks() + axis.yaxis.get_minor_ticks()
+            if t.label1.get_visible() and t.label1.get_text() and lo <= t.get_loc() <= hi
+        ]  # fmt: skip
+        assert len(shown) >= 2, (spread, axis.get_ylabel(), lo, hi)
+        # The labels name their ticks' values (not an offset or a rounded-away value).
+        for t in shown:
+            text = t.label1.get_text().replace("\u2212", "-").strip("$")
+            assert float(text) == pytest.approx(t.get_loc(), rel=1e-6)
+        assert [x.get_text() for x in axis.get_xticklabels()] == ["bc", "gsr"]
+
+
+class _Recorder:
+    """A stand-in for tqdm that records its total and every update."""
+
+    made: list = []
+
+    def __init__(self, *args, total=None, **kwargs):
+        self.total, self.n, self.updates = total, 0, []
+        _Recorder.made.append(self)
+
+    def update(self, k=1):
+        self.n += k
+        self.updates.append(k)
+
+    def set_description(self, *args, **kwargs):
+        pass
+
+    def close(self):
+        pass
+
+
+def test_batched_progress_advances_every_step(monkeypatch):
+    """The bar counts steps: a batched policy advances it at every one of its steps (not
+    once when the whole policy is done), and it ends full."""
+    import tqdm.auto
+
+    monkeypatch.setattr(tqdm.auto, "tqdm", _Recorder)
+    _Recorder.made = []
+    steps, episodes = 5, 3
+    evaluate(["gsr", "rm"], "paper", episodes, SEED, batched=True, n_steps=steps)
+    (bar,) = _Recorder.made
+    assert bar.total == 2 * episodes * steps and bar.n == bar.total
+    # GSR batched: one update of 3 copies per step; RM serial: one per episode step.
+    assert bar.updates.count(episodes) >= steps and bar.updates.count(1) >= episodes * steps
+
+
+class _CostlyFirstCall:
+    """An expert that stays put; its first call burns 0.3 s of CPU (a compilation), its
+    later ones sleep 5 ms (waiting is not computing)."""
+
+    def __init__(self):
+        self.calls = 0
+
+    def plan(self, problem):
+        import time
+
+        self.calls += 1
+        if self.calls == 1:
+            end = time.process_time() + 0.3
+            while time.process_time() < end:
+                pass
+        else:
+            time.sleep(0.005)
+        return problem.sensors
+
+
+def test_ms_per_step_is_cpu_time_after_a_warm_up():
+    """The first call (compilation) is a warm-up, not counted; sleeping costs no CPU.
+    Counted, the first call alone would give 0.3 s / 4 steps = 75 ms per decision; wall
+    time would give at least 5 ms."""
+    policy = _CostlyFirstCall()
+    (res, _) = evaluate({"stay": policy}, "paper", 1, SEED, progress=False, n_steps=4)
+    assert policy.calls == 5  # the warm-up and the 4 steps
+    assert 0.0 <= res.ms_per_step[0] < 2.5

@@ -805,7 +805,8 @@ class Prepared:
         b, k = len(p.r), p.k
         self.problem, self.n_iter = p, n_iter
         #: With ``remember``, each solve keeps its starts and where they ended (``last``);
-        #: the next solve refines from there the rows whose starts are the same candidates.
+        #: the next solve refines from there the rows whose starts are the same candidates
+        #: (a caller may set ``last`` with a fourth entry, the rows that have a last solve).
         self.remember, self.last = False, None
         (o0, r0, th0, pts0), (o1, r1, th1, pts1) = _arc_candidates(p, n_boundary)
         n0, n1 = th0.shape[-1], th1.shape[-1]
@@ -967,6 +968,8 @@ def _solve(p: _Problem, cand: Prepared) -> tuple[FloatArray, FloatArray]:
         # A repeated solve (Gauss-Seidel's next sweep, the base changed a little): rows
         # whose starts come from the same candidates refine from where those ended.
         same = np.all(chosen == cand.last[0], axis=(1, 2))
+        if len(cand.last) > 3:  # per row: whether it was solved before
+            same &= cand.last[3]
         arcs = arcs[:2] + (np.where(same[:, None], cand.last[1], arcs[2]),) + arcs[3:]
         plane = (np.where(same[:, None, None], cand.last[2], plane[0]),) + plane[1:]
     pts_r, vals_r, th_r, x_r = _refine(p, arcs, plane, cand.n_iter)
