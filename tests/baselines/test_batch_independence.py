@@ -18,8 +18,8 @@ import pytest
 
 from activetrack.baselines.evaluation import evaluate
 from activetrack.baselines.policies import GBESPolicy, LookaheadPolicy
-from activetrack.scenarios import PRESETS
 from activetrack.world import World
+from activetrack.world.scenarios import PRESETS
 
 SEED, STEPS = 7007, 4
 #: (first seed, episodes): the seed alone, second of 3, last of 7.
