@@ -43,7 +43,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from activetrack.baselines.distributed import check_reachable
+from activetrack.baselines.distributed import check_address_form, check_reachable
 from activetrack.files import RunOutputs, prepare_output_dir
 from activetrack.train.networks import DEFAULT_NET, NetConfig, build_policy
 from activetrack.train.policy_io import save_policy
@@ -382,7 +382,7 @@ def check_address(address: Any) -> str | None:
         return None
     if not isinstance(address, str) or not address.strip():
         raise ValueError(f"address must be a non-empty Ray address such as 'auto', got {address!r}")
-    return address.strip()
+    return check_address_form(address)
 
 
 @dataclass

@@ -288,3 +288,25 @@ def test_train_refuses_results_unless_overwrite(trained, tmp_path, capsys):
     assert main([*argv, "--out", str(out), "--overwrite"]) == 0
     assert sorted(p.name for p in out.iterdir()) == ["config.json", "notes.txt", "policy.zip", "tb"]
     assert load_policy(out / "policy.zip").meta["net"]["hidden"] == [8]
+
+
+@pytest.mark.parametrize("method", ["bc", "rllib-ppo"])
+def test_a_malformed_address_fails_before_training(method, tmp_path, capsys, monkeypatch):
+    import socket
+
+    import activetrack.train.cli as tcli
+
+    def never(*args, **kwargs):
+        raise AssertionError("probed or trained with a malformed address")
+
+    if method == "rllib-ppo":
+        rllib = pytest.importorskip("activetrack.train.rllib")
+        monkeypatch.setattr(rllib, "train_rllib_ppo", never)
+    monkeypatch.setattr(tcli, "train_imitation", never)
+    monkeypatch.setattr(socket, "create_connection", never)
+    out = tmp_path / "out"
+    for address in ("127.0.0.1:-5", "127.0.0.1:+1", "127.0.0.1:1.5", "127.0.0.1:99999"):
+        assert main(["train", method, "--address", address, "--out", str(out)]) == 2
+        err = capsys.readouterr().err
+        assert f"activetrack train {method}: error: address must be 'auto', 'local'" in err
+        assert not out.exists()
