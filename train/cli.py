@@ -341,13 +341,27 @@ def run_rllib(args: argparse.Namespace) -> int:
         progress=not args.no_progress,
         threads=threads,
     )
-    ret = result.history[-1].get("episode_return_mean", float("nan"))
     print(
         f"rllib-ppo: {iterations} iterations, {result.env_steps} env steps "
-        f"({result.agent_steps} agent-steps), {result.seconds:.1f} s, last mean episode return "
-        f"(all sensors, scaled) {ret:.3f} -> {result.policy_path}"
+        f"({result.agent_steps} agent-steps), {result.seconds:.1f} s, "
+        f"{_last_return(result.history)} -> {result.policy_path}"
     )
     return 0
+
+
+def _last_return(history: list[dict[str, float]]) -> str:
+    """Return the phrase for the last mean episode return of an RLlib run's ``history``
+    (RLlib reports one only once an episode has finished)."""
+    done = [
+        (i, h["episode_return_mean"])
+        for i, h in enumerate(history, 1)
+        if "episode_return_mean" in h
+    ]
+    if not done:
+        return "no episode finished in training (no mean return)"
+    it, ret = done[-1]
+    when = "" if it == len(history) else f" at iteration {it}"
+    return f"last mean episode return (all sensors, scaled) {ret:.3f}{when}"
 
 
 def _net_config(args: argparse.Namespace) -> NetConfig:

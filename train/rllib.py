@@ -450,9 +450,8 @@ def train_rllib_ppo(
                 if writer is not None:
                     _log_scalars(writer, result, it)
                 bar.update(1)
-                bar.set_postfix(
-                    ret=f"{stats.get('episode_return_mean', math.nan):.3g}", refresh=False
-                )
+                ret = stats.get("episode_return_mean")  # none until an episode finishes
+                bar.set_postfix(ret="-" if ret is None else f"{ret:.3g}", refresh=False)
                 every = cfg.checkpoint_every
                 if outputs is not None and (it == iterations or (every and it % every == 0)):
                     _checkpoint(algo, outputs.path("checkpoints/"), it)

@@ -310,3 +310,26 @@ def test_a_malformed_address_fails_before_training(method, tmp_path, capsys, mon
         err = capsys.readouterr().err
         assert f"activetrack train {method}: error: address must be 'auto', 'local'" in err
         assert not out.exists()
+
+
+def test_rllib_says_when_no_episode_finished(tmp_path, capsys, monkeypatch):
+    """RLlib reports a mean return only once an episode has finished: the summary line says
+    so instead of printing nan, and names the iteration of an older mean."""
+    rllib = pytest.importorskip("activetrack.train.rllib")
+
+    def fake(history):
+        def train(*args, **kwargs):
+            return rllib.RLlibResult(tmp_path / "policy.zip", history, 1.0, 64, 192, None)
+
+        return train
+
+    argv = ["train", "rllib-ppo", "--iterations", "2", "--out", str(tmp_path / "out")]
+    for history, expected in [
+        ([{}, {}], "no episode finished in training (no mean return)"),
+        ([{"episode_return_mean": -1.25}, {}], "(all sensors, scaled) -1.250 at iteration 1"),
+        ([{}, {"episode_return_mean": 2.5}], "(all sensors, scaled) 2.500 ->"),
+    ]:
+        monkeypatch.setattr(rllib, "train_rllib_ppo", fake(history))
+        assert main(argv) == 0
+        out = capsys.readouterr().out
+        assert expected in out and "nan" not in out
