@@ -146,18 +146,23 @@ def session(workers: int = 1, address: str | None = None) -> Iterator[int]:
         import ray
     except ImportError:
         raise RayNotInstalledError(f"distributed runs need Ray: {INSTALL_HINT}") from None
+    from activetrack.files import keep_signal_handlers
+
     started = not ray.is_initialized()
     if started:
         if address is not None:
             check_reachable(address)
-            ray.init(address=address, logging_level="warning")
-        else:
-            ray.init(
-                address="local",
-                num_cpus=workers,
-                include_dashboard=False,
-                logging_level="warning",
-            )
+        # Ray's own SIGTERM handler would exit without the caller's clean-up.
+        with keep_signal_handlers():
+            if address is not None:
+                ray.init(address=address, logging_level="warning")
+            else:
+                ray.init(
+                    address="local",
+                    num_cpus=workers,
+                    include_dashboard=False,
+                    logging_level="warning",
+                )
     try:
         yield max(1, int(ray.cluster_resources().get("CPU", workers)))
     finally:

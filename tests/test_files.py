@@ -55,16 +55,18 @@ def test_a_failed_write_keeps_the_old_file(tmp_path):
 def test_run_outputs_commit_together_or_not_at_all(tmp_path):
     (tmp_path / "results.json").write_text("old results")
     (tmp_path / "plot.png").write_text("old plot")
-    out = prepare_output_dir(tmp_path, ("results.json", "plot.png"), overwrite=True)
-    with pytest.raises(RuntimeError), out:
+    owned = ("results.json", "plot.png")
+    with pytest.raises(RuntimeError), prepare_output_dir(tmp_path, owned, overwrite=True) as out:
         out.write_text("results.json", "new results")
         raise RuntimeError("the plot failed")
+    assert out.state == "discarded"
     assert (tmp_path / "results.json").read_text() == "old results"
     assert (tmp_path / "plot.png").read_text() == "old plot"
     assert temp_files(tmp_path) == []
     # A successful run without the plot: the stale plot goes, the results are new.
-    with out:
+    with prepare_output_dir(tmp_path, owned, overwrite=True) as out:
         out.write_json("results.json", {"v": 1})
+        assert (tmp_path / "results.json").read_text() == "old results"  # until the commit
         written = out.commit()
     assert written == {"results.json": tmp_path / "results.json"}
     assert json.loads((tmp_path / "results.json").read_text()) == {"v": 1}
@@ -77,22 +79,29 @@ def test_run_outputs_commit_together_or_not_at_all(tmp_path):
 def test_prepare_output_dir_refuses_results_unless_overwrite(tmp_path):
     owned = ("results.json", "tb/")
     folder = tmp_path / "new" / "deep"
-    prepare_output_dir(folder, owned)  # checked, made at the first write
-    assert not folder.exists()
+    with prepare_output_dir(folder, owned):  # made (and locked) for the run...
+        assert folder.is_dir()
+    assert not (tmp_path / "new").exists()  # ...and removed: the run wrote nothing
     folder.mkdir(parents=True)
     (folder / "notes.txt").write_text("mine")
     (folder / "tb").mkdir()
-    prepare_output_dir(folder, owned)  # unrelated files and empty folders are no results
+    prepare_output_dir(folder, owned).close()  # unrelated files, empty folders: no results
     (folder / "tb" / "events").write_text("x")
     (folder / "results.json").write_text("{}")
     with pytest.raises(
         ValueError, match=r"already holds results \(results.json, tb/\).*--overwrite"
     ):
         prepare_output_dir(folder, owned)
-    prepare_output_dir(folder, owned, overwrite=True)
-    assert not (folder / "tb").exists()  # owned folders are cleared now
-    assert (folder / "results.json").exists()  # owned files only when the run commits
+    with prepare_output_dir(folder, owned, overwrite=True) as out:
+        (out.staged("tb/") / "new-events").write_text("y")
+        # Nothing is replaced before the commit, folders included.
+        assert (folder / "tb" / "events").read_text() == "x"
+        assert (folder / "results.json").exists()
+        out.write_text("results.json", "new")
+        out.commit()
+    assert sorted(p.name for p in (folder / "tb").iterdir()) == ["new-events"]
     assert (folder / "notes.txt").read_text() == "mine"
+    assert temp_files(folder) == []
 
 
 def test_prepare_output_dir_rejects_unusable_paths(tmp_path):
@@ -170,9 +179,10 @@ def test_train_failing_to_write_keeps_the_previous_policy(tmp_path):
 
 
 def test_a_run_that_writes_nothing_leaves_no_folder_and_json_is_standard(tmp_path):
-    out = prepare_output_dir(tmp_path / "a" / "b", ("results.json",))
-    assert not (tmp_path / "a").exists()  # checked in tmp_path, made at the first write
-    with out:
+    with pytest.raises(RuntimeError), prepare_output_dir(tmp_path / "a" / "b", ("r.json",)):
+        raise RuntimeError("the computation failed")
+    assert not (tmp_path / "a").exists()  # made for the run, removed with it
+    with prepare_output_dir(tmp_path / "a" / "b", ("results.json",)) as out:
         out.write_json("results.json", {"x": 1.0})
         out.commit()
     assert json.loads((tmp_path / "a" / "b" / "results.json").read_text()) == {"x": 1.0}

@@ -44,7 +44,7 @@ import numpy as np
 import torch
 
 from activetrack.baselines.distributed import check_address_form, check_reachable
-from activetrack.files import RunOutputs, prepare_output_dir
+from activetrack.files import RunOutputs, keep_signal_handlers, prepare_output_dir
 from activetrack.train.networks import DEFAULT_NET, NetConfig, build_policy
 from activetrack.train.policy_io import save_policy
 from activetrack.train.utils import (
@@ -369,7 +369,8 @@ def ray_session(address: str | None = None, num_cpus: int | None = None) -> Iter
         address, kwargs["num_cpus"] = "local", num_cpus
     else:
         check_reachable(address)
-    ray.init(address=address, **kwargs)
+    with keep_signal_handlers():  # Ray's SIGTERM handler would skip the command's clean-up
+        ray.init(address=address, **kwargs)
     try:
         yield
     finally:
@@ -425,11 +426,12 @@ def train_rllib_ppo(
     iterations = check_int("iterations", iterations, 1, MAX_ITERATIONS)
     seed = check_int("seed", seed, 0, 2**31 - 1)
     address = check_address(address)
-    outputs = None
-    if isinstance(out_dir, RunOutputs):
-        outputs = out_dir
-    elif out_dir is not None:
-        outputs = prepare_output_dir(out_dir, OUTPUTS, overwrite)
+    if out_dir is not None and not isinstance(out_dir, RunOutputs):
+        with prepare_output_dir(out_dir, OUTPUTS, overwrite) as outputs:  # locked for the run
+            return train_rllib_ppo(
+                scenario, seed, iterations, cfg, outputs, address, progress, threads, **overrides
+            )
+    outputs = out_dir
     from activetrack.scenarios import make_scenario
 
     scenario_dict = make_scenario(scenario, **overrides).to_dict()  # checks the overrides
@@ -454,7 +456,7 @@ def train_rllib_ppo(
                 bar.set_postfix(ret="-" if ret is None else f"{ret:.3g}", refresh=False)
                 every = cfg.checkpoint_every
                 if outputs is not None and (it == iterations or (every and it % every == 0)):
-                    _checkpoint(algo, outputs.path("checkpoints/"), it)
+                    _checkpoint(algo, outputs.staged("checkpoints/"), it)
             bar.close()
             if writer is not None:
                 writer.close()
@@ -540,7 +542,7 @@ def _tb_writer(outputs: RunOutputs | None) -> Any:
         return None
     from torch.utils.tensorboard import SummaryWriter
 
-    return SummaryWriter(str(outputs.path("tb/")))
+    return SummaryWriter(str(outputs.staged("tb/")))
 
 
 def _log_scalars(writer: Any, result: dict[str, Any], step: int, prefix: str = "") -> None:
