@@ -190,3 +190,214 @@ def test_a_run_that_writes_nothing_leaves_no_folder_and_json_is_standard(tmp_pat
         with pytest.raises(ValueError, match="JSON compliant"):
             atomic_write_json(tmp_path / "x.json", {"x": bad})
     assert not (tmp_path / "x.json").exists()
+
+
+# One run per folder: a lock for the run, or a refusal at the commit. -----------------------
+def test_a_second_run_on_the_same_folder_is_refused_while_the_first_runs(tmp_path):
+    folder = tmp_path / "new"
+    owned = ("results.json",)
+    with prepare_output_dir(folder, owned) as first:
+        with pytest.raises(ValueError, match="another run is writing to this folder"):
+            prepare_output_dir(folder, owned)  # refused at once, before any computation
+        first.write_text("results.json", "first")
+        first.commit()
+    assert (folder / "results.json").read_text() == "first"
+    # The first run has ended: the next one finds its results.
+    with pytest.raises(ValueError, match="already holds results"):
+        prepare_output_dir(folder, owned)
+    assert temp_files(folder) == []
+
+
+def test_without_a_lock_the_commit_refuses_results_that_appeared(tmp_path, monkeypatch):
+    """On a file system without flock, two runs into the same new folder both start; the
+    one that finishes last must not replace the other's results."""
+    import activetrack.files as files
+
+    monkeypatch.setattr(files, "_lock", lambda folder: None)
+    folder = tmp_path / "new"
+    owned = ("results.json", "tb/")
+    a = prepare_output_dir(folder, owned)
+    b = prepare_output_dir(folder, owned)
+    with a:
+        a.write_text("results.json", "a")
+        (a.staged("tb/") / "events").write_text("a")
+        a.commit()
+    with pytest.raises(ValueError, match=r"another run wrote results \(results.json, tb/\)"), b:
+        b.write_text("results.json", "b")
+        b.commit()
+    assert (folder / "results.json").read_text() == "a"
+    assert (folder / "tb" / "events").read_text() == "a"
+    assert temp_files(folder) == []
+
+
+def test_a_killed_runs_staging_is_removed_by_the_next_run(tmp_path):
+    folder = tmp_path / "out"
+    (folder / f"{TEMP_PREFIX}run-abc" / "tb").mkdir(parents=True)  # SIGKILL left it
+    (folder / f"{TEMP_PREFIX}results-x.json").write_text("half")
+    with prepare_output_dir(folder, ("results.json",)) as out:
+        out.write_text("results.json", "new")
+        out.commit()
+    assert sorted(p.name for p in folder.iterdir()) == ["results.json"]
+
+
+def test_unusable_output_paths_are_refused_before_the_run(tmp_path):
+    (tmp_path / "dangling").symlink_to(tmp_path / "nowhere")
+    for bad in ("dangling", "dangling/sub"):
+        with pytest.raises(ValueError, match="is a symbolic link to .*nowhere, which does not"):
+            prepare_output_dir(tmp_path / bad, ("a",))
+    long = tmp_path / ("x" * 300)
+    with pytest.raises(ValueError, match="cannot write to this folder .*too long"):
+        prepare_output_dir(long / "sub", ("a",))
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["dangling"]  # nothing made
+
+
+def test_signals_are_held_back_until_the_block_ends():
+    import signal
+
+    from activetrack.files import signals_deferred
+
+    seen = []
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        previous = signal.signal(signal.SIGTERM, signal.default_int_handler)
+        try:
+            with pytest.raises(KeyboardInterrupt), signals_deferred():
+                os.kill(os.getpid(), signum)
+                os.kill(os.getpid(), signum)  # twice: delivered once
+                seen.append(signum)  # reached: the signal waits for the block's end
+        finally:
+            signal.signal(signal.SIGTERM, previous)
+    assert seen == [signal.SIGINT, signal.SIGTERM]
+
+
+# Signals: SIGINT and SIGTERM leave the old complete results or the new complete ones. -----
+SIM = ["simulate", "--planner", "rm", "--runs", "1", "--steps", "2", "--no-progress"]
+
+
+def _old_results(folder: Path) -> dict[str, bytes]:
+    """Write a complete run's results (seed 1, with its figure) in ``folder``; return them."""
+    from activetrack.cli import main
+
+    assert main([*SIM, "--seed", "1", "--out", str(folder)]) == 0
+    return snapshot(folder)
+
+
+def _check_outcome(folder: Path, old: dict[str, bytes], code: int, err: str) -> str:
+    """Check the folder holds the old or the new complete results, no temporary file, and
+    that the exit code and message say which; return "old" or "new"."""
+    assert temp_files(folder) == [], err
+    now = snapshot(folder)
+    seed = json.loads(now["results.json"])["rm"]["seed"]
+    if seed == 1:
+        assert now == old, err  # every old file, unchanged
+        outcome = "old"
+    else:  # the new run (seed 2, --no-plot): its results and no stale figure
+        assert seed == 2 and set(now) == {"results.json"}, (sorted(now), err)
+        outcome = "new"
+    assert "Traceback" not in err, err
+    if code == 0:
+        assert outcome == "new", err
+    else:
+        assert code in (130, 143), err
+        name = "SIGINT" if code == 130 else "SIGTERM"
+        assert f"activetrack simulate: interrupted ({name}); " in err, err
+        assert err.count("interrupted") == 1, err
+        expected = (
+            f"{folder} holds this run's complete new results"
+            if outcome == "new"
+            else f"{folder} still holds its previous results, unchanged"
+        )
+        assert expected in err, err
+    return outcome
+
+
+@pytest.mark.parametrize("signum", ["SIGINT", "SIGTERM"])
+@pytest.mark.parametrize("point", ["computing", "staging", "committing"])
+def test_a_signal_at_each_stage_of_a_run(signum, point, tmp_path, monkeypatch, capsys):
+    """The signal sent by the process to itself at a known point of an --overwrite run."""
+    import signal
+
+    import activetrack.baselines.cli as bcli
+    import activetrack.files as files
+    from activetrack.cli import main
+
+    folder = tmp_path / "out"
+    old = _old_results(folder)
+    sig = getattr(signal, signum)
+
+    def send_then(fn):
+        def wrapped(*args, **kwargs):
+            os.kill(os.getpid(), sig)
+            return fn(*args, **kwargs)
+
+        return wrapped
+
+    if point == "computing":
+        monkeypatch.setattr(bcli, "run_monte_carlo", send_then(bcli.run_monte_carlo))
+    elif point == "staging":
+        monkeypatch.setattr(bcli, "format_table", send_then(bcli.format_table))
+    else:  # inside the commit, between the renames: held back until they are done
+        monkeypatch.setattr(files, "_fsync_dir", send_then(files._fsync_dir))
+    capsys.readouterr()
+    code = main([*SIM, "--seed", "2", "--no-plot", "--overwrite", "--out", str(folder)])
+    assert code == 128 + sig
+    outcome = _check_outcome(folder, old, code, capsys.readouterr().err)
+    assert outcome == ("new" if point == "committing" else "old")
+    assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL  # main restored the handlers
+
+
+def test_a_signal_before_any_output_folder(tmp_path, monkeypatch, capsys):
+    import signal
+
+    import activetrack.baselines.cli as bcli
+    from activetrack.cli import main
+
+    def interrupted(*args, **kwargs):
+        os.kill(os.getpid(), signal.SIGTERM)
+
+    monkeypatch.setattr(bcli, "make_scenario", interrupted)
+    out = tmp_path / "out"
+    assert main([*SIM, "--out", str(out)]) == 143
+    assert "interrupted (SIGTERM); no output folder was touched" in capsys.readouterr().err
+    out2 = tmp_path / "fresh"
+    monkeypatch.undo()
+    monkeypatch.setattr(bcli, "run_monte_carlo", interrupted)
+    assert main([*SIM, "--out", str(out2)]) == 143
+    err = capsys.readouterr().err
+    assert f"no results were written to {out2} (the folder made for it was removed)" in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == []
+
+
+@pytest.mark.skipif(not hasattr(os, "kill") or os.name != "posix", reason="POSIX signals")
+def test_timed_signals_in_a_real_process(tmp_path):
+    """A real process, the signal sent from outside at a few delays after the results table
+    (just before, during or just after the commit): old or new complete results, never a
+    mix, no temporary file, and a message saying which."""
+    import signal
+    import time
+
+    folder = tmp_path / "out"
+    old = _old_results(folder)
+    argv = [*SIM, "--seed", "2", "--no-plot", "--overwrite", "--out", str(folder)]
+    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    outcomes = []
+    for delay, sig in [(0.0, signal.SIGTERM), (0.005, signal.SIGINT), (0.03, signal.SIGTERM)]:
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "activetrack.cli", *argv],  # as the program
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+            env=env,
+        )
+        for line in proc.stdout:  # the table is printed just before the outputs are written
+            if line.startswith("rm "):
+                break
+        time.sleep(delay)
+        proc.send_signal(sig)
+        _, err = proc.communicate(timeout=60)
+        outcomes.append(_check_outcome(folder, old, proc.returncode, err))
+        if outcomes[-1] == "new":  # back to the old results for the next delay
+            for p in folder.iterdir():
+                p.unlink()
+            for name, data in old.items():
+                (folder / name).write_bytes(data)
+    assert len(outcomes) == 3

@@ -21,9 +21,11 @@ This module also holds the small argparse helpers the layers share.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import importlib
 import math
+import os
 import signal
 import sys
 import threading
@@ -169,16 +171,32 @@ class Interrupted(KeyboardInterrupt):
 
 
 class _SignalHandler:
-    """Raise :class:`Interrupted` on SIGINT or SIGTERM while armed; once the command has
-    returned or is reporting an interrupt, a signal is ignored (the exit follows)."""
+    """Raise :class:`Interrupted` on SIGINT or SIGTERM while armed. While an interrupt is
+    being reported, another signal is ignored. After the command has returned (the
+    process only exits then), a signal exits at once with 128 + the signal and one line
+    saying what the folders hold."""
 
-    def __init__(self) -> None:
+    def __init__(self, prog: str) -> None:
+        self.prog = prog
         self.armed = True
+        self.runs: list[Any] = []
+        self.completed = False
 
     def __call__(self, signum: int, frame: Any) -> None:
         if self.armed:
             self.armed = False  # the report of this interrupt is not cut short by another
             raise Interrupted(signum)
+        if self.completed:
+            name = signal.Signals(signum).name
+            with contextlib.suppress(Exception):
+                sys.stdout.flush()
+                print(
+                    f"\n{self.prog}: interrupted ({name}); the command had completed: "
+                    f"{_folders_report(self.runs)}",
+                    file=sys.stderr,
+                    flush=True,
+                )
+            os._exit(128 + signum)
 
 
 def _folders_report(runs: list[Any]) -> str:
@@ -196,6 +214,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     the output folder holds (the previous results, or, if the signal came after the
     commit, the new ones; never a mix).
     """
+    console = argv is None
     argv = list(sys.argv[1:] if argv is None else argv)
     command = _command_of(argv)
     parser = build_parser([command] if command in COMMANDS else [])
@@ -206,12 +225,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     sub = getattr(args, "parser", parser)
     from activetrack.files import SIGNALS, recorded_runs
 
-    handler = _SignalHandler()
+    handler = _SignalHandler(sub.prog)
     in_main = threading.current_thread() is threading.main_thread()
     previous = {s: signal.signal(s, handler) for s in SIGNALS} if in_main else {}
     runs: list[Any] = []
     try:
         with recorded_runs() as runs:
+            handler.runs = runs
             try:
                 code = int(args.func(args) or 0)
             except ValueError as exc:  # bad input, found before computing: argparse style
@@ -222,6 +242,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                 print(f"{sub.prog}: error: {exc} ({_folders_report(runs)})", file=sys.stderr)
                 code = 1
             handler.armed = False  # done: a signal now changes nothing on disk
+            handler.completed = True
     except KeyboardInterrupt as exc:  # Ctrl-C or SIGTERM: the staged outputs are removed
         handler.armed = False
         signum = int(getattr(exc, "signum", signal.SIGINT))
@@ -229,8 +250,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"\n{sub.prog}: interrupted ({name}); {_folders_report(runs)}", file=sys.stderr)
         code = 128 + signum
     finally:
-        for s, old in previous.items():
-            signal.signal(s, signal.SIG_DFL if old is None else old)
+        # Called with arguments (a test, a script): the caller's handlers come back. As
+        # the program (no arguments), the process exits next: the handler stays, so a
+        # signal now still gets its exit status and message rather than a traceback.
+        if not console:
+            for s, old in previous.items():
+                signal.signal(s, signal.SIG_DFL if old is None else old)
     return code
 
 

@@ -487,20 +487,10 @@ def prepare_output_dir(
         raise ValueError(f"the output folder must be a non-empty path, got {str(path)!r}")
     folder = Path(path)
     owned = tuple(owned)
-    dangling = _dangling_link(folder)
-    if dangling is not None:
-        raise ValueError(
-            f"{folder}: {dangling} is a symbolic link to {os.readlink(dangling)}, "
-            "which does not exist"
-        )
-    if folder.exists() and not folder.is_dir():
-        raise ValueError(f"{folder}: exists and is not a folder")
-    existing = folder
-    while not existing.exists() and existing != existing.parent:
-        existing = existing.parent
-    if not existing.is_dir():
-        raise ValueError(f"{folder}: {existing} is not a folder")
-    missing = [p for p in (folder, *folder.parents) if not p.exists()][::-1]
+    try:  # a name too long (ENAMETOOLONG) fails already when looked at
+        missing = _check_path(folder)
+    except OSError as exc:
+        raise ValueError(f"{folder}: cannot write to this folder ({exc.strerror or exc})") from exc
     for attempt in range(5):  # the folder may vanish (a run ending) between the steps: retry
         made = False
         try:
@@ -553,6 +543,25 @@ def prepare_output_dir(
     if recorder is not None:
         recorder.append(outputs)
     return outputs
+
+
+def _check_path(folder: Path) -> list[Path]:
+    """Raise ``ValueError`` if ``folder`` cannot be an output folder; return the folders
+    that must be made for it, outermost first."""
+    dangling = _dangling_link(folder)
+    if dangling is not None:
+        raise ValueError(
+            f"{folder}: {dangling} is a symbolic link to {os.readlink(dangling)}, "
+            "which does not exist"
+        )
+    if folder.exists() and not folder.is_dir():
+        raise ValueError(f"{folder}: exists and is not a folder")
+    existing = folder
+    while not existing.exists() and existing != existing.parent:
+        existing = existing.parent
+    if not existing.is_dir():
+        raise ValueError(f"{folder}: {existing} is not a folder")
+    return [p for p in (folder, *folder.parents) if not p.exists()][::-1]
 
 
 def _same_folder(fd: int, folder: Path) -> bool:

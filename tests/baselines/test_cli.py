@@ -256,3 +256,29 @@ def test_well_formed_addresses_are_accepted():
 
     for address in ("auto", " local ", "127.0.0.1:1", "ray://head-1.example:10001", "[::1]:65535"):
         assert distributed.check_options(1, address) == (1, address.strip())
+
+
+def unusable_outs(tmp_path):
+    """Return (--out, expected message) of output folders that cannot be made."""
+    (tmp_path / "dangling").symlink_to(tmp_path / "nowhere")
+    return [
+        (tmp_path / "dangling", "is a symbolic link to"),
+        (tmp_path / ("x" * 300), "cannot write to this folder (File name too long)"),
+    ]
+
+
+def test_a_dangling_link_or_long_name_as_out_fails_before_computing(tmp_path, capsys, monkeypatch):
+    import activetrack.baselines.cli as bcli
+    import activetrack.baselines.evaluation as ev
+
+    def never(*args, **kwargs):
+        raise AssertionError("computed before checking --out")
+
+    monkeypatch.setattr(bcli, "run_monte_carlo", never)
+    monkeypatch.setattr(ev, "evaluate", never)
+    for out, message in unusable_outs(tmp_path):
+        for argv in (TINY, ["evaluate", "--policy", "rm", "--episodes", "1", "--no-progress"]):
+            assert main([*argv, "--out", str(out)]) == 2
+            err = capsys.readouterr().err
+            assert f"error: {out}: " in err and message in err, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["dangling"]

@@ -333,3 +333,44 @@ def test_rllib_says_when_no_episode_finished(tmp_path, capsys, monkeypatch):
         assert main(argv) == 0
         out = capsys.readouterr().out
         assert expected in out and "nan" not in out
+
+
+@pytest.mark.parametrize("method", ["bc", "ppo", "rllib-ppo"])
+def test_a_dangling_link_or_long_name_as_out_fails_before_training(
+    method, tmp_path, capsys, monkeypatch
+):
+    import activetrack.train.cli as tcli
+
+    def never(*args, **kwargs):
+        raise AssertionError("trained before checking --out")
+
+    if method == "rllib-ppo":
+        rllib = pytest.importorskip("activetrack.train.rllib")
+        monkeypatch.setattr(rllib, "train_rllib_ppo", never)
+    monkeypatch.setattr(tcli, "train_imitation", never)
+    monkeypatch.setattr(tcli, "train_ppo", never)
+    (tmp_path / "dangling").symlink_to(tmp_path / "nowhere")
+    for out, message in [
+        (tmp_path / "dangling", "is a symbolic link to"),
+        (tmp_path / ("x" * 300), "cannot write to this folder (File name too long)"),
+    ]:
+        assert main(["train", method, "--out", str(out)]) == 2
+        err = capsys.readouterr().err
+        assert f"activetrack train {method}: error: {out}: " in err and message in err, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["dangling"]
+
+
+def test_a_failed_run_leaves_no_folder(tmp_path, capsys):
+    """train bc with a Ray address nothing answers at: exit 1, and no OUT (nor OUT/tb)."""
+    pytest.importorskip("ray")
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]  # released: nothing listens there
+    out = tmp_path / "out"
+    argv = ["train", "bc", "--episodes", "1", "--epochs", "1", "--no-progress"]
+    assert main([*argv, "--address", f"127.0.0.1:{port}", "--out", str(out)]) == 1
+    err = capsys.readouterr().err
+    assert "cannot reach a Ray cluster" in err and f"no results were written to {out}" in err
+    assert not out.exists()
