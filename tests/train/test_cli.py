@@ -374,3 +374,53 @@ def test_a_failed_run_leaves_no_folder(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "cannot reach a Ray cluster" in err and f"no results were written to {out}" in err
     assert not out.exists()
+
+
+def _tree(folder):
+    return {
+        str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()
+    }
+
+
+@pytest.mark.parametrize("signum", ["SIGINT", "SIGTERM"])
+def test_an_interrupted_ppo_overwrite_keeps_every_old_output(signum, tmp_path, monkeypatch, capsys):
+    """Interrupted at the end of training (its TensorBoard logs and checkpoints written in
+    the staging folder the command printed), an --overwrite run leaves the previous run's
+    files *and folders* as they were: the folder never mixes two runs."""
+    import os
+    import signal
+
+    import activetrack.train.ppo as ppo_module
+
+    out = tmp_path / "ppo"
+    (out / "checkpoints").mkdir(parents=True)
+    (out / "tb" / "ppo_1").mkdir(parents=True)
+    for name in ("policy.zip", "model.zip", "config.json"):
+        (out / name).write_text(f"old {name}")
+    (out / "checkpoints" / "ppo_100_steps.zip").write_text("old checkpoint")
+    (out / "tb" / "ppo_1" / "events.out.tfevents.old").write_text("old events")
+    before = _tree(out)
+    seen = {}
+
+    def interrupted(*args, **kwargs):
+        staging = next(out.glob(".tmp-run-*"))
+        seen["staged"] = sorted(str(p.relative_to(staging)) for p in staging.rglob("*"))
+        os.kill(os.getpid(), getattr(signal, signum))
+
+    monkeypatch.setattr(ppo_module, "save_policy", interrupted)
+    argv = ["train", "ppo", "--hidden", "8", "--no-progress", "--total-timesteps", "200"]
+    argv += ["--n-copies", "1", "--n-steps", "100", "--batch-size", "100", "--n-epochs", "1"]
+    argv += ["--checkpoint-every", "100", "--out", str(out), "--overwrite"]
+    assert main(argv) == 128 + getattr(signal, signum)
+    captured = capsys.readouterr()
+    staging_tb = captured.out.split("TensorBoard logs while training: ")[1].split(" ")[0]
+    assert staging_tb.startswith(str(out / ".tmp-run-")) and staging_tb.endswith("tb")
+    # The new run's logs and checkpoints were being written in the staging folder...
+    assert any(p.startswith("tb/ppo_1/events.out.tfevents") for p in seen["staged"])
+    assert any(p.startswith("checkpoints/ppo_") for p in seen["staged"])
+    # ...and the old outputs, folders included, are all still there, unchanged.
+    assert _tree(out) == before
+    assert sorted(p.name for p in out.iterdir()) == sorted(
+        ["checkpoints", "config.json", "model.zip", "policy.zip", "tb"]
+    )
+    assert f"interrupted ({signum}); {out} still holds its previous results" in captured.err
