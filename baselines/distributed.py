@@ -106,6 +106,15 @@ def check_address_form(address: str) -> str:
     return text
 
 
+def quiet_failure_handler() -> None:
+    """Keep Ray's native failure-signal handler out of this (driver) process: it takes a
+    SIGTERM that arrives during ``ray.init`` with a stack dump and an abort (exit -6),
+    before the caller can clean up. Ray's workers keep theirs."""
+    from ray._private import ray_constants
+
+    ray_constants.RAY_DISABLE_FAILURE_SIGNAL_HANDLER = True
+
+
 def check_reachable(address: str, timeout: float = CONNECT_TIMEOUT) -> None:
     """Raise ``ConnectionError`` unless ``address`` (``HOST:PORT`` or ``ray://HOST:PORT``)
     accepts a TCP connection within ``timeout`` s; ``"auto"`` and ``"local"`` are left to
@@ -149,24 +158,26 @@ def session(workers: int = 1, address: str | None = None) -> Iterator[int]:
     from activetrack.files import keep_signal_handlers
 
     started = not ray.is_initialized()
-    if started:
-        if address is not None:
-            check_reachable(address)
-        # Ray's own SIGTERM handler would exit without the caller's clean-up.
-        with keep_signal_handlers():
-            if address is not None:
-                ray.init(address=address, logging_level="warning")
-            else:
-                ray.init(
-                    address="local",
-                    num_cpus=workers,
-                    include_dashboard=False,
-                    logging_level="warning",
-                )
+    if started and address is not None:
+        check_reachable(address)
     try:
+        if started:
+            # Signals wait until ray.init returns (then the caller's handlers take them, not
+            # Ray's, which would exit without the caller's clean-up); shut down in any case.
+            quiet_failure_handler()
+            with keep_signal_handlers():
+                if address is not None:
+                    ray.init(address=address, logging_level="warning")
+                else:
+                    ray.init(
+                        address="local",
+                        num_cpus=workers,
+                        include_dashboard=False,
+                        logging_level="warning",
+                    )
         yield max(1, int(ray.cluster_resources().get("CPU", workers)))
     finally:
-        if started:
+        if started and ray.is_initialized():
             ray.shutdown()
 
 

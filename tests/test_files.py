@@ -401,3 +401,35 @@ def test_timed_signals_in_a_real_process(tmp_path):
             for name, data in old.items():
                 (folder / name).write_bytes(data)
     assert len(outcomes) == 3
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(os.name != "posix", reason="POSIX signals")
+@pytest.mark.parametrize("delay", [0.5, 4.0])
+def test_sigterm_with_ray_workers_exits_143_without_a_native_stack_dump(delay, tmp_path):
+    """SIGTERM while Ray starts or runs the tasks: Ray's handlers (its Python one exits with
+    15, its native one dumps a stack and aborts) must not take it from the command."""
+    pytest.importorskip("ray")
+    import signal
+    import time
+
+    out = tmp_path / "out"
+    argv = ["simulate", "--planner", "rm", "--runs", "8", "--steps", "30", "--workers", "2"]
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "activetrack.cli", *argv, "--out", str(out)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    deadline = time.monotonic() + 120
+    while not out.exists() and proc.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.05)  # the folder is made (and locked) just before Ray starts
+    time.sleep(delay)
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=120)
+    if proc.returncode == 0:  # finished first (a fast machine): nothing to check
+        return
+    assert proc.returncode == 143, err[-3000:]
+    assert "SIGTERM received" not in err and "Traceback" not in err, err[-3000:]
+    assert f"interrupted (SIGTERM); no results were written to {out}" in err
+    assert not out.exists()

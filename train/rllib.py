@@ -43,7 +43,11 @@ from typing import Any
 import numpy as np
 import torch
 
-from activetrack.baselines.distributed import check_address_form, check_reachable
+from activetrack.baselines.distributed import (
+    check_address_form,
+    check_reachable,
+    quiet_failure_handler,
+)
 from activetrack.files import RunOutputs, keep_signal_handlers, prepare_output_dir
 from activetrack.train.networks import DEFAULT_NET, NetConfig, build_policy
 from activetrack.train.policy_io import save_policy
@@ -369,12 +373,14 @@ def ray_session(address: str | None = None, num_cpus: int | None = None) -> Iter
         address, kwargs["num_cpus"] = "local", num_cpus
     else:
         check_reachable(address)
-    with keep_signal_handlers():  # Ray's SIGTERM handler would skip the command's clean-up
-        ray.init(address=address, **kwargs)
     try:
+        quiet_failure_handler()
+        with keep_signal_handlers():  # Ray's SIGTERM handler would skip the clean-up
+            ray.init(address=address, **kwargs)
         yield
     finally:
-        ray.shutdown()
+        if ray.is_initialized():
+            ray.shutdown()
 
 
 def check_address(address: Any) -> str | None:

@@ -161,15 +161,6 @@ def _command_of(argv: Sequence[str]) -> str | None:
     return next((a for a in argv if not a.startswith("-")), None)
 
 
-class Interrupted(KeyboardInterrupt):
-    """SIGINT or SIGTERM during a command (a ``KeyboardInterrupt``, so every clean-up that
-    Ctrl-C runs runs for SIGTERM too). ``signum`` is the signal."""
-
-    def __init__(self, signum: int) -> None:
-        super().__init__(signal.Signals(signum).name)
-        self.signum = signum
-
-
 class _SignalHandler:
     """Raise :class:`Interrupted` on SIGINT or SIGTERM while armed. While an interrupt is
     being reported, another signal is ignored. After the command has returned (the
@@ -185,6 +176,8 @@ class _SignalHandler:
     def __call__(self, signum: int, frame: Any) -> None:
         if self.armed:
             self.armed = False  # the report of this interrupt is not cut short by another
+            from activetrack.files import Interrupted
+
             raise Interrupted(signum)
         if self.completed:
             name = signal.Signals(signum).name

@@ -43,6 +43,7 @@ except ImportError:  # pragma: no cover - Windows
     fcntl = None  # type: ignore[assignment]
 
 __all__ = [
+    "Interrupted",
     "RunOutputs",
     "atomic_path",
     "keep_signal_handlers",
@@ -60,6 +61,7 @@ TEMP_PREFIX = ".tmp-"
 STAGING_PREFIX = f"{TEMP_PREFIX}run-"
 #: The signals a run's file operations hold back (and the command line handles).
 SIGNALS = (signal.SIGINT, signal.SIGTERM)
+_HAS_SIGMASK = hasattr(signal, "pthread_sigmask")
 
 
 # Signals ----------------------------------------------------------------------------------
@@ -90,20 +92,41 @@ def signals_deferred() -> Iterator[None]:
             signal.raise_signal(s)  # now handled as it would have been
 
 
+class Interrupted(KeyboardInterrupt):
+    """SIGINT or SIGTERM during a command (a ``KeyboardInterrupt``, so every clean-up that
+    Ctrl-C runs runs for SIGTERM too). ``signum`` is the signal."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signal.Signals(signum).name)
+        self.signum = signum
+
+
 @contextlib.contextmanager
 def keep_signal_handlers() -> Iterator[None]:
     """Restore the SIGINT and SIGTERM handlers after the block (``ray.init`` replaces the
-    SIGTERM one with its own, which exits without the command's clean-up)."""
+    SIGTERM one with its own, which exits without the command's clean-up). A SIGTERM that
+    Ray's handler turned into ``SystemExit(15)`` inside the block leaves it as
+    :class:`Interrupted`."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
     previous = {s: signal.getsignal(s) for s in SIGNALS}
+    # Blocked meanwhile (in this thread, and in the threads the block starts, which
+    # inherit the mask): Ray's native failure handler, installed by ray.init, would take
+    # a SIGTERM with a stack dump and an abort. A signal sent meanwhile waits for the end.
+    blocked = signal.pthread_sigmask(signal.SIG_BLOCK, SIGNALS) if _HAS_SIGMASK else None
     try:
         yield
+    except SystemExit as exc:
+        if exc.code == signal.SIGTERM:
+            raise Interrupted(signal.SIGTERM) from None
+        raise
     finally:
         for s, handler in previous.items():
             if handler is not None and signal.getsignal(s) is not handler:
                 signal.signal(s, handler)
+        if blocked is not None:
+            signal.pthread_sigmask(signal.SIG_SETMASK, blocked)  # a pending one arrives now
 
 
 def _umask() -> int:
