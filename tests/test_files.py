@@ -433,3 +433,30 @@ def test_sigterm_with_ray_workers_exits_143_without_a_native_stack_dump(delay, t
     assert "SIGTERM received" not in err and "Traceback" not in err, err[-3000:]
     assert f"interrupted (SIGTERM); no results were written to {out}" in err
     assert not out.exists()
+
+
+def test_a_commit_failing_part_way_keeps_the_replaced_outputs(tmp_path, monkeypatch):
+    """If a rename of the commit failed (it should not), the outputs it had moved aside are
+    kept where the next run does not clean up, and the folder's state is reported."""
+    import activetrack.files as files
+
+    folder = tmp_path / "out"
+    (folder / "tb").mkdir(parents=True)
+    (folder / "tb" / "events").write_text("old")
+    real_rename = os.rename
+
+    def failing(src, dst):
+        if Path(dst) == folder / "tb":  # the new folder into place: fails
+            raise OSError(5, "Input/output error", str(dst))
+        return real_rename(src, dst)
+
+    with prepare_output_dir(folder, ("tb/",), overwrite=True) as out:
+        (out.staged("tb/") / "events").write_text("new")
+        monkeypatch.setattr(files.os, "rename", failing)
+        with pytest.raises(OSError, match="Input/output error"):
+            out.commit()
+        monkeypatch.undo()
+    assert out.state == "failed" and "commit failed part-way" in out.describe()
+    prepare_output_dir(folder, ("tb/",), overwrite=True).close()  # the next run
+    (kept,) = folder.glob(".failed-commit-*")
+    assert (kept / ".old" / "tb" / "events").read_text() == "old"

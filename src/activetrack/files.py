@@ -392,7 +392,11 @@ class RunOutputs:
                         written[name] = final
             except BaseException:
                 # A rename failed part-way (it should not: same folder, checked writable):
-                # the staging folder, with the replaced outputs in .old, is kept for the user.
+                # the staging folder, with the replaced outputs in .old, is kept for the
+                # user under a name the next run does not clean up.
+                kept = self.folder / f".failed-commit-{self.staging.name}"
+                with contextlib.suppress(OSError):
+                    os.rename(self.staging, kept)
                 self.state, self._staging = "failed", None
                 raise
             self._staged = {}
@@ -439,7 +443,7 @@ class RunOutputs:
         if self.state == "failed":
             return (
                 f"{self.folder}: the commit failed part-way; the replaced outputs are in "
-                f"{STAGING_PREFIX}*/.old there"
+                f".failed-commit-{STAGING_PREFIX}*/.old there"
             )
         if self.previous:
             return f"{self.folder} still holds its previous results, unchanged"
