@@ -244,10 +244,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         code = 128 + signum
     finally:
         # Called with arguments (a test, a script): the caller's handlers come back. As
-        # the program (no arguments), the process exits next: the handler stays, so a
-        # signal now still gets its exit status and message rather than a traceback.
-        if not console:
-            for s, old in previous.items():
+        # the program (no arguments), the process only exits next, with the folder in
+        # its final state: a signal now is ignored (Python's finalization would restore
+        # the default action, and SIGTERM would kill the process without a word).
+        for s, old in previous.items():
+            if console:
+                signal.signal(s, signal.SIG_IGN)
+            else:
                 signal.signal(s, signal.SIG_DFL if old is None else old)
     return code
 
