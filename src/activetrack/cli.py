@@ -205,7 +205,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     SIGINT (Ctrl-C) and SIGTERM stop a command the same way: the run's staged outputs are
     removed, and the exit status is 128 + the signal (130, 143) with one line saying what
     the output folder holds (the previous results, or, if the signal came after the
-    commit, the new ones; never a mix).
+    commit, the new ones; never a mix). Once the command has returned, a signal changes
+    nothing: as the program (``argv`` None) the process exits with the command's status.
     """
     console = argv is None
     argv = list(sys.argv[1:] if argv is None else argv)
