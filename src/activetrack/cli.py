@@ -21,11 +21,9 @@ This module also holds the small argparse helpers the layers share.
 from __future__ import annotations
 
 import argparse
-import contextlib
 import dataclasses
 import importlib
 import math
-import os
 import signal
 import sys
 import threading
@@ -162,16 +160,11 @@ def _command_of(argv: Sequence[str]) -> str | None:
 
 
 class _SignalHandler:
-    """Raise :class:`Interrupted` on SIGINT or SIGTERM while armed. While an interrupt is
-    being reported, another signal is ignored. After the command has returned (the
-    process only exits then), a signal exits at once with 128 + the signal and one line
-    saying what the folders hold."""
+    """Raise :class:`~activetrack.files.Interrupted` on SIGINT or SIGTERM while armed; once
+    disarmed (the command has returned, or an interrupt is being reported), ignore them."""
 
-    def __init__(self, prog: str) -> None:
-        self.prog = prog
+    def __init__(self) -> None:
         self.armed = True
-        self.runs: list[Any] = []
-        self.completed = False
 
     def __call__(self, signum: int, frame: Any) -> None:
         if self.armed:
@@ -179,17 +172,6 @@ class _SignalHandler:
             from activetrack.files import Interrupted
 
             raise Interrupted(signum)
-        if self.completed:
-            name = signal.Signals(signum).name
-            with contextlib.suppress(Exception):
-                sys.stdout.flush()
-                print(
-                    f"\n{self.prog}: interrupted ({name}); the command had completed: "
-                    f"{_folders_report(self.runs)}",
-                    file=sys.stderr,
-                    flush=True,
-                )
-            os._exit(128 + signum)
 
 
 def _folders_report(runs: list[Any]) -> str:
@@ -219,13 +201,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     sub = getattr(args, "parser", parser)
     from activetrack.files import SIGNALS, recorded_runs
 
-    handler = _SignalHandler(sub.prog)
+    handler = _SignalHandler()
     in_main = threading.current_thread() is threading.main_thread()
     previous = {s: signal.signal(s, handler) for s in SIGNALS} if in_main else {}
     runs: list[Any] = []
     try:
         with recorded_runs() as runs:
-            handler.runs = runs
             try:
                 code = int(args.func(args) or 0)
             except ValueError as exc:  # bad input, found before computing: argparse style
@@ -236,7 +217,6 @@ def main(argv: Sequence[str] | None = None) -> int:
                 print(f"{sub.prog}: error: {exc} ({_folders_report(runs)})", file=sys.stderr)
                 code = 1
             handler.armed = False  # done: a signal now changes nothing on disk
-            handler.completed = True
     except KeyboardInterrupt as exc:  # Ctrl-C or SIGTERM: the staged outputs are removed
         handler.armed = False
         signum = int(getattr(exc, "signum", signal.SIGINT))
