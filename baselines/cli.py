@@ -209,30 +209,28 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     for name in names:
         planners[name], configs[name] = make_planner(name, args)
     workers, address = check_options(args.workers, args.address)
-    outputs = prepare_output_dir(args.out, SIMULATE_OUTPUTS, args.overwrite)
-
-    results = run_monte_carlo(
-        scenario,
-        planners,
-        args.runs,
-        args.seed,
-        progress=not args.no_progress,
-        workers=workers,
-        address=address,
-    )
-    summaries = {}
-    for name, res in results.items():
-        s = res.summary()
-        s["seed"] = args.seed
-        s["config"] = {"planner": configs[name], "scenario": scenario.to_dict()}
-        summaries[name] = s
-    last = args.seed + args.runs - 1
-    print(
-        f"scenario {scenario.name!r}, {args.runs} runs (seeds {args.seed}..{last}), "
-        f"{scenario.n_steps} steps"
-    )
-    print(format_table(summaries))
-    with outputs:
+    with prepare_output_dir(args.out, SIMULATE_OUTPUTS, args.overwrite) as outputs:
+        results = run_monte_carlo(
+            scenario,
+            planners,
+            args.runs,
+            args.seed,
+            progress=not args.no_progress,
+            workers=workers,
+            address=address,
+        )
+        summaries = {}
+        for name, res in results.items():
+            s = res.summary()
+            s["seed"] = args.seed
+            s["config"] = {"planner": configs[name], "scenario": scenario.to_dict()}
+            summaries[name] = s
+        last = args.seed + args.runs - 1
+        print(
+            f"scenario {scenario.name!r}, {args.runs} runs (seeds {args.seed}..{last}), "
+            f"{scenario.n_steps} steps"
+        )
+        print(format_table(summaries))
         outputs.write_json("results.json", summaries, default=json_default)
         if not args.no_plot:
             from activetrack.baselines.plotting import plot_comparison, plot_trajectories

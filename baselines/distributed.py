@@ -25,6 +25,7 @@ for workers without it raises :class:`RayNotInstalledError`, which names the ext
 
 from __future__ import annotations
 
+import re
 import socket
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
@@ -70,7 +71,7 @@ def check_options(workers: Any = 1, address: Any = None) -> tuple[int, str | Non
         raise ValueError(f"workers must be an integer in [1, {MAX_WORKERS}], got {workers!r}")
     if address is not None and (not isinstance(address, str) or not address.strip()):
         raise ValueError(f"address must be a non-empty string (a Ray cluster), got {address!r}")
-    workers, address = int(workers), None if address is None else address.strip()
+    workers, address = int(workers), None if address is None else check_address_form(address)
     if is_distributed(workers, address):
         try:
             import ray  # noqa: F401 (installed and importable; used by the caller next)
@@ -82,13 +83,46 @@ def check_options(workers: Any = 1, address: Any = None) -> tuple[int, str | Non
     return workers, address
 
 
+#: The Ray addresses accepted: ``auto``, ``local``, ``[ray://]HOST:PORT`` (HOST a name, an
+#: IPv4 address or a bracketed IPv6 one; PORT decimal digits, checked to be in 1..65535).
+_NAMED_ADDRESSES = ("auto", "local")
+_HOST_PORT = re.compile(
+    r"(?:ray://)?(?P<host>\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9._-]+):(?P<port>[0-9]{1,5})"
+)
+
+
+def check_address_form(address: str) -> str:
+    """Return ``address`` stripped if it is ``"auto"``, ``"local"``, ``HOST:PORT`` or
+    ``ray://HOST:PORT`` with PORT in 1..65535; raise ``ValueError`` naming it otherwise."""
+    text = address.strip()
+    if text in _NAMED_ADDRESSES:
+        return text
+    m = _HOST_PORT.fullmatch(text)
+    if m is None or not 1 <= int(m["port"]) <= 65535:
+        raise ValueError(
+            "address must be 'auto', 'local', HOST:PORT or ray://HOST:PORT with PORT an "
+            f"integer in [1, 65535], got {address!r}"
+        )
+    return text
+
+
+def quiet_failure_handler() -> None:
+    """Keep Ray's native failure-signal handler out of this (driver) process: it takes a
+    SIGTERM that arrives during ``ray.init`` with a stack dump and an abort (exit -6),
+    before the caller can clean up. Ray's workers keep theirs."""
+    from ray._private import ray_constants
+
+    ray_constants.RAY_DISABLE_FAILURE_SIGNAL_HANDLER = True
+
+
 def check_reachable(address: str, timeout: float = CONNECT_TIMEOUT) -> None:
     """Raise ``ConnectionError`` unless ``address`` (``HOST:PORT`` or ``ray://HOST:PORT``)
-    accepts a TCP connection within ``timeout`` s; other forms (``"auto"``, ``"local"``)
-    are left to Ray."""
-    host, sep, port = address.removeprefix("ray://").rpartition(":")
-    if not sep or not host or not port.isdigit():
+    accepts a TCP connection within ``timeout`` s; ``"auto"`` and ``"local"`` are left to
+    Ray. Any other form raises ``ValueError`` (:func:`check_address_form`) before a probe."""
+    text = check_address_form(address)
+    if text in _NAMED_ADDRESSES:
         return
+    host, _, port = text.removeprefix("ray://").rpartition(":")
     try:
         with socket.create_connection((host.strip("[]"), int(port)), timeout=timeout):
             pass
@@ -121,22 +155,29 @@ def session(workers: int = 1, address: str | None = None) -> Iterator[int]:
         import ray
     except ImportError:
         raise RayNotInstalledError(f"distributed runs need Ray: {INSTALL_HINT}") from None
+    from activetrack.files import keep_signal_handlers
+
     started = not ray.is_initialized()
-    if started:
-        if address is not None:
-            check_reachable(address)
-            ray.init(address=address, logging_level="warning")
-        else:
-            ray.init(
-                address="local",
-                num_cpus=workers,
-                include_dashboard=False,
-                logging_level="warning",
-            )
+    if started and address is not None:
+        check_reachable(address)
     try:
+        if started:
+            # Signals wait until ray.init returns (then the caller's handlers take them, not
+            # Ray's, which would exit without the caller's clean-up); shut down in any case.
+            quiet_failure_handler()
+            with keep_signal_handlers():
+                if address is not None:
+                    ray.init(address=address, logging_level="warning")
+                else:
+                    ray.init(
+                        address="local",
+                        num_cpus=workers,
+                        include_dashboard=False,
+                        logging_level="warning",
+                    )
         yield max(1, int(ray.cluster_resources().get("CPU", workers)))
     finally:
-        if started:
+        if started and ray.is_initialized():
             ray.shutdown()
 
 

@@ -680,7 +680,23 @@ def run_evaluation(
     ``address`` and ``batched`` (:func:`evaluate`).
     """
     workers, address = check_batched(batched, workers, address)
-    outputs = None if out_dir is None else prepare_output_dir(out_dir, OUTPUTS, overwrite)
+    if out_dir is not None and not isinstance(out_dir, RunOutputs):
+        with prepare_output_dir(out_dir, OUTPUTS, overwrite) as outputs:  # locked for the run
+            return run_evaluation(
+                policies,
+                scenario,
+                episodes,
+                seed,
+                outputs,
+                plot,
+                progress,
+                overwrite,
+                workers=workers,
+                address=address,
+                batched=batched,
+                **overrides,
+            )
+    outputs = out_dir
     results = evaluate(
         policies,
         scenario,

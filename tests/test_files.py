@@ -55,16 +55,18 @@ def test_a_failed_write_keeps_the_old_file(tmp_path):
 def test_run_outputs_commit_together_or_not_at_all(tmp_path):
     (tmp_path / "results.json").write_text("old results")
     (tmp_path / "plot.png").write_text("old plot")
-    out = prepare_output_dir(tmp_path, ("results.json", "plot.png"), overwrite=True)
-    with pytest.raises(RuntimeError), out:
+    owned = ("results.json", "plot.png")
+    with pytest.raises(RuntimeError), prepare_output_dir(tmp_path, owned, overwrite=True) as out:
         out.write_text("results.json", "new results")
         raise RuntimeError("the plot failed")
+    assert out.state == "discarded"
     assert (tmp_path / "results.json").read_text() == "old results"
     assert (tmp_path / "plot.png").read_text() == "old plot"
     assert temp_files(tmp_path) == []
     # A successful run without the plot: the stale plot goes, the results are new.
-    with out:
+    with prepare_output_dir(tmp_path, owned, overwrite=True) as out:
         out.write_json("results.json", {"v": 1})
+        assert (tmp_path / "results.json").read_text() == "old results"  # until the commit
         written = out.commit()
     assert written == {"results.json": tmp_path / "results.json"}
     assert json.loads((tmp_path / "results.json").read_text()) == {"v": 1}
@@ -77,22 +79,29 @@ def test_run_outputs_commit_together_or_not_at_all(tmp_path):
 def test_prepare_output_dir_refuses_results_unless_overwrite(tmp_path):
     owned = ("results.json", "tb/")
     folder = tmp_path / "new" / "deep"
-    prepare_output_dir(folder, owned)  # checked, made at the first write
-    assert not folder.exists()
+    with prepare_output_dir(folder, owned):  # made (and locked) for the run...
+        assert folder.is_dir()
+    assert not (tmp_path / "new").exists()  # ...and removed: the run wrote nothing
     folder.mkdir(parents=True)
     (folder / "notes.txt").write_text("mine")
     (folder / "tb").mkdir()
-    prepare_output_dir(folder, owned)  # unrelated files and empty folders are no results
+    prepare_output_dir(folder, owned).close()  # unrelated files, empty folders: no results
     (folder / "tb" / "events").write_text("x")
     (folder / "results.json").write_text("{}")
     with pytest.raises(
         ValueError, match=r"already holds results \(results.json, tb/\).*--overwrite"
     ):
         prepare_output_dir(folder, owned)
-    prepare_output_dir(folder, owned, overwrite=True)
-    assert not (folder / "tb").exists()  # owned folders are cleared now
-    assert (folder / "results.json").exists()  # owned files only when the run commits
+    with prepare_output_dir(folder, owned, overwrite=True) as out:
+        (out.staged("tb/") / "new-events").write_text("y")
+        # Nothing is replaced before the commit, folders included.
+        assert (folder / "tb" / "events").read_text() == "x"
+        assert (folder / "results.json").exists()
+        out.write_text("results.json", "new")
+        out.commit()
+    assert sorted(p.name for p in (folder / "tb").iterdir()) == ["new-events"]
     assert (folder / "notes.txt").read_text() == "mine"
+    assert temp_files(folder) == []
 
 
 def test_prepare_output_dir_rejects_unusable_paths(tmp_path):
@@ -170,9 +179,10 @@ def test_train_failing_to_write_keeps_the_previous_policy(tmp_path):
 
 
 def test_a_run_that_writes_nothing_leaves_no_folder_and_json_is_standard(tmp_path):
-    out = prepare_output_dir(tmp_path / "a" / "b", ("results.json",))
-    assert not (tmp_path / "a").exists()  # checked in tmp_path, made at the first write
-    with out:
+    with pytest.raises(RuntimeError), prepare_output_dir(tmp_path / "a" / "b", ("r.json",)):
+        raise RuntimeError("the computation failed")
+    assert not (tmp_path / "a").exists()  # made for the run, removed with it
+    with prepare_output_dir(tmp_path / "a" / "b", ("results.json",)) as out:
         out.write_json("results.json", {"x": 1.0})
         out.commit()
     assert json.loads((tmp_path / "a" / "b" / "results.json").read_text()) == {"x": 1.0}
@@ -180,3 +190,273 @@ def test_a_run_that_writes_nothing_leaves_no_folder_and_json_is_standard(tmp_pat
         with pytest.raises(ValueError, match="JSON compliant"):
             atomic_write_json(tmp_path / "x.json", {"x": bad})
     assert not (tmp_path / "x.json").exists()
+
+
+# One run per folder: a lock for the run, or a refusal at the commit. -----------------------
+def test_a_second_run_on_the_same_folder_is_refused_while_the_first_runs(tmp_path):
+    folder = tmp_path / "new"
+    owned = ("results.json",)
+    with prepare_output_dir(folder, owned) as first:
+        with pytest.raises(ValueError, match="another run is writing to this folder"):
+            prepare_output_dir(folder, owned)  # refused at once, before any computation
+        first.write_text("results.json", "first")
+        first.commit()
+    assert (folder / "results.json").read_text() == "first"
+    # The first run has ended: the next one finds its results.
+    with pytest.raises(ValueError, match="already holds results"):
+        prepare_output_dir(folder, owned)
+    assert temp_files(folder) == []
+
+
+def test_without_a_lock_the_commit_refuses_results_that_appeared(tmp_path, monkeypatch):
+    """On a file system without flock, two runs into the same new folder both start; the
+    one that finishes last must not replace the other's results."""
+    import activetrack.files as files
+
+    monkeypatch.setattr(files, "_lock", lambda folder: None)
+    folder = tmp_path / "new"
+    owned = ("results.json", "tb/")
+    a = prepare_output_dir(folder, owned)
+    b = prepare_output_dir(folder, owned)
+    with a:
+        a.write_text("results.json", "a")
+        (a.staged("tb/") / "events").write_text("a")
+        a.commit()
+    with pytest.raises(ValueError, match=r"another run wrote results \(results.json, tb/\)"), b:
+        b.write_text("results.json", "b")
+        b.commit()
+    assert (folder / "results.json").read_text() == "a"
+    assert (folder / "tb" / "events").read_text() == "a"
+    assert temp_files(folder) == []
+
+
+def test_a_killed_runs_staging_is_removed_by_the_next_run(tmp_path):
+    folder = tmp_path / "out"
+    (folder / f"{TEMP_PREFIX}run-abc" / "tb").mkdir(parents=True)  # SIGKILL left it
+    (folder / f"{TEMP_PREFIX}results-x.json").write_text("half")
+    with prepare_output_dir(folder, ("results.json",)) as out:
+        out.write_text("results.json", "new")
+        out.commit()
+    assert sorted(p.name for p in folder.iterdir()) == ["results.json"]
+
+
+def test_unusable_output_paths_are_refused_before_the_run(tmp_path):
+    (tmp_path / "dangling").symlink_to(tmp_path / "nowhere")
+    for bad in ("dangling", "dangling/sub"):
+        with pytest.raises(ValueError, match="is a symbolic link to .*nowhere, which does not"):
+            prepare_output_dir(tmp_path / bad, ("a",))
+    long = tmp_path / ("x" * 300)
+    with pytest.raises(ValueError, match="cannot write to this folder .*too long"):
+        prepare_output_dir(long / "sub", ("a",))
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["dangling"]  # nothing made
+
+
+def test_signals_are_held_back_until_the_block_ends():
+    import signal
+
+    from activetrack.files import signals_deferred
+
+    seen = []
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        previous = signal.signal(signal.SIGTERM, signal.default_int_handler)
+        try:
+            with pytest.raises(KeyboardInterrupt), signals_deferred():
+                os.kill(os.getpid(), signum)
+                os.kill(os.getpid(), signum)  # twice: delivered once
+                seen.append(signum)  # reached: the signal waits for the block's end
+        finally:
+            signal.signal(signal.SIGTERM, previous)
+    assert seen == [signal.SIGINT, signal.SIGTERM]
+
+
+# Signals: SIGINT and SIGTERM leave the old complete results or the new complete ones. -----
+SIM = ["simulate", "--planner", "rm", "--runs", "1", "--steps", "2", "--no-progress"]
+
+
+def _old_results(folder: Path) -> dict[str, bytes]:
+    """Write a complete run's results (seed 1, with its figure) in ``folder``; return them."""
+    from activetrack.cli import main
+
+    assert main([*SIM, "--seed", "1", "--out", str(folder)]) == 0
+    return snapshot(folder)
+
+
+def _check_outcome(folder: Path, old: dict[str, bytes], code: int, err: str) -> str:
+    """Check the folder holds the old or the new complete results, no temporary file, and
+    that the exit code and message say which; return "old" or "new"."""
+    assert temp_files(folder) == [], err
+    now = snapshot(folder)
+    seed = json.loads(now["results.json"])["rm"]["seed"]
+    if seed == 1:
+        assert now == old, err  # every old file, unchanged
+        outcome = "old"
+    else:  # the new run (seed 2, --no-plot): its results and no stale figure
+        assert seed == 2 and set(now) == {"results.json"}, (sorted(now), err)
+        outcome = "new"
+    assert "Traceback" not in err, err
+    if code == 0:
+        assert outcome == "new", err
+    else:
+        assert code in (130, 143), err
+        name = "SIGINT" if code == 130 else "SIGTERM"
+        assert f"activetrack simulate: interrupted ({name}); " in err, err
+        assert err.count("interrupted") == 1, err
+        expected = (
+            f"{folder} holds this run's complete new results"
+            if outcome == "new"
+            else f"{folder} still holds its previous results, unchanged"
+        )
+        assert expected in err, err
+    return outcome
+
+
+@pytest.mark.parametrize("signum", ["SIGINT", "SIGTERM"])
+@pytest.mark.parametrize("point", ["computing", "staging", "committing"])
+def test_a_signal_at_each_stage_of_a_run(signum, point, tmp_path, monkeypatch, capsys):
+    """The signal sent by the process to itself at a known point of an --overwrite run."""
+    import signal
+
+    import activetrack.baselines.cli as bcli
+    import activetrack.files as files
+    from activetrack.cli import main
+
+    folder = tmp_path / "out"
+    old = _old_results(folder)
+    sig = getattr(signal, signum)
+
+    def send_then(fn):
+        def wrapped(*args, **kwargs):
+            os.kill(os.getpid(), sig)
+            return fn(*args, **kwargs)
+
+        return wrapped
+
+    if point == "computing":
+        monkeypatch.setattr(bcli, "run_monte_carlo", send_then(bcli.run_monte_carlo))
+    elif point == "staging":
+        monkeypatch.setattr(bcli, "format_table", send_then(bcli.format_table))
+    else:  # inside the commit, between the renames: held back until they are done
+        monkeypatch.setattr(files, "_fsync_dir", send_then(files._fsync_dir))
+    capsys.readouterr()
+    code = main([*SIM, "--seed", "2", "--no-plot", "--overwrite", "--out", str(folder)])
+    assert code == 128 + sig
+    outcome = _check_outcome(folder, old, code, capsys.readouterr().err)
+    assert outcome == ("new" if point == "committing" else "old")
+    assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL  # main restored the handlers
+
+
+def test_a_signal_before_any_output_folder(tmp_path, monkeypatch, capsys):
+    import signal
+
+    import activetrack.baselines.cli as bcli
+    from activetrack.cli import main
+
+    def interrupted(*args, **kwargs):
+        os.kill(os.getpid(), signal.SIGTERM)
+
+    monkeypatch.setattr(bcli, "make_scenario", interrupted)
+    out = tmp_path / "out"
+    assert main([*SIM, "--out", str(out)]) == 143
+    assert "interrupted (SIGTERM); no output folder was touched" in capsys.readouterr().err
+    out2 = tmp_path / "fresh"
+    monkeypatch.undo()
+    monkeypatch.setattr(bcli, "run_monte_carlo", interrupted)
+    assert main([*SIM, "--out", str(out2)]) == 143
+    err = capsys.readouterr().err
+    assert f"no results were written to {out2} (the folder made for it was removed)" in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == []
+
+
+@pytest.mark.skipif(not hasattr(os, "kill") or os.name != "posix", reason="POSIX signals")
+def test_timed_signals_in_a_real_process(tmp_path):
+    """A real process, the signal sent from outside at a few delays after the results table
+    (just before, during or just after the commit): old or new complete results, never a
+    mix, no temporary file, and a message saying which."""
+    import signal
+    import time
+
+    folder = tmp_path / "out"
+    old = _old_results(folder)
+    argv = [*SIM, "--seed", "2", "--no-plot", "--overwrite", "--out", str(folder)]
+    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    outcomes = []
+    for delay, sig in [(0.0, signal.SIGTERM), (0.005, signal.SIGINT), (0.03, signal.SIGTERM)]:
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "activetrack.cli", *argv],  # as the program
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+            env=env,
+        )
+        for line in proc.stdout:  # the table is printed just before the outputs are written
+            if line.startswith("rm "):
+                break
+        time.sleep(delay)
+        proc.send_signal(sig)
+        _, err = proc.communicate(timeout=60)
+        outcomes.append(_check_outcome(folder, old, proc.returncode, err))
+        if outcomes[-1] == "new":  # back to the old results for the next delay
+            for p in folder.iterdir():
+                p.unlink()
+            for name, data in old.items():
+                (folder / name).write_bytes(data)
+    assert len(outcomes) == 3
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(os.name != "posix", reason="POSIX signals")
+@pytest.mark.parametrize("delay", [0.5, 4.0])
+def test_sigterm_with_ray_workers_exits_143_without_a_native_stack_dump(delay, tmp_path):
+    """SIGTERM while Ray starts or runs the tasks: Ray's handlers (its Python one exits with
+    15, its native one dumps a stack and aborts) must not take it from the command."""
+    pytest.importorskip("ray")
+    import signal
+    import time
+
+    out = tmp_path / "out"
+    argv = ["simulate", "--planner", "rm", "--runs", "8", "--steps", "30", "--workers", "2"]
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "activetrack.cli", *argv, "--out", str(out)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    deadline = time.monotonic() + 120
+    while not out.exists() and proc.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.05)  # the folder is made (and locked) just before Ray starts
+    time.sleep(delay)
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=120)
+    if proc.returncode == 0:  # finished first (a fast machine): nothing to check
+        return
+    assert proc.returncode == 143, err[-3000:]
+    assert "SIGTERM received" not in err and "Traceback" not in err, err[-3000:]
+    assert f"interrupted (SIGTERM); no results were written to {out}" in err
+    assert not out.exists()
+
+
+def test_a_commit_failing_part_way_keeps_the_replaced_outputs(tmp_path, monkeypatch):
+    """If a rename of the commit failed (it should not), the outputs it had moved aside are
+    kept where the next run does not clean up, and the folder's state is reported."""
+    import activetrack.files as files
+
+    folder = tmp_path / "out"
+    (folder / "tb").mkdir(parents=True)
+    (folder / "tb" / "events").write_text("old")
+    real_rename = os.rename
+
+    def failing(src, dst):
+        if Path(dst) == folder / "tb":  # the new folder into place: fails
+            raise OSError(5, "Input/output error", str(dst))
+        return real_rename(src, dst)
+
+    with prepare_output_dir(folder, ("tb/",), overwrite=True) as out:
+        (out.staged("tb/") / "events").write_text("new")
+        monkeypatch.setattr(files.os, "rename", failing)
+        with pytest.raises(OSError, match="Input/output error"):
+            out.commit()
+        monkeypatch.undo()
+    assert out.state == "failed" and "commit failed part-way" in out.describe()
+    prepare_output_dir(folder, ("tb/",), overwrite=True).close()  # the next run
+    (kept,) = folder.glob(".failed-commit-*")
+    assert (kept / ".old" / "tb" / "events").read_text() == "old"

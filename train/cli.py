@@ -10,8 +10,11 @@ default is the field default of
 :class:`~activetrack.train.ppo.PPOConfig` or :class:`~activetrack.train.networks.NetConfig`:
 the parser's defaults are None and only the options given reach the config, which checks
 every value. Before training: the configs, ``--threads``, the ``--init`` policy file and
-the output folder (one holding results needs ``--overwrite``) are checked; the output
-files are committed together at the end.
+the output folder (one holding results needs ``--overwrite``; one another run is writing
+is refused) are checked. The run writes everything, folders included, into the staging
+folder ``OUT/.tmp-run-*`` (printed when the run starts: TensorBoard reads its logs there
+while it trains) and moves it into place only when it completes; a failed or interrupted
+run leaves the previous outputs as they were.
 """
 
 from __future__ import annotations
@@ -330,24 +333,39 @@ def run_rllib(args: argparse.Namespace) -> int:
     iterations = check_int("iterations", args.iterations, 1, rllib.MAX_ITERATIONS)
     threads = check_int("threads", args.threads, 1, MAX_THREADS)
     address = rllib.check_address(args.address)
-    outputs = prepare_output_dir(args.out, rllib.OUTPUTS, args.overwrite)
-    result = rllib.train_rllib_ppo(
-        args.scenario,
-        seed=args.seed,
-        iterations=iterations,
-        config=cfg,
-        out_dir=outputs,
-        address=address,
-        progress=not args.no_progress,
-        threads=threads,
-    )
-    ret = result.history[-1].get("episode_return_mean", float("nan"))
+    with prepare_output_dir(args.out, rllib.OUTPUTS, args.overwrite) as outputs:
+        _say_where_logs_are(outputs)
+        result = rllib.train_rllib_ppo(
+            args.scenario,
+            seed=args.seed,
+            iterations=iterations,
+            config=cfg,
+            out_dir=outputs,
+            address=address,
+            progress=not args.no_progress,
+            threads=threads,
+        )
     print(
         f"rllib-ppo: {iterations} iterations, {result.env_steps} env steps "
-        f"({result.agent_steps} agent-steps), {result.seconds:.1f} s, last mean episode return "
-        f"(all sensors, scaled) {ret:.3f} -> {result.policy_path}"
+        f"({result.agent_steps} agent-steps), {result.seconds:.1f} s, "
+        f"{_last_return(result.history)} -> {result.policy_path}"
     )
     return 0
+
+
+def _last_return(history: list[dict[str, float]]) -> str:
+    """Return the phrase for the last mean episode return of an RLlib run's ``history``
+    (RLlib reports one only once an episode has finished)."""
+    done = [
+        (i, h["episode_return_mean"])
+        for i, h in enumerate(history, 1)
+        if "episode_return_mean" in h
+    ]
+    if not done:
+        return "no episode finished in training (no mean return)"
+    it, ret = done[-1]
+    when = "" if it == len(history) else f" at iteration {it}"
+    return f"last mean episode return (all sensors, scaled) {ret:.3f}{when}"
 
 
 def _net_config(args: argparse.Namespace) -> NetConfig:
@@ -407,20 +425,21 @@ def run_train(args: argparse.Namespace) -> int:
         load_policy(init)  # a bad file fails now, with its path and problem
     if args.method in ("bc", "dagger"):
         check_batched(args.batched, args.workers, args.address)  # Ray if asked for
-    outputs = prepare_output_dir(args.out, OUTPUTS, args.overwrite)
-    configure_torch(threads)
-    progress = not args.no_progress
-    if args.method in ("bc", "dagger"):
-        return _run_imitation(args, cfg, net, outputs, threads, progress)
-    result = train_ppo(
-        args.scenario,
-        seed=args.seed,
-        config=cfg,
-        out_dir=outputs,
-        init=init,
-        progress=progress,
-        threads=threads,
-    )
+    with prepare_output_dir(args.out, OUTPUTS, args.overwrite) as outputs:
+        _say_where_logs_are(outputs)
+        configure_torch(threads)
+        progress = not args.no_progress
+        if args.method in ("bc", "dagger"):
+            return _run_imitation(args, cfg, net, outputs, threads, progress)
+        result = train_ppo(
+            args.scenario,
+            seed=args.seed,
+            config=cfg,
+            out_dir=outputs,
+            init=init,
+            progress=progress,
+            threads=threads,
+        )
     best = ""
     if result.validation:
         best = f", validation mean trace {min(t for _, t in result.validation):.4f} (best)"
@@ -429,6 +448,15 @@ def run_train(args: argparse.Namespace) -> int:
         f"{result.policy_path}"
     )
     return 0
+
+
+def _say_where_logs_are(outputs: RunOutputs) -> None:
+    """Print where the run's TensorBoard logs are while it trains (its staging folder)."""
+    print(
+        f"TensorBoard logs while training: {outputs.staged('tb/')} (moved to "
+        f"{outputs.path('tb/')} with the other outputs when the run completes)",
+        flush=True,
+    )
 
 
 def _run_imitation(
@@ -450,7 +478,7 @@ def _run_imitation(
         args.scenario,
         seed=args.seed,
         config=cfg,
-        tensorboard_dir=str(outputs.path("tb/")),
+        tensorboard_dir=str(outputs.staged("tb/")),
         progress=progress,
         expert=expert,
         threads=threads,

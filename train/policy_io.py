@@ -19,6 +19,7 @@ import io
 import json
 import math
 import zipfile
+import zlib
 from pathlib import Path
 from typing import Any
 
@@ -144,6 +145,9 @@ def load_policy(path: str | Path) -> LearnedPolicy:
         return _load_policy(path)
     except _PolicyFileError as exc:
         raise ValueError(f"{path}: {exc}") from exc.__cause__
+    except Exception as exc:  # a crafted file found a failure no check above names
+        first = (str(exc).strip().splitlines() or [""])[0][:200]
+        raise ValueError(f"{path}: cannot be loaded ({type(exc).__name__}: {first})") from exc
 
 
 class _PolicyFileError(Exception):
@@ -162,7 +166,14 @@ def _member(zf: zipfile.ZipFile, name: str, max_bytes: int) -> bytes:
         )
     try:
         return zf.read(info)
-    except (zipfile.BadZipFile, zipfile.LargeZipFile, OSError, EOFError, ValueError) as exc:
+    except (
+        zipfile.BadZipFile,
+        zipfile.LargeZipFile,
+        zlib.error,  # a corrupt deflate stream
+        OSError,
+        EOFError,
+        ValueError,
+    ) as exc:
         raise _PolicyFileError(f"member {name!r} is corrupt ({exc})") from exc
     except (RuntimeError, NotImplementedError) as exc:  # encrypted, unknown compression
         raise _PolicyFileError(f"member {name!r} cannot be read ({exc})") from exc
@@ -254,15 +265,19 @@ def _space_from_meta(d: Any, key: str) -> gym.spaces.Box:
             not isinstance(v, list)
             or len(v) != shape[0]
             or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v)
-            or any(math.isnan(x) for x in v)
         ):
             raise _PolicyFileError(
                 f"{where}: {name} must be a list of {shape[0]} numbers (null: unbounded)"
             )
-        try:
-            bounds.append(np.asarray(v, dtype=d["dtype"]))
+        try:  # float() first: an integer too large for a float is out of range, not inf
+            values = [float(x) for x in v]
+            bounds.append(np.asarray(values, dtype=d["dtype"]))
         except (OverflowError, ValueError) as exc:
             raise _PolicyFileError(f"{where}: {name} is out of range ({exc})") from exc
+        if np.isnan(bounds[-1]).any():
+            raise _PolicyFileError(
+                f"{where}: {name} must be a list of {shape[0]} numbers (null: unbounded)"
+            )
     if np.any(bounds[0] > bounds[1]):
         raise _PolicyFileError(f"{where}: low must not exceed high")
     return gym.spaces.Box(bounds[0], bounds[1], dtype=np.dtype(d["dtype"]))
@@ -283,6 +298,13 @@ def _check_state(state: Any, shapes: dict[str, tuple[int, ...]]) -> None:
         t = state[key]
         if not isinstance(t, torch.Tensor) or not t.is_floating_point():
             raise _PolicyFileError(f"policy.pth: {key} is not a float tensor")
+        # Only dense CPU tensors have values to check (a sparse or meta tensor has none
+        # that torch.isfinite can read).
+        if t.layout != torch.strided or t.device.type != "cpu":
+            raise _PolicyFileError(
+                f"policy.pth: {key} must be a dense CPU tensor, got layout {t.layout} on "
+                f"device {t.device.type!r}"
+            )
         if tuple(t.shape) != want:
             raise _PolicyFileError(
                 f"policy.pth: {key} has shape {tuple(t.shape)}, the network of meta.json "

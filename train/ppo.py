@@ -368,23 +368,22 @@ def train_ppo(
 
     With ``out_dir`` (a folder, or the :class:`~activetrack.files.RunOutputs` of one
     prepared with :data:`OUTPUTS`) it writes ``policy.zip``, ``model.zip``,
-    ``config.json``, ``checkpoints/`` and ``tb/`` there. The folder is checked before
-    training (a folder holding results needs ``overwrite``); the three files are committed
-    together at the end, so a failed run leaves the previous ones. Deterministic for a
+    ``config.json``, ``checkpoints/`` and ``tb/`` there. The folder is checked and locked
+    before training (a folder holding results needs ``overwrite``); everything is written
+    in its staging folder and committed together at the end, so a failed run leaves the
+    previous outputs, folders included. Deterministic for a
     given seed (with ``threads=1``, the default).
     """
     cfg = config or PPOConfig()
     if not isinstance(cfg, PPOConfig):
         raise TypeError(f"config must be a PPOConfig, got {type(cfg).__name__}")
-    outputs = None
-    if isinstance(out_dir, RunOutputs):
-        outputs = out_dir
-    elif out_dir is not None:
-        outputs = prepare_output_dir(out_dir, OUTPUTS, overwrite)
+    if out_dir is not None and not isinstance(out_dir, RunOutputs):
+        with prepare_output_dir(out_dir, OUTPUTS, overwrite) as outputs:  # locked for the run
+            return train_ppo(scenario, seed, cfg, outputs, init, progress, threads, **overrides)
+    outputs = out_dir
     configure_torch(threads)
     seed_everything(seed)
     t0 = time.perf_counter()
-    out = outputs.folder if outputs is not None else None
     venv = make_training_env(
         scenario,
         cfg.n_copies,
@@ -401,16 +400,17 @@ def train_ppo(
             f"batch_size must be at most the rollout, n_steps * slots = {cfg.n_steps} * "
             f"{venv.num_envs} = {rollout}, got {cfg.batch_size}"
         )
-    model = build_ppo(venv, cfg, seed, str(out / "tb") if out is not None else None)
+    tb = str(outputs.staged("tb/")) if outputs is not None else None
+    model = build_ppo(venv, cfg, seed, tb)
 
     callbacks: list[BaseCallback] = []
     if progress:
         callbacks.append(TqdmCallback(cfg.total_timesteps))
-    if out is not None and cfg.checkpoint_every > 0:
+    if outputs is not None and cfg.checkpoint_every > 0:
         callbacks.append(
             AtomicCheckpointCallback(
                 save_freq=max(1, cfg.checkpoint_every // venv.num_envs),
-                save_path=str(out / "checkpoints"),
+                save_path=str(outputs.staged("checkpoints/")),
                 name_prefix="ppo",
             )
         )

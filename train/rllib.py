@@ -43,8 +43,12 @@ from typing import Any
 import numpy as np
 import torch
 
-from activetrack.baselines.distributed import check_reachable
-from activetrack.files import RunOutputs, prepare_output_dir
+from activetrack.baselines.distributed import (
+    check_address_form,
+    check_reachable,
+    quiet_failure_handler,
+)
+from activetrack.files import RunOutputs, keep_signal_handlers, prepare_output_dir
 from activetrack.train.networks import DEFAULT_NET, NetConfig, build_policy
 from activetrack.train.policy_io import save_policy
 from activetrack.train.utils import (
@@ -369,11 +373,14 @@ def ray_session(address: str | None = None, num_cpus: int | None = None) -> Iter
         address, kwargs["num_cpus"] = "local", num_cpus
     else:
         check_reachable(address)
-    ray.init(address=address, **kwargs)
     try:
+        quiet_failure_handler()
+        with keep_signal_handlers():  # Ray's SIGTERM handler would skip the clean-up
+            ray.init(address=address, **kwargs)
         yield
     finally:
-        ray.shutdown()
+        if ray.is_initialized():
+            ray.shutdown()
 
 
 def check_address(address: Any) -> str | None:
@@ -382,7 +389,7 @@ def check_address(address: Any) -> str | None:
         return None
     if not isinstance(address, str) or not address.strip():
         raise ValueError(f"address must be a non-empty Ray address such as 'auto', got {address!r}")
-    return address.strip()
+    return check_address_form(address)
 
 
 @dataclass
@@ -425,11 +432,12 @@ def train_rllib_ppo(
     iterations = check_int("iterations", iterations, 1, MAX_ITERATIONS)
     seed = check_int("seed", seed, 0, 2**31 - 1)
     address = check_address(address)
-    outputs = None
-    if isinstance(out_dir, RunOutputs):
-        outputs = out_dir
-    elif out_dir is not None:
-        outputs = prepare_output_dir(out_dir, OUTPUTS, overwrite)
+    if out_dir is not None and not isinstance(out_dir, RunOutputs):
+        with prepare_output_dir(out_dir, OUTPUTS, overwrite) as outputs:  # locked for the run
+            return train_rllib_ppo(
+                scenario, seed, iterations, cfg, outputs, address, progress, threads, **overrides
+            )
+    outputs = out_dir
     from activetrack.world.scenarios import make_scenario
 
     scenario_dict = make_scenario(scenario, **overrides).to_dict()  # checks the overrides
@@ -450,12 +458,11 @@ def train_rllib_ppo(
                 if writer is not None:
                     _log_scalars(writer, result, it)
                 bar.update(1)
-                bar.set_postfix(
-                    ret=f"{stats.get('episode_return_mean', math.nan):.3g}", refresh=False
-                )
+                ret = stats.get("episode_return_mean")  # none until an episode finishes
+                bar.set_postfix(ret="-" if ret is None else f"{ret:.3g}", refresh=False)
                 every = cfg.checkpoint_every
                 if outputs is not None and (it == iterations or (every and it % every == 0)):
-                    _checkpoint(algo, outputs.path("checkpoints/"), it)
+                    _checkpoint(algo, outputs.staged("checkpoints/"), it)
             bar.close()
             if writer is not None:
                 writer.close()
@@ -541,7 +548,7 @@ def _tb_writer(outputs: RunOutputs | None) -> Any:
         return None
     from torch.utils.tensorboard import SummaryWriter
 
-    return SummaryWriter(str(outputs.path("tb/")))
+    return SummaryWriter(str(outputs.staged("tb/")))
 
 
 def _log_scalars(writer: Any, result: dict[str, Any], step: int, prefix: str = "") -> None:

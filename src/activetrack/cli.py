@@ -12,7 +12,8 @@ Errors. Input is checked before any computation (the config dataclasses, policy 
 the output folder). A ``ValueError`` from a command is reported as argparse reports its
 own errors: the command's usage and ``activetrack <command>: error: <message>``, exit
 status 2. An ``OSError`` while writing outputs is reported the same way with status 1;
-outputs are committed together, so the previous ones are then still in place.
+outputs are committed together, so the previous ones are then still in place (the message
+says so). SIGINT and SIGTERM exit with 130 and 143 (:func:`main`).
 
 This module also holds the small argparse helpers the layers share.
 """
@@ -23,7 +24,9 @@ import argparse
 import dataclasses
 import importlib
 import math
+import signal
 import sys
+import threading
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
@@ -156,8 +159,38 @@ def _command_of(argv: Sequence[str]) -> str | None:
     return next((a for a in argv if not a.startswith("-")), None)
 
 
+class _SignalHandler:
+    """Raise :class:`~activetrack.files.Interrupted` on SIGINT or SIGTERM while armed; once
+    disarmed (the command has returned, or an interrupt is being reported), ignore them."""
+
+    def __init__(self) -> None:
+        self.armed = True
+
+    def __call__(self, signum: int, frame: Any) -> None:
+        if self.armed:
+            self.armed = False  # the report of this interrupt is not cut short by another
+            from activetrack.files import Interrupted
+
+            raise Interrupted(signum)
+
+
+def _folders_report(runs: list[Any]) -> str:
+    """Return what the output folders of ``runs`` hold now, or that none was touched."""
+    if not runs:
+        return "no output folder was touched"
+    return "; ".join(run.describe() for run in runs)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run the command line with ``argv`` (default ``sys.argv[1:]``); return the exit code."""
+    """Run the command line with ``argv`` (default ``sys.argv[1:]``); return the exit code.
+
+    SIGINT (Ctrl-C) and SIGTERM stop a command the same way: the run's staged outputs are
+    removed, and the exit status is 128 + the signal (130, 143) with one line saying what
+    the output folder holds (the previous results, or, if the signal came after the
+    commit, the new ones; never a mix). Once the command has returned, a signal changes
+    nothing: as the program (``argv`` None) the process exits with the command's status.
+    """
+    console = argv is None
     argv = list(sys.argv[1:] if argv is None else argv)
     command = _command_of(argv)
     parser = build_parser([command] if command in COMMANDS else [])
@@ -166,20 +199,41 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.print_help()
         return 2
     sub = getattr(args, "parser", parser)
+    from activetrack.files import SIGNALS, recorded_runs
+
+    handler = _SignalHandler()
+    in_main = threading.current_thread() is threading.main_thread()
+    previous = {s: signal.signal(s, handler) for s in SIGNALS} if in_main else {}
+    runs: list[Any] = []
     try:
-        return int(args.func(args) or 0)
-    except ValueError as exc:  # bad input, found before computing: argparse style
-        sub.print_usage(sys.stderr)
-        print(f"{sub.prog}: error: {exc}", file=sys.stderr)
-        return 2
-    except OSError as exc:  # e.g. writing the outputs failed: the previous ones are kept
-        print(f"{sub.prog}: error: {exc}", file=sys.stderr)
-        return 1
-    except KeyboardInterrupt:  # Ctrl-C: outputs are committed together, so none are half-written
-        print(
-            f"\n{sub.prog}: interrupted (the previous outputs, if any, are kept)", file=sys.stderr
-        )
-        return 130
+        with recorded_runs() as runs:
+            try:
+                code = int(args.func(args) or 0)
+            except ValueError as exc:  # bad input, found before computing: argparse style
+                sub.print_usage(sys.stderr)
+                print(f"{sub.prog}: error: {exc}", file=sys.stderr)
+                code = 2
+            except OSError as exc:  # e.g. writing the outputs failed
+                print(f"{sub.prog}: error: {exc} ({_folders_report(runs)})", file=sys.stderr)
+                code = 1
+            handler.armed = False  # done: a signal now changes nothing on disk
+    except KeyboardInterrupt as exc:  # Ctrl-C or SIGTERM: the staged outputs are removed
+        handler.armed = False
+        signum = int(getattr(exc, "signum", signal.SIGINT))
+        name = signal.Signals(signum).name
+        print(f"\n{sub.prog}: interrupted ({name}); {_folders_report(runs)}", file=sys.stderr)
+        code = 128 + signum
+    finally:
+        # Called with arguments (a test, a script): the caller's handlers come back. As
+        # the program (no arguments), the process only exits next, with the folder in
+        # its final state: a signal now is ignored (Python's finalization would restore
+        # the default action, and SIGTERM would kill the process without a word).
+        for s, old in previous.items():
+            if console:
+                signal.signal(s, signal.SIG_IGN)
+            else:
+                signal.signal(s, signal.SIG_DFL if old is None else old)
+    return code
 
 
 if __name__ == "__main__":

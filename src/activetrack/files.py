@@ -8,10 +8,16 @@ previous file in place and no temporary file behind:
   flushed to disk and renamed onto the target, on failure it is removed;
 - :func:`atomic_write_bytes`, :func:`atomic_write_text`, :func:`atomic_write_json` write
   one file that way;
-- :func:`prepare_output_dir` checks an output folder before any computation and returns
-  a :class:`RunOutputs`, which stages all of a run's files and commits them together: the
-  folder then holds either every new file or every old one (a rename cannot run out of
-  space, so only a crash between two renames can mix them).
+- :func:`prepare_output_dir` checks an output folder before any computation, locks it for
+  the run and returns a :class:`RunOutputs`: the run writes its files *and folders* (TensorBoard
+  logs, checkpoints) into a private staging folder ``OUT/.tmp-run-*`` and commits them
+  together at the end; the folder then holds either every new output or every old one (a
+  rename cannot run out of space; SIGINT and SIGTERM are held back during the renames, so
+  only a hard crash, such as SIGKILL, between two renames can mix them). A second run on
+  the same folder is refused while the first one runs (:func:`prepare_output_dir`).
+
+Signals: :func:`signals_deferred` holds SIGINT and SIGTERM back during a few file
+operations; :func:`keep_signal_handlers` restores the handlers a library (Ray) replaces.
 
 Nothing here imports numpy or the layers above the core.
 """
@@ -19,17 +25,30 @@ Nothing here imports numpy or the layers above the core.
 from __future__ import annotations
 
 import contextlib
+import contextvars
 import json
 import os
 import shutil
+import signal
 import tempfile
+import threading
+import weakref
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
+try:  # POSIX: the output folder is locked with flock (elsewhere: checked at the commit)
+    import fcntl
+except ImportError:  # pragma: no cover - Windows
+    fcntl = None  # type: ignore[assignment]
+
 __all__ = [
+    "Interrupted",
     "RunOutputs",
     "atomic_path",
+    "keep_signal_handlers",
+    "recorded_runs",
+    "signals_deferred",
     "atomic_write_bytes",
     "atomic_write_json",
     "atomic_write_text",
@@ -38,6 +57,76 @@ __all__ = [
 
 #: Prefix of the temporary files this module creates (hidden, recognizable).
 TEMP_PREFIX = ".tmp-"
+#: Prefix of a run's staging folder inside its output folder.
+STAGING_PREFIX = f"{TEMP_PREFIX}run-"
+#: The signals a run's file operations hold back (and the command line handles).
+SIGNALS = (signal.SIGINT, signal.SIGTERM)
+_HAS_SIGMASK = hasattr(signal, "pthread_sigmask")
+
+
+# Signals ----------------------------------------------------------------------------------
+@contextlib.contextmanager
+def signals_deferred() -> Iterator[None]:
+    """Hold SIGINT and SIGTERM back inside the block; deliver them (once each) after it.
+
+    The renames of a commit and the removal of a staging folder then run to the end: an
+    interrupt arrives after them, to the handler that was in place before. Only the main
+    thread can set handlers; elsewhere the block runs as it is.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    pending: list[int] = []
+
+    def hold(signum: int, frame: Any) -> None:
+        if signum not in pending:
+            pending.append(signum)
+
+    previous = {s: signal.signal(s, hold) for s in SIGNALS}
+    try:
+        yield
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, signal.SIG_DFL if handler is None else handler)
+        for s in pending:
+            signal.raise_signal(s)  # now handled as it would have been
+
+
+class Interrupted(KeyboardInterrupt):
+    """SIGINT or SIGTERM during a command (a ``KeyboardInterrupt``, so every clean-up that
+    Ctrl-C runs runs for SIGTERM too). ``signum`` is the signal."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signal.Signals(signum).name)
+        self.signum = signum
+
+
+@contextlib.contextmanager
+def keep_signal_handlers() -> Iterator[None]:
+    """Restore the SIGINT and SIGTERM handlers after the block (``ray.init`` replaces the
+    SIGTERM one with its own, which exits without the command's clean-up). A SIGTERM that
+    Ray's handler turned into ``SystemExit(15)`` inside the block leaves it as
+    :class:`Interrupted`."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = {s: signal.getsignal(s) for s in SIGNALS}
+    # Blocked meanwhile (in this thread, and in the threads the block starts, which
+    # inherit the mask): Ray's native failure handler, installed by ray.init, would take
+    # a SIGTERM with a stack dump and an abort. A signal sent meanwhile waits for the end.
+    blocked = signal.pthread_sigmask(signal.SIG_BLOCK, SIGNALS) if _HAS_SIGMASK else None
+    try:
+        yield
+    except SystemExit as exc:
+        if exc.code == signal.SIGTERM:
+            raise Interrupted(signal.SIGTERM) from None
+        raise
+    finally:
+        for s, handler in previous.items():
+            if handler is not None and signal.getsignal(s) is not handler:
+                signal.signal(s, handler)
+        if blocked is not None:
+            signal.pthread_sigmask(signal.SIG_SETMASK, blocked)  # a pending one arrives now
 
 
 def _umask() -> int:
@@ -137,27 +226,88 @@ def atomic_write_json(
 
 
 def _is_empty_dir(path: Path) -> bool:
-    return path.is_dir() and not any(path.iterdir())
+    return path.is_dir() and not path.is_symlink() and not any(path.iterdir())
+
+
+def _holds(folder: Path, name: str) -> bool:
+    """Return whether ``folder`` holds results under the owned ``name`` (a file, or a
+    non-empty folder for a name ending in ``/``)."""
+    p = folder / name.rstrip("/")
+    if name.endswith("/"):
+        return (p.exists() or p.is_symlink()) and not _is_empty_dir(p)
+    return p.exists() or p.is_symlink()
+
+
+def _remove(path: Path) -> None:
+    """Remove a file, a symbolic link or a folder tree (what is not there is fine)."""
+    if path.is_dir() and not path.is_symlink():
+        shutil.rmtree(path, ignore_errors=True)
+    else:
+        _unlink(path)
+
+
+#: The runs prepared in the current context (for the command line's messages).
+_RECORDER: contextvars.ContextVar[list[RunOutputs] | None] = contextvars.ContextVar(
+    "activetrack_runs", default=None
+)
+
+
+@contextlib.contextmanager
+def recorded_runs() -> Iterator[list[RunOutputs]]:
+    """Yield the list of the :class:`RunOutputs` prepared inside the block, in order (the
+    command line reports what each output folder holds after an interrupt or an error)."""
+    runs: list[RunOutputs] = []
+    token = _RECORDER.set(runs)
+    try:
+        yield runs
+    finally:
+        _RECORDER.reset(token)
 
 
 class RunOutputs:
-    """The output folder of one run: staged files, committed together.
+    """The output folder of one run: locked, its outputs staged, then committed together.
 
-    Create it with :func:`prepare_output_dir`. :meth:`staged` returns a temporary path for
-    one of the owned names; :meth:`commit` renames every staged file into place and removes
-    the owned files that this run did not write (e.g. an old figure after ``--no-plot``),
-    so no stale output stays beside new ones; :meth:`discard` removes the staged files. As
-    a context manager it discards on an exception (it never commits by itself).
+    Create it with :func:`prepare_output_dir`, and use it as a context manager around the
+    whole run: on leaving the block, uncommitted outputs are discarded, a folder the run
+    made and left empty is removed, and the lock is released (:meth:`close`).
+
+    :meth:`staged` returns where one of the owned names goes during the run: a path in
+    the private staging folder ``OUT/.tmp-run-*`` (for a folder name, ending in ``/``,
+    the folder itself, made empty: TensorBoard logs and checkpoints are read there while
+    the run goes on). :meth:`commit` moves every staged output into place, replacing the
+    old ones, and removes the owned names this run did not write (e.g. an old figure after
+    ``--no-plot``), so no stale output stays beside new ones. :meth:`discard` removes the
+    staged outputs: the old ones are untouched until the commit.
 
     Attributes:
         folder: the output folder.
         owned: the names (files, or folders ending in ``/``) the run may write.
+        state: ``"open"``, ``"committed"``, ``"discarded"`` (or ``"failed"``: a rename of
+            the commit failed, which a writable folder does not do).
     """
 
-    def __init__(self, folder: Path, owned: tuple[str, ...]) -> None:
+    def __init__(
+        self,
+        folder: Path,
+        owned: tuple[str, ...],
+        overwrite: bool = False,
+        *,
+        previous: tuple[str, ...] = (),
+        created: tuple[Path, ...] = (),
+        lock_fd: int | None = None,
+    ) -> None:
         self.folder = folder
         self.owned = owned
+        self.overwrite = overwrite
+        self.previous = previous  # the owned names that held results when the run began
+        self.state = "open"
+        self.folder_removed = False
+        self._created = created  # folders made for this run, outermost first
+        self._lock_fd = lock_fd
+        self._staging: Path | None = None
         self._staged: dict[str, Path] = {}
+        # Clean up even if the owner never closes (a library caller; the interpreter exit).
+        self._finalizer = weakref.finalize(self, _release, lock_fd)
 
     def path(self, name: str) -> Path:
         """Return the final path of the owned ``name``."""
@@ -165,13 +315,25 @@ class RunOutputs:
             raise ValueError(f"{name!r} is not one of this run's outputs {list(self.owned)}")
         return self.folder / name.rstrip("/")
 
+    @property
+    def staging(self) -> Path:
+        """Return the run's private staging folder (made at the first use)."""
+        if self.state != "open":
+            raise RuntimeError(f"{self.folder}: this run's outputs are already {self.state}")
+        if self._staging is None:
+            self._staging = Path(tempfile.mkdtemp(dir=self.folder, prefix=STAGING_PREFIX))
+            os.chmod(self._staging, 0o777 & ~_umask())
+        return self._staging
+
     def staged(self, name: str) -> Path:
-        """Return the temporary path where ``name``'s new content goes (created empty; the
-        folder too, if it does not exist yet)."""
-        final = self.path(name)
+        """Return where ``name``'s new content goes until the commit: a path in the staging
+        folder (a folder name's folder is made, empty)."""
+        self.path(name)  # an owned name
         if name not in self._staged:
-            self.folder.mkdir(parents=True, exist_ok=True)
-            self._staged[name] = _temp_path(final)
+            target = self.staging / name.rstrip("/")
+            if name.endswith("/"):
+                target.mkdir()
+            self._staged[name] = target
         return self._staged[name]
 
     def write_bytes(self, name: str, data: bytes) -> Path:
@@ -188,65 +350,237 @@ class RunOutputs:
         return self.write_text(name, json_text(obj, **kwargs))
 
     def commit(self) -> dict[str, Path]:
-        """Rename every staged file into place; return the written paths by name.
+        """Move every staged output into place; return the final paths by name.
 
         Every staged file is flushed to disk before the first rename, so a failure there
-        (the disk full) leaves all the old outputs. Owned files the run did not stage are
-        removed (owned folders, written during the run, are left alone).
+        (the disk full, a file not written) leaves all the old outputs. Without the lock (a
+        file system without ``flock``), results that another run wrote meanwhile make the
+        commit refuse (``ValueError``) unless the run overwrites. The owned names the run did
+        not stage are removed. SIGINT and SIGTERM wait until the renames are done.
         """
+        if self.state != "open":
+            raise RuntimeError(f"{self.folder}: this run's outputs are already {self.state}")
         try:
-            for tmp in self._staged.values():
-                _fsync_file(tmp)
+            for name, staged in self._staged.items():
+                if not name.endswith("/"):
+                    _fsync_file(staged)
+            appeared = [n for n in self.owned if n not in self.previous and _holds(self.folder, n)]
+            if appeared and not self.overwrite:
+                raise ValueError(
+                    f"{self.folder}: another run wrote results ({', '.join(appeared)}) while "
+                    "this one ran; this run's outputs were not written"
+                )
         except BaseException as exc:
             self.discard(exc)
             raise
-        written = {}
-        for name, tmp in self._staged.items():
-            os.replace(tmp, self.path(name))
-            written[name] = self.path(name)
-        for name in self.owned:
-            if name.endswith("/") or name in self._staged:
-                continue
-            _unlink(self.path(name))
-        self._staged = {}
-        _fsync_dir(self.folder)
+        with signals_deferred():
+            old = self.staging / ".old"  # where the replaced outputs go before removal
+            old.mkdir()
+            written = {}
+            try:
+                for name in self.owned:
+                    final = self.path(name)
+                    staged = self._staged.get(name)
+                    if staged is not None and not name.endswith("/") and not final.is_dir():
+                        os.replace(staged, final)  # a file onto a file: atomic
+                    else:
+                        if final.exists() or final.is_symlink():
+                            os.rename(final, old / final.name)
+                        if staged is not None:
+                            os.rename(staged, final)
+                    if staged is not None:
+                        written[name] = final
+            except BaseException:
+                # A rename failed part-way (it should not: same folder, checked writable):
+                # the staging folder, with the replaced outputs in .old, is kept for the
+                # user under a name the next run does not clean up.
+                kept = self.folder / f".failed-commit-{self.staging.name}"
+                with contextlib.suppress(OSError):
+                    os.rename(self.staging, kept)
+                self.state, self._staging = "failed", None
+                raise
+            self._staged = {}
+            self.state = "committed"
+            _fsync_dir(self.folder)
+            self._remove_staging()
         return written
 
     def discard(self, exc: BaseException | None = None) -> None:
-        """Remove every staged temporary file (the old outputs stay); an ``OSError`` that
-        names one of them is made to name the output it stood for."""
-        for name, tmp in self._staged.items():
-            _unlink(tmp)
-            if isinstance(exc, OSError) and exc.filename == str(tmp):
-                exc.filename = str(self.path(name))
-        self._staged = {}
+        """Remove the staged outputs (the old ones stay); an ``OSError`` that names one of
+        them is made to name the output it stood for."""
+        with signals_deferred():
+            if isinstance(exc, OSError) and exc.filename is not None:
+                for name, staged in self._staged.items():
+                    if str(exc.filename).startswith(str(staged)):
+                        exc.filename = str(self.path(name))
+                        break
+            self._staged = {}
+            if self.state == "open":
+                self.state = "discarded"
+            self._remove_staging()
+
+    def close(self) -> None:
+        """End the run: discard what was not committed, remove the folders made for it if
+        the run left them empty, and release the lock (idempotent)."""
+        with signals_deferred():
+            if self.state == "open":
+                self.discard()
+            if self.state == "discarded":
+                for folder in reversed(self._created):
+                    try:
+                        folder.rmdir()  # only if empty: someone else's files stay
+                    except OSError:
+                        break
+                    if folder == self.folder:
+                        self.folder_removed = True
+                self._created = ()
+            self._finalizer()
+
+    def describe(self) -> str:
+        """Return one sentence saying what the output folder holds after this run."""
+        if self.state == "committed":
+            return f"{self.folder} holds this run's complete new results"
+        if self.state == "failed":
+            return (
+                f"{self.folder}: the commit failed part-way; the replaced outputs are in "
+                f".failed-commit-{STAGING_PREFIX}*/.old there"
+            )
+        if self.previous:
+            return f"{self.folder} still holds its previous results, unchanged"
+        removed = " (the folder made for it was removed)" if self.folder_removed else ""
+        return f"no results were written to {self.folder}{removed}"
+
+    def _remove_staging(self) -> None:
+        if self._staging is not None:
+            shutil.rmtree(self._staging, ignore_errors=True)
+            self._staging = None
 
     def __enter__(self) -> RunOutputs:
         return self
 
     def __exit__(self, exc_type: Any, exc: Any, tb: Any) -> None:
-        if exc_type is not None:
+        if exc_type is not None and self.state == "open":
             self.discard(exc)
+        self.close()
+
+
+def _release(lock_fd: int | None) -> None:
+    if lock_fd is not None:
+        with contextlib.suppress(OSError):
+            os.close(lock_fd)  # releases the flock
+
+
+def _dangling_link(folder: Path) -> Path | None:
+    """Return the first of ``folder`` and its parents that is a link to nothing, if any."""
+    for p in (*reversed(folder.parents), folder):
+        if p.is_symlink() and not p.exists():
+            return p
+    return None
+
+
+def _lock(folder: Path) -> int | None:
+    """Lock ``folder`` (an existing folder) for this run; return the descriptor holding the
+    lock, or None where ``flock`` is unavailable. Raise ``BlockingIOError`` if another run
+    holds it."""
+    if fcntl is None:  # pragma: no cover - Windows
+        return None
+    fd = os.open(folder, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0))
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        os.close(fd)
+        raise
+    except OSError:  # a file system without flock: the commit checks instead
+        os.close(fd)
+        return None
+    return fd
 
 
 def prepare_output_dir(
     path: str | Path, owned: Iterable[str], overwrite: bool = False
 ) -> RunOutputs:
-    """Check the output folder ``path`` before a run; return its :class:`RunOutputs`.
+    """Check the output folder ``path`` before a run, lock it; return its :class:`RunOutputs`.
 
-    Checks that the folder, or the nearest existing folder above it, can take a new file
-    (the folder itself is made when the first output is staged, so a run that fails or is
-    interrupted before writing leaves no empty folder behind). Raises ``ValueError``
-    naming the folder if it cannot be used, or if it already holds one of
-    the ``owned`` names (files, or non-empty folders written as ``"name/"``) and
-    ``overwrite`` is false. With ``overwrite``, owned folders are emptied now (the run
-    writes into them as it goes); owned files are replaced only when the run commits, so
-    the old ones survive a failed run.
+    Makes the folder if needed (the :class:`RunOutputs` removes it again if the run writes
+    nothing) and locks it for the run: another run on the same folder is refused until this
+    one ends. Raises ``ValueError`` naming the folder if it cannot be used (not a folder, a
+    link to nothing, a name too long, not writable), if another run holds it, or if it
+    already holds one of the ``owned`` names (files, or non-empty folders written as
+    ``"name/"``) and ``overwrite`` is false. Nothing is replaced now, with ``overwrite``
+    either: the old outputs, folders included, stay until the run commits. Left-over
+    staging files of a run that was killed are removed.
     """
     if not str(path).strip():
         raise ValueError(f"the output folder must be a non-empty path, got {str(path)!r}")
     folder = Path(path)
     owned = tuple(owned)
+    try:  # a name too long (ENAMETOOLONG) fails already when looked at
+        missing = _check_path(folder)
+    except OSError as exc:
+        raise ValueError(f"{folder}: cannot write to this folder ({exc.strerror or exc})") from exc
+    for attempt in range(5):  # the folder may vanish (a run ending) between the steps: retry
+        made = False
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+            made = True
+            fd, probe = tempfile.mkstemp(dir=folder, prefix=TEMP_PREFIX)
+            os.close(fd)
+            os.unlink(probe)
+        except OSError as exc:
+            if made and isinstance(exc, FileNotFoundError) and attempt < 4:
+                continue  # made, then removed by a run ending: make it again
+            _remove_empty(missing)
+            raise ValueError(
+                f"{folder}: cannot write to this folder ({exc.strerror or exc})"
+            ) from exc
+        try:
+            lock_fd = _lock(folder)
+        except BlockingIOError:
+            raise ValueError(
+                f"{folder}: another run is writing to this folder; wait for it to finish, "
+                "or choose another folder"
+            ) from None
+        except FileNotFoundError:
+            continue
+        if lock_fd is None or _same_folder(lock_fd, folder):
+            break
+        os.close(lock_fd)  # locked a folder that was removed meanwhile: again
+    else:
+        raise ValueError(f"{folder}: the folder keeps being removed by another process")
+    outputs = RunOutputs(folder, owned, overwrite, created=tuple(missing), lock_fd=lock_fd)
+    try:
+        if lock_fd is not None:
+            for stale in folder.glob(f"{TEMP_PREFIX}*"):  # a killed run's (the folder is ours)
+                _remove(stale)
+        present = tuple(name for name in owned if _holds(folder, name))
+        if present and not overwrite:
+            raise ValueError(
+                f"{folder}: already holds results ({', '.join(present)}); pass --overwrite to "
+                "replace them, or choose another folder"
+            )
+        for name in present:
+            p = folder / name.rstrip("/")
+            if not name.endswith("/") and p.is_dir():
+                raise ValueError(f"{p}: is a folder, expected a file")
+        outputs.previous = present
+    except BaseException:
+        outputs.close()
+        raise
+    recorder = _RECORDER.get()
+    if recorder is not None:
+        recorder.append(outputs)
+    return outputs
+
+
+def _check_path(folder: Path) -> list[Path]:
+    """Raise ``ValueError`` if ``folder`` cannot be an output folder; return the folders
+    that must be made for it, outermost first."""
+    dangling = _dangling_link(folder)
+    if dangling is not None:
+        raise ValueError(
+            f"{folder}: {dangling} is a symbolic link to {os.readlink(dangling)}, "
+            "which does not exist"
+        )
     if folder.exists() and not folder.is_dir():
         raise ValueError(f"{folder}: exists and is not a folder")
     existing = folder
@@ -254,31 +588,20 @@ def prepare_output_dir(
         existing = existing.parent
     if not existing.is_dir():
         raise ValueError(f"{folder}: {existing} is not a folder")
+    return [p for p in (folder, *folder.parents) if not p.exists()][::-1]
+
+
+def _same_folder(fd: int, folder: Path) -> bool:
     try:
-        fd, probe = tempfile.mkstemp(dir=existing, prefix=TEMP_PREFIX)
-        os.close(fd)
-        os.unlink(probe)
-    except OSError as exc:
-        raise ValueError(f"{folder}: cannot write to this folder ({exc.strerror or exc})") from exc
-    present = []
-    for name in owned:
-        p = folder / name.rstrip("/")
-        if (name.endswith("/") and p.exists() and not _is_empty_dir(p)) or (
-            not name.endswith("/") and p.exists()
-        ):
-            present.append(name)
-    if present and not overwrite:
-        raise ValueError(
-            f"{folder}: already holds results ({', '.join(present)}); pass --overwrite to "
-            "replace them, or choose another folder"
-        )
-    for name in present:
-        p = folder / name.rstrip("/")
-        if name.endswith("/"):
-            if p.is_dir() and not p.is_symlink():
-                shutil.rmtree(p)
-            else:
-                _unlink(p)
-        elif p.is_dir():
-            raise ValueError(f"{p}: is a folder, expected a file")
-    return RunOutputs(folder, owned)
+        return os.path.samestat(os.fstat(fd), os.stat(folder))
+    except FileNotFoundError:
+        return False
+
+
+def _remove_empty(folders: list[Path]) -> None:
+    """Remove the (empty) ``folders``, innermost first, stopping at one that is not."""
+    for p in reversed(folders):
+        try:
+            p.rmdir()
+        except OSError:
+            return

@@ -226,3 +226,63 @@ def test_a_grid_gbes_cannot_search_fails_before_any_run(tmp_path, capsys):
     assert main([*argv, "--no-progress"]) == 2
     assert "GBES grid has" in capsys.readouterr().err
     assert not out.exists()
+
+
+BAD_ADDRESSES = ["127.0.0.1:-5", "127.0.0.1:+1", "127.0.0.1:1.5", "127.0.0.1:0", "h:65536", ":80"]
+
+
+@pytest.mark.parametrize("address", BAD_ADDRESSES)
+def test_a_malformed_address_fails_before_any_probe_or_run(address, tmp_path, capsys, monkeypatch):
+    """A port that is not an integer in [1, 65535] (or no host) is an argparse-style error
+    before the reachability probe and before computing; Ray would wait for minutes."""
+    import socket
+
+    import activetrack.baselines.cli as bcli
+    from activetrack.baselines import distributed
+
+    def never(*args, **kwargs):
+        raise AssertionError("probed or computed with a malformed address")
+
+    monkeypatch.setattr(bcli, "run_monte_carlo", never)
+    monkeypatch.setattr(socket, "create_connection", never)
+    with pytest.raises(ValueError, match=r"PORT an integer in \[1, 65535\]"):
+        distributed.check_reachable(address)
+    out = tmp_path / "res"
+    for argv in (TINY, ["evaluate", "--policy", "rm", "--episodes", "1", "--no-progress"]):
+        assert main([*argv, "--address", address, "--out", str(out)]) == 2
+        err = capsys.readouterr().err
+        assert "error: address must be 'auto', 'local', HOST:PORT" in err and address in err
+        assert not out.exists()
+
+
+def test_well_formed_addresses_are_accepted():
+    from activetrack.baselines import distributed
+
+    for address in ("auto", " local ", "127.0.0.1:1", "ray://head-1.example:10001", "[::1]:65535"):
+        assert distributed.check_options(1, address) == (1, address.strip())
+
+
+def unusable_outs(tmp_path):
+    """Return (--out, expected message) of output folders that cannot be made."""
+    (tmp_path / "dangling").symlink_to(tmp_path / "nowhere")
+    return [
+        (tmp_path / "dangling", "is a symbolic link to"),
+        (tmp_path / ("x" * 300), "cannot write to this folder (File name too long)"),
+    ]
+
+
+def test_a_dangling_link_or_long_name_as_out_fails_before_computing(tmp_path, capsys, monkeypatch):
+    import activetrack.baselines.cli as bcli
+    import activetrack.baselines.evaluation as ev
+
+    def never(*args, **kwargs):
+        raise AssertionError("computed before checking --out")
+
+    monkeypatch.setattr(bcli, "run_monte_carlo", never)
+    monkeypatch.setattr(ev, "evaluate", never)
+    for out, message in unusable_outs(tmp_path):
+        for argv in (TINY, ["evaluate", "--policy", "rm", "--episodes", "1", "--no-progress"]):
+            assert main([*argv, "--out", str(out)]) == 2
+            err = capsys.readouterr().err
+            assert f"error: {out}: " in err and message in err, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["dangling"]

@@ -288,3 +288,139 @@ def test_train_refuses_results_unless_overwrite(trained, tmp_path, capsys):
     assert main([*argv, "--out", str(out), "--overwrite"]) == 0
     assert sorted(p.name for p in out.iterdir()) == ["config.json", "notes.txt", "policy.zip", "tb"]
     assert load_policy(out / "policy.zip").meta["net"]["hidden"] == [8]
+
+
+@pytest.mark.parametrize("method", ["bc", "rllib-ppo"])
+def test_a_malformed_address_fails_before_training(method, tmp_path, capsys, monkeypatch):
+    import socket
+
+    import activetrack.train.cli as tcli
+
+    def never(*args, **kwargs):
+        raise AssertionError("probed or trained with a malformed address")
+
+    if method == "rllib-ppo":
+        rllib = pytest.importorskip("activetrack.train.rllib")
+        monkeypatch.setattr(rllib, "train_rllib_ppo", never)
+    monkeypatch.setattr(tcli, "train_imitation", never)
+    monkeypatch.setattr(socket, "create_connection", never)
+    out = tmp_path / "out"
+    for address in ("127.0.0.1:-5", "127.0.0.1:+1", "127.0.0.1:1.5", "127.0.0.1:99999"):
+        assert main(["train", method, "--address", address, "--out", str(out)]) == 2
+        err = capsys.readouterr().err
+        assert f"activetrack train {method}: error: address must be 'auto', 'local'" in err
+        assert not out.exists()
+
+
+def test_rllib_says_when_no_episode_finished(tmp_path, capsys, monkeypatch):
+    """RLlib reports a mean return only once an episode has finished: the summary line says
+    so instead of printing nan, and names the iteration of an older mean."""
+    rllib = pytest.importorskip("activetrack.train.rllib")
+
+    def fake(history):
+        def train(*args, **kwargs):
+            return rllib.RLlibResult(tmp_path / "policy.zip", history, 1.0, 64, 192, None)
+
+        return train
+
+    argv = ["train", "rllib-ppo", "--iterations", "2", "--out", str(tmp_path / "out")]
+    for history, expected in [
+        ([{}, {}], "no episode finished in training (no mean return)"),
+        ([{"episode_return_mean": -1.25}, {}], "(all sensors, scaled) -1.250 at iteration 1"),
+        ([{}, {"episode_return_mean": 2.5}], "(all sensors, scaled) 2.500 ->"),
+    ]:
+        monkeypatch.setattr(rllib, "train_rllib_ppo", fake(history))
+        assert main(argv) == 0
+        out = capsys.readouterr().out
+        assert expected in out and "nan" not in out
+
+
+@pytest.mark.parametrize("method", ["bc", "ppo", "rllib-ppo"])
+def test_a_dangling_link_or_long_name_as_out_fails_before_training(
+    method, tmp_path, capsys, monkeypatch
+):
+    import activetrack.train.cli as tcli
+
+    def never(*args, **kwargs):
+        raise AssertionError("trained before checking --out")
+
+    if method == "rllib-ppo":
+        rllib = pytest.importorskip("activetrack.train.rllib")
+        monkeypatch.setattr(rllib, "train_rllib_ppo", never)
+    monkeypatch.setattr(tcli, "train_imitation", never)
+    monkeypatch.setattr(tcli, "train_ppo", never)
+    (tmp_path / "dangling").symlink_to(tmp_path / "nowhere")
+    for out, message in [
+        (tmp_path / "dangling", "is a symbolic link to"),
+        (tmp_path / ("x" * 300), "cannot write to this folder (File name too long)"),
+    ]:
+        assert main(["train", method, "--out", str(out)]) == 2
+        err = capsys.readouterr().err
+        assert f"activetrack train {method}: error: {out}: " in err and message in err, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["dangling"]
+
+
+def test_a_failed_run_leaves_no_folder(tmp_path, capsys):
+    """train bc with a Ray address nothing answers at: exit 1, and no OUT (nor OUT/tb)."""
+    pytest.importorskip("ray")
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]  # released: nothing listens there
+    out = tmp_path / "out"
+    argv = ["train", "bc", "--episodes", "1", "--epochs", "1", "--no-progress"]
+    assert main([*argv, "--address", f"127.0.0.1:{port}", "--out", str(out)]) == 1
+    err = capsys.readouterr().err
+    assert "cannot reach a Ray cluster" in err and f"no results were written to {out}" in err
+    assert not out.exists()
+
+
+def _tree(folder):
+    return {
+        str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()
+    }
+
+
+@pytest.mark.parametrize("signum", ["SIGINT", "SIGTERM"])
+def test_an_interrupted_ppo_overwrite_keeps_every_old_output(signum, tmp_path, monkeypatch, capsys):
+    """Interrupted at the end of training (its TensorBoard logs and checkpoints written in
+    the staging folder the command printed), an --overwrite run leaves the previous run's
+    files *and folders* as they were: the folder never mixes two runs."""
+    import os
+    import signal
+
+    import activetrack.train.ppo as ppo_module
+
+    out = tmp_path / "ppo"
+    (out / "checkpoints").mkdir(parents=True)
+    (out / "tb" / "ppo_1").mkdir(parents=True)
+    for name in ("policy.zip", "model.zip", "config.json"):
+        (out / name).write_text(f"old {name}")
+    (out / "checkpoints" / "ppo_100_steps.zip").write_text("old checkpoint")
+    (out / "tb" / "ppo_1" / "events.out.tfevents.old").write_text("old events")
+    before = _tree(out)
+    seen = {}
+
+    def interrupted(*args, **kwargs):
+        staging = next(out.glob(".tmp-run-*"))
+        seen["staged"] = sorted(str(p.relative_to(staging)) for p in staging.rglob("*"))
+        os.kill(os.getpid(), getattr(signal, signum))
+
+    monkeypatch.setattr(ppo_module, "save_policy", interrupted)
+    argv = ["train", "ppo", "--hidden", "8", "--no-progress", "--total-timesteps", "200"]
+    argv += ["--n-copies", "1", "--n-steps", "100", "--batch-size", "100", "--n-epochs", "1"]
+    argv += ["--checkpoint-every", "100", "--out", str(out), "--overwrite"]
+    assert main(argv) == 128 + getattr(signal, signum)
+    captured = capsys.readouterr()
+    staging_tb = captured.out.split("TensorBoard logs while training: ")[1].split(" ")[0]
+    assert staging_tb.startswith(str(out / ".tmp-run-")) and staging_tb.endswith("tb")
+    # The new run's logs and checkpoints were being written in the staging folder...
+    assert any(p.startswith("tb/ppo_1/events.out.tfevents") for p in seen["staged"])
+    assert any(p.startswith("checkpoints/ppo_") for p in seen["staged"])
+    # ...and the old outputs, folders included, are all still there, unchanged.
+    assert _tree(out) == before
+    assert sorted(p.name for p in out.iterdir()) == sorted(
+        ["checkpoints", "config.json", "model.zip", "policy.zip", "tb"]
+    )
+    assert f"interrupted ({signum}); {out} still holds its previous results" in captured.err

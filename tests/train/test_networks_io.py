@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import io
 import json
+import struct
 import subprocess
 import sys
 import zipfile
@@ -167,6 +168,10 @@ def bad_files(good_path, members, folder):
     torch.save(nan_state, nan_buf)
     tiny_std = {k: v.clone() for k, v in state.items()}
     tiny_std["log_std"][:] = -200.0  # finite, but exp(-200) is 0 in float32
+    sparse = {**state, "action_net.weight": state["action_net.weight"].to_sparse()}
+    on_meta = {**state, "action_net.weight": state["action_net.weight"].to("meta")}
+    huge_low = json.loads(members["meta.json"])["observation_space"]["low"]
+    huge_low[0] = 10**400  # valid JSON, too large for any float
     wide = build_policy(OBS, ACT, NetConfig(hidden=(32, 16)))
     wide_buf = io.BytesIO()
     torch.save(wide.state_dict(), wide_buf)
@@ -174,6 +179,7 @@ def bad_files(good_path, members, folder):
         "truncated": (raw[: len(raw) // 2], "not a readable zip file"),
         "random bytes": (np.random.default_rng(0).bytes(5000), "not a readable zip file"),
         "empty": (b"", "not a readable zip file"),
+        "bad deflate": (_bad_deflate(members), "member 'policy.pth' is corrupt"),
         "missing member": ({"meta.json": members["meta.json"]}, "missing member 'policy.pth'"),
         "no meta": ({"policy.pth": members["policy.pth"]}, "missing member 'meta.json'"),
         "meta not json": ({**members, "meta.json": b"{nope"}, "not valid JSON"),
@@ -190,6 +196,10 @@ def bad_files(good_path, members, folder):
         "huge shape": (with_meta(members, observation_space__shape=[10**9]), "shape"),
         "low strings": (with_meta(members, observation_space__low=["a"] * 23), "low"),
         "low too short": (with_meta(members, action_space__low=[0.0]), "low"),
+        "low too large": (
+            with_meta(members, observation_space__low=huge_low),
+            "low is out of range",
+        ),
         "bad dtype": (with_meta(members, action_space__dtype="int8"), "dtype"),
         "bad view": (with_meta(members, view=3), "view"),
         "scenario a list": (with_meta(members, scenario=[1]), "scenario"),
@@ -198,6 +208,8 @@ def bad_files(good_path, members, folder):
         "pth a list": ({**members, "policy.pth": _saved([1, 2])}, "must hold a state dict"),
         "pth nan": ({**members, "policy.pth": nan_buf.getvalue()}, "NaN"),
         "pth log_std": ({**members, "policy.pth": _saved(tiny_std)}, "log_std must be in"),
+        "pth sparse": ({**members, "policy.pth": _saved(sparse)}, "must be a dense CPU tensor"),
+        "pth meta": ({**members, "policy.pth": _saved(on_meta)}, "must be a dense CPU tensor"),
         "pth a class": ({**members, "policy.pth": _saved(Fraction(1, 3))}, "Unsupported global"),
         # A zip bomb: 50 MB of zeros declared for a 1000-parameter network.
         "pth too large": ({**members, "policy.pth": bytes(50_000_000)}, "bytes, more than"),
@@ -211,6 +223,21 @@ def bad_files(good_path, members, folder):
             write_zip(path, content)
         out.append((name, path, message))
     return out
+
+
+def _bad_deflate(members):
+    """Return a zip whose policy.pth deflate stream starts with a reserved block type."""
+    buf = io.BytesIO()
+    write_zip(buf, members)
+    raw = bytearray(buf.getvalue())
+    with zipfile.ZipFile(io.BytesIO(bytes(raw))) as zf:
+        info = zf.getinfo("policy.pth")
+    # Local header: 30 bytes, then the name and the extra field (sizes at 26 and 28).
+    h = info.header_offset
+    name_len, extra_len = struct.unpack("<HH", raw[h + 26 : h + 30])
+    start = h + 30 + name_len + extra_len
+    raw[start] = 0b111  # BFINAL=1, BTYPE=11: reserved, an invalid block for zlib
+    return bytes(raw)
 
 
 def _saved(obj):
