@@ -160,7 +160,8 @@ class Scenario:
             step each sensor detects each target in range independently with it; a sensor
             that does not detect a target contributes no measurement of it that step.
         occluders: polygons (each a sequence of at least 3 (x, y) vertices, simple, of
-            non-zero area; :mod:`activetrack.occluders`) that block the line of sight
+            non-zero area; at most 4096 vertices in all with the random rectangles',
+            :data:`activetrack.occluders.MAX_VERTICES`) that block the line of sight
             (no measurement through them) and the sensors' straight moves; stored as
             tuples of (x, y) tuples. Empty: an open plane (the paper).
         random_occluders: rectangles drawn afresh for every episode from its seed [0, 100]
@@ -293,6 +294,14 @@ class Scenario:
     def _convert_random_occluders(self, put: Any) -> None:
         """Check and store ``random_occluders``, ``occluder_bounds`` and ``occluder_size``."""
         put("random_occluders", _count("random_occluders", self.random_occluders, 100, lo=0))
+        from activetrack.occluders import MAX_VERTICES  # noqa: PLC0415 (occluded scenarios)
+
+        fixed = sum(len(poly) for poly in self.occluders)
+        if fixed + 4 * self.random_occluders > MAX_VERTICES:
+            raise ValueError(
+                f"occluders and random_occluders must have at most {MAX_VERTICES} vertices in "
+                f"all (4 a random rectangle), got {fixed} + 4 x {self.random_occluders}"
+            )
         b = _vector("occluder_bounds", self.occluder_bounds, 4, -LENGTH_MAX, LENGTH_MAX,
                     zero=True)  # fmt: skip
         if not (b[0] < b[2] and b[1] < b[3]):

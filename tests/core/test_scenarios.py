@@ -174,3 +174,21 @@ def test_several_targets_sensor_models_and_poses_are_stored_converted():
     np.testing.assert_array_equal(sc.pose_covariances[2], 0.2 * np.eye(2))
     json.dumps(sc.to_dict())  # JSON-friendly, the new fields included
     assert at.make_scenario("paper", sensor_model=("range",) * 3).sensor_model == "range"
+
+
+def test_occluders_beyond_the_vertex_limit_are_refused_naming_the_field():
+    from activetrack.occluders import MAX_VERTICES
+
+    tri = ((0.0, 0.0), (1.0, 0.0), (0.0, 1.0))
+    many = tuple(tuple((x + 3.0 * k, y + 30.0) for x, y in tri) for k in range(20_000))
+    with pytest.raises(ValueError, match=rf"^occluders must have at most {MAX_VERTICES}"):
+        at.make_scenario("urban", occluders=many)
+    ang = np.linspace(0, 2 * np.pi, 8000, endpoint=False)
+    circle = tuple(zip(30 + np.cos(ang), 30 + np.sin(ang), strict=True))
+    with pytest.raises(ValueError, match=rf"^occluders must have at most {MAX_VERTICES}"):
+        at.make_scenario("urban", occluders=(circle,))
+    # Fixed and random together: 4 vertices a random rectangle.
+    fixed = (circle[: MAX_VERTICES - 396],)
+    at.make_scenario("paper", occluders=fixed, random_occluders=99)  # 4092 vertices
+    with pytest.raises(ValueError, match=r"^occluders and random_occluders must have at most"):
+        at.make_scenario("paper", occluders=fixed, random_occluders=100)
