@@ -817,12 +817,33 @@ def _same(a: object, b: object) -> bool:
         return False
 
 
+#: The per-sensor fields :func:`make_scenario` repeats for a new team size.
+_TEAM_FIELDS = (*_PER_SENSOR, "sensor_model", "pose_cov", "max_range", "p_detect")
+
+
+def _per_sensor_tuple(key: str, value: object) -> bool:
+    """Return whether ``value`` of field ``key`` holds one entry per sensor (a tuple or
+    list; for ``pose_cov`` of variances or of 2x2 matrices, not one matrix)."""
+    if not isinstance(value, (tuple, list)) or not value:
+        return False
+    if key == "pose_cov":
+        try:
+            return np.asarray(value, dtype=np.float64).ndim in (1, 3)
+        except (TypeError, ValueError):
+            return False  # Scenario names the field
+    return True
+
+
 def make_scenario(scenario: str | Scenario = "paper", **overrides: Any) -> Scenario:
     """Return the named preset (or a given scenario) with ``overrides`` applied.
 
-    Per-sensor fields given as a tuple of the preset's length are dropped when only
-    ``n_sensors`` changes, so ``make_scenario("paper", n_sensors=5)`` keeps working: the
-    first sensor's value is then used for every sensor. ``max_cycles`` (PettingZoo's
+    A new team size repeats the team (every preset alike): when ``n_sensors`` changes,
+    each per-sensor field the base holds as a tuple of its L sensors (``sigma_d2``,
+    ``sigma_theta2``, ``vmax``, ``rho``, ``orientation``, ``sensor_model``, ``pose_cov``,
+    ``max_range``, ``p_detect``) and that is not overridden gives sensor ``i`` the value of
+    the base's sensor ``i mod L``: ``make_scenario("paper", n_sensors=6)`` is the paper's
+    team twice, ``make_scenario("mixed", n_sensors=2)`` its first two sensors. Fields given
+    as one value for every sensor stay so. ``max_cycles`` (PettingZoo's
     episode-length keyword) is accepted as ``n_steps``. An unknown keyword raises
     :class:`~activetrack.validation.UnexpectedKeywordError` (a ``TypeError`` worded like
     Python's, and a ``ValueError``).
@@ -852,9 +873,9 @@ def make_scenario(scenario: str | Scenario = "paper", **overrides: Any) -> Scena
             )
     m = overrides.get("n_sensors", base["n_sensors"])
     if isinstance(m, (int, np.integer)) and not isinstance(m, (bool, np.bool_)):
-        for key in (*_PER_SENSOR, "sensor_model"):  # (invalid n_sensors: Scenario says)
+        for key in _TEAM_FIELDS:  # (an invalid n_sensors: Scenario says)
             val = base[key]
-            if key not in overrides and isinstance(val, (tuple, list)) and len(val) != m:
-                base[key] = val[0]
+            if key not in overrides and _per_sensor_tuple(key, val) and len(val) != m:
+                base[key] = tuple(val[i % len(val)] for i in range(min(m, N_SENSORS_MAX)))
     base.update(overrides)
     return Scenario(**base)
