@@ -411,3 +411,18 @@ def test_evaluate_resolves_lookahead_for_a_preset_and_any_scenario():
     # Not a preset: before problems carried their prediction this raised.
     res = evaluate(["lookahead"], "paper", episodes=2, progress=False, n_steps=4, q=3.0)
     assert res[0].policy == "lookahead" and np.all(np.isfinite(res[0].mean_trace))
+
+
+def test_settings_beyond_the_work_bound_are_refused_naming_them():
+    from activetrack.baselines.lookahead import WORK_MAX
+
+    with pytest.raises(ValueError, match=r"^headings, bearings, horizon"):
+        Lookahead(headings=4096)
+    # The bound, written out: (horizon + tail) x options x (passes + pair_passes x options).
+    h, t = 10, 3
+    opts = 276  # largest options count with (h + t) * o * (1 + o) <= WORK_MAX
+    assert (h + t) * opts * (1 + opts) <= WORK_MAX < (h + t) * (opts + 1) * (2 + opts)
+    Lookahead(horizon=h, tail=t, headings=opts - 2)
+    with pytest.raises(ValueError, match=r"^headings"):
+        Lookahead(horizon=h, tail=t, headings=opts - 1)
+    Lookahead(headings=4096, pair_passes=0, passes=1, horizon=10)  # linear in the options
