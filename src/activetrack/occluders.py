@@ -362,6 +362,7 @@ class Occluders:
         if isinstance(polygons, np.ndarray) and polygons.ndim == 2:
             raise ValueError("polygons must be a sequence of (n_i, 2) vertex arrays, got one array")
         polys: list[np.ndarray] = []
+        total = 0
         for i, raw in enumerate(polygons):
             name = f"polygons[{i}]"
             arr = real_array(name, raw, finite=False)
@@ -370,7 +371,7 @@ class Occluders:
             if not np.all(np.isfinite(arr)):
                 raise ValueError(f"{name} must be finite (no NaN or inf)")
             polys.append(arr)
-            total = sum(len(v) for v in polys)
+            total += len(arr)
             if total > MAX_VERTICES:  # before any pair of edges is tested
                 raise ValueError(
                     f"polygons must have at most {MAX_VERTICES} vertices in all, got "
