@@ -82,13 +82,7 @@ def _add_simulate(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--steps", type=positive_int, default=None, help="override the scenario's n_steps"
     )
-    p.add_argument(
-        "--gbes-spacing",
-        type=positive_float,
-        default=None,
-        help="GBES grid spacing on the curves ADB in metres "
-        f"(default {field_default(GBES, 'spacing'):.6g}, pi/200, the paper's)",
-    )
+    add_gbes_arguments(p)
     p.add_argument(
         "--gsr-tol",
         type=float,
@@ -114,6 +108,18 @@ def _add_simulate(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     add_ray_arguments(p, "runs")
     p.set_defaults(func=_cmd_simulate, parser=p)
+
+
+def add_gbes_arguments(p: argparse.ArgumentParser) -> None:
+    """Add ``--gbes-spacing`` (simulate and evaluate)."""
+    p.add_argument(
+        "--gbes-spacing",
+        type=positive_float,
+        default=None,
+        help="GBES grid spacing on the curves ADB in metres "
+        f"(default {field_default(GBES, 'spacing'):.6g}, pi/200, the paper's, widened per "
+        "problem where the grid would exceed GBES's max_combinations: GBES.adapt)",
+    )
 
 
 def add_ray_arguments(p: argparse.ArgumentParser, what: str) -> None:
@@ -305,20 +311,25 @@ def _add_evaluate(sub: argparse._SubParsersAction) -> None:
         "for lookahead; rows equal the serial ones to the planner's tolerance, and a seed's "
         "row is the same in any batch; other policies run episode by episode)",
     )
+    add_gbes_arguments(p)
     add_ray_arguments(p, "episodes")
     p.set_defaults(func=_cmd_evaluate, parser=p)
 
 
 def _cmd_evaluate(args: argparse.Namespace) -> int:
     policies: Any = args.policy
-    if any(p.lower() == "lookahead" for p in policies):
+    if any(p.lower() == "lookahead" for p in policies) or args.gbes_spacing is not None:
         # The look-ahead policy recovers the full prediction with the scenario's model.
-        from activetrack.baselines.policies import LookaheadPolicy
+        from activetrack.baselines.policies import GBESPolicy, LookaheadPolicy
 
-        policies = {
-            p: LookaheadPolicy(scenario=args.scenario) if p.lower() == "lookahead" else p
-            for p in policies
-        }
+        def made(p: str) -> Any:
+            if p.lower() == "lookahead":
+                return LookaheadPolicy(scenario=args.scenario)
+            if p.lower() == "gbes" and args.gbes_spacing is not None:
+                return GBESPolicy(spacing=args.gbes_spacing)
+            return p
+
+        policies = {p: made(p) for p in policies}
     run_evaluation(
         policies,
         args.scenario,

@@ -44,6 +44,7 @@ over the sensors; for the largest target (WORST_TRACE, ``combine`` a max)
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 
@@ -77,12 +78,15 @@ class GBESResult:
         n_combinations: the size of the grid product that was searched.
         n_evaluated: how many configurations were actually evaluated (the rest were
             excluded by the exact bound).
+        spacing: the grid spacing searched (m): ``GBES.spacing``, or wider where
+            ``GBES.adapt`` widened it to fit ``max_combinations``.
     """
 
     positions: FloatArray
     value: float
     n_combinations: int
     n_evaluated: int
+    spacing: float = math.nan
 
 
 @dataclass
@@ -94,7 +98,15 @@ class GBES:
     Attributes:
         spacing: largest distance between neighbouring grid points on a curve ADB (m);
             the paper uses ``pi / 200``.
-        max_combinations: the search refuses (ValueError) grids with more combinations.
+        max_combinations: the largest grid (product of the sensors' grid sizes) searched.
+        adapt: the rule for a problem whose grid at ``spacing`` is larger: True (the
+            default) widens the spacing for that problem until the grid has at most
+            ``max_combinations`` combinations (by about the root of the excess over the
+            free sensors, recounted, at least 5% a round; no grid is built), so the
+            default runs on every preset: the paper's three sensors keep ``pi / 200``, four
+            sensors get a coarser grid, :attr:`GBESResult.spacing` says which; False
+            refuses it (ValueError). A grid too large even with one step per arc is
+            refused either way.
         block: grid points per block of the branch and bound (>= 1).
         prune: if False, evaluate every combination (no bounds; slower, same answer).
         batch_elements: configurations evaluated per vectorized batch (memory bound).
@@ -106,6 +118,7 @@ class GBES:
     block: int = 16
     prune: bool = True
     batch_elements: int = 1 << 17
+    adapt: bool = True
     last_result: GBESResult | None = field(default=None, init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -115,6 +128,8 @@ class GBES:
             raise ValueError(f"spacing must be a finite number > 0 (metres), got {self.spacing!r}")
         if not self.max_combinations >= 1:
             raise ValueError(f"max_combinations must be >= 1, got {self.max_combinations!r}")
+        if not isinstance(self.adapt, (bool, np.bool_)):
+            raise ValueError(f"adapt must be True or False, got {self.adapt!r}")
         for name in ("block", "batch_elements"):
             value = getattr(self, name)
             if not isinstance(value, (int, np.integer)) or value < 1:
@@ -240,10 +255,33 @@ class GBES:
         """Return the number of grid combinations of ``problem`` (product of grid sizes)."""
         return math.prod(self.grid_sizes(problem))
 
+    def fitted(self, problem: PlanningProblem) -> GBES:
+        """Return the search run on ``problem``: this one if its grid fits
+        ``max_combinations`` (or ``adapt`` is False), else a copy whose spacing is widened
+        just enough (``adapt``, see the class docstring; counted, no grid built)."""
+        sizes = self.grid_sizes(problem)
+        total = math.prod(sizes)
+        out = self
+        # Sizes scale about as 1 / spacing: widen by the root of the excess over the free
+        # sensors, recount, and repeat (at least 5% a round) until the grid fits; past the
+        # length of the longest arc the sizes stop falling and check() refuses the grid.
+        for _ in range(400):
+            if total <= self.max_combinations or not self.adapt:
+                return out
+            free = max(1, sum(n > 1 for n in sizes))
+            factor = max(1.05, (total / self.max_combinations) ** (1.0 / free) * 1.01)
+            out = dataclasses.replace(out, spacing=out.spacing * factor)
+            sizes = out.grid_sizes(problem)
+            total = math.prod(sizes)
+        return out
+
     def check(self, problem: PlanningProblem) -> int:
-        """Return the grid's number of combinations for a single ``problem``, or raise the
-        ValueError of a grid over ``max_combinations`` (the runners call this on a
-        scenario's first problem, before any run)."""
+        """Return the number of combinations of the grid searched on a single ``problem``
+        (:meth:`fitted`), or raise the ValueError of a grid over ``max_combinations`` (the
+        runners call this on a scenario's first problem, before any run)."""
+        fit = self.fitted(problem)
+        if fit is not self:
+            return fit.check(problem)
         sizes = self.grid_sizes(problem)
         total = math.prod(sizes)
         if total > self.max_combinations:
@@ -254,7 +292,8 @@ class GBES:
                 f"GBES grid has {total:.3g} combinations ({' x '.join(map(str, sizes))} points "
                 f"at spacing {self.spacing:.4g} m), more than max_combinations="
                 f"{self.max_combinations:.3g}; use a spacing of about {fits:.3g} m or more "
-                "(activetrack simulate --gbes-spacing) or raise max_combinations"
+                "(GBES(spacing=...), or --gbes-spacing of activetrack simulate and evaluate), "
+                "adapt=True, or raise max_combinations"
             )
         return total
 
@@ -275,19 +314,22 @@ class GBES:
         """Return the grid optimum of a single ``problem`` with search statistics.
 
         Raises:
-            ValueError: the grid has more than ``max_combinations`` combinations (counted
-                before the grid is built).
+            ValueError: the grid searched (:meth:`fitted`) has more than
+                ``max_combinations`` combinations (counted before the grid is built).
         """
         if problem.batch_shape:
             raise ValueError(
                 f"search takes a single problem, got batch_shape {problem.batch_shape}; "
                 "use plan, or index the problem"
             )
-        total = self.check(problem)
-        cands = self.candidates(problem)
+        fit = self.fitted(problem)
+        total = fit.check(problem)
+        cands = fit.candidates(problem)
         rel, n_eval = grid_optimum(problem, cands, self.block, self.batch_elements, self.prune)
         positions = rel + problem.targets[0]
-        result = GBESResult(positions, float(problem.score(positions)), total, n_eval)
+        result = GBESResult(
+            positions, float(problem.score(positions)), total, n_eval, float(fit.spacing)
+        )
         self.last_result = result
         return result
 

@@ -433,7 +433,13 @@ def polish(
         if not par:
             break
         arcs = _ArcSet(run, s, par)
-        theta, f = _newton(arcs, np.array([_angle(a, s[i]) for i, a in par]))
+        try:
+            theta, f = _newton(arcs, np.array([_angle(a, s[i]) for i, a in par]))
+        except np.linalg.LinAlgError:
+            # The total information is singular in float64 (one sensor's rank-one
+            # information 1e30 or more times the rest, which the single-sensor solves
+            # handle): no joint step; the sweeps' answer stands.
+            break
         if val - f <= 1e-13 * val and conv_sweeps:
             break  # no sensor can improve alone (swept before) nor all together on their arcs
         start, fstart = (arcs.positions(theta), f) if f < val else (s, val)

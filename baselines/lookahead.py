@@ -82,6 +82,20 @@ class LookaheadResult:
     gsr_score: FloatArray
 
 
+#: Largest accepted :func:`_work` of a :class:`Lookahead`'s settings: about 225 times the
+#: defaults' (4446), about a second per plan for the paper's three sensors (the pair pass,
+#: quadratic in the options, dominates; it grows as M^2 with the team).
+WORK_MAX = 1e6
+
+
+def _work(search: Lookahead) -> float:
+    """Return the relative cost of one plan: ``(horizon + tail) x options x (passes +
+    pair_passes x options)`` with ``options = headings + bearings + 2`` (stay and the
+    warm start)."""
+    options = search.headings + search.bearings + 2
+    return (search.horizon + search.tail) * options * (search.passes + search.pair_passes * options)
+
+
 @dataclass
 class Lookahead:
     """Receding-horizon planner (see the module docstring).
@@ -126,6 +140,15 @@ class Lookahead:
         self.tail = check_int("tail", self.tail, 0, 1000)
         self.tail_weight = check_float("tail_weight", self.tail_weight, 1e-6, 1e6)
         self.margin = check_float("margin", self.margin, 0.0, 100.0)
+        work = _work(self)
+        if work > WORK_MAX:
+            raise ValueError(
+                f"headings, bearings, horizon, tail, passes and pair_passes: one plan would "
+                f"score about {work:.3g} units ((horizon + tail) x options x (passes + "
+                f"pair_passes x options), options = headings + bearings + 2), more than "
+                f"WORK_MAX={WORK_MAX:g} (about a second per plan for three sensors); "
+                "lower headings or bearings first"
+            )
         self._gsr = GSR(tol=self.gsr_tol, max_sweeps=self.gsr_max_sweeps)
 
     # ------------------------------------------------------------------------------

@@ -27,6 +27,12 @@ from .tracking_env import TrackingParallelEnv, policy_step
 Policy = Callable[[dict[str, np.ndarray]], dict[str, Any]]
 
 
+#: Most bytes of frames ``record_video`` holds: a GIF is written from every frame at once
+#: (Pillow's writer keeps them all until it saves), so the episode's frames are bounded:
+#: 2,330 frames of 480x480 RGB (a 233 s GIF at 10 fps).
+FRAME_BYTES_MAX = 1_610_612_736  # 1.5 GiB
+
+
 def record_video(
     path: str | pathlib.Path,
     policy: Policy | Any | None = None,
@@ -54,6 +60,10 @@ def record_video(
 
     Returns:
         The path written.
+
+    Raises ``ValueError`` before the episode runs when its frames (``min(n_steps,
+    max_steps) + 1`` of them) would take more than :data:`FRAME_BYTES_MAX` bytes: pass a
+    smaller ``max_steps`` (or ``n_steps``).
     """
     path = pathlib.Path(path)
     seed = check_seed("seed", seed)
@@ -75,6 +85,16 @@ def record_video(
         raise ValueError("policy must be None, an expert with plan(problem), or map observations")
     obs, _ = env.reset(seed=seed)
     frames = [env.render()]
+    steps_max = (
+        base.scenario.n_steps if max_steps is None else min(max_steps, base.scenario.n_steps)
+    )
+    most = max(1, FRAME_BYTES_MAX // frames[0].nbytes)  # frames the budget holds
+    if steps_max + 1 > most:
+        raise ValueError(
+            f"max_steps: the episode's {steps_max + 1} frames of {frames[0].shape} would take "
+            f"{(steps_max + 1) * frames[0].nbytes / 2**30:.1f} GiB, more than the "
+            f"{FRAME_BYTES_MAX / 2**30:g} GiB record_video holds; pass max_steps <= {most - 1}"
+        )
     steps = 0
     while base.agents and (max_steps is None or steps < max_steps):
         obs, *_ = policy_step(env, policy, obs)

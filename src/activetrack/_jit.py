@@ -98,6 +98,7 @@ class Kernel(Generic[F]):
         import numba
 
         _teach_numba()
+        notice_compiling()
         # error_model="numpy": a float division by zero gives inf/NaN instead of raising
         # (no zero test before every division); kernels guard their divisors, so the
         # plain-Python run (NUMBA_DISABLE_JIT=1) takes the same branches.
@@ -213,6 +214,40 @@ def _module_file(name: str) -> str:
         return ""
     origin = getattr(spec, "origin", None)
     return origin if isinstance(origin, str) and os.path.isfile(origin) else ""
+
+
+#: The line printed (to stderr, once a process) when a kernel is compiled rather than
+#: loaded from the cache: a fresh install's first step compiles for about a minute.
+COMPILE_NOTICE = (
+    "activetrack: compiling activetrack kernels, once, ~1 min (cached afterwards; "
+    "'activetrack kernels' compiles them ahead of time)"
+)
+_noticed: list[bool] = []  # [True] once the notice is armed (one listener a process)
+
+
+def notice_compiling() -> None:
+    """Arm the compile notice: on numba's first cache miss in this process (its
+    ``numba:compile`` event, which a kernel loaded from the cache does not raise) print
+    :data:`COMPILE_NOTICE` once to stderr. Idempotent."""
+    if _noticed:
+        return
+    _noticed.append(True)
+    import sys
+
+    from numba.core import event
+
+    class _Notice(event.Listener):
+        printed = False
+
+        def on_start(self, ev: Any) -> None:
+            if not self.printed:
+                self.printed = True
+                print(COMPILE_NOTICE, file=sys.stderr, flush=True)
+
+        def on_end(self, ev: Any) -> None:
+            pass
+
+    event.register("numba:compile", _Notice())
 
 
 def kernel(fn: F) -> F:

@@ -116,9 +116,12 @@ def test_gbes_refuses_too_many_combinations_with_their_number():
     p = random_problem(np.random.default_rng(1), 3)
     n = GBES().n_combinations(p)
     with pytest.raises(ValueError, match=r"max_combinations") as err:
-        GBES(max_combinations=n - 1).plan(p)
+        GBES(max_combinations=n - 1, adapt=False).plan(p)
     assert f"{n:.3g}" in str(err.value)
     assert GBES(max_combinations=n).search(p).n_combinations == n
+    # The default (adapt) widens the spacing instead, just past the paper's.
+    wide = GBES(max_combinations=n - 1).search(p)
+    assert wide.n_combinations <= n - 1 and wide.spacing > GBES().spacing
 
 
 def _count_from_arc_lengths(problem, spacing):
@@ -159,7 +162,7 @@ def test_gbes_refuses_a_too_fine_grid_before_building_it():
     tracemalloc.start()
     try:
         with pytest.raises(ValueError, match="max_combinations") as err:
-            GBES(spacing=1e-9).plan(p)
+            GBES(spacing=1e-9, adapt=False).plan(p)
         _, peak = tracemalloc.get_traced_memory()
     finally:
         tracemalloc.stop()

@@ -435,3 +435,18 @@ def test_lookahead_beats_gsr_in_closed_loop_paired_over_episodes():
     ratio = la.mean_trace / gsr.mean_trace
     upper = ratio.mean() + stats.t.ppf(0.975, n - 1) * ratio.std(ddof=1) / np.sqrt(n)
     assert upper < 1.0, (ratio.mean(), upper)
+
+
+def test_settings_beyond_the_work_bound_are_refused_naming_them():
+    from activetrack.baselines.lookahead import WORK_MAX
+
+    with pytest.raises(ValueError, match=r"^headings, bearings, horizon"):
+        Lookahead(headings=4096)
+    # The bound, written out: (horizon + tail) x options x (passes + pair_passes x options).
+    h, t = 10, 3
+    opts = 276  # largest options count with (h + t) * o * (1 + o) <= WORK_MAX
+    assert (h + t) * opts * (1 + opts) <= WORK_MAX < (h + t) * (opts + 1) * (2 + opts)
+    Lookahead(horizon=h, tail=t, headings=opts - 2)
+    with pytest.raises(ValueError, match=r"^headings"):
+        Lookahead(horizon=h, tail=t, headings=opts - 1)
+    Lookahead(headings=4096, pair_passes=0, passes=1, horizon=10)  # linear in the options

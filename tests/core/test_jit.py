@@ -244,3 +244,30 @@ def test_every_library_kernel_module_keys_the_cache() -> None:
     elsewhere.__module__ = "activetrack.elsewhere"
     with pytest.raises(RuntimeError, match="activetrack.elsewhere defines kernels"):
         kernel(elsewhere)
+
+
+def test_a_compile_prints_the_notice_once_and_a_warm_cache_prints_nothing(tmp_path):
+    from activetrack._jit import COMPILE_NOTICE
+
+    (tmp_path / "twokernels.py").write_text(
+        "from activetrack._jit import kernel\n\n"
+        "@kernel\ndef inner(x):\n    return x + 1.0\n\n"
+        "@kernel\ndef outer(x):\n    return inner(x) * 2.0\n"
+    )
+    cache = tmp_path / "cache"
+    cache.mkdir()
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(cache), "PYTHONPATH": str(tmp_path)}
+    env.pop("NUMBA_DISABLE_JIT", None)
+    code = "import twokernels as t; print(t.outer(1.0), t.inner(2.0), t.outer(3))"
+
+    def run():
+        out = subprocess.run([sys.executable, "-c", code], env=env, cwd=tmp_path,
+                             capture_output=True, text=True, check=True)  # fmt: skip
+        assert out.stdout.split() == ["4.0", "3.0", "8.0"]  # (x + 1) * 2, x + 1 by hand
+        return out.stderr
+
+    first = run()  # an empty cache: three compiles (two kernels, two signatures of outer)
+    assert first.count(COMPILE_NOTICE) == 1, first
+    assert any(cache.rglob("*.nbi"))  # the cache is now warm
+    second = run()
+    assert COMPILE_NOTICE not in second, second

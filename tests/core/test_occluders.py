@@ -653,3 +653,70 @@ def test_rays_written_into_float32_views_equal_the_float64_readings_cast():
     for bad in (np.zeros((3, 4, 15), np.float32), np.zeros((3, 4, 16), np.int64)):
         with pytest.raises(ValueError, match="out must be a float32 or float64 array"):
             ray_readings(pts, occ, out=bad)
+
+
+# ---------------------------------------------------------------- bounded input (issue 35)
+
+
+def _star(n, rng):
+    """Return a simple star-shaped polygon of n vertices (radii in [1, 2] at sorted angles)."""
+    ang = np.sort(rng.uniform(0, 2 * np.pi, n))
+    ang = np.unique(ang)
+    rad = rng.uniform(1.0, 2.0, len(ang))
+    return np.stack([rad * np.cos(ang), rad * np.sin(ang)], -1)
+
+
+def _first_bad_pair_brute_force(p, eps):
+    """Return the first pair (i, j), i < j, in row order, of edges that meet other than
+    consecutive edges at their shared vertex (segment tests written out, one pair at a
+    time), or None."""
+    n = len(p)
+    q = np.roll(p, -1, axis=0)
+    for i in range(n):
+        for j in range(i + 1, n):
+            if j == i + 1 or (i == 0 and j == n - 1):
+                continue  # consecutive: the fold-back test, not exercised by these cases
+            # Orientation tests of the closed segments with the module's tolerance rule.
+            if oc._segments_meet(p[i], q[i], p[j], q[j], eps):
+                return i, j
+    return None
+
+
+@pytest.mark.parametrize("n", [12, 40])
+def test_chunked_simplicity_check_names_the_brute_force_first_bad_pair(monkeypatch, n):
+    # Chunks of a few pairs: every chunk boundary falls inside the pair table.
+    monkeypatch.setattr(oc, "_PAIRS_PER_CHUNK", 7)
+    rng = np.random.default_rng(n)
+    for _ in range(20):
+        p = _star(n, rng)
+        k, m = sorted(rng.choice(len(p), 2, replace=False))
+        p[[k, m]] = p[[m, k]]  # usually a self-intersection, possibly several
+        eps = oc.TOL * max(1.0, float(np.max(np.abs(p))))
+        ref = _first_bad_pair_brute_force(p, eps)
+        if ref is None:
+            oc._check_simple("polygons[0]", p, eps)  # accepted, as the brute force says
+            continue
+        with pytest.raises(ValueError, match=rf"edges {ref[0]} and {ref[1]} meet$"):
+            oc._check_simple("polygons[0]", p, eps)
+
+
+def test_a_polygon_at_the_vertex_limit_is_accepted_one_beyond_is_refused():
+    rng = np.random.default_rng(0)
+    p = _star(oc.MAX_VERTICES + 50, rng)[: oc.MAX_VERTICES]  # a star minus a sliver: simple
+    assert len(p) == oc.MAX_VERTICES
+    occ = oc.Occluders.from_polygons([p])
+    assert occ.n_edges == oc.MAX_VERTICES
+    # A point at the centre is inside (winding number, written out here), far out is not.
+    assert bool(oc.inside(np.zeros(2), occ)) == (winding(np.zeros((1, 2)), p)[0] != 0)
+    assert not oc.inside(np.array([5.0, 5.0]), occ)
+    big = np.concatenate([p, [[0.0, 0.0]]])
+    with pytest.raises(ValueError, match=rf"^polygons must have at most {oc.MAX_VERTICES}"):
+        oc.Occluders.from_polygons([big])
+
+
+def test_many_polygons_are_refused_before_any_pair_is_built():
+    # 20,000 triangles: 60,000 edges, whose pair table would need 26.8 GiB.
+    tri = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
+    many = [tri + [3.0 * k, 0.0] for k in range(20_000)]
+    with pytest.raises(ValueError, match=rf"^polygons must have at most {oc.MAX_VERTICES}"):
+        oc.Occluders.from_polygons(many)

@@ -174,3 +174,69 @@ def test_several_targets_sensor_models_and_poses_are_stored_converted():
     np.testing.assert_array_equal(sc.pose_covariances[2], 0.2 * np.eye(2))
     json.dumps(sc.to_dict())  # JSON-friendly, the new fields included
     assert at.make_scenario("paper", sensor_model=("range",) * 3).sensor_model == "range"
+
+
+def test_occluders_beyond_the_vertex_limit_are_refused_naming_the_field():
+    from activetrack.models.occluders import MAX_VERTICES
+
+    tri = ((0.0, 0.0), (1.0, 0.0), (0.0, 1.0))
+    many = tuple(tuple((x + 3.0 * k, y + 30.0) for x, y in tri) for k in range(20_000))
+    with pytest.raises(ValueError, match=rf"^occluders must have at most {MAX_VERTICES}"):
+        at.make_scenario("urban", occluders=many)
+    ang = np.linspace(0, 2 * np.pi, 8000, endpoint=False)
+    circle = tuple(zip(30 + np.cos(ang), 30 + np.sin(ang), strict=True))
+    with pytest.raises(ValueError, match=rf"^occluders must have at most {MAX_VERTICES}"):
+        at.make_scenario("urban", occluders=(circle,))
+    # Fixed and random together: 4 vertices a random rectangle.
+    fixed = (circle[: MAX_VERTICES - 396],)
+    at.make_scenario("paper", occluders=fixed, random_occluders=99)  # 4092 vertices
+    with pytest.raises(ValueError, match=r"^occluders and random_occluders must have at most"):
+        at.make_scenario("paper", occluders=fixed, random_occluders=100)
+
+
+_TEAM = ("sigma_d2", "sigma_theta2", "vmax", "rho", "orientation", "sensor_model", "pose_cov",
+         "max_range", "p_detect")  # fmt: skip
+
+
+def _sensor_entries(sc, key):
+    """Return field ``key`` of ``sc`` as a list of one entry per sensor, read from the
+    stored field itself (one value for every sensor, or a tuple of M; pose_cov as 2x2)."""
+    v = getattr(sc, key)
+    m = sc.n_sensors
+    if key == "pose_cov":
+        arr = np.asarray(v, np.float64)
+        if arr.ndim == 0:
+            return [arr * np.eye(2)] * m
+        if arr.ndim == 1:
+            return [x * np.eye(2) for x in arr]
+        return [arr] * m if arr.ndim == 2 else list(arr)
+    if isinstance(v, tuple):
+        return list(v)
+    return [v] * m
+
+
+@pytest.mark.parametrize("preset", sorted(at.world.scenarios.PRESETS))
+@pytest.mark.parametrize("m", [1, 2, 5, 6, 9])
+def test_a_new_team_size_repeats_the_presets_team_on_every_preset(preset, m):
+    base = at.make_scenario(preset)
+    sc = at.make_scenario(preset, n_sensors=m)
+    L = base.n_sensors
+    for key in _TEAM:
+        want = _sensor_entries(base, key)
+        got = _sensor_entries(sc, key)
+        assert len(got) == m, key
+        for i in range(m):  # sensor i is the preset's sensor i mod L
+            np.testing.assert_array_equal(np.asarray(got[i]), np.asarray(want[i % L]), key)
+    # What the world reads agrees: the models and covariances per sensor.
+    codes = base.sensor_models
+    np.testing.assert_array_equal(sc.sensor_models, codes[np.arange(m) % L])
+    np.testing.assert_array_equal(sc.per_sensor("sigma_d2"),
+                                  base.per_sensor("sigma_d2")[np.arange(m) % L])  # fmt: skip
+
+
+def test_a_mixed_team_of_six_stays_mixed():
+    sc = at.make_scenario("mixed", n_sensors=6)
+    assert sc.sensor_model == ("range_bearing", "range", "bearing", "range") * 1 + (
+        "range_bearing", "range")  # fmt: skip
+    assert at.make_scenario("uncertain_poses", n_sensors=6).pose_cov == (
+        0.25, 0.5, 1.0, 2.0, 0.25, 0.5)  # fmt: skip

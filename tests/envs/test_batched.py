@@ -110,3 +110,54 @@ def test_spaces_and_errors():
         BatchedActiveTracking(2, autoreset_mode="sometimes")
     with pytest.raises(ValueError, match="rho"):
         BatchedActiveTracking(2, rho=-1.0)
+
+
+# ------------------------------------------------------------ sizes bounded (issue 35)
+
+
+@pytest.mark.parametrize(
+    "kwargs",
+    [
+        dict(num_envs=10**12),
+        dict(num_envs=4, noise_block=10**9),
+        dict(num_envs=1, n_sensors=10_000),
+        dict(num_envs=1, scenario="two_targets", n_sensors=2000, n_targets=100,
+             x0=[(0.0, 0.0, 1.0, 1.0)] * 100, x0_hat=[(0.0, 0.0, 1.0, 1.0)] * 100),
+    ],
+)  # fmt: skip
+def test_sizes_beyond_the_memory_bound_are_refused_naming_them(kwargs):
+    from activetrack.world import WORLD_BYTES_MAX
+
+    with pytest.raises(ValueError, match=r"^num_copies \(num_envs\) x noise_block") as info:
+        BatchedActiveTracking(**kwargs)
+    assert f"{WORLD_BYTES_MAX / 2**30:g} GiB" in str(info.value)
+
+
+@pytest.mark.parametrize(
+    "n, m, k, block", [(1, 400, 1, 64), (2, 200, 10, 64), (64, 4, 1, 256), (1, 50, 20, 64)]
+)
+def test_the_memory_estimate_bounds_the_measured_peak(n, m, k, block):
+    import tracemalloc
+
+    from activetrack.world import world_bytes
+
+    kw = dict(n_sensors=m, noise_block=block)
+    if k > 1:
+        kw.update(scenario="two_targets", n_targets=k, x0=[(0.0, 0.0, 1.0, 1.0)] * k,
+                  x0_hat=[(0.0, 0.0, 1.0, 1.0)] * k)  # fmt: skip
+    else:
+        kw.update(scenario="homogeneous")
+
+    def run():
+        env = BatchedActiveTracking(n, **kw)
+        env.reset(seed=0)
+        env.step(env.action_space.sample())
+
+    run()  # compiled and imported before measuring
+    tracemalloc.start()
+    try:
+        run()
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak <= world_bytes(n, block, m, k, 4)

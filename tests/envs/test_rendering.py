@@ -752,3 +752,18 @@ def test_human_mode_draws_the_limited_world(monkeypatch, feasible_set_guard):
         det = env.world.get("detected", 0)
         assert art["title"].get_text().endswith(f"missed {int((~det).sum())}/8")
         env.close()
+
+
+def test_record_video_refuses_an_episode_whose_frames_exceed_its_memory_bound(tmp_path):
+    from activetrack.envs import video
+
+    frame = 480 * 480 * 3  # bytes of one RGB frame at the default size
+    most = video.FRAME_BYTES_MAX // frame  # frames the bound holds, reset frame included
+    with pytest.raises(ValueError, match=rf"max_steps <= {most - 1}$"):
+        record_video(tmp_path / "long.gif", scenario="urban", n_steps=20000, seed=0)
+    with pytest.raises(ValueError, match=rf"max_steps <= {most - 1}$"):
+        record_video(tmp_path / "long.gif", scenario="paper", n_steps=20000, max_steps=most)
+    assert not list(tmp_path.iterdir())  # refused before any file
+    # Within the bound, the same long scenario records the steps asked for.
+    record_video(tmp_path / "short.gif", scenario="urban", n_steps=20000, seed=0, max_steps=3)
+    assert iio.imread(tmp_path / "short.gif", index=None).shape[0] == 4

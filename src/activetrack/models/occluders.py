@@ -87,8 +87,8 @@ from activetrack.models._occluder_kernels import REACH_TOL, TOL
 from activetrack.validation import FloatArray, real_array
 
 __all__ = [
-    "REACH_TOL", "TOL", "Occluders", "blocked", "inside", "line_of_sight", "project_move",
-    "random_layout", "ray_distances",
+    "MAX_VERTICES", "REACH_TOL", "TOL", "Occluders", "blocked", "inside", "line_of_sight",
+    "project_move", "random_layout", "ray_distances",
 ]  # fmt: skip
 
 
@@ -356,11 +356,13 @@ class Occluders:
 
         Raises ``ValueError`` naming ``polygons[i]`` for fewer than 3 vertices, a wrong
         shape, non-finite or non-real values, a repeated consecutive vertex, zero area, or
-        edges that meet other than consecutive edges at their common vertex.
+        edges that meet other than consecutive edges at their common vertex, and naming
+        ``polygons`` for more than :data:`MAX_VERTICES` vertices in all.
         """
         if isinstance(polygons, np.ndarray) and polygons.ndim == 2:
             raise ValueError("polygons must be a sequence of (n_i, 2) vertex arrays, got one array")
         polys: list[np.ndarray] = []
+        total = 0
         for i, raw in enumerate(polygons):
             name = f"polygons[{i}]"
             arr = real_array(name, raw, finite=False)
@@ -369,6 +371,12 @@ class Occluders:
             if not np.all(np.isfinite(arr)):
                 raise ValueError(f"{name} must be finite (no NaN or inf)")
             polys.append(arr)
+            total += len(arr)
+            if total > MAX_VERTICES:  # before any pair of edges is tested
+                raise ValueError(
+                    f"polygons must have at most {MAX_VERTICES} vertices in all, got "
+                    f"{total} in polygons[0..{i}]"
+                )
         eps = TOL * _scale(polys)
         for i, p in enumerate(polys):
             _check_simple(f"polygons[{i}]", p, eps)
@@ -460,29 +468,56 @@ def _flat(a: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
     return as_rows(a, shape, (2,))
 
 
+#: Most vertices (= edges) of one layout, fixed and random polygons together. Building a
+#: layout tests every pair of its edges for crossings (the compiled table holds up to
+#: E (E - 1) / 2 of them, 134 MB at this bound) and every line-of-sight test walks all
+#: E edges, so the bound keeps both within a second and well within memory.
+MAX_VERTICES = 4096
+
+#: Pairs of edges tested at once by the simplicity check (its memory: a few hundred bytes a pair).
+_PAIRS_PER_CHUNK = 1 << 18
+
+
 def _check_simple(name: str, p: np.ndarray, eps: float) -> None:
-    """Raise ``ValueError`` unless ``p`` is a simple polygon of non-zero area."""
+    """Raise ``ValueError`` unless ``p`` is a simple polygon of non-zero area.
+
+    Every pair of edges is tested (in chunks of rows of the pair table, so memory stays
+    bounded); the first bad pair in the order of ``np.triu_indices`` is the one named.
+    """
     q = np.roll(p, -1, axis=0)
     if np.any(np.all(p == q, axis=-1)):
         raise ValueError(f"{name} has a repeated consecutive vertex (zero-length edge)")
     span = float(np.max(np.ptp(p, axis=0)))
     n = len(p)
-    i, j = np.triu_indices(n, k=1)
-    adjacent = (j == i + 1) | ((i == 0) & (j == n - 1))
-    meet = _segments_meet(p[i], q[i], p[j], q[j], eps)
-    # Consecutive edges share a vertex; they must meet only there (no fold-back).
-    nxt = np.where(j == i + 1, j, i)  # the edge that starts at the shared vertex
-    prv = np.where(j == i + 1, i, j)
-    d_prev = p[prv] - q[prv]  # from the shared vertex back along the previous edge
-    d_next = q[nxt] - p[nxt]
-    fold = (np.abs(_cross(d_prev, d_next)) <= eps * span * span) & (np.sum(d_prev * d_next, -1) > 0)
-    bad = np.where(adjacent, fold, meet)
-    if np.any(bad):
-        k = int(np.argmax(bad))
-        raise ValueError(f"{name} must not self-intersect: edges {i[k]} and {j[k]} meet")
+    rows = max(1, _PAIRS_PER_CHUNK // n)
+    for start in range(0, n - 1, rows):
+        i, j = _pairs(n, start, min(n - 1, start + rows))
+        adjacent = (j == i + 1) | ((i == 0) & (j == n - 1))
+        meet = _segments_meet(p[i], q[i], p[j], q[j], eps)
+        # Consecutive edges share a vertex; they must meet only there (no fold-back).
+        nxt = np.where(j == i + 1, j, i)  # the edge that starts at the shared vertex
+        prv = np.where(j == i + 1, i, j)
+        d_prev = p[prv] - q[prv]  # from the shared vertex back along the previous edge
+        d_next = q[nxt] - p[nxt]
+        fold = (np.abs(_cross(d_prev, d_next)) <= eps * span * span) & (
+            np.sum(d_prev * d_next, -1) > 0
+        )
+        bad = np.where(adjacent, fold, meet)
+        if np.any(bad):
+            k = int(np.argmax(bad))
+            raise ValueError(f"{name} must not self-intersect: edges {i[k]} and {j[k]} meet")
     area = 0.5 * float(np.sum(_cross(p, q)))
     if abs(area) <= eps * span:
         raise ValueError(f"{name} must have non-zero area, got area {area!r}")
+
+
+def _pairs(n: int, lo: int, hi: int) -> tuple[np.ndarray, np.ndarray]:
+    """Return the rows ``lo <= i < hi`` of ``np.triu_indices(n, k=1)``, in its order."""
+    rows = np.arange(lo, hi)
+    counts = n - 1 - rows  # row i pairs edge i with edges i + 1 .. n - 1
+    i = np.repeat(rows, counts)
+    first = np.repeat(np.cumsum(counts) - counts, counts)  # where each row starts
+    return i, np.arange(len(i)) - first + i + 1
 
 
 def inside(points: FloatArray, occ: Occluders) -> np.ndarray:

@@ -37,10 +37,41 @@ from numpy.typing import ArrayLike
 from activetrack.linalg2 import inv2
 from activetrack.models import sensor_models
 from activetrack.models.objective import TRACE, TraceObjective, total_information
+from activetrack.solvers._inputs import MAX_SCALE, MIN_SCALE
 from activetrack.validation import FloatArray, as_finite, positive, psd, real_array, spd
 
 #: The per-sensor parameters and whether 0 is allowed.
 _PER_SENSOR = (("r", True), ("rho", True), ("sigma_d2", False), ("sigma_theta2", False))
+#: The accepted range of the noise variances and of both eigenvalues of ``prior_cov``: the
+#: single-sensor solver's own (:mod:`activetrack.solvers.analytic`, ``MIN_SCALE``, ``MAX_SCALE``),
+#: inside which every planner (GSR with or without restarts, GBES, RM, the look-ahead)
+#: answers feasible finite positions; beyond it the information overflows float64.
+SCALE_RANGE = (MIN_SCALE, MAX_SCALE)
+
+
+def _check_scale(name: str, value: FloatArray, what: str = "") -> None:
+    """Raise ``ValueError`` naming ``name`` unless every entry of ``value`` lies in
+    :data:`SCALE_RANGE`."""
+    lo, hi = SCALE_RANGE
+    out = ~((value >= lo) & (value <= hi))  # NaN (an overflowed eigenvalue) is out
+    if np.any(out):
+        bad = value[out]
+        raise ValueError(
+            f"{name}{what} must lie in [{lo:g}, {hi:g}] (the planners' scale range), "
+            f"got {float(bad.flat[0])!r}"
+        )
+
+
+def _eigenvalues2(cov: FloatArray) -> FloatArray:
+    """Return both eigenvalues (..., 2) of symmetric 2x2 matrices (..., 2, 2), closed form
+    in units of the largest entry (no overflow or underflow before scaling back)."""
+    s = np.max(np.abs(cov), axis=(-2, -1))
+    u = cov / np.where(s > 0, s, 1.0)[..., None, None]
+    a, b, c = u[..., 0, 0], 0.5 * (u[..., 0, 1] + u[..., 1, 0]), u[..., 1, 1]
+    big = 0.5 * (a + c) + np.hypot(0.5 * (a - c), b)
+    # The small one from the determinant (no cancellation): a c - b^2 = big * small.
+    small = (a * c - b * b) / np.where(big > 0, big, 1.0)
+    return np.stack([small, big], axis=-1) * s[..., None]
 
 
 @dataclass(frozen=True, eq=False)
@@ -140,13 +171,14 @@ class PlanningProblem:
     of sensors M. Arrays are stored broadcast to the batch shape, read-only.
 
     Attributes:
-        prior_cov: predicted target position covariance ``P(k+1|k)_11``, (..., 2, 2).
+        prior_cov: predicted target position covariance ``P(k+1|k)_11``, (..., 2, 2),
+            both eigenvalues in :data:`SCALE_RANGE` ``[1e-50, 1e50]``.
         target: predicted target position ``p_T(k+1|k)``, (..., 2).
         sensors: current sensor positions ``p_S_i(k)``, (..., M, 2).
         r: per-sensor reach ``vmax_i dt``, (..., M) (a scalar or (M,) broadcasts).
         rho: per-sensor minimum distance to the predicted target, (..., M).
-        sigma_d2: range noise variances, (..., M).
-        sigma_theta2: bearing noise variances, (..., M).
+        sigma_d2: range noise variances, (..., M), in :data:`SCALE_RANGE`.
+        sigma_theta2: bearing noise variances, (..., M), in :data:`SCALE_RANGE`.
         objective: the function of the total information that planners minimize
             (:data:`activetrack.models.objective.TRACE`, eq. 17).
         prediction: the filter's full :class:`Prediction` (``None``: not known), stored
@@ -214,6 +246,7 @@ class PlanningProblem:
             prior_cov = spd("prior_cov", self.prior_cov)
         if prior_cov.shape[-2:] != (2, 2):
             raise ValueError(f"prior_cov must have shape (..., 2, 2), got {prior_cov.shape}")
+        _check_scale("prior_cov", _eigenvalues2(prior_cov), " eigenvalues")
         derived_target = pred is not None and self.target is None
         if derived_target:
             target = _blocks(pred, lambda q: q.mean[..., :2], 1)
@@ -247,6 +280,8 @@ class PlanningProblem:
                     f"{name} must be a scalar or have shape (..., {m}) (one entry per sensor), "
                     f"got {arr.shape}"
                 )
+            if not allow_zero:  # the noise variances
+                _check_scale(name, arr)
             values[name] = arr
             batch_of[name] = arr.shape[:-1]
         if pred is not None:

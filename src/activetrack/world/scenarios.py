@@ -160,7 +160,8 @@ class Scenario:
             step each sensor detects each target in range independently with it; a sensor
             that does not detect a target contributes no measurement of it that step.
         occluders: polygons (each a sequence of at least 3 (x, y) vertices, simple, of
-            non-zero area; :mod:`activetrack.models.occluders`) that block the line of sight
+            non-zero area; at most 4096 vertices in all with the random rectangles',
+            :data:`activetrack.models.occluders.MAX_VERTICES`) that block the line of sight
             (no measurement through them) and the sensors' straight moves; stored as
             tuples of (x, y) tuples. Empty: an open plane (the paper).
         random_occluders: rectangles drawn afresh for every episode from its seed [0, 100]
@@ -293,6 +294,14 @@ class Scenario:
     def _convert_random_occluders(self, put: Any) -> None:
         """Check and store ``random_occluders``, ``occluder_bounds`` and ``occluder_size``."""
         put("random_occluders", _count("random_occluders", self.random_occluders, 100, lo=0))
+        from activetrack.models.occluders import MAX_VERTICES  # noqa: PLC0415 (occluded scenarios)
+
+        fixed = sum(len(poly) for poly in self.occluders)
+        if fixed + 4 * self.random_occluders > MAX_VERTICES:
+            raise ValueError(
+                f"occluders and random_occluders must have at most {MAX_VERTICES} vertices in "
+                f"all (4 a random rectangle), got {fixed} + 4 x {self.random_occluders}"
+            )
         b = _vector("occluder_bounds", self.occluder_bounds, 4, -LENGTH_MAX, LENGTH_MAX,
                     zero=True)  # fmt: skip
         if not (b[0] < b[2] and b[1] < b[3]):
@@ -809,12 +818,33 @@ def _same(a: object, b: object) -> bool:
         return False
 
 
+#: The per-sensor fields :func:`make_scenario` repeats for a new team size.
+_TEAM_FIELDS = (*_PER_SENSOR, "sensor_model", "pose_cov", "max_range", "p_detect")
+
+
+def _per_sensor_tuple(key: str, value: object) -> bool:
+    """Return whether ``value`` of field ``key`` holds one entry per sensor (a tuple or
+    list; for ``pose_cov`` of variances or of 2x2 matrices, not one matrix)."""
+    if not isinstance(value, (tuple, list)) or not value:
+        return False
+    if key == "pose_cov":
+        try:
+            return np.asarray(value, dtype=np.float64).ndim in (1, 3)
+        except (TypeError, ValueError):
+            return False  # Scenario names the field
+    return True
+
+
 def make_scenario(scenario: str | Scenario = "paper", **overrides: Any) -> Scenario:
     """Return the named preset (or a given scenario) with ``overrides`` applied.
 
-    Per-sensor fields given as a tuple of the preset's length are dropped when only
-    ``n_sensors`` changes, so ``make_scenario("paper", n_sensors=5)`` keeps working: the
-    first sensor's value is then used for every sensor. ``max_cycles`` (PettingZoo's
+    A new team size repeats the team (every preset alike): when ``n_sensors`` changes,
+    each per-sensor field the base holds as a tuple of its L sensors (``sigma_d2``,
+    ``sigma_theta2``, ``vmax``, ``rho``, ``orientation``, ``sensor_model``, ``pose_cov``,
+    ``max_range``, ``p_detect``) and that is not overridden gives sensor ``i`` the value of
+    the base's sensor ``i mod L``: ``make_scenario("paper", n_sensors=6)`` is the paper's
+    team twice, ``make_scenario("mixed", n_sensors=2)`` its first two sensors. Fields given
+    as one value for every sensor stay so. ``max_cycles`` (PettingZoo's
     episode-length keyword) is accepted as ``n_steps``. An unknown keyword raises
     :class:`~activetrack.validation.UnexpectedKeywordError` (a ``TypeError`` worded like
     Python's, and a ``ValueError``).
@@ -844,9 +874,9 @@ def make_scenario(scenario: str | Scenario = "paper", **overrides: Any) -> Scena
             )
     m = overrides.get("n_sensors", base["n_sensors"])
     if isinstance(m, (int, np.integer)) and not isinstance(m, (bool, np.bool_)):
-        for key in (*_PER_SENSOR, "sensor_model"):  # (invalid n_sensors: Scenario says)
+        for key in _TEAM_FIELDS:  # (an invalid n_sensors: Scenario says)
             val = base[key]
-            if key not in overrides and isinstance(val, (tuple, list)) and len(val) != m:
-                base[key] = val[0]
+            if key not in overrides and _per_sensor_tuple(key, val) and len(val) != m:
+                base[key] = tuple(val[i % len(val)] for i in range(min(m, N_SENSORS_MAX)))
     base.update(overrides)
     return Scenario(**base)

@@ -66,6 +66,24 @@ from activetrack.world.scenarios import Scenario, make_scenario
 
 #: Steps of noise a copy draws per generator call in a world of several copies.
 DEFAULT_NOISE_BLOCK = 64
+#: Most bytes a world's arrays may take (:func:`world_bytes`): 4 GiB, a sixth of this
+#: project's 24 GiB test machine, so a few worlds run side by side. A world beyond it is
+#: refused at construction (ValueError naming the sizes), before anything is allocated.
+WORLD_BYTES_MAX = 4 * 2**30
+
+
+def world_bytes(num_copies: int, noise_block: int, n_sensors: int, n_targets: int,
+                state_dim: int) -> int:  # fmt: skip
+    """Return an upper estimate of the bytes of a world's arrays (float64): per copy, a
+    noise block (``noise_block`` steps of every normal a step draws), the per-sensor and
+    per-target state, and the observation's features, whose pairwise sensor terms grow as
+    M^2 and M^2 K; checked above tracemalloc's peak over a batched env's construction,
+    reset and step (tests/envs/test_batched.py)."""
+    m, k, n = n_sensors, n_targets, state_dim
+    n_noise = k * n + 2 * m * k + 2 * m + m * k
+    per_copy = noise_block * n_noise + 24 * m * m + 3 * m * m * k + 64 * m * k + 8 * k * n * n
+    return 8 * num_copies * per_copy
+
 
 _Selection = int | slice | np.ndarray
 #: The state fields every target has its own of.
@@ -128,6 +146,16 @@ class World:
         ):
             raise ValueError(f"noise_block must be an integer >= 1, got {noise_block!r}")
         sc = make_scenario(scenario, **overrides)
+        need = world_bytes(int(num_copies), int(noise_block), sc.n_sensors, sc.n_targets,
+                           max(mdl.dim for mdl in sc.target_models))  # fmt: skip
+        if need > WORLD_BYTES_MAX:
+            raise ValueError(
+                f"num_copies (num_envs) x noise_block x n_sensors x n_targets: the world's "
+                f"arrays would take about {need / 2**30:.3g} GiB (num_copies={num_copies}, "
+                f"noise_block={noise_block}, n_sensors={sc.n_sensors}, "
+                f"n_targets={sc.n_targets}), more than {WORLD_BYTES_MAX / 2**30:g} GiB "
+                "(WORLD_BYTES_MAX); lower some of them"
+            )
         self.scenario = sc
         self.params = p = tracking.LoopParams.from_scenario(sc)
         self.num_copies = N = int(num_copies)
