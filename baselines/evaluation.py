@@ -184,7 +184,8 @@ def policy_loader(path: Path) -> Any:
     suffix = path.suffix.lower().removeprefix(".")
     loaders = policy_loaders()
     if suffix not in loaders:
-        known = ", ".join(f".{s}" for s in sorted(loaders)) or "none"
+        # None at all: an install made before the group existed (reinstall registers it).
+        known = ", ".join(f".{s}" for s in sorted(loaders)) or "none; reinstall activetrack"
         what = f"'.{suffix}' files" if suffix else "files without a suffix"
         raise ValueError(
             f"{path}: no policy loader for {what} (installed: {known}; loaders register "
@@ -194,9 +195,10 @@ def policy_loader(path: Path) -> Any:
     try:
         return entry.load()
     except ImportError as exc:
+        ours = entry.value.startswith("activetrack.train")
+        hint = "; the train layer needs the [rl] extra: pip install 'activetrack[rl]'"
         raise ImportError(
-            f"{path}: its loader {entry.value} cannot be imported ({exc}); a policy.zip "
-            "needs the [rl] extra: pip install 'activetrack[rl]'"
+            f"{path}: its loader {entry.value} cannot be imported ({exc}){hint if ours else ''}"
         ) from exc
 
 

@@ -135,6 +135,7 @@ def _install_loader(root, suffix, module):
     (info / "METADATA").write_text("Metadata-Version: 2.1\nName: fakeloader\nVersion: 1.0\n")
     (info / "entry_points.txt").write_text(
         f"[activetrack.policy_loaders]\n{suffix} = {module}:load\n"
+        "broken = no_such_module_for_activetrack:load\n"
     )
     (root / f"{module}.py").write_text(
         "from activetrack.baselines.policies import RMPolicy\n"
@@ -160,6 +161,11 @@ def test_a_policy_file_loads_through_the_installed_entry_points(rm_and_gsr, tmp_
     assert rm.policy == str(policy_file)
     np.testing.assert_array_equal(rm.mean_trace, rm_and_gsr[0].mean_trace)
     np.testing.assert_array_equal(gsr.mean_trace, rm_and_gsr[1].mean_trace)
+    # A loader that cannot be imported is named, before any episode.
+    broken = tmp_path / "x.broken"
+    broken.write_text("")
+    with pytest.raises(ImportError, match="x.broken: its loader no_such_module_for_activetrack"):
+        evaluate([str(broken)], "paper", 1, SEED, progress=False)
 
 
 def test_a_policy_file_without_a_loader_is_refused_naming_the_installed_ones(tmp_path):
