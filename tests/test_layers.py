@@ -100,13 +100,28 @@ def modules() -> list[tuple[str, Path]]:
     return out
 
 
-def imported(module: str, path: Path) -> set[str]:
+def _statements(tree: ast.Module, lazy: bool):
+    """Yield every node of ``tree``, or without ``lazy`` only those that run on import
+    (function and lambda bodies left out)."""
+    if lazy:
+        yield from ast.walk(tree)
+        return
+    todo: list[ast.AST] = list(tree.body)
+    while todo:
+        node = todo.pop()
+        yield node
+        if not isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda)):
+            todo.extend(ast.iter_child_nodes(node))
+
+
+def imported(module: str, path: Path, lazy: bool = True) -> set[str]:
     """Return every module name ``path`` imports anywhere (``from a import b`` gives a.b too,
-    ``importlib.import_module("...")`` with a constant name included)."""
+    ``importlib.import_module("...")`` with a constant name included), or without ``lazy``
+    only where it runs on import (not inside functions)."""
     tree = ast.parse(path.read_text(), str(path))
     is_package = path.name == "__init__.py"
     names: set[str] = set()
-    for node in ast.walk(tree):
+    for node in _statements(tree, lazy):
         if isinstance(node, ast.Import):
             names.update(a.name for a in node.names)
         elif isinstance(node, ast.ImportFrom):
@@ -138,6 +153,15 @@ def test_no_module_imports_a_layer_above_it(module, path):
     assert above == [], f"{module} (layer {FOLDERS[own][1]}) imports {above}"
 
 
+@pytest.mark.parametrize("module", sorted(CLI))
+def test_the_command_line_reaches_up_only_inside_functions(module):
+    # Lazily: importing a command module (``activetrack --help``) loads no layer above it.
+    own = layer_of(module)
+    found = imported(module, dict(modules())[module], lazy=False)
+    above = sorted(n for n in found if layer_of(n) > own)
+    assert above == [], f"{module} imports {above} when it is imported"
+
+
 def test_the_import_scan_sees_lazy_imports(tmp_path):
     # The scan itself, on a module written for it: a function-level import, a relative one
     # and an import_module call with a constant name are all found.
@@ -151,6 +175,8 @@ def test_the_import_scan_sees_lazy_imports(tmp_path):
     )
     found = imported("activetrack.world.probe", probe)
     assert {"activetrack.train.policy_io", "activetrack.envs", "activetrack.baselines.gsr"} <= found
+    # Without the lazy ones only the module-level import remains.
+    assert imported("activetrack.world.probe", probe, lazy=False) == {"importlib"}
     # and on a real lazy import: the kernels command runs GSR, inside a function.
     cache = dict(modules())["activetrack.kernel_cache"]
     assert "activetrack.baselines.GSR" in imported("activetrack.kernel_cache", cache)
