@@ -20,10 +20,15 @@ A policy is an expert with ``plan(problem) -> next positions`` (e.g.
 :class:`~activetrack.baselines.policies.GSRPolicy`; its positions are executed with
 ``step_positions``), anything with ``act(observations) -> {agent: action}`` (e.g. a
 learned policy), or a name: ``gsr``, ``gsr-restarts``
-(``GSR(restarts=True)``), ``gbes``, ``rm``, or the path of a trained ``policy.zip``
-(loaded through :func:`activetrack.train.policy_io.load_policy`, imported only then:
-baselines never imports ``train`` at module level). Every policy is loaded and checked
-before the first episode runs.
+(``GSR(restarts=True)``), ``gbes``, ``rm``, or the path of a policy file, e.g. a trained
+``policy.zip``. Every policy is loaded and checked before the first episode runs.
+
+Policy files load through the entry-point group :data:`POLICY_LOADERS`
+(``activetrack.policy_loaders`` in ``pyproject.toml``): an entry named for a file suffix
+(``zip``) names a function ``path -> policy``; the train layer provides ``zip``
+(:func:`activetrack.train.policy_io.load_policy`). Why: ``evaluate(["runs/x/policy.zip"])``
+keeps loading trained policies while baselines, below train, never imports it, and other
+packages can add their own formats.
 
 :func:`write_results` writes a run's files together (:mod:`activetrack.files`); the
 figure is :func:`activetrack.baselines.plotting.plot_evaluation`. With ``workers`` or an
@@ -33,6 +38,7 @@ the same results.
 
 from __future__ import annotations
 
+import importlib.metadata
 import time
 import warnings
 from collections.abc import Mapping, Sequence
@@ -49,6 +55,9 @@ from activetrack.validation import check_int
 
 #: Names that resolve to the planners' expert policies.
 EXPERT_NAMES = ("gsr", "gsr-restarts", "gbes", "rm", "lookahead")
+#: The entry-point group of the policy file loaders: name = the file suffix without its
+#: dot (lower case), value = ``module:function`` taking the path and returning a policy.
+POLICY_LOADERS = "activetrack.policy_loaders"
 
 
 @dataclass(eq=False)
@@ -216,9 +225,41 @@ def resolve_policy(spec: Any) -> Any:
             f"unknown policy {name!r}: use one of {list(EXPERT_NAMES)} or the path of a "
             "policy.zip written by 'activetrack train'"
         )
-    from activetrack.train.policy_io import load_policy  # lazy: train sits above baselines
+    return policy_loader(path)(path)
 
-    return load_policy(path)
+
+def policy_loaders() -> dict[str, importlib.metadata.EntryPoint]:
+    """Return the installed policy file loaders, ``{suffix: entry point}``
+    (:data:`POLICY_LOADERS`; not yet imported)."""
+    found = importlib.metadata.entry_points(group=POLICY_LOADERS)
+    return {ep.name.lower(): ep for ep in found}
+
+
+def policy_loader(path: Path) -> Any:
+    """Return the function that loads the policy file ``path`` (by its suffix).
+
+    Raises ``ValueError`` when no installed loader takes the suffix, ``ImportError``
+    (naming the loader) when the loader's module cannot be imported.
+    """
+    suffix = path.suffix.lower().removeprefix(".")
+    loaders = policy_loaders()
+    if suffix not in loaders:
+        # None at all: an install made before the group existed (reinstall registers it).
+        known = ", ".join(f".{s}" for s in sorted(loaders)) or "none; reinstall activetrack"
+        what = f"'.{suffix}' files" if suffix else "files without a suffix"
+        raise ValueError(
+            f"{path}: no policy loader for {what} (installed: {known}; loaders register "
+            f"under the entry-point group {POLICY_LOADERS!r})"
+        )
+    entry = loaders[suffix]
+    try:
+        return entry.load()
+    except ImportError as exc:
+        ours = entry.value.startswith("activetrack.train")
+        hint = "; the train layer needs the [rl] extra: pip install 'activetrack[rl]'"
+        raise ImportError(
+            f"{path}: its loader {entry.value} cannot be imported ({exc}){hint if ours else ''}"
+        ) from exc
 
 
 def _reset_policy(policy: Any, seed: int) -> None:

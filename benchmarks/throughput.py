@@ -113,8 +113,8 @@ def vmas_stepper(n: int, agents: int):
 
 def gsr_rates(n: int, episodes: int) -> dict[str, float]:
     """Return GSR plans/s for M = 3: scalar GSR per copy, and batched GSR per batch of ``n``."""
+    from activetrack import PlanningProblem
     from activetrack.baselines import GSR
-    from activetrack.baselines.batched_gsr import BatchedGSR
     from activetrack.envs.batched import BatchedActiveTracking
 
     env = BatchedActiveTracking(n, scenario="paper")
@@ -127,16 +127,14 @@ def gsr_rates(n: int, episodes: int) -> dict[str, float]:
         )
         env.step(rng.uniform(-1, 1, (n, 6)))
     p = env.params
-    batched = BatchedGSR()
-    batched.plan_batch(*problems[0], p.r, p.rho, p.sigma_d2, p.sigma_theta2)  # load kernels
+    plan_batch = _batched_gsr()
+    plan_batch(*problems[0], p.r, p.rho, p.sigma_d2, p.sigma_theta2)  # load kernels
     start = time.perf_counter()
     for P, target, sensors in problems:
-        batched.plan_batch(P, target, sensors, p.r, p.rho, p.sigma_d2, p.sigma_theta2)
+        plan_batch(P, target, sensors, p.r, p.rho, p.sigma_d2, p.sigma_theta2)
     batched_rate = n * len(problems) / (time.perf_counter() - start)
 
-    solves = _count_solves(batched, problems, p)  # untimed
-    from activetrack import PlanningProblem
-
+    solves = _count_solves(plan_batch, problems, p)  # untimed
     scalar = GSR()
     count = min(n, 300)
     P, target, sensors = problems[len(problems) // 2]
@@ -158,11 +156,26 @@ def gsr_rates(n: int, episodes: int) -> dict[str, float]:
     }
 
 
-def _count_solves(planner, problems, p) -> int:
-    """Return how many single-sensor problems ``planner`` solves over ``problems`` (the
+def _batched_gsr():
+    """Return GSR on a batch given as arrays, ``(P, target, sensors, r, rho, sigma_d2,
+    sigma_theta2) -> batch result``: ``GSR().plan_with_info`` on a batched planning problem,
+    or, on an old checkout (benchmarked side by side), its ``BatchedGSR().plan_batch``."""
+    from activetrack import PlanningProblem
+    from activetrack.baselines import GSR
+
+    try:
+        from activetrack.baselines.batched_gsr import BatchedGSR  # old checkouts only
+    except ImportError:
+        gsr = GSR()
+        return lambda *arrays: gsr.plan_with_info(PlanningProblem(*arrays))
+    return BatchedGSR().plan_batch
+
+
+def _count_solves(plan_batch, problems, p) -> int:
+    """Return how many single-sensor problems ``plan_batch`` solves over ``problems`` (the
     kernel counts them: ``n_solves`` of each batch result)."""
     return sum(
-        int(planner.plan_batch(P, target, sensors, p.r, p.rho, p.sigma_d2, p.sigma_theta2)
+        int(plan_batch(P, target, sensors, p.r, p.rho, p.sigma_d2, p.sigma_theta2)
             .n_solves.sum())
         for P, target, sensors in problems
     )  # fmt: skip

@@ -10,8 +10,9 @@
 - :func:`record_video`: an episode as a GIF/MP4.
 
 All of them adapt the core's closed loop, :class:`activetrack.world.World`; the sensor
-motion (:func:`apply_actions`, :func:`actions_to_reach`) and the observation encoding
-(:mod:`activetrack.world.observation`) live in the core too. Configuration is the core
+motion (:mod:`activetrack.kinematics.sensor_motion`: ``apply_actions``,
+``actions_to_reach``) and the observation encoding (:mod:`activetrack.world.observation`)
+live in the core too. Configuration is the core
 :class:`activetrack.Scenario`: ``scenario="paper"`` or
 ``"homogeneous"`` plus any field override, e.g.
 ``parallel_env(scenario="homogeneous", n_sensors=8, rho=1.5)``.
@@ -32,7 +33,6 @@ from .registration import ENV_ID, register_envs
 if TYPE_CHECKING:
     from .batched import BatchedActiveTracking
     from .centralized import CentralizedTrackingEnv
-    from .dynamics import actions_to_reach, apply_actions
     from .tracking_env import (
         TrackingAECEnv,
         TrackingParallelEnv,
@@ -48,8 +48,6 @@ _LAZY = {
     "CentralizedTrackingEnv": ".centralized",
     "TrackingAECEnv": ".tracking_env",
     "TrackingParallelEnv": ".tracking_env",
-    "actions_to_reach": ".dynamics",
-    "apply_actions": ".dynamics",
     "env": ".tracking_env",
     "parallel_env": ".tracking_env",
     "policy_step": ".tracking_env",
@@ -63,8 +61,6 @@ __all__ = [
     "CentralizedTrackingEnv",
     "TrackingAECEnv",
     "TrackingParallelEnv",
-    "actions_to_reach",
-    "apply_actions",
     "env",
     "parallel_env",
     "policy_step",

@@ -125,6 +125,22 @@ for k in range(3):
     obs, rewards, terminations, truncations, infos = env.step(actions)
 assert all(truncations.values()) and not env.agents  # the episode ends after n_steps
 single = gym.make("activetrack.envs:activetrack/ActiveTracking-v0", n_steps=2)
+
+# The wheel registers the train layer's policy.zip loader (entry points), which needs the
+# [rl] extra this venv does not have: evaluate says so.
+import pathlib, tempfile
+from activetrack.baselines.evaluation import policy_loaders, resolve_policy
+
+assert policy_loaders()["zip"].value == "activetrack.train.policy_io:load_policy"
+with tempfile.TemporaryDirectory() as folder:
+    path = pathlib.Path(folder, "policy.zip")
+    path.write_bytes(b"")
+    try:
+        resolve_policy(str(path))
+    except ImportError as exc:
+        assert "activetrack[rl]" in str(exc), exc
+    else:
+        raise AssertionError("the policy.zip loader imported without torch")
 print("ok", single.reset(seed=0)[0].shape)
 """
 

@@ -7,6 +7,10 @@ instead (numba then compiles again on first use). Useful before timing anything,
 container image build, or after changing numba or the CPU. An edit of a kernel source needs
 no clearing: it makes every cached kernel stale by itself (:mod:`activetrack._jit` says
 how the cache works).
+
+Part of the command line (like :mod:`activetrack.cli`): to compile GSR's kernels through
+their entry point it imports the baselines' planner, inside a function, the one arrow from
+the core up besides the front door's (``tests/test_layers.py``).
 """
 
 from __future__ import annotations

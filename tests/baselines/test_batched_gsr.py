@@ -1,19 +1,23 @@
-"""Batched GSR against the scalar GSR, problem by problem."""
+"""GSR on a batched planning problem (one compiled sweep over the copies) against the
+scalar GSR, problem by problem."""
 
 import numpy as np
 import pytest
 
 from activetrack.baselines import GSR, GSRPolicy
 from activetrack.baselines._common import random_problem
-from activetrack.baselines.batched_gsr import BatchedGSR
 from activetrack.envs.batched import BatchedActiveTracking
+from activetrack.world.problem import PlanningProblem
 
 
 def stack(problems):
-    return [
-        np.stack([getattr(p, f) for p in problems])
-        for f in ("prior_cov", "target", "sensors", "r", "rho", "sigma_d2", "sigma_theta2")
-    ]
+    """Return the problems as one batched problem (B copies)."""
+    return PlanningProblem(
+        *(
+            np.stack([getattr(p, f) for p in problems])
+            for f in ("prior_cov", "target", "sensors", "r", "rho", "sigma_d2", "sigma_theta2")
+        )
+    )
 
 
 @pytest.mark.parametrize("m", [1, 3, 5])
@@ -21,7 +25,7 @@ def test_batched_gsr_equals_scalar_gsr(m):
     rng = np.random.default_rng(m)
     # distances 0.5..6 m: some sensors cannot keep rho (fallback), most can
     problems = [random_problem(rng, m, distance=(0.5, 6.0)) for _ in range(150)]
-    res = BatchedGSR().plan_batch(*stack(problems))
+    res = GSR().plan_with_info(stack(problems))
     gsr = GSR()
     for b, p in enumerate(problems):
         ref = gsr.plan_with_info(p)
@@ -53,21 +57,20 @@ def test_expert_plans_a_batched_env_and_its_positions_are_executed():
 
 def test_parameter_errors():
     with pytest.raises(ValueError, match="tol"):
-        BatchedGSR(tol=-1.0)
+        GSR(tol=-1.0)
     with pytest.raises(ValueError, match="max_sweeps"):
-        BatchedGSR(max_sweeps=0)
+        GSR(max_sweeps=0)
 
 
 def test_warm_roots_is_deprecated_and_changes_nothing():
     rng = np.random.default_rng(17)
-    args = stack([random_problem(rng, 3, distance=(3.5, 12.0)) for _ in range(50)])
-    plain = BatchedGSR().plan_batch(*args)
-    for cls in (BatchedGSR, GSR):
-        with pytest.warns(DeprecationWarning, match="warm_roots"):
-            cls(warm_roots=False)
+    problem = stack([random_problem(rng, 3, distance=(3.5, 12.0)) for _ in range(50)])
+    plain = GSR().plan(problem)
+    with pytest.warns(DeprecationWarning, match="warm_roots"):
+        GSR(warm_roots=False)
     with pytest.warns(DeprecationWarning):
-        old = BatchedGSR(warm_roots=True).plan_batch(*args)
-    np.testing.assert_array_equal(old.positions, plain.positions)
+        old = GSR(warm_roots=True).plan(problem)
+    np.testing.assert_array_equal(old, plain)
 
 
 def test_batched_gsr_rejects_a_fixed_sensor_on_the_target_and_names_the_copy():
@@ -77,7 +80,7 @@ def test_batched_gsr_rejects_a_fixed_sensor_on_the_target_and_names_the_copy():
     r = np.array([[1.0, 1.0], [0.0, 1.0]])
     args = (np.broadcast_to(np.eye(2), (2, 2, 2)), target, sensors, r, 2.0, 1.0, 0.5)
     with pytest.raises(ValueError, match="cannot move") as err:
-        BatchedGSR().plan_batch(*args)
+        GSR().plan(PlanningProblem(*args))
     assert "(1, 0)" in str(err.value)
 
 
@@ -85,4 +88,4 @@ def test_batched_gsr_rejects_rho_zero_with_a_reachable_target():
     sensors = np.array([[[3.0, 0.0]], [[0.5, 0.0]]])
     args = (np.broadcast_to(np.eye(2), (2, 2, 2)), np.zeros((2, 2)), sensors, 1.0, 0.0, 1.0, 1.0)
     with pytest.raises(ValueError, match=r"rho must be > 0.*\(1, 0\)"):
-        BatchedGSR().plan_batch(*args)
+        GSR().plan(PlanningProblem(*args))

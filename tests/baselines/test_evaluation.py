@@ -131,6 +131,60 @@ def test_errors(tmp_path):
         evaluate([str(tmp_path / "policy.zip")], "paper", 1, SEED, progress=False)
 
 
+def _install_loader(root, suffix, module):
+    """Put on ``root`` a distribution whose entry point loads ``*.suffix`` files with
+    ``module.load`` (an RM policy; it records the paths it was given)."""
+    info = root / "fakeloader-1.0.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: fakeloader\nVersion: 1.0\n")
+    (info / "entry_points.txt").write_text(
+        f"[activetrack.policy_loaders]\n{suffix} = {module}:load\n"
+        "broken = no_such_module_for_activetrack:load\n"
+    )
+    (root / f"{module}.py").write_text(
+        "from activetrack.baselines.policies import RMPolicy\n"
+        "paths = []\n"
+        "def load(path):\n"
+        "    paths.append(path)\n"
+        "    return RMPolicy()\n"
+    )
+
+
+def test_a_policy_file_loads_through_the_installed_entry_points(rm_and_gsr, tmp_path, monkeypatch):
+    # A third package's loader, found by the file's suffix: its policy is the one evaluated
+    # (the same episodes as the named RM policy), and it received the path given.
+    plugins = tmp_path / "site"
+    plugins.mkdir()
+    _install_loader(plugins, "rmpolicy", "fake_rm_loader")
+    monkeypatch.syspath_prepend(str(plugins))
+    monkeypatch.delitem(sys.modules, "fake_rm_loader", raising=False)
+    policy_file = tmp_path / "mine.RMPolicy"
+    policy_file.write_text("any content: the loader decides")
+    rm, gsr = evaluate([str(policy_file)], "paper", EPISODES, SEED, progress=False)
+    assert sys.modules["fake_rm_loader"].paths == [policy_file]
+    assert rm.policy == str(policy_file)
+    np.testing.assert_array_equal(rm.mean_trace, rm_and_gsr[0].mean_trace)
+    np.testing.assert_array_equal(gsr.mean_trace, rm_and_gsr[1].mean_trace)
+    # A loader that cannot be imported is named, before any episode.
+    broken = tmp_path / "x.broken"
+    broken.write_text("")
+    with pytest.raises(ImportError, match="x.broken: its loader no_such_module_for_activetrack"):
+        evaluate([str(broken)], "paper", 1, SEED, progress=False)
+
+
+def test_a_policy_file_without_a_loader_is_refused_naming_the_installed_ones(tmp_path):
+    notes = tmp_path / "notes.txt"
+    notes.write_text("not a policy")
+    # The train layer provides .zip (pyproject.toml); nothing provides .txt.
+    with pytest.raises(ValueError, match=r"notes.txt: no policy loader for '.txt' files "
+                                         r"\(installed: .*\.zip"):  # fmt: skip
+        evaluate([str(notes)], "paper", 1, SEED, progress=False)
+    bare = tmp_path / "policy"
+    bare.write_text("")
+    with pytest.raises(ValueError, match="no policy loader for files without a suffix"):
+        evaluate([str(bare)], "paper", 1, SEED, progress=False)
+
+
 def test_a_scenario_object_is_written_as_its_fields(tmp_path, capsys):
     sc = make_scenario("paper", n_steps=3)
     run_evaluation(["rm"], sc, 2, SEED, out_dir=tmp_path / "out", plot=False, progress=False)

@@ -18,10 +18,10 @@ from activetrack.baselines import horizon_model as hm
 from activetrack.baselines.lookahead import run_batched
 from activetrack.baselines.prediction_tracker import PredictionTracker
 from activetrack.estimation import ekf
-from activetrack.models import measurement
 from activetrack.models.motion import constant_velocity, predict
 from activetrack.world import World
 from activetrack.world.problem import PlanningProblem
+from tests.core.helpers import range_bearing
 
 
 def _random_state(rng: np.random.Generator, m: int = 3):
@@ -52,7 +52,7 @@ def _filter_along(plan, x, P, model, problem, orientation=0.0):
     priors, posts = [], []
     for h in range(plan.shape[1]):
         sensors = plan[:, h]
-        z = measurement.range_bearing(x[:2], sensors, orientation, wrap=True)
+        z = range_bearing(x[:2], sensors, orientation, wrap=True)
         priors.append(P)
         x_post, P_post = ekf.update(
             x, P, z, sensors, problem.sigma_d2, problem.sigma_theta2, orientation
@@ -112,7 +112,7 @@ def _gsr_rollout_score(x, P, model, problem, H, weights, margin, tail=0, tail_we
             offset = sensors - x[:2]
         else:  # past the horizon: the same place relative to the predicted target
             sensors = x[:2] + offset
-        z = measurement.range_bearing(x[:2], sensors, 0.0)
+        z = range_bearing(x[:2], sensors, 0.0)
         x, P_post = ekf.update(x, P, z, sensors, problem.sigma_d2, problem.sigma_theta2)
         total += weights[h] * (P_post[0, 0] + P_post[1, 1])
         x, P = predict(x, P_post, model.Phi, model.Q)

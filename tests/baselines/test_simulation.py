@@ -9,6 +9,7 @@ from scipy import stats
 from activetrack import ExtendedKalmanFilter, make_scenario
 from activetrack.baselines import GSR, RandomMotion, mean_ci, run_monte_carlo, simulate
 from activetrack.models import measurement
+from tests.core.helpers import range_bearing
 
 
 class _Towards:
@@ -41,9 +42,7 @@ def test_simulate_matches_a_hand_written_loop():
         sensors = sensors - 1.0 * c / np.hypot(*c.T)[:, None]
         w = rng.standard_normal(10)
         x = model.Phi @ x + model.noise_factor @ w[:4]
-        z = measurement.range_bearing(x[:2], sensors) + w[4:].reshape(3, 2) * np.sqrt(
-            np.stack([sd2, st2], -1)
-        )
+        z = range_bearing(x[:2], sensors) + w[4:].reshape(3, 2) * np.sqrt(np.stack([sd2, st2], -1))
         z[:, 1] = measurement.wrap_angle(z[:, 1])
         kf.update(z, sensors, sd2, st2)
         traces.append(np.trace(kf.position_cov))

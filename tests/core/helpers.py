@@ -3,11 +3,53 @@
 import numpy as np
 from scipy import stats
 
+from activetrack.models.measurement import ZERO_DISTANCE2, wrap_angle
+
 
 def random_spd(rng, n, scale=1.0):
     """Return a random non-diagonal SPD matrix."""
     A = rng.standard_normal((n, n))
     return scale * (A @ A.T + 0.5 * np.eye(n))
+
+
+def range_bearing(target_pos, sensor_pos, orientation=0.0, *, wrap=True):
+    """Return the noise-free range-bearing measurements ``[d_i, theta_i]`` of eq. (4),
+    (..., M, 2): ``d = hypot(dx, dy)``, ``theta = atan2(dy, dx) - phi`` with
+    ``(dx, dy) = p_T - p_S``, the bearing wrapped to [-pi, pi) unless ``wrap=False``
+    (:func:`wrap_angle`, itself checked against sin/cos in test_measurement.py).
+    ``target_pos`` (..., 2), ``sensor_pos`` (..., M, 2), ``orientation`` (..., M)."""
+    target_pos, sensor_pos = np.asarray(target_pos, float), np.asarray(sensor_pos, float)
+    dx = target_pos[..., None, 0] - sensor_pos[..., 0]
+    dy = target_pos[..., None, 1] - sensor_pos[..., 1]
+    theta = np.arctan2(dy, dx) - orientation
+    return np.stack([np.hypot(dx, dy), wrap_angle(theta) if wrap else theta], axis=-1)
+
+
+def jacobian(target_pos, sensor_pos):
+    """Return the Jacobians ``[h_d^T; h_theta^T]`` of eq. (9) with respect to the target
+    position, (..., M, 2, 2): ``h_d = (dx, dy) / d``, ``h_theta = (-dy, dx) / d^2``; zero
+    rows for a sensor at zero distance (``d^2 < ZERO_DISTANCE2``: no information)."""
+    target_pos, sensor_pos = np.asarray(target_pos, float), np.asarray(sensor_pos, float)
+    dx = target_pos[..., None, 0] - sensor_pos[..., 0]
+    dy = target_pos[..., None, 1] - sensor_pos[..., 1]
+    d2 = dx * dx + dy * dy
+    far = d2 >= ZERO_DISTANCE2
+    safe = np.where(far, d2, 1.0)
+    d = np.sqrt(safe)
+    h_d = np.stack([np.where(far, dx / d, 0.0), np.where(far, dy / d, 0.0)], axis=-1)
+    h_theta = np.stack([np.where(far, -dy / safe, 0.0), np.where(far, dx / safe, 0.0)], axis=-1)
+    return np.stack([h_d, h_theta], axis=-2)
+
+
+def sample(target_pos, sensor_pos, sigma_d2, sigma_theta2, rng, orientation=0.0):
+    """Return noisy range-bearing measurements of eq. (4), (..., M, 2): :func:`range_bearing`
+    plus Gaussian noise of variances ``sigma_d2``, ``sigma_theta2`` (per sensor), the bearing
+    wrapped to [-pi, pi)."""
+    z = range_bearing(target_pos, sensor_pos, orientation)
+    std = np.stack(np.broadcast_arrays(np.sqrt(sigma_d2), np.sqrt(sigma_theta2)), axis=-1)
+    z = z + rng.standard_normal(z.shape) * std
+    z[..., 1] = wrap_angle(z[..., 1])
+    return z
 
 
 def textbook_h(target_pos, sensors):

@@ -9,7 +9,7 @@ from scipy import stats
 import activetrack as at
 from activetrack.estimation import ekf
 from activetrack.models import measurement, motion
-from tests.core.helpers import random_spd, textbook_h, textbook_update
+from tests.core.helpers import random_spd, sample, textbook_h, textbook_update
 from tests.envs.reference import ekf_update as reference_ekf_update
 
 # The EKF is compiled (activetrack.estimation._kernels): make test also runs these as plain Python.
@@ -27,7 +27,7 @@ def test_lemma1_full_update_position_block_equals_eq12(model, seed):
     P = random_spd(rng, n, scale=2.0)
     sensors = x[:2] + rng.uniform(-15, 15, (m, 2))
     sd2, st2 = rng.uniform(0.1, 4, m), rng.uniform(0.01, 1, m)
-    z = measurement.sample(x[:2], sensors, sd2, st2, rng)
+    z = sample(x[:2], sensors, sd2, st2, rng)
     _, P_full = textbook_update(x, P, z, sensors, sd2, st2)
     eq12 = at.posterior_position_covariance(P[:2, :2], sensors - x[:2], sd2, st2)
     np.testing.assert_allclose(P_full[:2, :2], eq12, rtol=1e-10, atol=1e-12)
@@ -42,7 +42,7 @@ def test_update_equals_textbook_kalman_update(seed):
     P = random_spd(rng, n)
     sensors = x[:2] + rng.uniform(-10, 10, (m, 2))
     sd2, st2 = rng.uniform(0.1, 4, m), rng.uniform(0.01, 1, m)
-    z = measurement.sample(x[:2] + 0.3, sensors, sd2, st2, rng)
+    z = sample(x[:2] + 0.3, sensors, sd2, st2, rng)
     x_ref, P_ref = textbook_update(x, P, z, sensors, sd2, st2)
     x_new, P_new = ekf.update(x, P, z, sensors, sd2, st2)
     np.testing.assert_allclose(x_new, x_ref, rtol=1e-10, atol=1e-12)
@@ -57,7 +57,7 @@ def test_batched_update_matches_loop():
     x = rng.standard_normal((B, 4))
     P = np.stack([random_spd(rng, 4) for _ in range(B)])
     sensors = x[:, None, :2] + rng.uniform(-10, 10, (B, m, 2))
-    z = measurement.sample(x[:, :2], sensors, 1.0, 0.1, rng)
+    z = sample(x[:, :2], sensors, 1.0, 0.1, rng)
     xb, Pb = ekf.update(x, P, z, sensors, np.ones(m), np.full(m, 0.1))
     for b in range(B):
         xr, Pr = textbook_update(x[b], P[b], z[b], sensors[b], np.ones(m), np.full(m, 0.1))
@@ -70,7 +70,7 @@ def test_subset_update_equals_update_with_those_sensors_only():
     x, P = rng.standard_normal(4), random_spd(rng, 4)
     sensors = x[:2] + rng.uniform(-10, 10, (4, 2))
     sd2, st2 = rng.uniform(0.5, 2, 4), rng.uniform(0.05, 0.5, 4)
-    z = measurement.sample(x[:2], sensors, sd2, st2, rng)
+    z = sample(x[:2], sensors, sd2, st2, rng)
     keep = np.array([True, False, True, False])
     x_ref, P_ref = textbook_update(x, P, z[keep], sensors[keep], sd2[keep], st2[keep])
     f = at.ExtendedKalmanFilter(at.constant_velocity(1.0, 0.1), x, P)
@@ -97,7 +97,7 @@ def test_joseph_form_keeps_covariance_spd_under_tiny_noise():
     x, P = np.zeros(4), np.diag([1e4, 1e4, 1e4, 1e4])
     sensors = np.array([[30.0, 1.0], [-2.0, 40.0], [5.0, -25.0]])
     for _ in range(100):
-        z = measurement.sample(x[:2], sensors, 1e-8, 1e-10, rng)
+        z = sample(x[:2], sensors, 1e-8, 1e-10, rng)
         x, P = ekf.update(x, P, z, sensors, np.full(3, 1e-8), np.full(3, 1e-10))
         x, P = motion.predict(x, P, np.eye(4), np.zeros((4, 4)))
         assert np.all(P == P.T)
@@ -120,7 +120,7 @@ def test_nees_of_static_network_is_consistent():
     for k in range(steps):
         x_hat, P = motion.predict(x_hat, P, model.Phi, model.Q)
         x_true = model.sample_next(x_true, rng)
-        z = measurement.sample(x_true[:, :2], sensors, sd2, st2, rng)
+        z = sample(x_true[:, :2], sensors, sd2, st2, rng)
         x_hat, P = ekf.update(x_hat, P, z, sensors, sd2, st2)
         nees[k] = ekf.position_nees(x_true, x_hat, P)
     lo, hi = stats.chi2.ppf([0.025, 0.975], 2 * runs) / runs
@@ -196,7 +196,7 @@ def test_update_equals_reference_and_information_form(seed):
     P = random_spd(rng, n, scale=10.0 ** rng.uniform(-2, 3))
     sensors = x[:2] + rng.uniform(-30, 30, (m, 2))
     sd2, st2 = 10.0 ** rng.uniform(-2, 1, m), 10.0 ** rng.uniform(-4, 0, m)
-    z = measurement.sample(x[:2] + 0.2, sensors, sd2, st2, rng)
+    z = sample(x[:2] + 0.2, sensors, sd2, st2, rng)
     x_new, P_new = ekf.update(x, P, z, sensors, sd2, st2)
     x_ref, P_ref = reference_ekf_update(x, P, z, sensors, sd2, st2)
     x_inf, P_inf = information_form_update(x, P, z, sensors, sd2, st2)
@@ -214,7 +214,7 @@ def test_batched_update_is_exactly_symmetric_and_matches_single():
     P = np.stack([random_spd(rng, 6, scale=10.0 ** rng.uniform(-3, 3)) for _ in range(B)])
     sensors = x[:, None, :2] + rng.uniform(-10, 10, (B, m, 2))
     sd2, st2 = np.array([1.0, 2.0, 0.5]), np.array([0.1, 0.01, 0.2])
-    z = measurement.sample(x[:, :2], sensors, sd2, st2, rng)
+    z = sample(x[:, :2], sensors, sd2, st2, rng)
     xb, Pb = ekf.update(x, P, z, sensors, sd2, st2)
     np.testing.assert_array_equal(Pb, np.swapaxes(Pb, -1, -2))
     for b in range(B):
@@ -230,7 +230,7 @@ def test_zero_distance_sensor_contributes_nothing(batched):
     x, P = rng.standard_normal(4) * 3, random_spd(rng, 4, scale=3.0)
     sensors = np.vstack([x[:2] + rng.uniform(-10, 10, (2, 2)), x[:2]])  # sensor 2 on it
     sd2, st2 = np.array([1.0, 2.0, 0.5]), np.array([0.1, 0.2, 0.05])
-    z = measurement.sample(x[:2] + 0.3, sensors, sd2, st2, rng)
+    z = sample(x[:2] + 0.3, sensors, sd2, st2, rng)
     z[2] = [0.7, 1.3]  # whatever it measured
     x_ref, P_ref = textbook_update(x, P, z[:2], sensors[:2], sd2[:2], st2[:2])
     args = (x, P, z, sensors, sd2, st2)
@@ -239,7 +239,7 @@ def test_zero_distance_sensor_contributes_nothing(batched):
         args = (
             np.stack([x, x]),
             np.stack([P, P]),
-            np.stack([z, measurement.sample(x[:2], far, sd2, st2, rng)]),
+            np.stack([z, sample(x[:2], far, sd2, st2, rng)]),
             np.stack([sensors, far]),
             sd2,
             st2,
@@ -285,7 +285,7 @@ def test_update_stays_spd_where_the_expanded_joseph_form_failed():
         x, P = motion.predict(x, P, model.Phi, model.Q)
         np.linalg.cholesky(P)
         x_true = model.sample_next(x_true, rng)
-        z = measurement.sample(x_true[:2], sensors, sd2, st2, rng)
+        z = sample(x_true[:2], sensors, sd2, st2, rng)
         x, P = ekf.update(x, P, z, sensors, sd2, st2)
         np.testing.assert_array_equal(P, P.T)
         np.linalg.cholesky(P)
@@ -302,7 +302,7 @@ def test_near_distance_rule_drops_a_sensor_only_beyond_the_information_bound():
     d_edge = np.sqrt(np.trace(P[:2, :2]) / st2[1] / measurement.INFORMATION_RATIO_MAX)
     for factor, counted in ((1.01, True), (0.99, False)):
         sensors = np.stack([x[:2] + [6.0, -4.0], x[:2] + [0.0, factor * d_edge]])
-        z = measurement.sample(x[:2] + 0.2, sensors, sd2, st2, rng)
+        z = sample(x[:2] + 0.2, sensors, sd2, st2, rng)
         x_new, P_new = ekf.update(x, P, z, sensors, sd2, st2)
         keep = slice(None) if counted else slice(0, 1)
         x_ref, P_ref = textbook_update(x, P, z[keep], sensors[keep], sd2[keep], st2[keep])

@@ -114,7 +114,7 @@ def measure(
     ``target_pos`` (..., 2), ``sensor_pos`` (..., M, 2), ``models`` and ``orientation``
     broadcastable to (..., M). The bearing is wrapped to ``[-pi, pi)`` unless ``wrap=False``.
     """
-    # The same operations as measurement.range_bearing: bit-identical for range-bearing.
+    # One complex difference per sensor: its modulus (hypot) and argument (atan2), eq. (4).
     delta = as_complex(target_pos[..., None, :] - sensor_pos)
     use_d, use_t = uses(models)
     out = np.empty(np.broadcast_shapes(delta.shape, use_d.shape) + (2,))

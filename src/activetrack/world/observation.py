@@ -250,21 +250,6 @@ def layout_of(sc: Scenario) -> Layout:
     )  # fmt: skip
 
 
-def extended_features(
-    x_preds: list[FloatArray],
-    P_preds: list[FloatArray],
-    fixes: FloatArray,
-    constants: FloatArray,
-    dt: float,
-    L: float,
-    detected: np.ndarray | None = None,
-) -> tuple[FloatArray, FloatArray]:
-    """Return the extended layout's target blocks, flattened (..., 7K), and sensor blocks
-    (..., M, 12), or (..., M, 12 + K) with the detection flags ``detected`` (..., K, M),
-    from every target's prediction and the sensors' position fixes."""
-    return features(x_preds, P_preds, fixes, constants, dt, L, True, detected)
-
-
 def features(
     x_preds: list[FloatArray],
     P_preds: list[FloatArray],
