@@ -127,7 +127,25 @@ def test_scenario_records_and_validates_the_new_objective():
     class Shadow(EOptimal):
         name = "trace"
 
-    for bad in (EOptimal, Shadow(), "e_optimal"):
+    class NaNs(EOptimal):
+        name = "nans"
+
+        def of_entries(self, a, b, c):
+            return np.sqrt(a - c)  # NaN where c > a
+
+    class Scalar(EOptimal):
+        name = "scalar"
+
+        def combine(self, values, axis=-1):
+            return np.sum(values)  # over every axis: not one value per configuration
+
+    class Raises(EOptimal):
+        name = "raises"
+
+        def of_entries(self, a, b, c):
+            raise ZeroDivisionError("bug")
+
+    for bad in (EOptimal, Shadow(), "e_optimal", NaNs(), Scalar(), Raises()):
         with pytest.raises(ValueError, match="objective"):
             activetrack.make_scenario("paper", objective=bad)
 

@@ -376,6 +376,7 @@ class Scenario:
                     f"objective {v!r} must have a name of its own (a non-empty string other "
                     f"than {list(OBJECTIVE_NAMES)}), got name {v.name!r}"
                 )
+            _probe_objective(v)
             return v
         if isinstance(v, str) and v in OBJECTIVE_NAMES:
             return v
@@ -824,6 +825,30 @@ TASKS = (
     "two_targets", "range_only", "bearing_only", "mixed", "uncertain_poses", "urban",
     "urban_random",
 )  # fmt: skip
+
+
+def _probe_objective(objective: Objective) -> None:
+    """Raise ValueError naming ``objective`` unless it scores two configurations of two
+    targets (information entries of positive definite matrices) and two covariances as
+    one finite value each: a new objective is checked here, not deep in a planner."""
+    a = np.array([[2.0, 1.0], [1.0, 4.0]])
+    b = np.array([[0.5, 0.0], [-0.2, 1.0]])
+    c = np.array([[1.0, 3.0], [0.5, 1.0]])
+    P = np.array([[[2.0, 0.3], [0.3, 1.0]], [[1.0, 0.0], [0.0, 5.0]]])
+    try:
+        with np.errstate(all="ignore"):  # a non-finite value is reported below
+            got = [
+                np.asarray(objective.of_targets(a, b, c)),
+                np.asarray(objective.of_covariances(P)),
+            ]
+    except Exception as exc:  # a user's code: report it against the field
+        raise ValueError(f"objective {objective!r} failed on a valid input: {exc!r}") from exc
+    for what, value, shape in (("of_targets", got[0], (2,)), ("of_covariances", got[1], ())):
+        if value.shape != shape or not np.all(np.isfinite(value)):
+            raise ValueError(
+                f"objective {objective!r}: {what} must return finite values of shape {shape} "
+                f"on this check's positive definite inputs, got {value!r}"
+            )
 
 
 def _same(a: object, b: object) -> bool:
