@@ -315,7 +315,9 @@ class GBES:
 
         Raises:
             ValueError: the grid searched (:meth:`fitted`) has more than
-                ``max_combinations`` combinations (counted before the grid is built).
+                ``max_combinations`` combinations (counted before the grid is built); with
+                ``prune``, the objective does not declare ``convex`` (the bound needs it),
+                or (K > 1) its ``combine`` is neither a sum nor a max.
         """
         if problem.batch_shape:
             raise ValueError(
@@ -347,6 +349,13 @@ def grid_optimum(
     predicted target (with K targets: the first, ``problem.targets[0]``); the result
     (M, 2) is relative too. Exact over the candidates. ``problem`` is single.
     """
+    if prune and not problem.objective.convex:
+        raise ValueError(
+            f"GBES's branch and bound needs an objective convex in each target's information "
+            f"(its tangent plane a lower bound); objective {problem.objective.name!r} "
+            f"({problem.objective!r}) does not declare convex = True: use prune=False "
+            "(every combination) or another planner"
+        )
     if problem.is_paper:  # the paper's arithmetic, unchanged
         feats = [
             _entries(sensor_information(p, problem.sigma_d2[i], problem.sigma_theta2[i]))

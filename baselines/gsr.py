@@ -42,7 +42,7 @@ from activetrack._jit import as_rows
 from activetrack.baselines import gsr_kernel as gk
 from activetrack.baselines import gsr_restarts
 from activetrack.baselines._common import raise_for_status, sensor_modes, sensor_modes_of
-from activetrack.models.objective import sensor_information
+from activetrack.models.objective import is_trace, sensor_information
 from activetrack.solvers._scalar import NO_ROOTS, ROOTS_SIZE, ROOTS_TAG, solve_point
 from activetrack.validation import FloatArray
 from activetrack.world.problem import PlanningProblem
@@ -210,14 +210,6 @@ class GSR:
     def _plan_numeric(self, problem: PlanningProblem) -> GSRResult | GSRBatchResult:
         """GSR beyond the paper's problem: numerical single-sensor steps
         (:mod:`activetrack.baselines.gsr_numeric`)."""
-        missing = [a for a in ("of_entries", "combine", "of_targets", "tangent")
-                   if not hasattr(problem.objective, a)]  # fmt: skip
-        if missing:
-            raise ValueError(
-                f"GSR's numerical steps need an objective of activetrack.models.objective's form "
-                f"(per-target entries, combined over targets); {problem.objective!r} has no "
-                f"{', '.join(missing)}"
-            )
         if self.restarts:
             raise ValueError(
                 "restarts=True runs the paper's exact solver from several starts; this problem "
@@ -255,7 +247,7 @@ class GSR:
 
 def _check_objective(problem: PlanningProblem) -> None:
     """Raise ValueError unless the problem's objective is the trace (the solver's, eq. 22)."""
-    if problem.objective.name != "trace":
+    if not is_trace(problem.objective):
         raise ValueError(
             f"GSR's exact single-sensor step (Section IV-A) minimizes the trace objective; "
             f"got objective {problem.objective.name!r}"

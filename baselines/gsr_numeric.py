@@ -112,7 +112,9 @@ def relax(
                 totals[e][keep] = base[e][keep] + entries[e][keep].sum(axis=-1)
             value[keep] = problem.objective.of_targets(*(t[keep] for t in totals))
         gain = before - value[rows]
-        scale = np.maximum(np.abs(before), 1.0) if problem.objective.name == "logdet" else before
+        # Relative to the value where it is never negative, else to max(|value|, 1).
+        nonneg = problem.objective.nonnegative
+        scale = before if nonneg else np.maximum(np.abs(before), 1.0)
         active[rows] = (gain > tol * scale) & changed[rows].any(axis=1)
     if det is not None and (occ is not None or np.any(np.isfinite(det[1]))):
         s, value = _approach(problem, s, value, current, r, targets, rho, det, (w_d, w_t, pose),

@@ -2,9 +2,10 @@
 
 The core (this package) holds the paper's mathematics and no RL: target motion models
 (eq. 1-2), the range-bearing measurement model (eq. 4-10), the EKF (eq. 3, 11), the
-covariance objective (eq. 12, 17-19), the analytic single-sensor optimum (Section IV-A),
-the planning problem and scenario presets. The layers ``activetrack.envs``,
-``activetrack.baselines`` and ``activetrack.train`` build on it, in that order.
+covariance objective (eq. 12, 17-19; :class:`Objective`, the base of a new one), the
+analytic single-sensor optimum (Section IV-A), the planning problem and scenario presets.
+The layers ``activetrack.envs``, ``activetrack.baselines`` and ``activetrack.train`` build
+on it, in that order.
 
 Importing this package imports none of those layers, nor Gymnasium or PettingZoo, yet it
 registers the environment ids (``activetrack/ActiveTracking-v0`` and the tasks) with both:
@@ -26,6 +27,13 @@ from activetrack.models.motion import (
     from_matrices,
 )
 from activetrack.models.objective import (
+    LOGDET,
+    TRACE,
+    WORST_TRACE,
+    LogDetObjective,
+    Objective,
+    TraceObjective,
+    WorstTraceObjective,
     lemma2_rotation,
     posterior_position_covariance,
     posterior_trace,
@@ -47,15 +55,22 @@ except _metadata.PackageNotFoundError:  # running from a source tree that was ne
     __version__ = "0+unknown"
 
 __all__ = [
+    "LOGDET",
     "PRESETS",
+    "TRACE",
+    "WORST_TRACE",
     "BatchSolution",
     "SingleSensorSolution",
     "ExtendedKalmanFilter",
     "LinearMotionModel",
+    "LogDetObjective",
+    "Objective",
     "PlanningProblem",
     "Prediction",
     "Planner",
     "Scenario",
+    "TraceObjective",
+    "WorstTraceObjective",
     "constant_acceleration",
     "constant_velocity",
     "from_continuous",

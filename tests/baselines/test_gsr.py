@@ -246,7 +246,7 @@ def test_gsr_keeps_extra_batch_axes_and_restarts_go_copy_by_copy():
         np.testing.assert_array_equal(out[b // 3, b % 3], GSR(restarts=True).plan(p))
 
 
-def test_gsr_refuses_an_objective_it_cannot_solve_exactly():
+def test_an_objective_not_built_on_the_base_is_refused_by_the_problem():
     class LogDet:
         name = "logdet"
 
@@ -254,11 +254,43 @@ def test_gsr_refuses_an_objective_it_cannot_solve_exactly():
             return -np.log(np.linalg.det(Y))
 
     p = random_problem(np.random.default_rng(0), 2)
-    q = PlanningProblem(
-        p.prior_cov, p.target, p.sensors, p.r, p.rho, p.sigma_d2, p.sigma_theta2, objective=LogDet()
-    )
     with pytest.raises(ValueError, match="objective"):
-        GSR().plan(q)
+        PlanningProblem(
+            p.prior_cov, p.target, p.sensors, p.r, p.rho, p.sigma_d2, p.sigma_theta2,
+            objective=LogDet(),
+        )  # fmt: skip
+
+
+def test_gsr_takes_its_exact_step_only_for_the_trace_itself_not_for_its_name():
+    from activetrack.models.objective import TRACE, TraceObjective
+
+    class Named(TraceObjective):  # another objective that calls itself "trace"
+        def of_entries(self, a, b, c):
+            return (0.5 * (a + c) + np.hypot(0.5 * (a - c), b)) / (a * c - b * b)
+
+    class Same(TraceObjective):  # the trace's arithmetic under another class
+        name = "same"
+
+    rng = np.random.default_rng(11)
+    for _ in range(4):
+        p = random_problem(rng, 3)
+        args = (p.prior_cov, p.target, p.sensors, p.r, p.rho, p.sigma_d2, p.sigma_theta2)
+        named = PlanningProblem(*args, objective=Named())
+        assert not named.is_paper
+        res = GSR().plan_with_info(named)
+        # The value is the objective's own: the largest eigenvalue of the posterior,
+        # longhand from the range and bearing Jacobian rows (eq. 9).
+        Y = np.linalg.inv(p.prior_cov)
+        for s, sd2, st2 in zip(res.positions, p.sigma_d2, p.sigma_theta2, strict=True):
+            d = p.target - s
+            n2 = d @ d
+            h_range, h_bearing = d / np.sqrt(n2), np.array([-d[1], d[0]]) / n2
+            Y += np.outer(h_range, h_range) / sd2 + np.outer(h_bearing, h_bearing) / st2
+        assert res.value == pytest.approx(np.linalg.eigvalsh(np.linalg.inv(Y))[-1], rel=1e-10)
+        # Numerical steps on the trace's arithmetic reach the exact solver's value.
+        same = GSR(tol=1e-12).plan_with_info(PlanningProblem(*args, objective=Same()))
+        exact = GSR(tol=1e-12).plan_with_info(PlanningProblem(*args, objective=TRACE))
+        assert same.value == pytest.approx(exact.value, rel=1e-6)
 
 
 def test_gsr_plans_other_objectives_numerically_never_worse_than_its_start():

@@ -134,3 +134,91 @@ def test_trace_objective_tangent_plane_is_a_lower_bound():
         d = Y - Y0
         lin = v0 + ga * d[0, 0] + gb * d[0, 1] + gc * d[1, 1]
         assert lin <= np.trace(np.linalg.inv(Y)) * (1 + 1e-12)
+
+
+# The public base (activetrack.Objective): its derived defaults against longhand ----------
+def _spd_batch(rng, n, count):
+    A = rng.standard_normal((count, n, n))
+    return A @ A.transpose(0, 2, 1) + 0.2 * np.eye(n)
+
+
+def test_base_default_of_covariance_is_each_builtins_closed_form():
+    # The default reads the value at the information P11^{-1}; the built-ins' overrides
+    # read P directly. Both against numpy's trace and log-determinant of the 2x2 block.
+    rng = np.random.default_rng(20)
+    P = _spd_batch(rng, 4, 40)
+    block = P[:, :2, :2]
+    trace = np.trace(block, axis1=-2, axis2=-1)
+    logdet = np.linalg.slogdet(block)[1]
+    for obj, want in ((at.TRACE, trace), (at.WORST_TRACE, trace), (at.LOGDET, logdet)):
+        np.testing.assert_allclose(at.Objective.of_covariance(obj, P), want, rtol=1e-11)
+        np.testing.assert_allclose(obj.of_covariance(P), want, rtol=1e-12)
+
+
+def test_base_combine_of_targets_and_of_covariances_against_longhand():
+    rng = np.random.default_rng(21)
+    P = _spd_batch(rng, 4, 30).reshape(10, 3, 4, 4)  # 10 configurations of K = 3 targets
+    traces = np.trace(P[..., :2, :2], axis1=-2, axis2=-1)
+    np.testing.assert_allclose(at.TRACE.of_covariances(P), traces.sum(-1), rtol=1e-12)
+    np.testing.assert_allclose(at.WORST_TRACE.of_covariances(P), traces.max(-1), rtol=1e-12)
+    Y = np.linalg.inv(P[..., :2, :2])
+    a, b, c = Y[..., 0, 0], Y[..., 0, 1], Y[..., 1, 1]
+    np.testing.assert_allclose(at.TRACE.of_targets(a, b, c), traces.sum(-1), rtol=1e-10)
+    np.testing.assert_allclose(
+        at.LOGDET.of_targets(a, b, c), np.linalg.slogdet(P[..., :2, :2])[1].sum(-1), rtol=1e-10
+    )
+
+
+def test_base_default_tangent_against_the_closed_form_gradients():
+    # d tr(Y^-1) = -tr(Y^-2 dY), d(-log det Y) = -tr(Y^-1 dY); b counts twice (symmetric dY).
+    rng = np.random.default_rng(22)
+    Y = _spd_batch(rng, 2, 60)
+    Y[:20] *= 1e-3  # other scales: the step follows the least eigenvalue
+    Y[20:40] *= 1e3
+    Yi = np.linalg.inv(Y)
+    a, b, c = Y[:, 0, 0], Y[:, 0, 1], Y[:, 1, 1]
+    for obj, G, val in (
+        (at.TRACE, -Yi @ Yi, np.trace(Yi, axis1=-2, axis2=-1)),
+        (at.LOGDET, -Yi, -np.linalg.slogdet(Y)[1]),
+    ):
+        v, ga, gb, gc = at.Objective.tangent(obj, a, b, c)
+        np.testing.assert_allclose(v, val, rtol=1e-12)
+        scale = np.abs(G).max(axis=(-2, -1))
+        for got, want in ((ga, G[:, 0, 0]), (gb, 2 * G[:, 0, 1]), (gc, G[:, 1, 1])):
+            assert np.all(np.abs(got - want) <= 1e-7 * scale)
+        np.testing.assert_allclose(
+            at.Objective.gradient(obj, Y), G, rtol=0, atol=1e-7 * scale.max()
+        )
+
+
+def test_logdet_tangent_plane_is_a_lower_bound():
+    # LOGDET declares convex (GBES's bound relies on it).
+    rng = np.random.default_rng(23)
+    for _ in range(200):
+        Y0, Y = random_spd(rng, 2, 0.1 + 5 * rng.random()), random_spd(rng, 2)
+        v0, ga, gb, gc = at.LOGDET.tangent(Y0[0, 0], Y0[0, 1], Y0[1, 1])
+        d = Y - Y0
+        lin = v0 + ga * d[0, 0] + gb * d[0, 1] + gc * d[1, 1]
+        assert lin <= -np.linalg.slogdet(Y)[1] + 1e-12 * (1 + abs(lin))
+
+
+def test_the_base_is_abstract_and_built_ins_are_its_subclasses():
+    from activetrack.models.objective import as_objective, is_trace
+
+    with pytest.raises(TypeError):
+        at.Objective()
+
+    class NoValue(at.Objective):
+        name = "no_value"
+
+    with pytest.raises(TypeError, match="of_entries"):
+        NoValue()
+    for obj in (at.TRACE, at.WORST_TRACE, at.LOGDET):
+        assert isinstance(obj, at.Objective) and obj.convex
+        assert as_objective(obj.name) is obj and as_objective(obj) is obj
+    assert at.TRACE.nonnegative and at.WORST_TRACE.nonnegative and not at.LOGDET.nonnegative
+    assert is_trace(at.TRACE) and is_trace(at.TraceObjective())
+    assert not is_trace(at.WORST_TRACE) and not is_trace(at.LOGDET)
+    for bad in ("det", None, at.TraceObjective):
+        with pytest.raises(ValueError, match="objective"):
+            as_objective(bad)

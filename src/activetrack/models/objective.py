@@ -9,15 +9,21 @@ Lemma 2 rotates the prior information into its eigenbasis (eq. 18).
 Every function is vectorized over a leading batch axis of relative positions
 (shape (..., M, 2)): exhaustive search evaluates millions of candidate configurations.
 
-:class:`TraceObjective` (:data:`TRACE`) is the objective as one piece: the function of the
-total information ``Y`` (eq. 12, 17) that every planner calls to score a candidate
-configuration, through :attr:`activetrack.world.problem.PlanningProblem.objective`. Another
-objective (a sum over targets, ``log det``) plugs in there as another object with the
-same methods; planners that rely on the form of ``tr(Y^{-1})`` (GSR's exact single-sensor
-step of Section IV-A) check its ``name``.
+:class:`Objective` is the objective as one piece, the public base every planner calls
+(through :attr:`activetrack.world.problem.PlanningProblem.objective`) to score a candidate
+configuration, and the world calls for its score and reward: a function of each target's
+total information ``Y`` (eq. 12, 17), combined over the targets. :class:`TraceObjective`
+(:data:`TRACE`, the paper's), :class:`WorstTraceObjective` and :class:`LogDetObjective` are
+its built-in subclasses. A new objective subclasses :class:`Objective` in any module,
+defines :meth:`Objective.of_entries` and a ``name``, and is passed as ``objective=`` to
+:func:`activetrack.make_scenario` (or to a :class:`~activetrack.PlanningProblem`).
+Planners that rely on the form of ``tr(Y^{-1})`` (GSR's exact single-sensor step of
+Section IV-A) apply only to :class:`TraceObjective` itself (:func:`is_trace`).
 """
 
 from __future__ import annotations
+
+import abc
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -76,18 +82,53 @@ def total_information(
     return prior_info + sensor_information(rel, sigma_d2, sigma_theta2).sum(axis=-3)
 
 
-class TraceObjective:
-    """The objective of eq. (17), ``phi(Y) = tr(Y^{-1})``, of the total information ``Y``.
+#: Central-difference step of :meth:`Objective.tangent`'s default, relative to the least
+#: eigenvalue of ``Y``: ``eps^(1/3)`` balances truncation (``h^2``) and rounding
+#: (``eps / h``) errors, both then ``~eps^(2/3)`` (``~4e-11``) relative.
+TANGENT_STEP = float(np.finfo(np.float64).eps ** (1.0 / 3.0))
 
-    ``Y = P11^{-1} + sum_i info_i`` is 2x2 symmetric positive definite. Methods take
-    either the matrices (..., 2, 2) or their independent entries ``a = Y11``, ``b = Y12``,
-    ``c = Y22`` (arrays of any broadcastable shapes): exhaustive search adds the entries of
-    per-sensor candidates by broadcasting and never forms matrices. ``phi`` is convex on
-    positive definite matrices, so its tangent plane (:meth:`tangent`) is a lower bound
-    everywhere (GBES's branch and bound relies on that).
+
+class Objective(abc.ABC):
+    """The score of a configuration: a function ``phi_k(Y_k)`` of each target's total
+    position information ``Y_k = P11_k^{-1} + sum_i info_ik`` (2x2 symmetric positive
+    definite, eq. 12, 17), combined over the K targets (:meth:`combine`). Planners minimize
+    it; the world's score is it at the posterior, and its reward minus that.
+
+    A subclass implements :meth:`of_entries` (one target's value from the entries
+    ``a = Y11``, ``b = Y12``, ``c = Y22``, elementwise over arrays of any broadcastable
+    shapes, as numpy's operators are) and sets the class attribute ``name``. Everything
+    else has a default derived from it, which a subclass may override with a closed form:
+
+    - :meth:`combine`: the sum over targets (a maximum, ``np.max``, is the other form GBES
+      bounds);
+    - :meth:`of_covariance`: :meth:`of_entries` of the information ``P11^{-1}``;
+    - :meth:`tangent`: the value and central differences of :meth:`of_entries` in
+      ``(a, b, c)`` with the step ``TANGENT_STEP`` times the least eigenvalue of ``Y``
+      (which keeps the stencil positive definite; relative error ``~1e-10``);
+    - :meth:`of_targets`, :meth:`of_covariances`, :meth:`of_information`,
+      :meth:`gradient`: from the above.
+
+    Two class attributes declare properties planners may rely on (declare them only when
+    true): ``convex`` (each ``phi_k`` is convex in ``Y_k`` on positive definite matrices,
+    so its tangent plane is a lower bound everywhere: GBES's branch and bound refuses an
+    objective without it) and ``nonnegative`` (values are never negative: GSR's relative
+    stopping tolerance is then taken on the value itself, otherwise on ``max(|f|, 1)``).
     """
 
-    name = "trace"
+    #: Whether each target's value is convex in its information ``Y`` (see the class doc).
+    convex: bool = False
+    #: Whether every value is >= 0 (see the class doc).
+    nonnegative: bool = False
+
+    @property
+    def name(self) -> str:
+        """Return the objective's name (scenario records, messages): a subclass sets the
+        class attribute ``name``; without one, its class name."""
+        return type(self).__name__
+
+    @abc.abstractmethod
+    def of_entries(self, a: FloatArray, b: FloatArray, c: FloatArray) -> FloatArray:
+        """Return one target's value at ``Y = [[a, b], [b, c]]`` (elementwise, broadcast)."""
 
     def combine(self, values: FloatArray, axis: int = -1) -> FloatArray:
         """Return the per-target values (the ``axis`` over targets) combined: their sum."""
@@ -101,16 +142,77 @@ class TraceObjective:
         """Return the objective of K targets' position covariances (..., K, n, n): (...)."""
         return self.combine(self.of_covariance(P))
 
-    def of_entries(self, a: FloatArray, b: FloatArray, c: FloatArray) -> FloatArray:
-        """Return ``tr([[a, b], [b, c]]^{-1}) = (a + c) / (ac - b^2)``."""
-        return trace_of_inverse.py_func(a, b, c)
-
     def of_information(self, Y: FloatArray) -> FloatArray:
-        """Return ``tr(Y^{-1})`` for total information matrices ``Y`` (..., 2, 2) (eq. 12, 17).
+        """Return one target's value at total information matrices ``Y`` (..., 2, 2).
 
         Reads ``Y[..., 0, 1]`` as the off-diagonal entry (``Y`` is symmetric).
         """
         return self.of_entries(Y[..., 0, 0], Y[..., 0, 1], Y[..., 1, 1])
+
+    def of_covariance(self, P: FloatArray) -> FloatArray:
+        """Return one target's value at position covariances: :meth:`of_entries` of the
+        information ``P11^{-1}``.
+
+        ``P`` (..., n, n) is ``P11`` itself (n = 2) or a whole state covariance whose
+        top-left 2x2 block is the position's; ``P[..., 0, 1]`` is read as its off-diagonal.
+        """
+        p, q, s = P[..., 0, 0], P[..., 0, 1], P[..., 1, 1]
+        det = p * s - q * q
+        return self.of_entries(s / det, -q / det, p / det)
+
+    def tangent(
+        self, a: FloatArray, b: FloatArray, c: FloatArray
+    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        """Return ``(phi, ga, gb, gc)`` at ``Y = [[a, b], [b, c]]``: value and entry gradient.
+
+        ``phi(Y + dY) ~ phi + ga da + gb db + gc dc`` for ``dY = [[da, db], [db, dc]]``
+        (``gb`` is the derivative in ``b``, which stands in both off-diagonal places). This
+        default: central differences of :meth:`of_entries` (see the class doc), all seven
+        points in one call.
+        """
+        a, b, c = np.broadcast_arrays(*(np.asarray(x, dtype=np.float64) for x in (a, b, c)))
+        lam_max = 0.5 * (a + c) + np.hypot(0.5 * (a - c), b)
+        # The least eigenvalue from the determinant: a perturbation of the entries by h moves
+        # the eigenvalues by at most h, so Y stays positive definite at every stencil point.
+        h = TANGENT_STEP * ((a * c - b * b) / lam_max)
+        z = np.zeros_like(h)
+        v = self.of_entries(
+            a + np.stack([z, h, -h, z, z, z, z]),
+            b + np.stack([z, z, z, h, -h, z, z]),
+            c + np.stack([z, z, z, z, z, h, -h]),
+        )
+        two_h = 2.0 * h
+        return v[0], (v[1] - v[2]) / two_h, (v[3] - v[4]) / two_h, (v[5] - v[6]) / two_h
+
+    def gradient(self, Y: FloatArray) -> FloatArray:
+        """Return ``d phi / dY`` (symmetric, (..., 2, 2)) for symmetric ``Y`` (..., 2, 2):
+        ``[[ga, gb / 2], [gb / 2, gc]]`` of :meth:`tangent`."""
+        _, ga, gb, gc = self.tangent(Y[..., 0, 0], Y[..., 0, 1], Y[..., 1, 1])
+        half = 0.5 * gb
+        return np.stack([np.stack([ga, half], -1), np.stack([half, gc], -1)], -2)
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}()"
+
+
+class TraceObjective(Objective):
+    """The objective of eq. (17), ``phi(Y) = tr(Y^{-1})``, of the total information ``Y``.
+
+    ``Y = P11^{-1} + sum_i info_i`` is 2x2 symmetric positive definite. Methods take
+    either the matrices (..., 2, 2) or their independent entries ``a = Y11``, ``b = Y12``,
+    ``c = Y22`` (arrays of any broadcastable shapes): exhaustive search adds the entries of
+    per-sensor candidates by broadcasting and never forms matrices. ``phi`` is convex on
+    positive definite matrices, so its tangent plane (:meth:`tangent`) is a lower bound
+    everywhere (GBES's branch and bound relies on that).
+    """
+
+    name = "trace"
+    convex = True
+    nonnegative = True
+
+    def of_entries(self, a: FloatArray, b: FloatArray, c: FloatArray) -> FloatArray:
+        """Return ``tr([[a, b], [b, c]]^{-1}) = (a + c) / (ac - b^2)``."""
+        return trace_of_inverse.py_func(a, b, c)
 
     def of_covariance(self, P: FloatArray) -> FloatArray:
         """Return the objective of position covariances: the trace of ``P11``.
@@ -133,12 +235,6 @@ class TraceObjective:
         # Y^{-1} = [[c, -b], [-b, a]] / det; the gradient is minus its square.
         p, q, s = c / det, -b / det, a / det
         return (a + c) / det, -(p * p + q * q), -2.0 * q * (p + s), -(s * s + q * q)
-
-    def gradient(self, Y: FloatArray) -> FloatArray:
-        """Return ``d tr(Y^{-1}) / dY = -Y^{-2}`` for symmetric ``Y`` (..., 2, 2)."""
-        _, ga, gb, gc = self.tangent(Y[..., 0, 0], Y[..., 0, 1], Y[..., 1, 1])
-        half = 0.5 * gb
-        return np.stack([np.stack([ga, half], -1), np.stack([half, gc], -1)], -2)
 
     def __repr__(self) -> str:
         return "TRACE"
@@ -174,6 +270,7 @@ class LogDetObjective(TraceObjective):
     """
 
     name = "logdet"
+    nonnegative = False
 
     def of_entries(self, a: FloatArray, b: FloatArray, c: FloatArray) -> FloatArray:
         """Return ``-log det([[a, b], [b, c]]) = -log(ac - b^2)``."""
@@ -199,7 +296,30 @@ WORST_TRACE = WorstTraceObjective()
 #: The sum of the targets' log-determinants.
 LOGDET = LogDetObjective()
 #: The objectives by name (:attr:`activetrack.Scenario.objective`).
-OBJECTIVES: dict[str, TraceObjective] = {o.name: o for o in (TRACE, WORST_TRACE, LOGDET)}
+OBJECTIVES: dict[str, Objective] = {o.name: o for o in (TRACE, WORST_TRACE, LOGDET)}
+
+
+def is_trace(objective: Objective) -> bool:
+    """Return whether ``objective`` is the paper's trace itself (a :class:`TraceObjective`,
+    not a subclass, which may change any method): Section IV-A's exact solve applies."""
+    return type(objective) is TraceObjective
+
+
+def as_objective(value: object, field: str = "objective") -> Objective:
+    """Return ``value`` as an :class:`Objective`: a name of :data:`OBJECTIVES` or an instance.
+
+    Raises:
+        ValueError: naming ``field``, for anything else (a class rather than an instance
+            included).
+    """
+    if isinstance(value, Objective):
+        return value
+    if isinstance(value, str) and value in OBJECTIVES:
+        return OBJECTIVES[value]
+    raise ValueError(
+        f"{field} must be one of {list(OBJECTIVES)} or an activetrack.Objective instance, "
+        f"got {value!r}"
+    )
 
 
 def _check(prior_cov: ArrayLike, rel: ArrayLike, sigma_d2: ArrayLike, sigma_theta2: ArrayLike):

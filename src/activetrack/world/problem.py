@@ -36,7 +36,7 @@ from numpy.typing import ArrayLike
 
 from activetrack.linalg2 import inv2
 from activetrack.models import sensor_models
-from activetrack.models.objective import TRACE, TraceObjective, total_information
+from activetrack.models.objective import TRACE, Objective, is_trace, total_information
 from activetrack.solvers._inputs import MAX_SCALE, MIN_SCALE
 from activetrack.validation import FloatArray, as_finite, positive, psd, real_array, spd
 
@@ -179,8 +179,9 @@ class PlanningProblem:
         rho: per-sensor minimum distance to the predicted target, (..., M).
         sigma_d2: range noise variances, (..., M), in :data:`SCALE_RANGE`.
         sigma_theta2: bearing noise variances, (..., M), in :data:`SCALE_RANGE`.
-        objective: the function of the total information that planners minimize
-            (:data:`activetrack.models.objective.TRACE`, eq. 17).
+        objective: the function of the total information that planners minimize, an
+            :class:`activetrack.Objective` (:data:`activetrack.models.objective.TRACE`,
+            eq. 17, by default).
         prediction: the filter's full :class:`Prediction` (``None``: not known), stored
             broadcast to the batch shape. With a prediction, ``prior_cov`` and ``target``
             are its position blocks ``cov[..., :2, :2]`` and ``mean[..., :2]``: ``None``
@@ -209,7 +210,7 @@ class PlanningProblem:
     rho: FloatArray
     sigma_d2: FloatArray
     sigma_theta2: FloatArray
-    objective: TraceObjective = TRACE
+    objective: Objective = TRACE
     prediction: Prediction | tuple[Prediction, ...] | None = None
     models: np.ndarray | None = None
     pose_cov: FloatArray | None = None
@@ -288,10 +289,10 @@ class PlanningProblem:
             for k, q in enumerate(pred if multi else (pred,)):
                 batch_of[f"prediction[{k}]" if multi else "prediction"] = q.batch_shape
         batch = _broadcast(batch_of)
-        if not all(hasattr(self.objective, a) for a in ("name", "of_information")):
+        if not isinstance(self.objective, Objective):
             raise ValueError(
-                f"objective must be an objective such as activetrack.models.objective.TRACE, "
-                f"got {self.objective!r}"
+                f"objective must be an activetrack.Objective instance (such as "
+                f"activetrack.TRACE), got {self.objective!r}"
             )
         if self.models is not None:
             codes = sensor_models.SensorTeam(self.models, 1.0, 1.0).models
@@ -413,7 +414,7 @@ class PlanningProblem:
         rho: ArrayLike,
         sigma_d2: ArrayLike,
         sigma_theta2: ArrayLike,
-        objective: TraceObjective = TRACE,
+        objective: Objective = TRACE,
         models: ArrayLike | None = None,
         pose_cov: ArrayLike | None = None,
         p_detect: ArrayLike | None = None,
@@ -526,7 +527,7 @@ class PlanningProblem:
             not self.multi_target
             and (self.models is None or not np.any(self.models))
             and self.pose_cov is None
-            and self.objective.name == "trace"
+            and is_trace(self.objective)
             and self.p_detect is None
             and self.max_range is None
             and self.occluders is None

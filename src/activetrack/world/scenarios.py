@@ -16,6 +16,7 @@ import numpy as np
 
 from activetrack.models.measurement import INFORMATION_RATIO_MAX as _INFORMATION_RATIO_MAX
 from activetrack.models.motion import MODELS, LinearMotionModel, make_model
+from activetrack.models.objective import OBJECTIVES, Objective
 from activetrack.validation import FloatArray, UnexpectedKeywordError, real_array, spd
 
 #: Accepted ranges (SI units). Chosen so that every quantity the EKF (eq. 3, 11), the
@@ -152,8 +153,10 @@ class Scenario:
             measurement noise (``R + H_s Sigma H_s^T``); False gives a filter that
             ignores it (for studies of that error).
         objective: ``"trace"`` (sum of the targets' posterior position traces, eq. 17),
-            ``"worst_trace"`` (the largest) or ``"logdet"`` (sum of log-determinants);
-            the reward is minus it at the posterior.
+            ``"worst_trace"`` (the largest) or ``"logdet"`` (sum of log-determinants),
+            or an :class:`activetrack.Objective` instance (a new objective: a subclass with
+            a ``name`` of its own); the reward is minus it at the posterior. A built-in
+            objective's instance (``activetrack.TRACE``...) is stored as its name.
         max_range: per-sensor sensing range (m) [1e-6, 1e9], or None (unlimited, the
             paper): a sensor farther than it from a target does not measure it that step.
         p_detect: per-sensor detection probability within range [0, 1] (1, the paper): each
@@ -207,7 +210,7 @@ class Scenario:
     sensor_model: str | tuple[str, ...] = "range_bearing"
     pose_cov: float | tuple = 0.0
     account_pose: bool = True
-    objective: str = "trace"
+    objective: str | Objective = "trace"
     max_range: float | tuple[float, ...] | None = None
     p_detect: float | tuple[float, ...] = 1.0
     occluders: tuple = ()
@@ -240,10 +243,7 @@ class Scenario:
             put("q", _vector("q", self.q, kk, 0.0, Q_MAX, zero=True, why=" (one per target)"))
         else:
             put("q", _real("q", self.q, 0.0, Q_MAX, zero=True))
-        if not isinstance(self.objective, str) or self.objective not in OBJECTIVE_NAMES:
-            raise ValueError(
-                f"objective must be one of {list(OBJECTIVE_NAMES)}, got {self.objective!r}"
-            )
+        put("objective", self._converted_objective())
         if not isinstance(self.account_pose, (bool, np.bool_)):
             raise ValueError(f"account_pose must be True or False, got {self.account_pose!r}")
         put("account_pose", bool(self.account_pose))
@@ -371,6 +371,28 @@ class Scenario:
                     "occluder_size or sensor_radius"
                 )
         return Occluders._stack_simple(vertices, counts)
+
+    def _converted_objective(self) -> str | Objective:
+        """Return ``objective`` checked: a built-in's name (its instance too), or a new
+        objective's instance (its own ``name``, a non-empty string, not a built-in's)."""
+        v = self.objective
+        if isinstance(v, Objective):
+            builtin = OBJECTIVES.get(v.name) if isinstance(v.name, str) else None
+            if builtin is not None and type(v) is type(builtin):
+                return v.name
+            if not isinstance(v.name, str) or not v.name or builtin is not None:
+                raise ValueError(
+                    f"objective {v!r} must have a name of its own (a non-empty string other "
+                    f"than {list(OBJECTIVE_NAMES)}), got name {v.name!r}"
+                )
+            _probe_objective(v)
+            return v
+        if isinstance(v, str) and v in OBJECTIVE_NAMES:
+            return v
+        raise ValueError(
+            f"objective must be one of {list(OBJECTIVE_NAMES)} or an activetrack.Objective "
+            f"instance, got {v!r}"
+        )
 
     def _converted_motion(self, kk: int) -> Any:
         """Return ``motion`` checked: one model, or (K > 1) a tuple of K models."""
@@ -667,7 +689,8 @@ class Scenario:
         return make_scenario(self, **overrides)
 
     def to_dict(self) -> dict[str, Any]:
-        """Return the fields as JSON-friendly values (a custom motion model by name).
+        """Return the fields as JSON-friendly values (a custom motion model by name, a new
+        objective as ``{"name": its name, "class": "module.QualifiedName"}``).
 
         The fields beyond the paper's (:data:`EXTENSIONS`) appear only when they differ
         from their defaults, so a paper-like scenario's record is what it always was.
@@ -681,6 +704,9 @@ class Scenario:
                 continue
             if isinstance(v, tuple) and any(isinstance(e, LinearMotionModel) for e in v):
                 v = tuple(e.name if isinstance(e, LinearMotionModel) else e for e in v)
+            if isinstance(v, Objective):  # a record of which objective, not its code
+                cls = type(v)
+                v = {"name": v.name, "class": f"{cls.__module__}.{cls.__qualname__}"}
             out[f.name] = v.name if isinstance(v, LinearMotionModel) else v
         return out
 
@@ -808,6 +834,30 @@ TASKS = (
     "two_targets", "range_only", "bearing_only", "mixed", "uncertain_poses", "urban",
     "urban_random",
 )  # fmt: skip
+
+
+def _probe_objective(objective: Objective) -> None:
+    """Raise ValueError naming ``objective`` unless it scores two configurations of two
+    targets (information entries of positive definite matrices) and two covariances as
+    one finite value each: a new objective is checked here, not deep in a planner."""
+    a = np.array([[2.0, 1.0], [1.0, 4.0]])
+    b = np.array([[0.5, 0.0], [-0.2, 1.0]])
+    c = np.array([[1.0, 3.0], [0.5, 1.0]])
+    P = np.array([[[2.0, 0.3], [0.3, 1.0]], [[1.0, 0.0], [0.0, 5.0]]])
+    try:
+        with np.errstate(all="ignore"):  # a non-finite value is reported below
+            got = [
+                np.asarray(objective.of_targets(a, b, c)),
+                np.asarray(objective.of_covariances(P)),
+            ]
+    except Exception as exc:  # a user's code: report it against the field
+        raise ValueError(f"objective {objective!r} failed on a valid input: {exc!r}") from exc
+    for what, value, shape in (("of_targets", got[0], (2,)), ("of_covariances", got[1], ())):
+        if value.shape != shape or not np.all(np.isfinite(value)):
+            raise ValueError(
+                f"objective {objective!r}: {what} must return finite values of shape {shape} "
+                f"on this check's positive definite inputs, got {value!r}"
+            )
 
 
 def _same(a: object, b: object) -> bool:

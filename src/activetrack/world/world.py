@@ -56,7 +56,7 @@ from activetrack._jit import as_rows
 from activetrack.estimation.ekf import position_nees
 from activetrack.kinematics import sensor_motion
 from activetrack.models.motion import predict, psd_factor
-from activetrack.models.objective import OBJECTIVES, TRACE
+from activetrack.models.objective import TRACE, as_objective
 from activetrack.validation import FloatArray, as_generator, check_int
 from activetrack.world import _loop_kernels as loop_kernels
 from activetrack.world import _observation_kernels as observation_kernels
@@ -172,7 +172,7 @@ class World:
         self._max_trace = np.inf if sc.max_trace is None else float(sc.max_trace)
         self._scale = float(sc.reward_scale)
         #: The score of a configuration (eq. 12, 17); the reward is minus it at the posterior.
-        self.objective = OBJECTIVES[sc.objective]
+        self.objective = as_objective(sc.objective)  # a name, or a new objective itself
         # The trace objective (the paper's; with K targets their sum): the score is the trace.
         self._plain = self.objective is TRACE
         self._pose = p.pose_cov is not None
