@@ -145,9 +145,11 @@ class World:
         self._scale = float(sc.reward_scale)
         #: The score of a configuration (eq. 12, 17); the reward is minus it at the posterior.
         self.objective = OBJECTIVES[sc.objective]
+        #: Which fast paths apply (:class:`activetrack.world.capabilities.Capabilities`).
+        self.capabilities = caps = sc.capabilities
         # The trace objective (the paper's; with K targets their sum): the score is the trace.
-        self._plain = self.objective is TRACE
-        self._pose = p.pose_cov is not None
+        self._plain = caps.trace_objective
+        self._pose = not caps.known_poses
         if self._pose:  # a square root of each sensor's (PSD) fix covariance
             self._pose_factor = psd_factor(p.pose_cov)
         self._dt = float(sc.dt)
@@ -169,13 +171,13 @@ class World:
         self._meas_slice = slice(int(proc[-1]), end)
         # The detection draws (p_detect < 1), M per target, last.
         self._detect_slice = slice(p.n_noise - m * K, p.n_noise)
-        self._limited = sc.limited_sensing
+        self._limited = not caps.unlimited_sensing
         # One target, known sensor positions, every sensor measures, no occluders: the whole
         # step is one compiled call (activetrack.world._loop_kernels.advance_rows).
-        self._fused = (
-            K == 1 and not self._limited and p.filter_iterations == 1 and not self._pose
-            and p.occluders is None and sc.random_occluders == 0
-        )  # fmt: skip
+        self._fused = caps.fused_step
+        # One target, every sensor measures, the EKF of eq. (11): the advance is one call per
+        # step (activetrack.world.tracking.advance_target), else stage by stage.
+        self._per_target = caps.per_target_update
         if self._fused:  # the kernel's constants: the sensors' table, the target's matrices
             t0 = p.targets[0]
             table = np.empty((m, loop_kernels.TABLE_COLUMNS))
@@ -802,7 +804,7 @@ class World:
             )
         else:
             sensors = fixes = moved
-        general = K > 1 or self._limited or p.filter_iterations > 1
+        general = not self._per_target
         detected = None
         if general:  # every target moves, then all are measured in one call
             moved_t = [
