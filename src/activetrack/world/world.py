@@ -52,15 +52,12 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from activetrack._jit import as_rows
 from activetrack.estimation.ekf import position_nees
 from activetrack.kinematics import sensor_motion
 from activetrack.models.motion import predict, psd_factor
 from activetrack.models.objective import OBJECTIVES, TRACE
 from activetrack.validation import FloatArray, as_generator, check_int
-from activetrack.world import _loop_kernels as loop_kernels
-from activetrack.world import _observation_kernels as observation_kernels
-from activetrack.world import observation, tracking
+from activetrack.world import _fast, observation, tracking
 from activetrack.world.problem import PlanningProblem, Prediction
 from activetrack.world.scenarios import Scenario, make_scenario
 
@@ -178,17 +175,6 @@ class World:
         # One target, every sensor measures, the EKF of eq. (11): the advance is one call per
         # step (activetrack.world.tracking.advance_target), else stage by stage.
         self._per_target = caps.per_target_update
-        if self._fused:  # the kernel's constants: the sensors' table, the target's matrices
-            t0 = p.targets[0]
-            table = np.empty((m, loop_kernels.TABLE_COLUMNS))
-            table[:, loop_kernels.R], table[:, loop_kernels.RHO] = p.r, p.rho
-            table[:, loop_kernels.ORIENTATION] = p.orientation
-            table[:, loop_kernels.STD_D : loop_kernels.STD_T + 1] = p.noise_std
-            table[:, loop_kernels.USE_D : loop_kernels.USE_T + 1] = p.uses
-            table[:, loop_kernels.W_D], table[:, loop_kernels.W_T] = p.weights
-            self._fused_args = (table, np.stack([t0.Phi, t0.noise_factor, t0.Q]))
-            n0 = t0.dim  # one copy's work arrays: P Phi^T, the measurements, all sensors
-            self._fused_work = (np.empty((n0, n0)), np.empty((m, 2)), np.ones(m, bool))
         if N > 1:  # the step's normals are (copies, n_noise) then; one copy's are (n_noise,)
             self._noise_slices = [
                 ((slice(None), a), (slice(None), b)) for a, b in self._noise_slices
@@ -211,13 +197,8 @@ class World:
         self._order = observation.cyclic_order(m)
         self._obs_shape = (m, self.layout.obs_dim)
         self._obs_cache: np.ndarray | None = None  # the observation a one-copy step made
-        if self._fused:  # the observation kernels' constant arguments
-            constants = np.ascontiguousarray(self._constants, np.float64)
-            td = observation.EXT_TARGET_DIM * K if self._extended else observation.TARGET_DIM
-            self._obs_args = (constants, float(self._dt), float(self.length_scale),
-                              self._extended)  # fmt: skip
-            self._obs_work = (np.zeros((1, m), bool), np.empty(td),
-                              np.empty((m, 2 + constants.shape[1])), self._order)  # fmt: skip
+        if self._fused:  # the compiled step's and observation's constant arguments
+            _fast.prepare(self)
 
         self._rngs: list[np.random.Generator | None] = [None] * N
         self._noise = (
@@ -574,7 +555,7 @@ class World:
         if self._one and self._fused:  # the single env: the short way
             if live is not None and self._select(live) is None:
                 return None
-            return self._step_one(absolute, moves, name)
+            return StepResult(*_fast.step_one(self, absolute, moves, name))
         sel = 0 if live is None and self._one else self._select(live)
         if sel is None:
             return None
@@ -592,7 +573,7 @@ class World:
         calc = slice(None) if partial else sel
         if self._fused:
             noise = self._noise_of(sel, partial)
-            sensors, projected, target = self._advance_fused(mv, absolute, noise, calc)
+            sensors, projected, target = _fast.advance_fused(self, mv, absolute, noise, calc)
             fixes, detected, results = sensors, None, [target]
             trace = target[-1][sel] if partial else target[-1]
         else:
@@ -633,7 +614,7 @@ class World:
         if detected is not None:
             new["detected"] = detected
         if self._one:
-            truncated = self._store_one(new, bool(np.count_nonzero(projected)))
+            truncated = _fast.store_one(self, new, bool(np.count_nonzero(projected)))
         else:
             k = st["k"][sel] + 1
             truncated = k >= self.episode_steps
@@ -687,52 +668,6 @@ class World:
             " before stepping"
         )
 
-    def _step_one(self, absolute: bool, moves: Any, name: str) -> StepResult:
-        """:meth:`_step` of a fused world of one copy: one compiled call
-        (:func:`activetrack.world._loop_kernels.advance_observe_row`) on its unbatched arrays,
-        which also makes the observation :meth:`observe` returns next."""
-        st, t = self._s, self._t[0]
-        if st["ended"]:
-            self._not_running(0)
-        moves = self._moves_array(moves, name, 0)
-        sensors, x_true, P_pred = st["sensors"], t["x_true"], t["P_pred"]
-        noise = self._noise_of(0, False)
-        new_sensors, projected = np.empty(sensors.shape), np.empty(sensors.shape[0], bool)
-        x_next_true, x_post, x_pred = (
-            np.empty(x_true.shape),
-            np.empty(x_true.shape),
-            np.empty(x_true.shape),
-        )
-        P_post, P_next = np.empty(P_pred.shape), np.empty(P_pred.shape)
-        obs = np.empty(self._obs_shape, np.float32)
-        trace, count = loop_kernels.advance_observe_row.dispatcher(  # (no wrapper call)
-            moves, absolute, sensors, x_true, t["x_pred"], P_pred, noise, *self._fused_args,
-            new_sensors, projected, x_next_true, x_post, P_post, x_pred, P_next,
-            *self._fused_work, *self._obs_args, *self._obs_work, obs,
-        )  # fmt: skip
-        self._obs_cache = obs
-        t["x_true"], t["x_hat"], t["P"], t["x_pred"], t["P_pred"] = (
-            x_next_true, x_post, P_post, x_pred, P_next)  # fmt: skip
-        trace = np.float64(trace)
-        score = trace if self._plain else self.objective.combine(
-            np.stack([self.objective.of_covariance(P_post)], -1)
-        )  # fmt: skip
-        terminated = trace > self._max_trace
-        new = {"sensors": new_sensors, "fixes": new_sensors, "projected": projected,
-               "trace": trace, "score": score, "terminated": terminated}  # fmt: skip
-        return StepResult(-self._scale * score, terminated, self._store_one(new, count > 0))
-
-    def _store_one(self, new: dict[str, Any], projected: bool) -> bool:
-        """Store a step's results ``new`` in a world of one copy (``projected``: whether a
-        move was pushed out of a ``rho`` disk); return ``truncated``."""
-        st = self._s
-        k = st["k"] + 1
-        truncated = k >= self.episode_steps
-        if projected:
-            st["n_projected"] = st["n_projected"] + new["projected"]
-        st.update(new, k=k, truncated=truncated, ended=bool(new["terminated"]) or truncated)
-        return truncated
-
     def _noise_of(self, sel: _Selection, partial: bool) -> FloatArray:
         """Return the step's standard normals of the copies ``sel`` (all copies' rows, zero
         for those not stepping, when ``partial``)."""
@@ -744,31 +679,6 @@ class World:
             full[sel] = noise
             noise = full
         return noise
-
-    def _advance_fused(
-        self, moves: FloatArray, absolute: bool, noise: FloatArray, calc: _Selection
-    ) -> tuple[FloatArray, np.ndarray, tuple[Any, ...]]:
-        """Return ``(sensors, projected, (x_true, x_post, P_post, x_pred, P_pred, trace))``
-        of one compiled step (:func:`activetrack.world._loop_kernels.advance_rows`) of the copies
-        ``calc`` of a batched world (one target, known sensor positions, every sensor
-        measures)."""
-        st, t = self._s, self._t[0]
-        sensors, x_true = st["sensors"][calc], t["x_true"][calc]
-        x_pred, P_pred = t["x_pred"][calc], t["P_pred"][calc]
-        n, m = x_true.shape[-1], self.n_sensors
-        batch = x_true.shape[:-1]
-        out = (
-            np.empty(sensors.shape), np.empty(sensors.shape[:-1], bool), np.empty(x_true.shape),
-            np.empty(x_true.shape), np.empty(P_pred.shape), np.empty(x_true.shape),
-            np.empty(P_pred.shape), np.empty(batch),
-        )  # fmt: skip
-        loop_kernels.advance_rows(  # (its count of projected moves: the caller's rows only)
-            as_rows(moves, batch, (m, 2)), absolute, as_rows(sensors, batch, (m, 2)),
-            as_rows(x_true, batch, (n,)), as_rows(x_pred, batch, (n,)),
-            as_rows(P_pred, batch, (n, n)), as_rows(noise, batch, (self._n_noise,)),
-            *self._fused_args, *out,
-        )  # fmt: skip
-        return out[0], out[1], out[2:]
 
     def _advance(
         self, move: Any, moves: FloatArray, sel: _Selection, calc: _Selection
@@ -911,31 +821,12 @@ class World:
         """
         rays = self.layout.rays
         if self._one and self._fused and (index is None or (type(index) is int and index == 0)):
-            return self._observe_one()[None] if index is None else self._observe_one()
+            return _fast.observe_one(self)[None] if index is None else _fast.observe_one(self)
         out = observation.encode(*self._feature_args(index), self._order, rays)
         if rays:  # written straight into the observation (float32): no float64 temporary
             observation.ray_readings(
                 self.get("sensors", index), self.occluders(index), out[..., -rays:]
             )
-        return out
-
-    def _observe_one(self) -> np.ndarray:
-        """:meth:`observe` of a fused world of one copy: the observation its last step made,
-        or the kernel's (:func:`activetrack.world._observation_kernels.features_row`,
-        ``windows_row``) on views of the world's own arrays, unchecked."""
-        out = self._obs_cache
-        if out is not None:  # handed out once: a second call makes a new array
-            self._obs_cache = None
-            return out
-        t = self._t[0]
-        x, P = t["x_pred"], t["P_pred"]
-        n, (m, d) = x.shape[0], self._obs_shape
-        detected, target, sensor, order = self._obs_work
-        out = np.empty((m, d), np.float32)
-        observation_kernels.observe_rows.dispatcher(
-            x.reshape(1, 1, n), P.reshape(1, 1, n, n), self._s["sensors"].reshape(1, m, 2),
-            *self._obs_args, detected.reshape(1, 1, m), 0, order, out.reshape(1, m, d),
-        )  # fmt: skip
         return out
 
     def state(self, index: int | None = None) -> np.ndarray:
