@@ -214,6 +214,9 @@ class World:
         # One copy keeps its state unbatched (Python numbers for the counters): a step then
         # stores by rebinding, with no NumPy indexing, which costs microseconds per call.
         self._one = N == 1
+        # What a step computes: every copy (a subset is computed with all, see _step); with
+        # one copy its unbatched arrays (a view of each whole array).
+        self._every = ... if self._one else slice(None)
         targets = []
         for tp, x0_hat, P0 in zip(p.targets, self._x0_hats, self._P0s, strict=True):
             x_pred, P_pred = predict(x0_hat, P0, tp.Phi, tp.Q)
@@ -570,7 +573,7 @@ class World:
         # stacked matrix products round a row differently with another number of rows, and
         # a copy's numbers must not depend on which other copies step with it.
         partial = isinstance(sel, np.ndarray)
-        calc = slice(None) if partial else sel
+        calc = self._every
         if self._fused:
             noise = self._noise_of(sel, partial)
             sensors, projected, target = _fast.advance_fused(self, mv, absolute, noise, calc)
@@ -688,14 +691,9 @@ class World:
         x_post, P_post, x_pred, P_pred)``."""
         st, p, K, tgt = self._s, self.params, self.n_targets, self._t
         # (One target without a comprehension: on Python 3.11 each one is a function call.)
-        if self._one:
-            sensors = st["sensors"]
-            fixes = st["fixes"] if self._pose else sensors
-            x_preds = [tgt[0]["x_pred"]] if K == 1 else [t["x_pred"] for t in tgt]
-        else:
-            sensors = st["sensors"][calc]
-            fixes = st["fixes"][calc] if self._pose else sensors
-            x_preds = [tgt[0]["x_pred"][calc]] if K == 1 else [t["x_pred"][calc] for t in tgt]
+        sensors = st["sensors"][calc]
+        fixes = st["fixes"][calc] if self._pose else sensors
+        x_preds = [tgt[0]["x_pred"][calc]] if K == 1 else [t["x_pred"][calc] for t in tgt]
         # Sensors move from where they believe they are, out of every target's rho disk.
         if K == 1:
             where = x_preds[0][..., :2]
@@ -718,8 +716,7 @@ class World:
         detected = None
         if general:  # every target moves, then all are measured in one call
             moved_t = [
-                tracking.move_target(tp, t["x_true"] if self._one else t["x_true"][calc],
-                                     noise[proc])
+                tracking.move_target(tp, t["x_true"][calc], noise[proc])
                 for t, tp, (proc, _) in zip(tgt, p.targets, self._noise_slices, strict=True)
             ]  # fmt: skip
             true_pos = np.empty(moved_t[0].shape[:-1] + (K, 2))
@@ -733,9 +730,9 @@ class World:
         for k, (t, tp, x_pred, (proc, meas)) in enumerate(
             zip(tgt, p.targets, x_preds, self._noise_slices, strict=True)
         ):
-            P_pred = t["P_pred"] if self._one else t["P_pred"][calc]
+            P_pred = t["P_pred"][calc]
             if not general:
-                x_true = t["x_true"] if self._one else t["x_true"][calc]
+                x_true = t["x_true"][calc]
                 x_true, _, x_post, P_post = tracking.advance_target(
                     p, tp, x_true, x_pred, P_pred, sensors, fixes, noise[proc], noise[meas]
                 )
