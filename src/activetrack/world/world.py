@@ -39,9 +39,16 @@ process noise, then every target's ``2M`` measurement noise, then ``2M`` for the
 episode's last step; a copy whose episode ends with normals of its block unused (terminated
 on ``max_trace``, or reset mid-episode) has its generator put back, at its next reset, to
 where the block began and advanced by the normals used, so every copy's stream is in the
-state a single environment's (one step a call) would be in at every reset. A world of one
-copy runs the same code on unbatched arrays (no leading axis inside a step), which is
-what makes a single environment fast.
+state a single environment's (one step a call) would be in at every reset
+(:mod:`activetrack.world._streams`). A world of one copy runs the same code on unbatched
+arrays (no leading axis inside a step), which is what makes a single environment fast.
+
+Which compiled fast path a world takes is decided once, from the scenario's
+:attr:`~activetrack.world.scenarios.Scenario.capabilities`: with ``fused_step`` (one
+target, known sensor positions, every sensor measures, the EKF of eq. 11) a whole step is
+one compiled call, and with one copy also the observation (:mod:`activetrack.world._fast`
+holds that code). What adapters read (state, planning problem, observation, errors) is
+:mod:`activetrack.world._readers`.
 """
 
 from __future__ import annotations
