@@ -241,12 +241,13 @@ def _sensor_constant_bounds(
 
 
 def layout_of(sc: Scenario) -> Layout:
-    """Return the layout of scenario ``sc`` (the paper's unless it needs the extended one)."""
-    paper = sc.n_targets == 1 and sc.sensor_model == "range_bearing" and sc.pose_covariances is None
-    limited = sc.limited_sensing
+    """Return the layout of scenario ``sc``: the paper's when its capabilities say so
+    (``paper_observation``), else the extended one, with detection flags unless sensing
+    is unlimited and range-finder rays when there are occluders."""
+    caps = sc.capabilities
     return Layout(
-        not paper or limited, sc.n_targets, sc.n_sensors,
-        sc.n_targets if limited else 0, RAYS if sc.has_occluders else 0,
+        not caps.paper_observation, sc.n_targets, sc.n_sensors,
+        0 if caps.unlimited_sensing else sc.n_targets, 0 if caps.no_occluders else RAYS,
     )  # fmt: skip
 
 

@@ -39,6 +39,7 @@ from activetrack.models import sensor_models
 from activetrack.models.objective import TRACE, Objective, is_trace, total_information
 from activetrack.solvers._inputs import MAX_SCALE, MIN_SCALE
 from activetrack.validation import FloatArray, as_finite, positive, psd, real_array, spd
+from activetrack.world import capabilities as _capabilities
 
 #: The per-sensor parameters and whether 0 is allowed.
 _PER_SENSOR = (("r", True), ("rho", True), ("sigma_d2", False), ("sigma_theta2", False))
@@ -522,15 +523,16 @@ class PlanningProblem:
     @property
     def is_paper(self) -> bool:
         """Return whether the paper's problem holds: one target, range-and-bearing sensors
-        at known positions, the trace objective (Section IV-A's exact solve applies)."""
-        return (
-            not self.multi_target
-            and (self.models is None or not np.any(self.models))
-            and self.pose_cov is None
-            and is_trace(self.objective)
-            and self.p_detect is None
-            and self.max_range is None
-            and self.occluders is None
+        at known positions, the trace objective, every sensor always measures (Section
+        IV-A's exact solve applies): :func:`activetrack.world.capabilities.paper_problem`,
+        the rule a scenario's ``capabilities.paper_problem`` applies, on this problem's
+        arrays."""
+        return _capabilities.paper_problem(
+            not self.multi_target,
+            self.models is None or not np.any(self.models),
+            self.pose_cov is None,
+            self.p_detect is None and self.max_range is None and self.occluders is None,
+            is_trace(self.objective),
         )
 
     @cached_property

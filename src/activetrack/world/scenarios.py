@@ -18,6 +18,7 @@ from activetrack.models.measurement import INFORMATION_RATIO_MAX as _INFORMATION
 from activetrack.models.motion import MODELS, LinearMotionModel, make_model
 from activetrack.models.objective import OBJECTIVES, Objective
 from activetrack.validation import FloatArray, UnexpectedKeywordError, real_array, spd
+from activetrack.world.capabilities import Capabilities
 
 #: Accepted ranges (SI units). Chosen so that every quantity the EKF (eq. 3, 11), the
 #: planners (eq. 12-19) and the features form from them stays finite and well inside
@@ -659,18 +660,21 @@ class Scenario:
         return bool(self.occluders) or self.random_occluders > 0
 
     @property
+    def capabilities(self) -> Capabilities:
+        """Return which of the paper's special cases this scenario is in
+        (:class:`activetrack.world.capabilities.Capabilities`): what decides the world's,
+        the observation's and the planners' fast paths."""
+        caps = self._cache.get("capabilities")
+        if caps is None:
+            caps = self._cache["capabilities"] = Capabilities.of(self)
+        return caps
+
+    @property
     def is_paper_model(self) -> bool:
         """Return whether this is the paper's measurement setup: one target, every sensor
         range-and-bearing, poses known, unlimited sensing, the trace objective, the EKF
-        (today's arithmetic applies)."""
-        return (
-            self.n_targets == 1
-            and self.sensor_model == "range_bearing"
-            and self.pose_covariances is None
-            and self.objective == "trace"
-            and not self.limited_sensing
-            and self.filter_iterations == 1
-        )
+        (today's arithmetic applies; ``capabilities.paper_model``)."""
+        return self.capabilities.paper_model
 
     def per_sensor(self, name: str) -> FloatArray:
         """Return the per-sensor parameter ``name`` as an (M,) array."""

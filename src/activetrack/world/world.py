@@ -39,9 +39,16 @@ process noise, then every target's ``2M`` measurement noise, then ``2M`` for the
 episode's last step; a copy whose episode ends with normals of its block unused (terminated
 on ``max_trace``, or reset mid-episode) has its generator put back, at its next reset, to
 where the block began and advanced by the normals used, so every copy's stream is in the
-state a single environment's (one step a call) would be in at every reset. A world of one
-copy runs the same code on unbatched arrays (no leading axis inside a step), which is
-what makes a single environment fast.
+state a single environment's (one step a call) would be in at every reset
+(:mod:`activetrack.world._streams`). A world of one copy runs the same code on unbatched
+arrays (no leading axis inside a step), which is what makes a single environment fast.
+
+Which compiled fast path a world takes is decided once, from the scenario's
+:attr:`~activetrack.world.scenarios.Scenario.capabilities`: with ``fused_step`` (one
+target, known sensor positions, every sensor measures, the EKF of eq. 11) a whole step is
+one compiled call, and with one copy also the observation (:mod:`activetrack.world._fast`
+holds that code). What adapters read (state, planning problem, observation, errors) is
+:mod:`activetrack.world._readers`.
 """
 
 from __future__ import annotations
@@ -52,16 +59,13 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from activetrack._jit import as_rows
-from activetrack.estimation.ekf import position_nees
 from activetrack.kinematics import sensor_motion
 from activetrack.models.motion import predict, psd_factor
 from activetrack.models.objective import TRACE, as_objective
 from activetrack.validation import FloatArray, as_generator, check_int
-from activetrack.world import _loop_kernels as loop_kernels
-from activetrack.world import _observation_kernels as observation_kernels
-from activetrack.world import observation, tracking
-from activetrack.world.problem import PlanningProblem, Prediction
+from activetrack.world import _fast, observation, tracking
+from activetrack.world._readers import _TARGET_FIELDS, WorldReaders
+from activetrack.world._streams import RandomStreams
 from activetrack.world.scenarios import Scenario, make_scenario
 
 #: Steps of noise a copy draws per generator call in a world of several copies.
@@ -86,8 +90,6 @@ def world_bytes(num_copies: int, noise_block: int, n_sensors: int, n_targets: in
 
 
 _Selection = int | slice | np.ndarray
-#: The state fields every target has its own of.
-_TARGET_FIELDS = ("x_true", "x_hat", "P", "x_pred", "P_pred")
 
 
 class StepResult(NamedTuple):
@@ -104,7 +106,7 @@ class StepResult(NamedTuple):
     truncated: Any
 
 
-class World:
+class World(RandomStreams, WorldReaders):
     """``num_copies`` independent tracking episodes of one scenario, stepped together.
 
     Args:
@@ -173,9 +175,11 @@ class World:
         self._scale = float(sc.reward_scale)
         #: The score of a configuration (eq. 12, 17); the reward is minus it at the posterior.
         self.objective = as_objective(sc.objective)  # a name, or a new objective itself
+        #: Which fast paths apply (:class:`activetrack.world.capabilities.Capabilities`).
+        self.capabilities = caps = sc.capabilities
         # The trace objective (the paper's; with K targets their sum): the score is the trace.
-        self._plain = self.objective is TRACE
-        self._pose = p.pose_cov is not None
+        self._plain = caps.trace_objective
+        self._pose = not caps.known_poses
         if self._pose:  # a square root of each sensor's (PSD) fix covariance
             self._pose_factor = psd_factor(p.pose_cov)
         self._dt = float(sc.dt)
@@ -197,24 +201,13 @@ class World:
         self._meas_slice = slice(int(proc[-1]), end)
         # The detection draws (p_detect < 1), M per target, last.
         self._detect_slice = slice(p.n_noise - m * K, p.n_noise)
-        self._limited = sc.limited_sensing
+        self._limited = not caps.unlimited_sensing
         # One target, known sensor positions, every sensor measures, no occluders: the whole
         # step is one compiled call (activetrack.world._loop_kernels.advance_rows).
-        self._fused = (
-            K == 1 and not self._limited and p.filter_iterations == 1 and not self._pose
-            and p.occluders is None and sc.random_occluders == 0
-        )  # fmt: skip
-        if self._fused:  # the kernel's constants: the sensors' table, the target's matrices
-            t0 = p.targets[0]
-            table = np.empty((m, loop_kernels.TABLE_COLUMNS))
-            table[:, loop_kernels.R], table[:, loop_kernels.RHO] = p.r, p.rho
-            table[:, loop_kernels.ORIENTATION] = p.orientation
-            table[:, loop_kernels.STD_D : loop_kernels.STD_T + 1] = p.noise_std
-            table[:, loop_kernels.USE_D : loop_kernels.USE_T + 1] = p.uses
-            table[:, loop_kernels.W_D], table[:, loop_kernels.W_T] = p.weights
-            self._fused_args = (table, np.stack([t0.Phi, t0.noise_factor, t0.Q]))
-            n0 = t0.dim  # one copy's work arrays: P Phi^T, the measurements, all sensors
-            self._fused_work = (np.empty((n0, n0)), np.empty((m, 2)), np.ones(m, bool))
+        self._fused = caps.fused_step
+        # One target, every sensor measures, the EKF of eq. (11): the advance is one call per
+        # step (activetrack.world.tracking.advance_target), else stage by stage.
+        self._per_target = caps.per_target_update
         if N > 1:  # the step's normals are (copies, n_noise) then; one copy's are (n_noise,)
             self._noise_slices = [
                 ((slice(None), a), (slice(None), b)) for a, b in self._noise_slices
@@ -237,13 +230,8 @@ class World:
         self._order = observation.cyclic_order(m)
         self._obs_shape = (m, self.layout.obs_dim)
         self._obs_cache: np.ndarray | None = None  # the observation a one-copy step made
-        if self._fused:  # the observation kernels' constant arguments
-            constants = np.ascontiguousarray(self._constants, np.float64)
-            td = observation.EXT_TARGET_DIM * K if self._extended else observation.TARGET_DIM
-            self._obs_args = (constants, float(self._dt), float(self.length_scale),
-                              self._extended)  # fmt: skip
-            self._obs_work = (np.zeros((1, m), bool), np.empty(td),
-                              np.empty((m, 2 + constants.shape[1])), self._order)  # fmt: skip
+        if self._fused:  # the compiled step's and observation's constant arguments
+            _fast.prepare(self)
 
         self._rngs: list[np.random.Generator | None] = [None] * N
         self._noise = (
@@ -259,6 +247,9 @@ class World:
         # One copy keeps its state unbatched (Python numbers for the counters): a step then
         # stores by rebinding, with no NumPy indexing, which costs microseconds per call.
         self._one = N == 1
+        # What a step computes: every copy (a subset is computed with all, see _step); with
+        # one copy its unbatched arrays (a view of each whole array).
+        self._every = ... if self._one else slice(None)
         targets = []
         for tp, x0_hat, P0 in zip(p.targets, self._x0_hats, self._P0s, strict=True):
             x_pred, P_pred = predict(x0_hat, P0, tp.Phi, tp.Q)
@@ -298,128 +289,11 @@ class World:
         #: Per-target state: x_true, x_hat, P, x_pred, P_pred of each target.
         self._t: list[dict[str, Any]] = targets
 
-    def get(self, name: str, index: int | None = None, target: int | None = None) -> Any:
-        """Return state field ``name`` of copy ``index`` (unbatched), or of all copies (N, ...).
-
-        Fields: ``x_true``, ``x_hat``, ``P``, ``x_pred``, ``P_pred`` (per target),
-        ``sensors`` (true positions), ``fixes`` (the position fixes the team believes and
-        plans from; the true positions when poses are known), ``k``, ``trace`` (the sum of
-        the targets' posterior position traces), ``score`` (the objective, minus the
-        reward; the trace for one target), ``projected``, ``n_projected``, ``terminated``,
-        ``truncated``, ``detected`` (K, M): which sensor measured which target at the
-        last step (all True with unlimited sensing; all False right after a reset). A
-        per-target field is target ``target``'s; ``target=None`` gives
-        the only target's (K = 1, shapes as in the paper) or all targets stacked on an
-        axis after the copies' (K > 1, e.g. ``x_pred`` (N, K, n); their state dimensions
-        must then agree). The attributes of the same names are ``get(name)``: read-only
-        views, refreshed by every step (keep a copy, not a reference).
-        """
-        if name in _TARGET_FIELDS:
-            if target is None:
-                if self.n_targets > 1:
-                    return self._stacked(name, index)
-                v = self._t[0][name]
-            else:
-                if not isinstance(target, (int, np.integer)) or not 0 <= target < self.n_targets:
-                    raise ValueError(
-                        f"target must be an integer in [0, {self.n_targets - 1}], got {target!r}"
-                    )
-                v = self._t[target][name]
-        elif name == "detected" and not self._limited:  # every sensor sees every target
-            shape = (self.n_targets, self.n_sensors)
-            v = np.ones(shape if self._one else (self.num_copies, *shape), dtype=bool)
-        else:
-            try:
-                v = self._s[name]
-            except KeyError:
-                fields = sorted([*(k for k in self._s if k != "ended"), *_TARGET_FIELDS])
-                raise ValueError(f"name must be one of {fields}, got {name!r}") from None
-        if self._one:
-            return v if index is not None else np.asarray(v)[None]
-        return v if index is None else v[index]
-
-    def _stacked(self, name: str, index: int | None) -> np.ndarray:
-        """Return a per-target field of every target, stacked after the copies' axis."""
-        parts = [self.get(name, index, k) for k in range(self.n_targets)]
-        if len({np.shape(v) for v in parts}) != 1:
-            raise ValueError(
-                f"the targets' states differ in dimension: give target= (0 to "
-                f"{self.n_targets - 1}) to read {name!r}"
-            )
-        return np.stack(parts, axis=0 if index is not None else 1)
-
-    x_true = property(lambda self: self.get("x_true"), doc="True target states (N, n).")
-    x_hat = property(lambda self: self.get("x_hat"), doc="Posterior means x_hat(k|k) (N, n).")
-    P = property(lambda self: self.get("P"), doc="Posterior covariances (N, n, n).")
-    x_pred = property(lambda self: self.get("x_pred"), doc="Predictions x_hat(k+1|k) (N, n).")
-    P_pred = property(lambda self: self.get("P_pred"), doc="Predicted P(k+1|k) (N, n, n).")
-    sensors = property(lambda self: self.get("sensors"), doc="Sensor positions (N, M, 2).")
-    fixes = property(lambda self: self.get("fixes"), doc="Believed sensor positions (N, M, 2).")
-    k = property(lambda self: self.get("k"), doc="Steps taken in each episode (N,).")
-    trace = property(lambda self: self.get("trace"), doc="Posterior traces tr P_11 (N,).")
-    score = property(lambda self: self.get("score"), doc="The objective at the posterior (N,).")
-    projected = property(lambda self: self.get("projected"), doc="Moves pushed out of rho (N, M).")
-    n_projected = property(lambda self: self.get("n_projected"), doc="Their count (N, M).")
-    terminated = property(lambda self: self.get("terminated"), doc="Trace above max_trace (N,).")
-    truncated = property(lambda self: self.get("truncated"), doc="Reached n_steps (N,).")
-    detected = property(lambda self: self.get("detected"), doc="Who measured whom (N, K, M).")
-
-    # Random streams ---------------------------------------------------------------------
-    def rng(self, i: int = 0) -> np.random.Generator:
-        """Return copy ``i``'s generator (created from fresh entropy if never seeded)."""
-        g = self._rngs[i]
-        if g is None:
-            g = self._rngs[i] = np.random.default_rng()
-        return g
-
+    # Selections -------------------------------------------------------------------------
     def _rows(self, sel: _Selection) -> np.ndarray:
         """Return the copy indices of a selection."""
         return np.arange(self.num_copies)[sel] if isinstance(sel, slice) else np.atleast_1d(sel)
 
-    def _draw_noise(self, rows: np.ndarray) -> None:
-        """Refill the noise blocks of copies ``rows``, never past their episode's last step."""
-        b = self.noise_block
-        k = self._s["k"]
-        left = np.minimum(b, np.maximum(self.episode_steps - (k if self._one else k[rows]), 1))
-        for i, steps in zip(rows.tolist(), np.atleast_1d(left).tolist(), strict=True):
-            rng = self.rng(i)
-            self._noise_from[i] = rng.bit_generator.state
-            self._noise[i, b - steps :] = rng.standard_normal((steps, self._n_noise))
-        self._noise_left[rows] = left
-        self._noise_drawn[rows] = left
-
-    def _rewind_noise(self, rows: np.ndarray) -> None:
-        """Put back the generators of copies ``rows`` that drew normals they did not use:
-        to their state before the block, advanced by the normals used (a single
-        environment's draws, one step a call, leave the same state)."""
-        for i in rows[self._noise_left[rows] > 0].tolist():
-            rng = self.rng(i)
-            rng.bit_generator.state = self._noise_from[i]
-            used = int(self._noise_drawn[i] - self._noise_left[i])
-            if used:
-                rng.standard_normal((used, self._n_noise))
-        self._noise_left[rows] = 0
-
-    def _step_noise(self, sel: _Selection) -> FloatArray:
-        """Return the ``n + 2M`` standard normals of this step for the selected copies."""
-        if self._noise is None:
-            if isinstance(sel, int):
-                return (self._rngs[sel] or self.rng(sel)).standard_normal(self._n_noise)
-            return np.stack([self.rng(i).standard_normal(self._n_noise) for i in self._rows(sel)])
-        rows = self._rows(sel)
-        left = self._noise_left[rows]
-        if not left.all():
-            self._draw_noise(rows[left == 0])
-            left = self._noise_left[rows]
-        if left.min() == left.max():  # copies in step (the common case): one column
-            noise = self._noise[sel if isinstance(sel, slice) else rows,
-                                self.noise_block - int(left[0])]  # fmt: skip
-        else:
-            noise = self._noise[rows, self.noise_block - left]
-        self._noise_left[rows] = left - 1
-        return noise[0] if isinstance(sel, int) else noise
-
-    # Selections -------------------------------------------------------------------------
     def _select(self, indices: Any) -> _Selection | None:
         """Return the selection of ``indices`` (None: all copies); None if it is empty.
 
@@ -600,7 +474,7 @@ class World:
         if self._one and self._fused:  # the single env: the short way
             if live is not None and self._select(live) is None:
                 return None
-            return self._step_one(absolute, moves, name)
+            return StepResult(*_fast.step_one(self, absolute, moves, name))
         sel = 0 if live is None and self._one else self._select(live)
         if sel is None:
             return None
@@ -615,10 +489,10 @@ class World:
         # stacked matrix products round a row differently with another number of rows, and
         # a copy's numbers must not depend on which other copies step with it.
         partial = isinstance(sel, np.ndarray)
-        calc = slice(None) if partial else sel
+        calc = self._every
         if self._fused:
             noise = self._noise_of(sel, partial)
-            sensors, projected, target = self._advance_fused(mv, absolute, noise, calc)
+            sensors, projected, target = _fast.advance_fused(self, mv, absolute, noise, calc)
             fixes, detected, results = sensors, None, [target]
             trace = target[-1][sel] if partial else target[-1]
         else:
@@ -659,7 +533,7 @@ class World:
         if detected is not None:
             new["detected"] = detected
         if self._one:
-            truncated = self._store_one(new, bool(np.count_nonzero(projected)))
+            truncated = _fast.store_one(self, new, bool(np.count_nonzero(projected)))
         else:
             k = st["k"][sel] + 1
             truncated = k >= self.episode_steps
@@ -713,89 +587,6 @@ class World:
             " before stepping"
         )
 
-    def _step_one(self, absolute: bool, moves: Any, name: str) -> StepResult:
-        """:meth:`_step` of a fused world of one copy: one compiled call
-        (:func:`activetrack.world._loop_kernels.advance_observe_row`) on its unbatched arrays,
-        which also makes the observation :meth:`observe` returns next."""
-        st, t = self._s, self._t[0]
-        if st["ended"]:
-            self._not_running(0)
-        moves = self._moves_array(moves, name, 0)
-        sensors, x_true, P_pred = st["sensors"], t["x_true"], t["P_pred"]
-        noise = self._noise_of(0, False)
-        new_sensors, projected = np.empty(sensors.shape), np.empty(sensors.shape[0], bool)
-        x_next_true, x_post, x_pred = (
-            np.empty(x_true.shape),
-            np.empty(x_true.shape),
-            np.empty(x_true.shape),
-        )
-        P_post, P_next = np.empty(P_pred.shape), np.empty(P_pred.shape)
-        obs = np.empty(self._obs_shape, np.float32)
-        trace, count = loop_kernels.advance_observe_row.dispatcher(  # (no wrapper call)
-            moves, absolute, sensors, x_true, t["x_pred"], P_pred, noise, *self._fused_args,
-            new_sensors, projected, x_next_true, x_post, P_post, x_pred, P_next,
-            *self._fused_work, *self._obs_args, *self._obs_work, obs,
-        )  # fmt: skip
-        self._obs_cache = obs
-        t["x_true"], t["x_hat"], t["P"], t["x_pred"], t["P_pred"] = (
-            x_next_true, x_post, P_post, x_pred, P_next)  # fmt: skip
-        trace = np.float64(trace)
-        score = trace if self._plain else self.objective.combine(
-            np.stack([self.objective.of_covariance(P_post)], -1)
-        )  # fmt: skip
-        terminated = trace > self._max_trace
-        new = {"sensors": new_sensors, "fixes": new_sensors, "projected": projected,
-               "trace": trace, "score": score, "terminated": terminated}  # fmt: skip
-        return StepResult(-self._scale * score, terminated, self._store_one(new, count > 0))
-
-    def _store_one(self, new: dict[str, Any], projected: bool) -> bool:
-        """Store a step's results ``new`` in a world of one copy (``projected``: whether a
-        move was pushed out of a ``rho`` disk); return ``truncated``."""
-        st = self._s
-        k = st["k"] + 1
-        truncated = k >= self.episode_steps
-        if projected:
-            st["n_projected"] = st["n_projected"] + new["projected"]
-        st.update(new, k=k, truncated=truncated, ended=bool(new["terminated"]) or truncated)
-        return truncated
-
-    def _noise_of(self, sel: _Selection, partial: bool) -> FloatArray:
-        """Return the step's standard normals of the copies ``sel`` (all copies' rows, zero
-        for those not stepping, when ``partial``)."""
-        if self._one and self._noise is None:  # the single env's draw, without a call
-            return (self._rngs[0] or self.rng(0)).standard_normal(self._n_noise)
-        noise = self._step_noise(sel)
-        if partial:
-            full = np.zeros((self.num_copies, self._n_noise))
-            full[sel] = noise
-            noise = full
-        return noise
-
-    def _advance_fused(
-        self, moves: FloatArray, absolute: bool, noise: FloatArray, calc: _Selection
-    ) -> tuple[FloatArray, np.ndarray, tuple[Any, ...]]:
-        """Return ``(sensors, projected, (x_true, x_post, P_post, x_pred, P_pred, trace))``
-        of one compiled step (:func:`activetrack.world._loop_kernels.advance_rows`) of the copies
-        ``calc`` of a batched world (one target, known sensor positions, every sensor
-        measures)."""
-        st, t = self._s, self._t[0]
-        sensors, x_true = st["sensors"][calc], t["x_true"][calc]
-        x_pred, P_pred = t["x_pred"][calc], t["P_pred"][calc]
-        n, m = x_true.shape[-1], self.n_sensors
-        batch = x_true.shape[:-1]
-        out = (
-            np.empty(sensors.shape), np.empty(sensors.shape[:-1], bool), np.empty(x_true.shape),
-            np.empty(x_true.shape), np.empty(P_pred.shape), np.empty(x_true.shape),
-            np.empty(P_pred.shape), np.empty(batch),
-        )  # fmt: skip
-        loop_kernels.advance_rows(  # (its count of projected moves: the caller's rows only)
-            as_rows(moves, batch, (m, 2)), absolute, as_rows(sensors, batch, (m, 2)),
-            as_rows(x_true, batch, (n,)), as_rows(x_pred, batch, (n,)),
-            as_rows(P_pred, batch, (n, n)), as_rows(noise, batch, (self._n_noise,)),
-            *self._fused_args, *out,
-        )  # fmt: skip
-        return out[0], out[1], out[2:]
-
     def _advance(
         self, move: Any, moves: FloatArray, sel: _Selection, calc: _Selection
     ) -> tuple[FloatArray, FloatArray, np.ndarray, np.ndarray | None, list[tuple]]:
@@ -804,14 +595,9 @@ class World:
         x_post, P_post, x_pred, P_pred)``."""
         st, p, K, tgt = self._s, self.params, self.n_targets, self._t
         # (One target without a comprehension: on Python 3.11 each one is a function call.)
-        if self._one:
-            sensors = st["sensors"]
-            fixes = st["fixes"] if self._pose else sensors
-            x_preds = [tgt[0]["x_pred"]] if K == 1 else [t["x_pred"] for t in tgt]
-        else:
-            sensors = st["sensors"][calc]
-            fixes = st["fixes"][calc] if self._pose else sensors
-            x_preds = [tgt[0]["x_pred"][calc]] if K == 1 else [t["x_pred"][calc] for t in tgt]
+        sensors = st["sensors"][calc]
+        fixes = st["fixes"][calc] if self._pose else sensors
+        x_preds = [tgt[0]["x_pred"][calc]] if K == 1 else [t["x_pred"][calc] for t in tgt]
         # Sensors move from where they believe they are, out of every target's rho disk.
         if K == 1:
             where = x_preds[0][..., :2]
@@ -830,12 +616,11 @@ class World:
             )
         else:
             sensors = fixes = moved
-        general = K > 1 or self._limited or p.filter_iterations > 1
+        general = not self._per_target
         detected = None
         if general:  # every target moves, then all are measured in one call
             moved_t = [
-                tracking.move_target(tp, t["x_true"] if self._one else t["x_true"][calc],
-                                     noise[proc])
+                tracking.move_target(tp, t["x_true"][calc], noise[proc])
                 for t, tp, (proc, _) in zip(tgt, p.targets, self._noise_slices, strict=True)
             ]  # fmt: skip
             true_pos = np.empty(moved_t[0].shape[:-1] + (K, 2))
@@ -849,9 +634,9 @@ class World:
         for k, (t, tp, x_pred, (proc, meas)) in enumerate(
             zip(tgt, p.targets, x_preds, self._noise_slices, strict=True)
         ):
-            P_pred = t["P_pred"] if self._one else t["P_pred"][calc]
+            P_pred = t["P_pred"][calc]
             if not general:
-                x_true = t["x_true"] if self._one else t["x_true"][calc]
+                x_true = t["x_true"][calc]
                 x_true, _, x_post, P_post = tracking.advance_target(
                     p, tp, x_true, x_pred, P_pred, sensors, fixes, noise[proc], noise[meas]
                 )
@@ -877,209 +662,3 @@ class World:
         if not np.any(hit):
             return moved, projected
         return (fixes + (reached - sensors) if self._pose else reached), projected | hit
-
-    def _started(self, i: int) -> bool:
-        """Return whether copy ``i`` was ever reset."""
-        return self._rngs[i] is not None
-
-    # What adapters read -----------------------------------------------------------------
-    def planning_problem(self, index: int | None = None) -> PlanningProblem:
-        """Return the planning problem of eq. (15)-(17) from the current prediction.
-
-        ``index`` None: every copy (leading batch axis N); an int: that copy, unbatched.
-        The problem carries the full prediction (:class:`~activetrack.world.problem.Prediction`:
-        ``x_pred``, ``P_pred`` and the motion model ``Phi``, ``Q``); with K > 1 targets
-        one per target (``multi_target``), whose positions and covariances are the
-        problem's ``target`` and ``prior_cov``. The sensors are the position fixes; the sensors'
-        models and the pose covariance the filter accounts for come along.
-        """
-        p = self.params
-        extra = {
-            "models": p.models,
-            "pose_cov": p.filter_pose_cov,
-            "objective": self.objective,
-        }
-        if self._limited:  # the planners count each sensor's information at its expected value
-            extra.update(
-                p_detect=p.p_detect, max_range=p.max_range, occluders=self.occluders(index)
-            )
-        sensors = self.get("fixes" if self._pose else "sensors", index)
-        models = self.__dict__.get("_prediction_models")
-        if models is None:  # each target's Phi and Q are validated once
-            models = self._prediction_models = [
-                Prediction(self.get("x_pred", index, k), self.get("P_pred", index, k), tp.Phi, tp.Q)
-                for k, tp in enumerate(p.targets)
-            ]
-        preds = [
-            model.with_state(self.get("x_pred", index, k), self.get("P_pred", index, k))
-            for k, model in enumerate(models)
-        ]
-        if self.n_targets > 1:
-            return PlanningProblem(
-                None, None, sensors, p.r, p.rho, p.sigma_d2, p.sigma_theta2,
-                prediction=tuple(preds), multi_target=True, **extra,
-            )  # fmt: skip
-        return PlanningProblem.from_prediction(
-            preds[0],
-            sensors=sensors,
-            r=p.r,
-            rho=p.rho,
-            sigma_d2=p.sigma_d2,
-            sigma_theta2=p.sigma_theta2,
-            **extra,
-        )
-
-    def observe(self, index: int | None = None) -> np.ndarray:
-        """Return every agent's observation, float32 (N, M, D), or (M, D) for one copy.
-
-        The layout is :mod:`activetrack.world.observation`'s (``self.layout``; ``D = 5 + 6M`` in
-        the paper): the prediction and the team as seen from each agent's seat.
-        """
-        rays = self.layout.rays
-        if self._one and self._fused and (index is None or (type(index) is int and index == 0)):
-            return self._observe_one()[None] if index is None else self._observe_one()
-        out = observation.encode(*self._feature_args(index), self._order, rays)
-        if rays:  # written straight into the observation (float32): no float64 temporary
-            observation.ray_readings(
-                self.get("sensors", index), self.occluders(index), out[..., -rays:]
-            )
-        return out
-
-    def _observe_one(self) -> np.ndarray:
-        """:meth:`observe` of a fused world of one copy: the observation its last step made,
-        or the kernel's (:func:`activetrack.world._observation_kernels.features_row`,
-        ``windows_row``) on views of the world's own arrays, unchecked."""
-        out = self._obs_cache
-        if out is not None:  # handed out once: a second call makes a new array
-            self._obs_cache = None
-            return out
-        t = self._t[0]
-        x, P = t["x_pred"], t["P_pred"]
-        n, (m, d) = x.shape[0], self._obs_shape
-        detected, target, sensor, order = self._obs_work
-        out = np.empty((m, d), np.float32)
-        observation_kernels.observe_rows.dispatcher(
-            x.reshape(1, 1, n), P.reshape(1, 1, n, n), self._s["sensors"].reshape(1, m, 2),
-            *self._obs_args, detected.reshape(1, 1, m), 0, order, out.reshape(1, m, d),
-        )  # fmt: skip
-        return out
-
-    def state(self, index: int | None = None) -> np.ndarray:
-        """Return the global state, float32 (N, D + 1) or (D + 1,) for one copy."""
-        target, sensor = observation.features(*self._feature_args(index))
-        elapsed = self.get("k", index) / self._n_steps
-        return observation.global_state(target, sensor, elapsed, self._rays(index))
-
-    def _rays(self, index: int | None) -> FloatArray | None:
-        """Return every agent's range-finder readings (..., M, RAYS), or None (no occluders)."""
-        if not self.layout.rays:
-            return None
-        return observation.ray_readings(self.get("sensors", index), self.occluders(index))
-
-    def occluders(
-        self, index: int | None = None
-    ):  # -> activetrack.models.occluders.Occluders | None
-        """Return the occluders in force (None: an open plane).
-
-        ``index`` None: every copy's (with random layouts an
-        :class:`~activetrack.models.occluders.Occluders` batched over the copies, else the
-        scenario's fixed set, shared); an int: copy ``index``'s layout, unbatched.
-        """
-        if index is not None and (
-            isinstance(index, (bool, np.bool_))
-            or not isinstance(index, (int, np.integer))
-            or not 0 <= index < self.num_copies
-        ):
-            raise ValueError(
-                f"index must be None or an integer in [0, {self.num_copies - 1}], got {index!r}"
-            )
-        occ = self._occ
-        if occ is None or index is None or self._one:
-            return occ
-        return occ[index]
-
-    def _feature_args(self, index: int | None) -> tuple:
-        """Return :func:`activetrack.world.observation.features`' arguments for copy ``index``
-        (None: every copy): the predictions, the sensors' fixes (their positions in the
-        paper's layout), the constant entries, ``dt``, ``L``, the layout, the flags."""
-        if self._one and index is not None:  # the single env: no get() calls
-            x_preds = [t["x_pred"] for t in self._t]
-            P_preds = [t["P_pred"] for t in self._t]
-            fixes = self._s["fixes" if self._extended else "sensors"]
-        else:
-            K = self.n_targets
-            x_preds = [self.get("x_pred", index, k) for k in range(K)]
-            P_preds = [self.get("P_pred", index, k) for k in range(K)]
-            fixes = self.get("fixes" if self._extended else "sensors", index)
-        detected = self.get("detected", index) if self._limited else None
-        return (x_preds, P_preds, fixes, self._constants, self._dt, self.length_scale,
-                self._extended, detected)  # fmt: skip
-
-    def position_error(self, index: int | None = None, per_target: bool = False) -> FloatArray:
-        """Return ``||p_T(k) - p_hat_T(k|k)||`` (m) per copy, or of copy ``index``.
-
-        With K > 1 targets: the root mean square over the targets (``per_target``: each
-        target's, on a last axis of K).
-        """
-        if self.n_targets > 1:
-            err = np.stack(
-                [self._error(self.get("x_true", index, k), self.get("x_hat", index, k))
-                 for k in range(self.n_targets)], -1,
-            )  # fmt: skip
-            return err if per_target else np.sqrt(np.mean(err * err, axis=-1))
-        if self._one and index is not None:
-            x, h = self._t[0]["x_true"], self._t[0]["x_hat"]
-        else:
-            x, h = self.get("x_true", index), self.get("x_hat", index)
-        if index is not None:  # one copy: Python numbers (NumPy calls cost microseconds)
-            (x0, x1, *_), (h0, h1, *_) = x.tolist(), h.tolist()
-            err = np.float64(math.hypot(x0 - h0, x1 - h1))
-            return err[None] if per_target else err
-        err = self._error(x, h)
-        return err[..., None] if per_target else err
-
-    @staticmethod
-    def _error(x: FloatArray, h: FloatArray) -> FloatArray:
-        d = x[..., :2] - h[..., :2]
-        return np.hypot(d[..., 0], d[..., 1])
-
-    def copy_info(self, index: int) -> tuple[int, float, float, list[bool], list[int]]:
-        """Return copy ``index``'s ``(k, trace, position_error, projected, n_projected)`` as
-        Python values (lists per sensor): what an environment's infos report."""
-        get = self._s.__getitem__ if self._one else (lambda key: self._s[key][index])
-        if self.n_targets == 1:
-            t = self._t[0]
-            x, h = (
-                (t["x_true"], t["x_hat"]) if self._one else (t["x_true"][index], t["x_hat"][index])
-            )
-            (x0, x1, *_), (h0, h1, *_) = x.tolist(), h.tolist()
-            err = math.hypot(x0 - h0, x1 - h1)  # position_error(index), without a call
-        else:  # the root mean square over the targets, on Python numbers as above
-            sq = 0.0
-            for t in self._t:
-                x, h = (
-                    (t["x_true"], t["x_hat"]) if self._one
-                    else (t["x_true"][index], t["x_hat"][index])
-                )  # fmt: skip
-                (x0, x1, *_), (h0, h1, *_) = x.tolist(), h.tolist()
-                sq += (x0 - h0) ** 2 + (x1 - h1) ** 2
-            err = math.sqrt(sq / self.n_targets)
-        return (
-            int(get("k")),
-            float(get("trace")),
-            err,
-            get("projected").tolist(),
-            get("n_projected").tolist(),
-        )
-
-    def position_nees(self, index: int | None = None, per_target: bool = False) -> FloatArray:
-        """Return the position NEES ``e^T P_11^{-1} e`` per copy, or of copy ``index``.
-
-        With K > 1 targets: the mean over the targets (``per_target``: each target's, on a
-        last axis of K); each is chi-square with 2 degrees of freedom for a consistent filter.
-        """
-        nees = np.stack(
-            [position_nees(self.get("x_true", index, k), self.get("x_hat", index, k),
-                           self.get("P", index, k)) for k in range(self.n_targets)], -1,
-        )  # fmt: skip
-        return nees if per_target else np.mean(nees, axis=-1)

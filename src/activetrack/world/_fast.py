@@ -1,0 +1,145 @@
+"""The world's compiled fast paths: one copy, and the fused step.
+
+:class:`activetrack.world.World` runs the general batched loop; when the scenario's
+capabilities say so (:attr:`Capabilities.fused_step
+<activetrack.world.capabilities.Capabilities.fused_step>`: one target, known sensor
+positions, every sensor measures, the EKF of eq. 11) a whole step is one compiled call
+(:mod:`activetrack.world._loop_kernels`), and a world of one copy keeps its state
+unbatched so that its step, its store and its observation cost microseconds. This module
+holds that code; the world calls it at its dispatch points (construction, step, store,
+observe). Each function takes the world as its first argument and reads and writes its
+private state directly: a single environment's step is measured in microseconds, so no
+wrapper or check is repeated here.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from activetrack._jit import as_rows
+from activetrack.world import _loop_kernels as loop_kernels
+from activetrack.world import _observation_kernels as observation_kernels
+from activetrack.world import observation
+
+if TYPE_CHECKING:
+    from activetrack.validation import FloatArray
+    from activetrack.world.world import World
+
+
+def prepare(w: World) -> None:
+    """Set the fused kernels' constant arguments on world ``w`` (built with ``w._fused``):
+    the sensors' table and the target's matrices of the step, the observation's
+    constants, and one copy's work arrays."""
+    p, m, K = w.params, w.n_sensors, w.n_targets
+    t0 = p.targets[0]
+    table = np.empty((m, loop_kernels.TABLE_COLUMNS))
+    table[:, loop_kernels.R], table[:, loop_kernels.RHO] = p.r, p.rho
+    table[:, loop_kernels.ORIENTATION] = p.orientation
+    table[:, loop_kernels.STD_D : loop_kernels.STD_T + 1] = p.noise_std
+    table[:, loop_kernels.USE_D : loop_kernels.USE_T + 1] = p.uses
+    table[:, loop_kernels.W_D], table[:, loop_kernels.W_T] = p.weights
+    w._fused_args = (table, np.stack([t0.Phi, t0.noise_factor, t0.Q]))
+    n0 = t0.dim  # one copy's work arrays: P Phi^T, the measurements, all sensors
+    w._fused_work = (np.empty((n0, n0)), np.empty((m, 2)), np.ones(m, bool))
+    constants = np.ascontiguousarray(w._constants, np.float64)
+    td = observation.EXT_TARGET_DIM * K if w._extended else observation.TARGET_DIM
+    w._obs_args = (constants, float(w._dt), float(w.length_scale), w._extended)
+    w._obs_work = (np.zeros((1, m), bool), np.empty(td),
+                   np.empty((m, 2 + constants.shape[1])), w._order)  # fmt: skip
+
+
+def step_one(w: World, absolute: bool, moves: Any, name: str) -> tuple[Any, Any, bool]:
+    """Return ``(reward, terminated, truncated)`` of ``World._step`` of a fused world of
+    one copy: one compiled call (:func:`activetrack.world._loop_kernels.advance_observe_row`)
+    on its unbatched arrays, which also makes the observation :func:`observe_one` returns
+    next."""
+    st, t = w._s, w._t[0]
+    if st["ended"]:
+        w._not_running(0)
+    moves = w._moves_array(moves, name, 0)
+    sensors, x_true, P_pred = st["sensors"], t["x_true"], t["P_pred"]
+    noise = w._noise_of(0, False)
+    new_sensors, projected = np.empty(sensors.shape), np.empty(sensors.shape[0], bool)
+    x_next_true, x_post, x_pred = (
+        np.empty(x_true.shape),
+        np.empty(x_true.shape),
+        np.empty(x_true.shape),
+    )
+    P_post, P_next = np.empty(P_pred.shape), np.empty(P_pred.shape)
+    obs = np.empty(w._obs_shape, np.float32)
+    trace, count = loop_kernels.advance_observe_row.dispatcher(  # (no wrapper call)
+        moves, absolute, sensors, x_true, t["x_pred"], P_pred, noise, *w._fused_args,
+        new_sensors, projected, x_next_true, x_post, P_post, x_pred, P_next,
+        *w._fused_work, *w._obs_args, *w._obs_work, obs,
+    )  # fmt: skip
+    w._obs_cache = obs
+    t["x_true"], t["x_hat"], t["P"], t["x_pred"], t["P_pred"] = (
+        x_next_true, x_post, P_post, x_pred, P_next)  # fmt: skip
+    trace = np.float64(trace)
+    score = trace if w._plain else w.objective.combine(
+        np.stack([w.objective.of_covariance(P_post)], -1)
+    )  # fmt: skip
+    terminated = trace > w._max_trace
+    new = {"sensors": new_sensors, "fixes": new_sensors, "projected": projected,
+           "trace": trace, "score": score, "terminated": terminated}  # fmt: skip
+    return -w._scale * score, terminated, store_one(w, new, count > 0)
+
+
+def store_one(w: World, new: dict[str, Any], projected: bool) -> bool:
+    """Store a step's results ``new`` in world ``w`` of one copy (``projected``: whether a
+    move was pushed out of a ``rho`` disk): by rebinding, no NumPy indexing; return
+    ``truncated``."""
+    st = w._s
+    k = st["k"] + 1
+    truncated = k >= w.episode_steps
+    if projected:
+        st["n_projected"] = st["n_projected"] + new["projected"]
+    st.update(new, k=k, truncated=truncated, ended=bool(new["terminated"]) or truncated)
+    return truncated
+
+
+def advance_fused(
+    w: World, moves: FloatArray, absolute: bool, noise: FloatArray, calc: Any
+) -> tuple[FloatArray, np.ndarray, tuple[Any, ...]]:
+    """Return ``(sensors, projected, (x_true, x_post, P_post, x_pred, P_pred, trace))``
+    of one compiled step (:func:`activetrack.world._loop_kernels.advance_rows`) of the
+    copies ``calc`` of a batched fused world ``w``."""
+    st, t = w._s, w._t[0]
+    sensors, x_true = st["sensors"][calc], t["x_true"][calc]
+    x_pred, P_pred = t["x_pred"][calc], t["P_pred"][calc]
+    n, m = x_true.shape[-1], w.n_sensors
+    batch = x_true.shape[:-1]
+    out = (
+        np.empty(sensors.shape), np.empty(sensors.shape[:-1], bool), np.empty(x_true.shape),
+        np.empty(x_true.shape), np.empty(P_pred.shape), np.empty(x_true.shape),
+        np.empty(P_pred.shape), np.empty(batch),
+    )  # fmt: skip
+    loop_kernels.advance_rows(  # (its count of projected moves: the caller's rows only)
+        as_rows(moves, batch, (m, 2)), absolute, as_rows(sensors, batch, (m, 2)),
+        as_rows(x_true, batch, (n,)), as_rows(x_pred, batch, (n,)),
+        as_rows(P_pred, batch, (n, n)), as_rows(noise, batch, (w._n_noise,)),
+        *w._fused_args, *out,
+    )  # fmt: skip
+    return out[0], out[1], out[2:]
+
+
+def observe_one(w: World) -> np.ndarray:
+    """``World.observe`` of a fused world of one copy: the observation its last step made,
+    or the kernel's (:func:`activetrack.world._observation_kernels.observe_rows`) on
+    views of the world's own arrays, unchecked."""
+    out = w._obs_cache
+    if out is not None:  # handed out once: a second call makes a new array
+        w._obs_cache = None
+        return out
+    t = w._t[0]
+    x, P = t["x_pred"], t["P_pred"]
+    n, (m, d) = x.shape[0], w._obs_shape
+    detected, target, sensor, order = w._obs_work
+    out = np.empty((m, d), np.float32)
+    observation_kernels.observe_rows.dispatcher(
+        x.reshape(1, 1, n), P.reshape(1, 1, n, n), w._s["sensors"].reshape(1, m, 2),
+        *w._obs_args, detected.reshape(1, 1, m), 0, order, out.reshape(1, m, d),
+    )  # fmt: skip
+    return out
