@@ -144,7 +144,7 @@ def test_simulate_failing_to_write_keeps_the_previous_outputs(tmp_path):
     base = ["simulate", "--planner", "rm", "--runs", "1", "--steps", "3", "--no-progress"]
     assert main([*base, "--seed", "1", "--out", str(out)]) == 0
     before = snapshot(out)
-    assert set(before) == {"results.json", "trajectories.png"}
+    assert set(before) == {"results.json", "comparison.png", "trajectories.png"}
     assert len(before["results.json"]) < 16_000 < len(before["trajectories.png"])
     # Another seed: new results.json fits under the limit, the figure does not.
     proc = run_limited([*base, "--seed", "2", "--out", str(out), "--overwrite"], 16_000)
@@ -338,11 +338,12 @@ def test_a_signal_at_each_stage_of_a_run(signum, point, tmp_path, monkeypatch, c
     else:  # inside the commit, between the renames: held back until they are done
         monkeypatch.setattr(files, "_fsync_dir", send_then(files._fsync_dir))
     capsys.readouterr()
+    before = signal.getsignal(signal.SIGTERM)  # (another test's Ray may have set its own)
     code = main([*SIM, "--seed", "2", "--no-plot", "--overwrite", "--out", str(folder)])
     assert code == 128 + sig
     outcome = _check_outcome(folder, old, code, capsys.readouterr().err)
     assert outcome == ("new" if point == "committing" else "old")
-    assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL  # main restored the handlers
+    assert signal.getsignal(signal.SIGTERM) is before  # main restored the handlers
 
 
 def test_a_signal_before_any_output_folder(tmp_path, monkeypatch, capsys):

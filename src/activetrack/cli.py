@@ -24,6 +24,7 @@ import argparse
 import dataclasses
 import importlib
 import math
+import os
 import signal
 import sys
 import threading
@@ -233,6 +234,13 @@ def main(argv: Sequence[str] | None = None) -> int:
                 signal.signal(s, signal.SIG_IGN)
             else:
                 signal.signal(s, signal.SIG_DFL if old is None else old)
+    if console and code >= 128 and "ray" in sys.modules:
+        # Interrupted with Ray loaded (its session already shut down): the interpreter's
+        # finalization can crash in Ray's native core (SIGSEGV) after the message; the
+        # folder is final, so leave with the status the message stands for.
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code)
     return code
 
 

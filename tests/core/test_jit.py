@@ -187,7 +187,7 @@ def test_an_edit_of_a_callee_file_recompiles_its_callers(tmp_path) -> None:
     # The package's own __init__ imports the whole core; these runs need only the kernels.
     (package / "__init__.py").write_text('"""A copy of the library for one test."""\n')
     (tmp_path / "caller.py").write_text(_CALLER)
-    callee = package / "motion_kernels.py"
+    callee = package / "kinematics" / "_kernels.py"
     original = callee.read_text()
     assert original.count(_CALLEE_LINE) == 1
     doubled = original.replace(_CALLEE_LINE, _CALLEE_LINE.replace("r *", "2.0 * r *"))
