@@ -64,29 +64,14 @@ from activetrack.models.motion import predict, psd_factor
 from activetrack.models.objective import TRACE, as_objective
 from activetrack.validation import FloatArray, as_generator, check_int
 from activetrack.world import _fast, observation, tracking
+from activetrack.world._occluded import OccludedMoves
 from activetrack.world._readers import _TARGET_FIELDS, WorldReaders
+from activetrack.world._sizes import WORLD_BYTES_MAX, world_bytes
 from activetrack.world._streams import RandomStreams
 from activetrack.world.scenarios import Scenario, make_scenario
 
 #: Steps of noise a copy draws per generator call in a world of several copies.
 DEFAULT_NOISE_BLOCK = 64
-#: Most bytes a world's arrays may take (:func:`world_bytes`): 4 GiB, a sixth of this
-#: project's 24 GiB test machine, so a few worlds run side by side. A world beyond it is
-#: refused at construction (ValueError naming the sizes), before anything is allocated.
-WORLD_BYTES_MAX = 4 * 2**30
-
-
-def world_bytes(num_copies: int, noise_block: int, n_sensors: int, n_targets: int,
-                state_dim: int) -> int:  # fmt: skip
-    """Return an upper estimate of the bytes of a world's arrays (float64): per copy, a
-    noise block (``noise_block`` steps of every normal a step draws), the per-sensor and
-    per-target state, and the observation's features, whose pairwise sensor terms grow as
-    M^2 and M^2 K; checked above tracemalloc's peak over a batched env's construction,
-    reset and step (tests/envs/test_batched.py)."""
-    m, k, n = n_sensors, n_targets, state_dim
-    n_noise = k * n + 2 * m * k + 2 * m + m * k
-    per_copy = noise_block * n_noise + 24 * m * m + 3 * m * m * k + 64 * m * k + 8 * k * n * n
-    return 8 * num_copies * per_copy
 
 
 _Selection = int | slice | np.ndarray
@@ -106,7 +91,7 @@ class StepResult(NamedTuple):
     truncated: Any
 
 
-class World(RandomStreams, WorldReaders):
+class World(RandomStreams, WorldReaders, OccludedMoves):
     """``num_copies`` independent tracking episodes of one scenario, stepped together.
 
     Args:
@@ -421,30 +406,6 @@ class World(RandomStreams, WorldReaders):
         angle = 2.0 * np.pi * u[..., 1]
         return self._center + radius[..., None] * np.stack([np.cos(angle), np.sin(angle)], -1)
 
-    def _outside_occluders(self, sensors: FloatArray, rows: np.ndarray, one: bool) -> FloatArray:
-        """Return ``sensors`` with each start inside an occluder drawn again (from its copy's
-        generator, after the copy's other draws) until it is outside."""
-        from activetrack.models import occluders  # noqa: PLC0415 (occluded scenarios only)
-
-        batch = sensors[None] if one else sensors
-        # One vectorized test of every start, then the copies with a start inside draw
-        # again, each from its own generator (as a loop over all copies would).
-        layouts = self._occ if one or not self._occ.batched else self._occ[rows]
-        bad_copies = np.flatnonzero(np.any(occluders.inside(batch, layouts), axis=-1))
-        for j in bad_copies.tolist():
-            i = int(rows[j])
-            occ = self._occ if one else self._occ[i]
-            for _ in range(1000):
-                bad = occluders.inside(batch[j], occ)
-                if not bad.any():
-                    break
-                batch[j][bad] = self._start_positions(self.rng(i).random((int(bad.sum()), 2)))
-            else:
-                raise ValueError(
-                    "occluders cover the sensors' start disk: no start outside them found"
-                )
-        return batch[0] if one else batch
-
     def _fix(self, sensors: FloatArray, normals: FloatArray) -> FloatArray:
         """Return the position fixes ``p_S + e``, ``e ~ N(0, Sigma_i)`` from standard normals."""
         return sensors + np.einsum("...ij,...j->...i", self._pose_factor, normals)
@@ -647,18 +608,3 @@ class World(RandomStreams, WorldReaders):
                 x_post, P_post = tracking.filter_update(p, x_pred, P_pred, z, fixes, seen)
             results.append((x_true, x_post, P_post, *predict(x_post, P_post, tp.Phi, tp.Q)))
         return sensors, fixes, projected, detected, results
-
-    def _around_occluders(
-        self, sensors: FloatArray, fixes: FloatArray, moved: FloatArray, projected: np.ndarray
-    ) -> tuple[FloatArray, np.ndarray]:
-        """Return the moves ``moved`` (from the fixes) mended so that each true straight
-        move from ``sensors`` neither passes through nor ends in an occluder
-        (:func:`activetrack.models.occluders.project_move`, the nearest reachable point), and the
-        projected marks including those mended."""
-        from activetrack.models import occluders  # noqa: PLC0415 (occluded scenarios only)
-
-        desired = sensors + (moved - fixes) if self._pose else moved
-        reached, hit = occluders.project_move(sensors, desired, self._occ, self.params.r)
-        if not np.any(hit):
-            return moved, projected
-        return (fixes + (reached - sensors) if self._pose else reached), projected | hit
