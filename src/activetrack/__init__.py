@@ -44,7 +44,8 @@ from activetrack.solvers.analytic import (
     solve_single_sensor,
     solve_single_sensor_batch,
 )
-from activetrack.world.problem import Planner, PlanningProblem, Prediction
+from activetrack.world.prediction import Prediction
+from activetrack.world.problem import Planner, PlanningProblem
 from activetrack.world.scenarios import PRESETS, Scenario, make_scenario
 
 _aliases.install()

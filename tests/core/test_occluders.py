@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 from matplotlib.path import Path
 
+from activetrack.models import _polygons
 from activetrack.models import occluders as oc
 
 SQUARE = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
@@ -677,7 +678,7 @@ def _first_bad_pair_brute_force(p, eps):
             if j == i + 1 or (i == 0 and j == n - 1):
                 continue  # consecutive: the fold-back test, not exercised by these cases
             # Orientation tests of the closed segments with the module's tolerance rule.
-            if oc._segments_meet(p[i], q[i], p[j], q[j], eps):
+            if _polygons._segments_meet(p[i], q[i], p[j], q[j], eps):
                 return i, j
     return None
 
@@ -685,7 +686,7 @@ def _first_bad_pair_brute_force(p, eps):
 @pytest.mark.parametrize("n", [12, 40])
 def test_chunked_simplicity_check_names_the_brute_force_first_bad_pair(monkeypatch, n):
     # Chunks of a few pairs: every chunk boundary falls inside the pair table.
-    monkeypatch.setattr(oc, "_PAIRS_PER_CHUNK", 7)
+    monkeypatch.setattr(_polygons, "_PAIRS_PER_CHUNK", 7)
     rng = np.random.default_rng(n)
     for _ in range(20):
         p = _star(n, rng)
@@ -694,10 +695,10 @@ def test_chunked_simplicity_check_names_the_brute_force_first_bad_pair(monkeypat
         eps = oc.TOL * max(1.0, float(np.max(np.abs(p))))
         ref = _first_bad_pair_brute_force(p, eps)
         if ref is None:
-            oc._check_simple("polygons[0]", p, eps)  # accepted, as the brute force says
+            _polygons._check_simple("polygons[0]", p, eps)  # accepted, as the brute force says
             continue
         with pytest.raises(ValueError, match=rf"edges {ref[0]} and {ref[1]} meet$"):
-            oc._check_simple("polygons[0]", p, eps)
+            _polygons._check_simple("polygons[0]", p, eps)
 
 
 def test_a_polygon_at_the_vertex_limit_is_accepted_one_beyond_is_refused():

@@ -70,7 +70,9 @@ kernel on ``occ[i]`` and the points ``[i]``. The kernels take each row's layout 
 
 Only :meth:`Occluders.from_polygons`, :meth:`Occluders.stack`, :meth:`Occluders.replaced`
 and :func:`random_layout` validate their input; the kernels are unchecked (finite float
-arrays, as the world passes them) except for the layout axis of a batched set.
+arrays, as the world passes them) except for the layout axis of a batched set. The polygon
+checks are :mod:`activetrack.models._polygons`, the random layouts
+:mod:`activetrack.models.occluder_layouts`.
 """
 
 from __future__ import annotations
@@ -84,7 +86,9 @@ import numpy as np
 from activetrack._jit import as_rows
 from activetrack.models import _occluder_kernels as ok
 from activetrack.models._occluder_kernels import REACH_TOL, TOL
-from activetrack.validation import FloatArray, real_array
+from activetrack.models._polygons import MAX_VERTICES, checked_polygons
+from activetrack.models.occluder_layouts import random_layout
+from activetrack.validation import FloatArray
 
 __all__ = [
     "MAX_VERTICES", "REACH_TOL", "TOL", "Occluders", "blocked", "inside", "line_of_sight",
@@ -96,31 +100,6 @@ def _frozen(a: np.ndarray) -> np.ndarray:
     a = np.ascontiguousarray(a)
     a.flags.writeable = False
     return a
-
-
-def _cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:
-    return u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
-
-
-def _segments_meet(p1, p2, q1, q2, eps: float) -> np.ndarray:
-    """Return whether closed segments ``[p1, p2]`` and ``[q1, q2]`` share a point (batched)."""
-    d1, d2 = p2 - p1, q2 - q1
-    o1 = _cross(d1, q1 - p1)
-    o2 = _cross(d1, q2 - p1)
-    o3 = _cross(d2, p1 - q1)
-    o4 = _cross(d2, p2 - q1)
-    s = eps * (np.hypot(d1[..., 0], d1[..., 1]) + np.hypot(d2[..., 0], d2[..., 1]))
-    proper = (o1 * o2 < 0) & (o3 * o4 < 0) & (np.abs(o1) > s) & (np.abs(o2) > s)
-    proper &= (np.abs(o3) > s) & (np.abs(o4) > s)
-
-    def on(a, b, p, o):  # p on segment [a, b] (collinear up to s)
-        lo, hi = np.minimum(a, b) - eps, np.maximum(a, b) + eps
-        box = np.all((p >= lo) & (p <= hi), axis=-1)
-        return (np.abs(o) <= s) & box
-
-    return (
-        proper | on(p1, p2, q1, o1) | on(p1, p2, q2, o2) | on(q1, q2, p1, o3) | on(q1, q2, p2, o4)
-    )
 
 
 @dataclass(frozen=True, eq=False)
@@ -359,28 +338,7 @@ class Occluders:
         edges that meet other than consecutive edges at their common vertex, and naming
         ``polygons`` for more than :data:`MAX_VERTICES` vertices in all.
         """
-        if isinstance(polygons, np.ndarray) and polygons.ndim == 2:
-            raise ValueError("polygons must be a sequence of (n_i, 2) vertex arrays, got one array")
-        polys: list[np.ndarray] = []
-        total = 0
-        for i, raw in enumerate(polygons):
-            name = f"polygons[{i}]"
-            arr = real_array(name, raw, finite=False)
-            if arr.ndim != 2 or arr.shape[1] != 2 or arr.shape[0] < 3:
-                raise ValueError(f"{name} must have shape (n, 2) with n >= 3, got {arr.shape}")
-            if not np.all(np.isfinite(arr)):
-                raise ValueError(f"{name} must be finite (no NaN or inf)")
-            polys.append(arr)
-            total += len(arr)
-            if total > MAX_VERTICES:  # before any pair of edges is tested
-                raise ValueError(
-                    f"polygons must have at most {MAX_VERTICES} vertices in all, got "
-                    f"{total} in polygons[0..{i}]"
-                )
-        eps = TOL * _scale(polys)
-        for i, p in enumerate(polys):
-            _check_simple(f"polygons[{i}]", p, eps)
-        return cls._of_simple(polys)
+        return cls._of_simple(checked_polygons(polygons))
 
     @classmethod
     def _of_simple(cls, polys: list[np.ndarray]) -> Occluders:
@@ -436,11 +394,6 @@ class Occluders:
         )
 
 
-def _scale(polys: list[np.ndarray]) -> float:
-    """Return ``max(1, max |vertex coordinate|)``: the scale of the tolerances."""
-    return max([1.0] + [float(np.max(np.abs(p))) for p in polys])
-
-
 def _trimmed(crossings: np.ndarray) -> np.ndarray:
     """Return batched ``crossings`` (N, X, 2) without the NaN columns no layout needs."""
     x = int(np.max(np.sum(~np.isnan(crossings[..., 0]), axis=-1), initial=0))
@@ -466,58 +419,6 @@ def _layouts(occ: Occluders, shape: tuple[int, ...], name: str) -> np.ndarray:
 def _flat(a: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
     """Return points ``a`` broadcast to ``shape + (2,)`` as kernel rows (size, 2)."""
     return as_rows(a, shape, (2,))
-
-
-#: Most vertices (= edges) of one layout, fixed and random polygons together. Building a
-#: layout tests every pair of its edges for crossings (the compiled table holds up to
-#: E (E - 1) / 2 of them, 134 MB at this bound) and every line-of-sight test walks all
-#: E edges, so the bound keeps both within a second and well within memory.
-MAX_VERTICES = 4096
-
-#: Pairs of edges tested at once by the simplicity check (its memory: a few hundred bytes a pair).
-_PAIRS_PER_CHUNK = 1 << 18
-
-
-def _check_simple(name: str, p: np.ndarray, eps: float) -> None:
-    """Raise ``ValueError`` unless ``p`` is a simple polygon of non-zero area.
-
-    Every pair of edges is tested (in chunks of rows of the pair table, so memory stays
-    bounded); the first bad pair in the order of ``np.triu_indices`` is the one named.
-    """
-    q = np.roll(p, -1, axis=0)
-    if np.any(np.all(p == q, axis=-1)):
-        raise ValueError(f"{name} has a repeated consecutive vertex (zero-length edge)")
-    span = float(np.max(np.ptp(p, axis=0)))
-    n = len(p)
-    rows = max(1, _PAIRS_PER_CHUNK // n)
-    for start in range(0, n - 1, rows):
-        i, j = _pairs(n, start, min(n - 1, start + rows))
-        adjacent = (j == i + 1) | ((i == 0) & (j == n - 1))
-        meet = _segments_meet(p[i], q[i], p[j], q[j], eps)
-        # Consecutive edges share a vertex; they must meet only there (no fold-back).
-        nxt = np.where(j == i + 1, j, i)  # the edge that starts at the shared vertex
-        prv = np.where(j == i + 1, i, j)
-        d_prev = p[prv] - q[prv]  # from the shared vertex back along the previous edge
-        d_next = q[nxt] - p[nxt]
-        fold = (np.abs(_cross(d_prev, d_next)) <= eps * span * span) & (
-            np.sum(d_prev * d_next, -1) > 0
-        )
-        bad = np.where(adjacent, fold, meet)
-        if np.any(bad):
-            k = int(np.argmax(bad))
-            raise ValueError(f"{name} must not self-intersect: edges {i[k]} and {j[k]} meet")
-    area = 0.5 * float(np.sum(_cross(p, q)))
-    if abs(area) <= eps * span:
-        raise ValueError(f"{name} must have non-zero area, got area {area!r}")
-
-
-def _pairs(n: int, lo: int, hi: int) -> tuple[np.ndarray, np.ndarray]:
-    """Return the rows ``lo <= i < hi`` of ``np.triu_indices(n, k=1)``, in its order."""
-    rows = np.arange(lo, hi)
-    counts = n - 1 - rows  # row i pairs edge i with edges i + 1 .. n - 1
-    i = np.repeat(rows, counts)
-    first = np.repeat(np.cumsum(counts) - counts, counts)  # where each row starts
-    return i, np.arange(len(i)) - first + i + 1
 
 
 def inside(points: FloatArray, occ: Occluders) -> np.ndarray:
@@ -662,71 +563,3 @@ def _rays_into(
     if not np.may_share_memory(rows, out):  # out's layout forced a copy: write it back
         out[...] = rows.reshape(out.shape)
     return out
-
-
-#: The smallest side of a random rectangle, relative to the bounds' scale.
-_MIN_SIDE = 1e-6
-
-
-def random_layout(
-    rng: np.random.Generator,
-    n: int,
-    bounds: Sequence[float],
-    size_range: Sequence[float],
-    *,
-    clear: FloatArray | None = None,
-    clearance: float = 0.0,
-    rotate: bool = True,
-    max_tries: int = 1000,
-) -> Occluders:
-    """Return ``n`` random rectangles inside ``bounds`` keeping the ``clear`` points clear.
-
-    ``bounds`` = ``(xmin, ymin, xmax, ymax)``; each rectangle's side lengths are uniform in
-    ``size_range = (lo, hi)``, its orientation uniform (or axis-aligned with
-    ``rotate=False``), its centre uniform among the positions keeping it inside ``bounds``.
-    Rectangles may overlap. With ``clear`` (k, 2), a rectangle is redrawn while any clear
-    point is inside it or closer than ``clearance`` to it; after ``max_tries`` draws of one
-    rectangle a ``ValueError`` is raised. Deterministic given ``rng``'s state.
-    """
-    if not isinstance(n, (int, np.integer)) or isinstance(n, bool) or n < 0:
-        raise ValueError(f"n must be an integer >= 0, got {n!r}")
-    bx = np.asarray(bounds, np.float64)
-    if bx.shape != (4,) or not np.all(np.isfinite(bx)) or bx[2] <= bx[0] or bx[3] <= bx[1]:
-        raise ValueError(
-            f"bounds must be finite (xmin, ymin, xmax, ymax) with min < max, got {bounds!r}"
-        )
-    sz = np.asarray(size_range, np.float64)
-    if sz.shape != (2,) or not np.all(np.isfinite(sz)) or not 0 < sz[0] <= sz[1]:
-        raise ValueError(f"size_range must be (lo, hi) with 0 < lo <= hi, got {size_range!r}")
-    least = _MIN_SIDE * max(1.0, float(np.max(np.abs(bx))))
-    if sz[0] < least:  # else a rectangle could be degenerate at the occluders' tolerance
-        raise ValueError(
-            f"size_range must be (lo, hi) with lo >= {least:g} ({_MIN_SIDE:g} times the "
-            f"bounds' scale), got {size_range!r}"
-        )
-    if not np.isfinite(clearance) or clearance < 0:
-        raise ValueError(f"clearance must be finite and >= 0, got {clearance!r}")
-    pts = np.empty((0, 2)) if clear is None else np.asarray(clear, np.float64).reshape(-1, 2)
-    if not np.all(np.isfinite(pts)):
-        raise ValueError("clear must be finite (no NaN or inf)")
-    return Occluders._of_simple(_rectangles(rng, n, bx, sz, pts, clearance, rotate, max_tries))
-
-
-def _rectangles(
-    rng: np.random.Generator, n: int, bx: FloatArray, sz: FloatArray, pts: FloatArray,
-    clearance: float, rotate: bool, max_tries: int,
-) -> list[np.ndarray]:  # fmt: skip
-    """Return :func:`random_layout`'s rectangles (its arguments checked), (4, 2) each
-    (:func:`activetrack.models._occluder_kernels.rectangles_into`)."""
-    out = np.empty((n, 4, 2))
-    clear = np.ascontiguousarray(pts, np.float64).reshape(-1, 2)
-    failed = ok.rectangles_into(
-        rng, np.ascontiguousarray(bx, np.float64), np.ascontiguousarray(sz, np.float64), clear,
-        float(clearance), bool(rotate), int(max_tries), out,
-    )  # fmt: skip
-    if failed >= 0:
-        raise ValueError(
-            f"could not place rectangle {failed} in {max_tries} tries (max_tries, bounds, "
-            "size_range or clearance too tight)"
-        )
-    return list(out)  # rectangles of sides >= size_range[0]: simple

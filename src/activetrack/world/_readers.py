@@ -19,7 +19,8 @@ import numpy as np
 from activetrack.estimation.ekf import position_nees
 from activetrack.validation import FloatArray
 from activetrack.world import _fast, observation
-from activetrack.world.problem import PlanningProblem, Prediction
+from activetrack.world.prediction import Prediction
+from activetrack.world.problem import PlanningProblem
 
 #: The state fields every target has its own of.
 _TARGET_FIELDS = ("x_true", "x_hat", "P", "x_pred", "P_pred")

@@ -38,8 +38,16 @@ from activetrack.linalg2 import inv2
 from activetrack.models import sensor_models
 from activetrack.models.objective import TRACE, Objective, is_trace, total_information
 from activetrack.solvers._inputs import MAX_SCALE, MIN_SCALE
-from activetrack.validation import FloatArray, as_finite, positive, psd, real_array, spd
+from activetrack.validation import FloatArray, as_finite, positive, real_array, spd
 from activetrack.world import capabilities as _capabilities
+from activetrack.world.prediction import (
+    Prediction,
+    broadcast_batches,
+    indexed,
+    stacked,
+    target_blocks,
+    target_predictions,
+)
 
 #: The per-sensor parameters and whether 0 is allowed.
 _PER_SENSOR = (("r", True), ("rho", True), ("sigma_d2", False), ("sigma_theta2", False))
@@ -73,94 +81,6 @@ def _eigenvalues2(cov: FloatArray) -> FloatArray:
     # The small one from the determinant (no cancellation): a c - b^2 = big * small.
     small = (a * c - b * b) / np.where(big > 0, big, 1.0)
     return np.stack([small, big], axis=-1) * s[..., None]
-
-
-@dataclass(frozen=True, eq=False)
-class Prediction:
-    """The filter's prediction ``x_hat(k+1|k), P(k+1|k)`` and its motion model (eq. 2-3).
-
-    Arrays are float64, validated on creation and stored read-only; ``mean`` and ``cov``
-    may carry the same leading batch axes ``...`` (or axes that broadcast to them).
-
-    Attributes:
-        mean: the predicted state ``x_hat(k+1|k)``, (..., n), position first (n >= 2).
-        cov: its covariance ``P(k+1|k)``, (..., n, n), symmetric positive definite.
-        Phi: the transition matrix of eq. (2), (n, n), shared by the batch.
-        Q: the process noise covariance of eq. (3), (n, n), symmetric positive
-            semidefinite, shared by the batch.
-    """
-
-    mean: FloatArray
-    cov: FloatArray
-    Phi: FloatArray
-    Q: FloatArray
-
-    def __post_init__(self) -> None:
-        self._store_state(self.mean, self.cov)
-        n = self.dim
-        Phi = as_finite("prediction.Phi", self.Phi)
-        if Phi.shape != (n, n):
-            raise ValueError(f"prediction.Phi must have shape ({n}, {n}), got {Phi.shape}")
-        Q = psd("prediction.Q", self.Q)
-        if Q.shape != (n, n):
-            raise ValueError(f"prediction.Q must have shape ({n}, {n}), got {Q.shape}")
-        for name, value in (("Phi", Phi), ("Q", Q)):
-            value = np.array(value)  # a copy the caller cannot change
-            value.setflags(write=False)
-            object.__setattr__(self, name, value)
-
-    def _store_state(self, mean: ArrayLike, cov: ArrayLike) -> None:
-        """Validate ``mean`` and ``cov`` and store them broadcast to their batch, read-only."""
-        mean = as_finite("prediction.mean", mean)
-        if mean.ndim < 1 or mean.shape[-1] < 2:
-            raise ValueError(
-                f"prediction.mean must have shape (..., n) with n >= 2, got {mean.shape}"
-            )
-        n = mean.shape[-1]
-        cov = spd("prediction.cov", cov)
-        if cov.shape[-1] != n:
-            raise ValueError(f"prediction.cov must have shape (..., {n}, {n}), got {cov.shape}")
-        batch = _broadcast({"prediction.mean": mean.shape[:-1], "prediction.cov": cov.shape[:-2]})
-        for name, value, trailing in (("mean", mean, (n,)), ("cov", cov, (n, n))):
-            shape = batch + trailing
-            # A copy the caller cannot change.
-            value = np.array(np.broadcast_to(value, shape) if value.shape != shape else value)
-            value.setflags(write=False)
-            object.__setattr__(self, name, value)
-
-    def with_state(self, mean: ArrayLike, cov: ArrayLike) -> Prediction:
-        """Return the prediction ``mean``, ``cov`` (validated) of the same motion model.
-
-        ``Phi`` and ``Q`` were validated once, with this prediction, and are shared, not
-        checked again: the cheap way to make the prediction of every step of one model.
-        """
-        out = object.__new__(Prediction)
-        out._store_state(mean, cov)
-        if out.dim != self.dim:
-            raise ValueError(
-                f"prediction.mean must have shape (..., {self.dim}) (the model's state), "
-                f"got {out.mean.shape}"
-            )
-        object.__setattr__(out, "Phi", self.Phi)
-        object.__setattr__(out, "Q", self.Q)
-        return out
-
-    @property
-    def batch_shape(self) -> tuple[int, ...]:
-        """Return the batch axes, ``()`` for a single prediction."""
-        return self.mean.shape[:-1]
-
-    @property
-    def dim(self) -> int:
-        """Return the state dimension n."""
-        return int(self.mean.shape[-1])
-
-    def _trusted(self, mean: FloatArray, cov: FloatArray) -> Prediction:
-        """Return the prediction of this model at already validated read-only arrays."""
-        out = object.__new__(Prediction)
-        for name, value in (("mean", mean), ("cov", cov), ("Phi", self.Phi), ("Q", self.Q)):
-            object.__setattr__(out, name, value)
-        return out
 
 
 @dataclass(frozen=True, eq=False)
@@ -234,7 +154,7 @@ class PlanningProblem:
         object.__setattr__(self, "multi_target", multi)
         pred = self.prediction
         if multi and pred is not None:
-            pred = _target_predictions(pred)
+            pred = target_predictions(pred)
             object.__setattr__(self, "prediction", pred)
         elif pred is not None and not isinstance(pred, Prediction):
             raise ValueError(
@@ -243,7 +163,7 @@ class PlanningProblem:
         # A prior taken from a prediction is a block of its validated SPD covariance.
         derived = pred is not None and self.prior_cov is None
         if derived:
-            prior_cov = _blocks(pred, lambda q: q.cov[..., :2, :2], 2)
+            prior_cov = target_blocks(pred, lambda q: q.cov[..., :2, :2], 2)
         else:
             prior_cov = spd("prior_cov", self.prior_cov)
         if prior_cov.shape[-2:] != (2, 2):
@@ -251,7 +171,7 @@ class PlanningProblem:
         _check_scale("prior_cov", _eigenvalues2(prior_cov), " eigenvalues")
         derived_target = pred is not None and self.target is None
         if derived_target:
-            target = _blocks(pred, lambda q: q.mean[..., :2], 1)
+            target = target_blocks(pred, lambda q: q.mean[..., :2], 1)
         else:
             target = as_finite("target", self.target)
         if target.ndim < 1 or target.shape[-1] != 2:
@@ -289,7 +209,7 @@ class PlanningProblem:
         if pred is not None:
             for k, q in enumerate(pred if multi else (pred,)):
                 batch_of[f"prediction[{k}]" if multi else "prediction"] = q.batch_shape
-        batch = _broadcast(batch_of)
+        batch = broadcast_batches(batch_of)
         if not isinstance(self.objective, Objective):
             raise ValueError(
                 f"objective must be an activetrack.Objective instance (such as "
@@ -485,7 +405,7 @@ class PlanningProblem:
         if any(q is not None for q in all_preds):
             if any(q is None for q in all_preds):
                 raise ValueError("problems must all carry a prediction, or none")
-            per_target = [_stacked([q[k] for q in all_preds]) for k in range(len(all_preds[0]))]
+            per_target = [stacked([q[k] for q in all_preds]) for k in range(len(all_preds[0]))]
             prediction = tuple(per_target) if multi else per_target[0]
         return cls(**arrays, objective=objective, prediction=prediction)
 
@@ -499,9 +419,9 @@ class PlanningProblem:
             value = getattr(self, f.name)
             if f.name == "prediction":
                 if isinstance(value, tuple):
-                    value = tuple(_indexed(q, index) for q in value)
+                    value = tuple(indexed(q, index) for q in value)
                 elif value is not None:
-                    value = _indexed(value, index)
+                    value = indexed(value, index)
             elif f.name == "occluders" and value is not None:  # the layouts of the first axis
                 value = value[index[0] if isinstance(index, tuple) else index]
             elif f.name not in ("objective", "multi_target") and value is not None:
@@ -627,58 +547,6 @@ class PlanningProblem:
         near = np.linalg.norm(p[..., None, :, :] - self.targets[..., :, None, :], axis=-1)
         dist = self.rho - near.min(axis=-2)  # the nearest target
         return np.maximum(np.maximum(step, dist), 0.0)
-
-
-def _indexed(pred: Prediction, index: Any) -> Prediction:
-    """Return the prediction(s) at ``index`` of the batch axes (read-only copies)."""
-    mean, cov = np.array(pred.mean[index]), np.array(pred.cov[index])
-    mean.setflags(write=False)
-    cov.setflags(write=False)
-    return pred._trusted(mean, cov)
-
-
-def _stacked(preds: list[Prediction]) -> Prediction:
-    """Return single predictions of one motion model stacked on a new batch axis."""
-    first = preds[0]
-    if any(
-        q.Phi.shape != first.Phi.shape
-        or not (np.array_equal(q.Phi, first.Phi) and np.array_equal(q.Q, first.Q))
-        for q in preds
-    ):
-        raise ValueError("problems must all have the same prediction.Phi and prediction.Q")
-    return first.with_state(np.stack([q.mean for q in preds]), np.stack([q.cov for q in preds]))
-
-
-def _target_predictions(value: Any) -> tuple[Prediction, ...]:
-    """Return a multi-target problem's predictions as a tuple, or raise naming the field."""
-    if not isinstance(value, (tuple, list)) or not all(isinstance(q, Prediction) for q in value):
-        raise ValueError(
-            "prediction of a multi_target problem must be a tuple of "
-            f"activetrack.world.problem.Prediction (one per target) or None, got {value!r}"
-        )
-    return tuple(value)
-
-
-def _blocks(preds: tuple[Prediction, ...] | Prediction, block: Any, tail: int) -> FloatArray:
-    """Return ``block`` of one prediction, or those of K stacked on a targets axis before
-    their ``tail`` trailing axes (broadcast to the predictions' common batch)."""
-    if isinstance(preds, Prediction):
-        return block(preds)
-    batch = _broadcast({f"prediction[{k}]": q.batch_shape for k, q in enumerate(preds)})
-    parts = [block(q) for q in preds]
-    return np.stack([np.broadcast_to(v, batch + v.shape[-tail:]) for v in parts], -tail - 1)
-
-
-def _broadcast(batch_of: dict[str, tuple[int, ...]]) -> tuple[int, ...]:
-    """Return the broadcast of the fields' batch shapes, or raise naming them all."""
-    shapes = list(batch_of.values())
-    if all(sh == shapes[0] for sh in shapes):  # the common case, without numpy's helper
-        return shapes[0]
-    try:
-        return np.broadcast_shapes(*shapes)
-    except ValueError:
-        listed = ", ".join(f"{k} {v}" for k, v in batch_of.items())
-        raise ValueError(f"the batch axes of the fields do not broadcast: {listed}") from None
 
 
 @runtime_checkable
