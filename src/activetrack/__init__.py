@@ -45,8 +45,9 @@ from activetrack.solvers.analytic import (
     solve_single_sensor_batch,
 )
 from activetrack.world.prediction import Prediction
+from activetrack.world.presets import PRESETS
 from activetrack.world.problem import Planner, PlanningProblem
-from activetrack.world.scenarios import PRESETS, Scenario, make_scenario
+from activetrack.world.scenarios import Scenario, make_scenario
 
 _aliases.install()
 

@@ -99,12 +99,8 @@ from activetrack.models.sensor_models import USES
 from activetrack.validation import FloatArray
 from activetrack.world import _observation_kernels as obk
 from activetrack.world._observation_kernels import LOG_STD_MAX, POSITION_MAX
-from activetrack.world.scenarios import (
-    POSE_COV_MAX,
-    SIGMA_D2_RANGE,
-    SIGMA_THETA2_RANGE,
-    Scenario,
-)
+from activetrack.world._scenario_fields import POSE_COV_MAX, SIGMA_D2_RANGE, SIGMA_THETA2_RANGE
+from activetrack.world.scenarios import Scenario
 
 TARGET_DIM = 5
 SENSOR_DIM = 6

@@ -1,9 +1,11 @@
-"""Scenario configuration and named presets.
+"""Scenario configuration.
 
 :class:`Scenario` is the one frozen configuration shared by the simulation runner and the
 environments: team, noise, kinematics, target model, initial conditions and episode
-length. ``paper`` is the setup of Section V exactly; ``homogeneous`` is M identical
-sensors. :func:`make_scenario` picks a preset and overrides any field by keyword.
+length. :func:`make_scenario` picks a named preset (:data:`PRESETS`, in
+``world/presets.py``: ``paper`` is the setup of Section V exactly, ``homogeneous`` M
+identical sensors, :data:`TASKS` the tasks beyond the paper) and overrides any field by
+keyword. Each field's accepted range and conversion is in ``world/_scenario_fields.py``.
 """
 
 from __future__ import annotations
@@ -14,90 +16,73 @@ from typing import Any
 
 import numpy as np
 
-from activetrack.models.measurement import INFORMATION_RATIO_MAX as _INFORMATION_RATIO_MAX
-from activetrack.models.motion import MODELS, LinearMotionModel, make_model
-from activetrack.models.objective import OBJECTIVES, Objective
-from activetrack.validation import FloatArray, UnexpectedKeywordError, real_array, spd
+from activetrack.models.motion import LinearMotionModel, make_model
+from activetrack.models.objective import Objective
+from activetrack.validation import FloatArray, UnexpectedKeywordError
+from activetrack.world._scenario_fields import (
+    _PER_SENSOR,
+    DT_RANGE,
+    INFORMATION_RATIO_MAX,
+    LENGTH_MAX,
+    MAX_TRACE_RANGE,
+    N_SENSORS_MAX,
+    N_STEPS_MAX,
+    N_TARGETS_MAX,
+    OBJECTIVE_NAMES,
+    ORIENTATION_MAX,
+    P0_RANGE,
+    POSE_COV_MAX,
+    Q_MAX,
+    REWARD_SCALE_RANGE,
+    SENSOR_MODELS,
+    SIGMA_D2_RANGE,
+    SIGMA_THETA2_RANGE,
+    SPEED_MAX,
+    STATE_MAX,
+    _converted_models,
+    _converted_motion,
+    _converted_objective,
+    _converted_occluders,
+    _converted_p0,
+    _converted_pose_cov,
+    _converted_random_occluders,
+    _count,
+    _per_target_p0,
+    _per_target_states,
+    _real,
+    _sensor_values,
+    _vector,
+)
 from activetrack.world.capabilities import Capabilities
+from activetrack.world.presets import EXTENSIONS, PRESETS, TASKS
 
-#: Accepted ranges (SI units). Chosen so that every quantity the EKF (eq. 3, 11), the
-#: planners (eq. 12-19) and the features form from them stays finite and well inside
-#: float64 (products of four of them stay below 1e150), and tested at their extremes.
-LENGTH_MAX = 1e9
-SPEED_MAX = 1e9
-STATE_MAX = 1e9
-DT_RANGE = (1e-6, 1e4)
-Q_MAX = 1e10
-SIGMA_D2_RANGE = (1e-8, 1e8)
-SIGMA_THETA2_RANGE = (1e-10, 1e2)
-P0_RANGE = (1e-8, 1e16)
-ORIENTATION_MAX = 1e3
-N_SENSORS_MAX = 10_000
-N_TARGETS_MAX = 100
-POSE_COV_MAX = 1e8
-N_STEPS_MAX = 10**9
-REWARD_SCALE_RANGE = (1e-12, 1e12)
-MAX_TRACE_RANGE = (1e-300, 1e300)
-#: Largest accepted ratio of the first predicted position variance to the smallest range
-#: variance: how much one update may shrink the position covariance. The position block
-#: of the posterior then keeps a condition number that float64 represents over long runs.
-#: (The bearing's information, which grows as a sensor nears the target, is bounded by the
-#: same ratio in the EKF itself: its near-distance rule.)
-INFORMATION_RATIO_MAX = _INFORMATION_RATIO_MAX
-
-_PER_SENSOR = ("sigma_d2", "sigma_theta2", "vmax", "rho", "orientation")
-#: Sensor model names (:class:`activetrack.models.sensor_models.SensorModel`, lower case).
-SENSOR_MODELS = ("range_bearing", "range", "bearing")
-#: Objective names (:data:`activetrack.models.objective.OBJECTIVES`).
-OBJECTIVE_NAMES = ("trace", "worst_trace", "logdet")
-
-
-def _count(name: str, value: object, hi: int, lo: int = 1) -> int:
-    """Return ``value`` as an ``int`` in ``[lo, hi]`` (bools, floats and strings rejected)."""
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
-        raise ValueError(f"{name} must be an integer in [{lo}, {hi}], got {value!r}")
-    if not lo <= value <= hi:
-        raise ValueError(f"{name} must be an integer in [{lo}, {hi}], got {value!r}")
-    return int(value)
-
-
-def _in_range(name: str, arr: FloatArray, lo: float, hi: float, *, zero: bool) -> None:
-    """Check ``lo <= x <= hi`` (or ``x == 0`` when ``zero``) for every entry of ``arr``."""
-    ok = ((arr >= lo) & (arr <= hi)) | ((arr == 0.0) & zero)
-    if not np.all(ok):
-        allowed = f"0 or [{lo:g}, {hi:g}]" if zero and lo > 0 else f"[{lo:g}, {hi:g}]"
-        raise ValueError(f"{name} must lie in {allowed}, got {arr.tolist()!r}")
-
-
-def _real(name: str, value: object, lo: float, hi: float, *, zero: bool = False) -> float:
-    """Return a real scalar in range as a Python ``float``."""
-    arr = real_array(name, value)
-    if arr.ndim:
-        raise ValueError(f"{name} must be a real number, got {value!r}")
-    _in_range(name, arr, lo, hi, zero=zero)
-    return float(arr)
-
-
-def _vector(
-    name: str, value: object, n: int, lo: float, hi: float, *, zero: bool, why: str = ""
-) -> tuple:
-    """Return a length-``n`` real vector in range as a tuple of floats."""
-    arr = real_array(name, value)
-    if arr.shape != (n,):
-        raise ValueError(f"{name} must have shape ({n},){why}, got {arr.shape}")
-    _in_range(name, arr, lo, hi, zero=zero)
-    return tuple(float(v) for v in arr)
-
-
-def _sensor_values(
-    name: str, value: object, m: int, lo: float, hi: float, *, zero: bool
-) -> float | tuple[float, ...]:
-    """Return a per-sensor field: a float for every sensor, or a tuple of ``m`` floats."""
-    arr = real_array(name, value)
-    if arr.ndim == 0:
-        _in_range(name, arr, lo, hi, zero=zero)
-        return float(arr)
-    return _vector(name, arr, m, lo, hi, zero=zero)
+#: The public names, re-exported from their modules: the fields' accepted ranges
+#: (``world/_scenario_fields.py``) and the presets (``world/presets.py``).
+__all__ = [
+    "DT_RANGE",
+    "EXTENSIONS",
+    "INFORMATION_RATIO_MAX",
+    "LENGTH_MAX",
+    "MAX_TRACE_RANGE",
+    "N_SENSORS_MAX",
+    "N_STEPS_MAX",
+    "N_TARGETS_MAX",
+    "OBJECTIVE_NAMES",
+    "ORIENTATION_MAX",
+    "P0_RANGE",
+    "POSE_COV_MAX",
+    "PRESETS",
+    "Q_MAX",
+    "REWARD_SCALE_RANGE",
+    "SENSOR_MODELS",
+    "SIGMA_D2_RANGE",
+    "SIGMA_THETA2_RANGE",
+    "SPEED_MAX",
+    "STATE_MAX",
+    "TASKS",
+    "Scenario",
+    "make_scenario",
+]
 
 
 @dataclass(frozen=True)
@@ -239,27 +224,35 @@ class Scenario:
             raise ValueError(f"target_init must be 'fixed' or 'gaussian', got {self.target_init!r}")
         kk = _count("n_targets", self.n_targets, N_TARGETS_MAX)
         put("n_targets", kk)
-        put("motion", self._converted_motion(kk))
+        put("motion", _converted_motion(self.motion, kk))
         if kk > 1 and isinstance(self.q, (tuple, list, np.ndarray)):
             put("q", _vector("q", self.q, kk, 0.0, Q_MAX, zero=True, why=" (one per target)"))
         else:
             put("q", _real("q", self.q, 0.0, Q_MAX, zero=True))
-        put("objective", self._converted_objective())
+        put("objective", _converted_objective(self.objective))
         if not isinstance(self.account_pose, (bool, np.bool_)):
             raise ValueError(f"account_pose must be True or False, got {self.account_pose!r}")
         put("account_pose", bool(self.account_pose))
-        put("sensor_model", self._converted_models(m))
-        put("pose_cov", self._converted_pose_cov(m))
+        put("sensor_model", _converted_models(self.sensor_model, m))
+        put("pose_cov", _converted_pose_cov(self.pose_cov, m))
         if self.max_range is not None:
             put("max_range", _sensor_values("max_range", self.max_range, m, 1e-6, LENGTH_MAX,
                                             zero=False))  # fmt: skip
         put("p_detect", _sensor_values("p_detect", self.p_detect, m, 0.0, 1.0, zero=True))
-        put("occluders", self._converted_occluders())
+        occluders, occ = _converted_occluders(self.occluders)
+        if occ is not None:
+            self._cache["occluders"] = occ
+        put("occluders", occluders)
         put(
             "sensor_center",
             _vector("sensor_center", self.sensor_center, 2, -LENGTH_MAX, LENGTH_MAX, zero=True),
         )
-        self._convert_random_occluders(put)
+        count, bounds, size = _converted_random_occluders(
+            self.random_occluders, self.occluders, self.occluder_bounds, self.occluder_size
+        )
+        put("random_occluders", count)
+        put("occluder_bounds", bounds)
+        put("occluder_size", size)
         put("filter_iterations", _count("filter_iterations", self.filter_iterations, 100))
         ranges = {
             "sigma_d2": (*SIGMA_D2_RANGE, False),
@@ -282,45 +275,15 @@ class Scenario:
             for key in ("x0", "x0_hat"):
                 value = getattr(self, key)
                 put(key, _vector(key, value, n, -STATE_MAX, STATE_MAX, zero=True, why=why))
-            put("P0", self._converted_p0(n))
+            put("P0", _converted_p0(self.P0, n, self.motion))
         else:
             dims = [mdl.dim for mdl in self.target_models]
             for key in ("x0", "x0_hat"):
-                put(key, self._per_target_states(key, getattr(self, key), dims))
-            put("P0", self._per_target_p0(dims))
+                put(key, _per_target_states(key, getattr(self, key), dims))
+            put("P0", _per_target_p0(self.P0, dims))
         self._check_information_ratio()
         if self.random_occluders:  # a layout can be drawn (the reset would fail otherwise)
             self.draw_occluders(np.random.default_rng(0))
-
-    def _convert_random_occluders(self, put: Any) -> None:
-        """Check and store ``random_occluders``, ``occluder_bounds`` and ``occluder_size``."""
-        put("random_occluders", _count("random_occluders", self.random_occluders, 100, lo=0))
-        from activetrack.models.occluders import MAX_VERTICES  # noqa: PLC0415 (occluded scenarios)
-
-        fixed = sum(len(poly) for poly in self.occluders)
-        if fixed + 4 * self.random_occluders > MAX_VERTICES:
-            raise ValueError(
-                f"occluders and random_occluders must have at most {MAX_VERTICES} vertices in "
-                f"all (4 a random rectangle), got {fixed} + 4 x {self.random_occluders}"
-            )
-        b = _vector("occluder_bounds", self.occluder_bounds, 4, -LENGTH_MAX, LENGTH_MAX,
-                    zero=True)  # fmt: skip
-        if not (b[0] < b[2] and b[1] < b[3]):
-            raise ValueError(
-                f"occluder_bounds must be (xmin, ymin, xmax, ymax) with xmin < xmax and "
-                f"ymin < ymax, got {self.occluder_bounds!r}"
-            )
-        put("occluder_bounds", b)
-        size = _vector("occluder_size", self.occluder_size, 2, 1e-6, LENGTH_MAX, zero=False)
-        if size[0] > size[1]:
-            raise ValueError(f"occluder_size must be (lo, hi) with lo <= hi, got {size!r}")
-        least = 1e-6 * max(1.0, max(abs(v) for v in b))  # random_layout's smallest side
-        if size[0] < least:
-            raise ValueError(
-                f"occluder_size must be (lo, hi) with lo >= {least:g} (1e-06 times the "
-                f"occluder_bounds' scale), got {size!r}"
-            )
-        put("occluder_size", size)
 
     def draw_occluders(self, rng: np.random.Generator):  # -> activetrack.models.occluders.Occluders
         """Return an episode's occluders: the fixed ``occluders`` and ``random_occluders``
@@ -372,156 +335,6 @@ class Scenario:
                     "occluder_size or sensor_radius"
                 )
         return Occluders._stack_simple(vertices, counts)
-
-    def _converted_objective(self) -> str | Objective:
-        """Return ``objective`` checked: a built-in's name (its instance too), or a new
-        objective's instance (its own ``name``, a non-empty string, not a built-in's)."""
-        v = self.objective
-        if isinstance(v, Objective):
-            builtin = OBJECTIVES.get(v.name) if isinstance(v.name, str) else None
-            if builtin is not None and type(v) is type(builtin):
-                return v.name
-            if not isinstance(v.name, str) or not v.name or builtin is not None:
-                raise ValueError(
-                    f"objective {v!r} must have a name of its own (a non-empty string other "
-                    f"than {list(OBJECTIVE_NAMES)}), got name {v.name!r}"
-                )
-            _probe_objective(v)
-            return v
-        if isinstance(v, str) and v in OBJECTIVE_NAMES:
-            return v
-        raise ValueError(
-            f"objective must be one of {list(OBJECTIVE_NAMES)} or an activetrack.Objective "
-            f"instance, got {v!r}"
-        )
-
-    def _converted_motion(self, kk: int) -> Any:
-        """Return ``motion`` checked: one model, or (K > 1) a tuple of K models."""
-
-        def one(v: object) -> str | LinearMotionModel:
-            if isinstance(v, LinearMotionModel) or (isinstance(v, str) and v in MODELS):
-                return v
-            raise ValueError(
-                f"motion must be one of {sorted(MODELS)} or a LinearMotionModel "
-                f"(or, with n_targets > 1, a tuple of one per target), got {self.motion!r}"
-            )
-
-        if kk > 1 and isinstance(self.motion, (tuple, list)):
-            if len(self.motion) != kk:
-                raise ValueError(
-                    f"motion must name one model per target ({kk}), got {len(self.motion)}"
-                )
-            return tuple(one(v) for v in self.motion)
-        return one(self.motion)
-
-    def _converted_models(self, m: int) -> str | tuple[str, ...]:
-        """Return ``sensor_model`` as a name, or a tuple of M names."""
-
-        def one(v: object) -> str:
-            if isinstance(v, str) and v in SENSOR_MODELS:
-                return v
-            raise ValueError(
-                f"sensor_model must be one of {list(SENSOR_MODELS)} or a tuple of {m} of "
-                f"them (one per sensor), got {self.sensor_model!r}"
-            )
-
-        v = self.sensor_model
-        if isinstance(v, (tuple, list, np.ndarray)):
-            if len(v) != m:
-                raise ValueError(f"sensor_model must name one model per sensor ({m}), got {len(v)}")
-            names = tuple(one(x) for x in v)
-            return names[0] if len(set(names)) == 1 else names
-        return one(v)
-
-    def _converted_pose_cov(self, m: int) -> float | tuple:
-        """Return ``pose_cov`` checked (PSD, in range) in the form it was given."""
-        arr = real_array("pose_cov", self.pose_cov)
-        if arr.shape not in ((), (m,), (2, 2), (m, 2, 2)):
-            raise ValueError(
-                f"pose_cov must be a variance, {m} variances (one per sensor), a 2x2 matrix "
-                f"or {m} 2x2 matrices, got shape {arr.shape}"
-            )
-        if arr.ndim <= 1:
-            _in_range("pose_cov", arr, 0.0, POSE_COV_MAX, zero=True)
-            return float(arr) if arr.ndim == 0 else tuple(float(v) for v in arr)
-        mats = arr.reshape(-1, 2, 2)
-        _in_range("pose_cov diagonal", mats[:, [0, 1], [0, 1]], 0.0, POSE_COV_MAX, zero=True)
-        det = mats[:, 0, 0] * mats[:, 1, 1] - mats[:, 0, 1] ** 2
-        if np.any(mats[:, 0, 1] != mats[:, 1, 0]) or np.any(det < 0.0):
-            raise ValueError(
-                f"pose_cov must be symmetric positive semidefinite, got {arr.tolist()!r}"
-            )
-        return (
-            tuple(tuple(tuple(float(v) for v in row) for row in mat) for mat in mats)
-            if arr.ndim == 3
-            else tuple(tuple(float(v) for v in row) for row in arr)
-        )
-
-    def _per_target_states(self, key: str, value: object, dims: list[int]) -> tuple:
-        """Return K state vectors (one per target, each of its model's dimension)."""
-        kk = len(dims)
-        rows = value if isinstance(value, (tuple, list, np.ndarray)) else None
-        if (
-            rows is None
-            or len(rows) != kk
-            or not all(isinstance(r, (tuple, list, np.ndarray)) for r in rows)
-        ):
-            raise ValueError(
-                f"{key} must hold one state per target ({kk} rows of {dims} entries) when "
-                f"n_targets > 1, got {value!r}"
-            )
-        return tuple(
-            _vector(f"{key}[{k}]", r, n, -STATE_MAX, STATE_MAX, zero=True)
-            for k, (r, n) in enumerate(zip(rows, dims, strict=True))
-        )
-
-    def _per_target_p0(self, dims: list[int]) -> tuple:
-        """Return P0 for K targets: a shared diagonal, or K diagonals or matrices."""
-        kk = len(dims)
-        P0 = self.P0
-        flat = np.asarray(P0, dtype=object)
-        shared = (
-            flat.ndim == 1
-            and len(P0) == dims[0]
-            and len(set(dims)) == 1
-            and not any(isinstance(v, (tuple, list, np.ndarray)) for v in P0)
-        )
-        if shared:
-            arr = real_array("P0", P0)
-            _in_range("P0 diagonal", arr, *P0_RANGE, zero=False)
-            return tuple(float(v) for v in arr)
-        if not isinstance(P0, (tuple, list)) or len(P0) != kk:
-            raise ValueError(
-                f"P0 must be a shared diagonal ({dims[0]} entries) or one diagonal or matrix "
-                f"per target ({kk}) when n_targets > 1, got {P0!r}"
-            )
-        out = []
-        for k, (pk, n) in enumerate(zip(P0, dims, strict=True)):
-            arr = real_array(f"P0[{k}]", pk)
-            if arr.shape not in ((n,), (n, n)):
-                raise ValueError(f"P0[{k}] must have shape ({n},) or ({n}, {n}), got {arr.shape}")
-            _in_range(f"P0[{k}] diagonal", np.diag(arr) if arr.ndim == 2 else arr, *P0_RANGE,
-                      zero=False)  # fmt: skip
-            if arr.ndim == 2:
-                spd(f"P0[{k}]", arr)
-                out.append(tuple(tuple(float(v) for v in row) for row in arr))
-            else:
-                out.append(tuple(float(v) for v in arr))
-        return tuple(out)
-
-    def _converted_p0(self, n: int) -> tuple:
-        """Return P0 converted (a tuple, or a tuple of tuples), checked SPD and in range."""
-        P0 = real_array("P0", self.P0)
-        if P0.shape not in ((n,), (n, n)):
-            raise ValueError(
-                f"P0 must have shape ({n},) or ({n}, {n}) (the state of "
-                f"motion={getattr(self.motion, 'name', self.motion)!r}), got {P0.shape}"
-            )
-        _in_range("P0 diagonal", np.diag(P0) if P0.ndim == 2 else P0, *P0_RANGE, zero=False)
-        if P0.ndim == 1:
-            return tuple(float(v) for v in P0)
-        spd("P0", P0)
-        return tuple(tuple(float(v) for v in row) for row in P0)
 
     def _check_information_ratio(self) -> None:
         """Check the coupled limit of the class docstring (one update's variance reduction)."""
@@ -600,26 +413,6 @@ class Scenario:
         if arr.ndim <= 1:
             return np.broadcast_to(arr, (m,))[:, None, None] * np.eye(2)
         return np.array(np.broadcast_to(arr, (m, 2, 2)))
-
-    def _converted_occluders(self) -> tuple:
-        """Return ``occluders`` checked, as tuples of (x, y) float tuples."""
-        from activetrack.models.occluders import Occluders  # noqa: PLC0415 (occluded scenarios)
-
-        raw = self.occluders
-        if not isinstance(raw, (tuple, list)):
-            raise ValueError(
-                f"occluders must be a sequence of polygons (each >= 3 (x, y) vertices), got {raw!r}"
-            )
-        if not raw:
-            return ()
-        try:
-            occ = Occluders.from_polygons(list(raw))
-        except ValueError as exc:  # name the scenario's field
-            raise ValueError(str(exc).replace("polygons", "occluders")) from None
-        if occ.scale > LENGTH_MAX:
-            raise ValueError(f"occluders coordinates must be at most {LENGTH_MAX:g} in magnitude")
-        self._cache["occluders"] = occ
-        return tuple(tuple((float(x), float(y)) for x, y in poly) for poly in occ.polygons)
 
     @property
     def occluder_set(self):  # -> activetrack.models.occluders.Occluders | None
@@ -713,155 +506,6 @@ class Scenario:
                 v = {"name": v.name, "class": f"{cls.__module__}.{cls.__qualname__}"}
             out[f.name] = v.name if isinstance(v, LinearMotionModel) else v
         return out
-
-
-#: The fields added beyond the paper's setup (several targets, sensor models, poses,
-#: limited sensing).
-EXTENSIONS = (
-    "n_targets", "sensor_model", "pose_cov", "account_pose", "objective", "max_range",
-    "p_detect", "occluders", "random_occluders", "occluder_bounds", "occluder_size",
-    "filter_iterations",
-)  # fmt: skip
-
-#: The beyond-the-paper tasks start the filter consistent: the true state is drawn from
-#: the prior N(x0_hat, P0).
-_TASK = {"target_init": "gaussian", "P0": (4.0, 4.0, 25.0, 25.0), "n_sensors": 4}
-
-#: The urban tasks' team, target and sensing limits.
-_URBAN = {
-    **_TASK,
-    "sigma_d2": 1.0,
-    "sigma_theta2": 0.05,
-    "x0": (0.0, 0.0, -4.0, 3.0),
-    "x0_hat": (0.0, 0.0, -4.0, 3.0),
-    "max_range": 20.0,
-    "p_detect": 0.9,
-    "sensor_center": (8.0, 0.0),
-    "sensor_radius": 4.0,
-    # The iterated EKF: after a gap the prediction can be meters off (module docstring of
-    # activetrack.estimation.ekf); with eq. (11)'s single linearization the mean NEES leaves the
-    # band.
-    "filter_iterations": 10,
-}
-#: The urban task's blocks, along and beside the target's predicted path.
-_BLOCKS = (
-    ((3.0, -8.0), (6.0, -8.0), (6.0, -4.5), (3.0, -4.5)),
-    ((2.0, 4.5), (6.0, 4.5), (6.0, 8.0), (2.0, 8.0)),
-    ((-9.0, 2.0), (-5.0, 2.0), (-5.0, 5.5), (-9.0, 5.5)),
-    ((-16.0, 6.0), (-12.0, 6.0), (-12.0, 10.0), (-16.0, 10.0)),
-    ((-10.0, 12.0), (-6.0, 12.0), (-6.0, 16.0), (-10.0, 16.0)),
-)
-
-PRESETS: dict[str, dict[str, Any]] = {
-    # Section V: heterogeneous team of three, CV target, 50 steps of 0.1 s.
-    "paper": {},
-    # M identical sensors (the paper's sensor 1), target started from N(x0_hat, P0).
-    "homogeneous": {
-        "name": "homogeneous",
-        "n_sensors": 4,
-        "sigma_d2": 2.0,
-        "sigma_theta2": 0.25,
-        "target_init": "gaussian",
-    },
-    # Two targets crossing (they meet at the origin halfway), four range-and-bearing
-    # sensors (the paper's sensor 1) starting to one side; the sum of the two traces.
-    "two_targets": {
-        **_TASK,
-        "name": "two_targets",
-        "n_targets": 2,
-        "sigma_d2": 2.0,
-        "sigma_theta2": 0.25,
-        "x0": ((-10.0, -10.0, 4.0, 4.0), (-10.0, 10.0, 4.0, -4.0)),
-        "x0_hat": ((-10.0, -10.0, 4.0, 4.0), (-10.0, 10.0, 4.0, -4.0)),
-        "sensor_center": (10.0, 0.0),
-        "sensor_radius": 5.0,
-    },
-    # Four range-only sensors (range noise 1 m^2) on the paper's target.
-    "range_only": {
-        **_TASK,
-        "name": "range_only",
-        "sensor_model": "range",
-        "sigma_d2": 1.0,
-        "sigma_theta2": 0.25,
-        "x0": (0.0, 0.0, -8.0, 6.0),
-        "x0_hat": (0.0, 0.0, -8.0, 6.0),
-    },
-    # Four bearing-only sensors (bearing noise 0.01 rad^2, a 5.7 degree standard deviation).
-    "bearing_only": {
-        **_TASK,
-        "name": "bearing_only",
-        "sensor_model": "bearing",
-        "sigma_d2": 2.0,
-        "sigma_theta2": 0.01,
-        "x0": (0.0, 0.0, -8.0, 6.0),
-        "x0_hat": (0.0, 0.0, -8.0, 6.0),
-    },
-    # A mixed team: range and bearing, range only, bearing only, range only.
-    "mixed": {
-        **_TASK,
-        "name": "mixed",
-        "sensor_model": ("range_bearing", "range", "bearing", "range"),
-        "sigma_d2": (2.0, 1.0, 2.0, 1.0),
-        "sigma_theta2": (0.25, 0.25, 0.01, 0.25),
-        "x0": (0.0, 0.0, -8.0, 6.0),
-        "x0_hat": (0.0, 0.0, -8.0, 6.0),
-    },
-    # Range-and-bearing sensors (1 m^2, 0.05 rad^2) whose position fixes are uncertain
-    # (isotropic variances 0.25 to 2 m^2, a 0.5 to 1.4 m standard deviation), accounted
-    # for by the filter.
-    "uncertain_poses": {
-        **_TASK,
-        "name": "uncertain_poses",
-        "sigma_d2": 1.0,
-        "sigma_theta2": 0.05,
-        "pose_cov": (0.25, 0.5, 1.0, 2.0),
-        "x0": (0.0, 0.0, -8.0, 6.0),
-        "x0_hat": (0.0, 0.0, -8.0, 6.0),
-    },
-    # Limited sensing among buildings: the paper's target slowed to 5 m/s drives past and
-    # through (a tunnel) five 3-4 m blocks; four range-and-bearing sensors (1 m^2, 0.05
-    # rad^2) start around (8, 0), each sees 20 m and detects a visible target with
-    # probability 0.9; the filter is the iterated EKF.
-    "urban": {**_URBAN, "name": "urban", "occluders": _BLOCKS},
-    # The same team and target among six random 2-5 m rectangles, drawn anew every episode.
-    "urban_random": {
-        **_URBAN,
-        "name": "urban_random",
-        "random_occluders": 6,
-        "occluder_bounds": (-24.0, -10.0, 12.0, 20.0),
-        "occluder_size": (2.0, 5.0),
-    },
-}
-
-#: The named tasks beyond the paper (presets with registered environment ids).
-TASKS = (
-    "two_targets", "range_only", "bearing_only", "mixed", "uncertain_poses", "urban",
-    "urban_random",
-)  # fmt: skip
-
-
-def _probe_objective(objective: Objective) -> None:
-    """Raise ValueError naming ``objective`` unless it scores two configurations of two
-    targets (information entries of positive definite matrices) and two covariances as
-    one finite value each: a new objective is checked here, not deep in a planner."""
-    a = np.array([[2.0, 1.0], [1.0, 4.0]])
-    b = np.array([[0.5, 0.0], [-0.2, 1.0]])
-    c = np.array([[1.0, 3.0], [0.5, 1.0]])
-    P = np.array([[[2.0, 0.3], [0.3, 1.0]], [[1.0, 0.0], [0.0, 5.0]]])
-    try:
-        with np.errstate(all="ignore"):  # a non-finite value is reported below
-            got = [
-                np.asarray(objective.of_targets(a, b, c)),
-                np.asarray(objective.of_covariances(P)),
-            ]
-    except Exception as exc:  # a user's code: report it against the field
-        raise ValueError(f"objective {objective!r} failed on a valid input: {exc!r}") from exc
-    for what, value, shape in (("of_targets", got[0], (2,)), ("of_covariances", got[1], ())):
-        if value.shape != shape or not np.all(np.isfinite(value)):
-            raise ValueError(
-                f"objective {objective!r}: {what} must return finite values of shape {shape} "
-                f"on this check's positive definite inputs, got {value!r}"
-            )
 
 
 def _same(a: object, b: object) -> bool:
