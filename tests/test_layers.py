@@ -191,3 +191,18 @@ def test_the_scan_covers_every_layer_and_the_cli_modules_exist():
     assert CLI <= names.keys()
     for _, package in FOLDERS:
         assert sum(layer_of(n) == layer_of(package) for n in names) > 1, package
+
+
+#: The core's modules stay small, one job each: about 600 lines at most (the slack of 20
+#: lines keeps a docstring's growth from forcing a split; past it, split by job).
+CORE_LINES_MAX = 620
+
+
+@pytest.mark.parametrize(
+    "module,path",
+    [(m, p) for m, p in modules() if layer_of(m) == 0],
+    ids=[m for m, _ in modules() if layer_of(m) == 0],
+)
+def test_no_module_of_the_core_is_above_about_600_lines(module, path):
+    lines = len(path.read_text().splitlines())
+    assert lines <= CORE_LINES_MAX, f"{module} has {lines} lines: split it by the jobs it does"
