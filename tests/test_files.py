@@ -52,6 +52,37 @@ def test_a_failed_write_keeps_the_old_file(tmp_path):
     assert temp_files(tmp_path) == []
 
 
+@pytest.mark.skipif(os.name != "posix", reason="POSIX signals")
+@pytest.mark.parametrize("where", ["atomic_path", "prepare_output_dir"])
+def test_an_interrupt_just_after_a_temporary_file_is_made_leaves_none(where, tmp_path, monkeypatch):
+    """Ctrl-C right after mkstemp made the file, before its name is returned: the file is
+    still removed (the interrupt waits until it is known)."""
+    import signal
+
+    import activetrack.files as files
+
+    real = files.tempfile.mkstemp
+
+    def made_then_interrupted(*args, **kwargs):
+        made = real(*args, **kwargs)
+        os.kill(os.getpid(), signal.SIGINT)
+        return made
+
+    monkeypatch.setattr(files.tempfile, "mkstemp", made_then_interrupted)
+    before = signal.getsignal(signal.SIGINT)
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            if where == "atomic_path":
+                atomic_write_bytes(tmp_path / "r.bin", b"new")
+            else:
+                prepare_output_dir(tmp_path / "out", ("a.json",))
+    finally:
+        signal.signal(signal.SIGINT, before)
+    assert temp_files(tmp_path) == []
+    assert not (tmp_path / "r.bin").exists()
+
+
 def test_run_outputs_commit_together_or_not_at_all(tmp_path):
     (tmp_path / "results.json").write_text("old results")
     (tmp_path / "plot.png").write_text("old plot")
@@ -311,7 +342,9 @@ def _check_outcome(folder: Path, old: dict[str, bytes], code: int, err: str) -> 
 
 
 @pytest.mark.parametrize("signum", ["SIGINT", "SIGTERM"])
-@pytest.mark.parametrize("point", ["computing", "staging", "committing"])
+@pytest.mark.parametrize(
+    "point", ["computing", "in_a_library", "staging_folder", "staging", "committing"]
+)
 def test_a_signal_at_each_stage_of_a_run(signum, point, tmp_path, monkeypatch, capsys):
     """The signal sent by the process to itself at a known point of an --overwrite run."""
     import signal
@@ -331,8 +364,30 @@ def test_a_signal_at_each_stage_of_a_run(signum, point, tmp_path, monkeypatch, c
 
         return wrapped
 
+    def library_reraising(*args, **kwargs):
+        # As Ray's ``get`` does: the handler's exception is caught and a plain
+        # KeyboardInterrupt raised in its place (the signal's name is lost).
+        try:
+            os.kill(os.getpid(), sig)
+            for _ in range(1000):  # the handler runs at the next bytecode
+                pass
+        except KeyboardInterrupt:
+            raise KeyboardInterrupt() from None
+        raise AssertionError("the handler did not run")
+
     if point == "computing":
         monkeypatch.setattr(bcli, "run_monte_carlo", send_then(bcli.run_monte_carlo))
+    elif point == "in_a_library":
+        monkeypatch.setattr(bcli, "run_monte_carlo", library_reraising)
+    elif point == "staging_folder":  # the staging folder made, its name not yet returned
+        real = files.tempfile.mkdtemp
+
+        def made_then_signal(*args, **kwargs):
+            path = real(*args, **kwargs)
+            os.kill(os.getpid(), sig)
+            return path
+
+        monkeypatch.setattr(files.tempfile, "mkdtemp", made_then_signal)
     elif point == "staging":
         monkeypatch.setattr(bcli, "format_table", send_then(bcli.format_table))
     else:  # inside the commit, between the renames: held back until they are done

@@ -166,10 +166,13 @@ class _SignalHandler:
 
     def __init__(self) -> None:
         self.armed = True
+        self.signum: int | None = None  # the signal taken, reported even if a library
+        # (Ray's ``get``) turned its exception into a plain KeyboardInterrupt
 
     def __call__(self, signum: int, frame: Any) -> None:
         if self.armed:
             self.armed = False  # the report of this interrupt is not cut short by another
+            self.signum = signum
             from activetrack.files import Interrupted
 
             raise Interrupted(signum)
@@ -220,7 +223,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             handler.armed = False  # done: a signal now changes nothing on disk
     except KeyboardInterrupt as exc:  # Ctrl-C or SIGTERM: the staged outputs are removed
         handler.armed = False
-        signum = int(getattr(exc, "signum", signal.SIGINT))
+        signum = int(getattr(exc, "signum", None) or handler.signum or signal.SIGINT)
         name = signal.Signals(signum).name
         print(f"\n{sub.prog}: interrupted ({name}); {_folders_report(runs)}", file=sys.stderr)
         code = 128 + signum

@@ -179,12 +179,16 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     suffix. If the block raises, the temporary file is removed and ``path`` is untouched.
     """
     target = Path(path)
-    tmp = _temp_path(target)
+    tmp: Path | None = None
     try:
+        with signals_deferred():  # an interrupt cannot fall between making and naming it
+            tmp = _temp_path(target)
         yield tmp
         _fsync_file(tmp)
         os.replace(tmp, target)
     except BaseException as exc:
+        if tmp is None:
+            raise
         _unlink(tmp)
         if isinstance(exc, OSError) and exc.filename in (None, str(tmp)):
             exc.filename = str(target)  # the user's file, not the temporary (or no) name
@@ -321,7 +325,10 @@ class RunOutputs:
         if self.state != "open":
             raise RuntimeError(f"{self.folder}: this run's outputs are already {self.state}")
         if self._staging is None:
-            self._staging = Path(tempfile.mkdtemp(dir=self.folder, prefix=STAGING_PREFIX))
+            # An interrupt waits until the folder is made and recorded, so the clean-up
+            # that the interrupt runs knows it.
+            with signals_deferred():
+                self._staging = Path(tempfile.mkdtemp(dir=self.folder, prefix=STAGING_PREFIX))
             os.chmod(self._staging, 0o777 & ~_umask())
         return self._staging
 
@@ -523,9 +530,10 @@ def prepare_output_dir(
         try:
             folder.mkdir(parents=True, exist_ok=True)
             made = True
-            fd, probe = tempfile.mkstemp(dir=folder, prefix=TEMP_PREFIX)
-            os.close(fd)
-            os.unlink(probe)
+            with signals_deferred():  # the probe never outlives an interrupt
+                fd, probe = tempfile.mkstemp(dir=folder, prefix=TEMP_PREFIX)
+                os.close(fd)
+                os.unlink(probe)
         except OSError as exc:
             if made and isinstance(exc, FileNotFoundError) and attempt < 4:
                 continue  # made, then removed by a run ending: make it again
