@@ -31,7 +31,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from activetrack.baselines import gsr_kinematic
 from activetrack.kinematics import feasible_set
+from activetrack.kinematics.team import all_disks
 from activetrack.models import sensor_models
 from activetrack.models.occluders import line_of_sight, project_move
 from activetrack.solvers import numeric as solver_numeric
@@ -61,7 +63,11 @@ def relax(
     occ = problem.occluders
     if occ is not None and occ.batched and len(shape) > 1:  # a layout per flattened copy
         occ = occ[np.repeat(np.arange(shape[0]), B // shape[0])]
-    s = _warm_start(current, r, targets, rho)
+    custom = problem.kinematics is not None and not all_disks(problem.kinematics)
+    if custom:  # a kinematics of its own: its own feasible sets (baselines.gsr_kinematic)
+        s = gsr_kinematic.warm_start(problem, current, targets, rho)
+    else:
+        s = _warm_start(current, r, targets, rho)
     entries = _entries(s, targets, w_d, w_t, pose, det, occ)  # 3 x (B, K, M)
     base = (prior[..., 0, 0], prior[..., 0, 1], prior[..., 1, 1])
     totals = [base[e] + entries[e].sum(axis=-1) for e in range(3)]
@@ -73,7 +79,11 @@ def relax(
     # changed[b, i]: sensor i's subproblem in copy b changed since its last solve (another
     # sensor moved); an unchanged subproblem would give the same answer, so it is skipped.
     changed = free.copy()
-    prepared = _Prepared(problem, current, r, targets, rho, w_d, w_t, pose, det, occ)
+    if custom:
+        prepared = gsr_kinematic.Prepared(problem, _one_sensor(targets, w_d, w_t, pose, det, occ),
+                                          current, targets, rho)  # fmt: skip
+    else:
+        prepared = _Prepared(problem, current, r, targets, rho, w_d, w_t, pose, det, occ)
     for _ in range(max_sweeps):
         rows = np.flatnonzero(active)
         if rows.size == 0:
@@ -116,7 +126,8 @@ def relax(
         nonneg = problem.objective.nonnegative
         scale = before if nonneg else np.maximum(np.abs(before), 1.0)
         active[rows] = (gain > tol * scale) & changed[rows].any(axis=1)
-    if det is not None and (occ is not None or np.any(np.isfinite(det[1]))):
+    # (A kinematics of its own skips the approach: it moves by the disk's projection.)
+    if det is not None and not custom and (occ is not None or np.any(np.isfinite(det[1]))):
         s, value = _approach(problem, s, value, current, r, targets, rho, det, (w_d, w_t, pose),
                              occ)  # fmt: skip
     return s.reshape(*shape, M, 2), value.reshape(shape), sweeps.reshape(shape), warm.reshape(shape)
@@ -231,6 +242,22 @@ class _Prepared:
         memory[0][sub], memory[1][sub], memory[2][sub] = chosen, th, x
         memory[3][sub] = True
         return out
+
+
+def _one_sensor(targets, w_d, w_t, pose, det, occ):
+    """Return ``entries(pts, b, i)``: sensor ``i``'s entries in copy ``b`` at ``pts`` (P, 2)
+    about every target, 3 x (P, K) (:func:`_entries` of P copies of the sensor)."""
+
+    def entries(pts: FloatArray, b: int, i: int) -> tuple[FloatArray, ...]:
+        n = len(pts)
+        row = (np.array([b]), np.full((1, n), i))
+        cov = None if pose is None else pose[row]
+        d = None if det is None else tuple(x[row] for x in det)
+        layout = None if occ is None else occ[np.array([b])]
+        out = _entries(pts[None], targets[[b]], w_d[row], w_t[row], cov, d, layout)
+        return tuple(x[0].T for x in out)
+
+    return entries
 
 
 def _warm_start(

@@ -1,7 +1,8 @@
 """activetrack: multi-robot active target tracking with range and bearing sensors.
 
 The core (this package) holds the paper's mathematics and no RL: target motion models
-(eq. 1-2), the range-bearing measurement model (eq. 4-10), the EKF (eq. 3, 11), the
+(eq. 1-2), the sensors' kinematics (eq. 13-16; :class:`Kinematics`, the base of a new one,
+and :class:`Disk`), the range-bearing measurement model (eq. 4-10), the EKF (eq. 3, 11), the
 covariance objective (eq. 12, 17-19; :class:`Objective`, the base of a new one), the
 analytic single-sensor optimum (Section IV-A), the planning problem and scenario presets.
 The layers ``activetrack.envs``, ``activetrack.baselines`` and ``activetrack.train`` build
@@ -19,6 +20,8 @@ import importlib.metadata as _metadata
 
 from activetrack import _aliases, _registry
 from activetrack.estimation.ekf import ExtendedKalmanFilter
+from activetrack.kinematics.base import Kinematics
+from activetrack.kinematics.disk import Disk
 from activetrack.models.motion import (
     LinearMotionModel,
     constant_acceleration,
@@ -62,8 +65,10 @@ __all__ = [
     "TRACE",
     "WORST_TRACE",
     "BatchSolution",
+    "Disk",
     "SingleSensorSolution",
     "ExtendedKalmanFilter",
+    "Kinematics",
     "LinearMotionModel",
     "LogDetObjective",
     "Objective",

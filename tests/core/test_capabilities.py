@@ -9,6 +9,7 @@ import dataclasses
 import numpy as np
 import pytest
 
+from activetrack import Disk
 from activetrack.world import World, capabilities, observation
 from activetrack.world.capabilities import Capabilities
 from activetrack.world.problem import PlanningProblem
@@ -16,8 +17,15 @@ from activetrack.world.scenarios import PRESETS, make_scenario
 
 FLAGS = (
     "one_target", "range_bearing", "known_poses", "pose_free_filter", "unlimited_sensing",
-    "no_occluders", "single_update", "trace_objective",
+    "no_occluders", "single_update", "trace_objective", "disk_kinematics",
 )  # fmt: skip
+
+
+class OwnDisk(Disk):
+    """A kinematics of its own (not the built-in Disk, though it moves as one)."""
+
+    name = "own_disk"
+
 
 # Each preset as its description in scenarios.py / docs/tasks.md reads (True: the paper's).
 PRESET_FLAGS = {
@@ -92,6 +100,7 @@ def expected(fields: dict) -> dict[str, bool]:
         "no_occluders": not occluded,
         "single_update": fields.get("filter_iterations", 1) == 1,
         "trace_objective": fields.get("objective", "trace") == "trace",
+        "disk_kinematics": all(type(k) is Disk for k in fields.get("kinematics", ())),
     }
     return {
         **f,
@@ -105,14 +114,22 @@ def expected(fields: dict) -> dict[str, bool]:
                 "pose_free_filter",
                 "unlimited_sensing",
                 "trace_objective",
+                "disk_kinematics",
             )
         ),  # fmt: skip
         "paper_observation": all(
             f[k] for k in ("one_target", "range_bearing", "known_poses", "unlimited_sensing")
         ),
         "fused_step": all(
-            f[k] for k in ("one_target", "known_poses", "unlimited_sensing", "single_update")
-        ),
+            f[k]
+            for k in (
+                "one_target",
+                "known_poses",
+                "unlimited_sensing",
+                "single_update",
+                "disk_kinematics",
+            )
+        ),  # fmt: skip
     }
 
 
@@ -151,6 +168,9 @@ def random_fields(rng: np.random.Generator) -> dict:
         fields["filter_iterations"] = 3
     if rng.random() < 0.3:
         fields["objective"] = ("trace", "worst_trace", "logdet")[int(rng.integers(3))]
+    if rng.random() < 0.3:  # the built-in disks given, or one of them a kinematics of its own
+        own = rng.random() < 0.6
+        fields["kinematics"] = (Disk(1.0), OwnDisk(1.0) if own else Disk(0.5), Disk(1.0))
     return fields
 
 

@@ -112,6 +112,8 @@ class WorldReaders:
             "pose_cov": p.filter_pose_cov,
             "objective": self.objective,
         }
+        if self._team is not None:  # a kinematics that is not the built-in disk
+            extra["kinematics"] = self._team.team
         if self._limited:  # the planners count each sensor's information at its expected value
             extra.update(
                 p_detect=p.p_detect, max_range=p.max_range, occluders=self.occluders(index)

@@ -34,6 +34,7 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 from numpy.typing import ArrayLike
 
+from activetrack.kinematics import team
 from activetrack.linalg2 import inv2
 from activetrack.models import sensor_models
 from activetrack.models.objective import TRACE, Objective, is_trace, total_information
@@ -122,6 +123,8 @@ class PlanningProblem:
         occluders: an :class:`activetrack.models.occluders.Occluders` (one layout shared by the
             batch, or one per entry of the first batch axis: ``Occluders.stack``) or None:
             a sensor counts no information about a predicted target it cannot see.
+        kinematics: each sensor's :class:`activetrack.Kinematics` (a tuple of M, shared by
+            the batch; ``r`` is then each one's radius), or None: the disks of radius ``r``.
     """
 
     prior_cov: FloatArray
@@ -139,6 +142,7 @@ class PlanningProblem:
     p_detect: FloatArray | None = None
     max_range: FloatArray | None = None
     occluders: Any = None
+    kinematics: tuple | None = None
 
     def __post_init__(self) -> None:
         sensors = as_finite("sensors", self.sensors)
@@ -252,6 +256,8 @@ class PlanningProblem:
                     "occluders must be an activetrack.models.occluders.Occluders or None, got "
                     f"{type(self.occluders).__name__}"
                 )
+        if self.kinematics is not None:
+            object.__setattr__(self, "kinematics", team.converted(tuple(self.kinematics), m))
         k_axis = (kk,) if multi else ()
         trailing = {
             "prior_cov": (*k_axis, 2, 2),
@@ -341,12 +347,14 @@ class PlanningProblem:
         p_detect: ArrayLike | None = None,
         max_range: ArrayLike | None = None,
         occluders: Any = None,
+        kinematics: tuple | None = None,
     ) -> PlanningProblem:
         """Return the problem at ``prediction`` (``prior_cov`` and ``target`` its position
         blocks); the other arguments are the fields of the same names."""
         return cls(
             None, None, sensors, r, rho, sigma_d2, sigma_theta2, objective, prediction,
             models, pose_cov, p_detect=p_detect, max_range=max_range, occluders=occluders,
+            kinematics=kinematics,
         )  # fmt: skip
 
     @classmethod
@@ -382,7 +390,7 @@ class PlanningProblem:
             occ = type(occ).stack([p.occluders for p in problems])
         arrays: dict[str, Any] = {"multi_target": multi, "occluders": occ}
         for f in fields(cls):
-            if f.name in ("objective", "prediction", "multi_target", "occluders"):
+            if f.name in ("objective", "prediction", "multi_target", "occluders", "kinematics"):
                 continue
             vals = [getattr(p, f.name) for p in problems]
             if f.name in ("models", "pose_cov", "p_detect", "max_range"):
@@ -407,7 +415,10 @@ class PlanningProblem:
                 raise ValueError("problems must all carry a prediction, or none")
             per_target = [stacked([q[k] for q in all_preds]) for k in range(len(all_preds[0]))]
             prediction = tuple(per_target) if multi else per_target[0]
-        return cls(**arrays, objective=objective, prediction=prediction)
+        kin = problems[0].kinematics
+        if any(p.kinematics != kin for p in problems):
+            raise ValueError("problems must all have the same kinematics")
+        return cls(**arrays, objective=objective, prediction=prediction, kinematics=kin)
 
     def __getitem__(self, index: Any) -> PlanningProblem:
         """Return the problem(s) at ``index`` of the batch axes (``problem[i]``: copy ``i``)."""
@@ -424,7 +435,7 @@ class PlanningProblem:
                     value = indexed(value, index)
             elif f.name == "occluders" and value is not None:  # the layouts of the first axis
                 value = value[index[0] if isinstance(index, tuple) else index]
-            elif f.name not in ("objective", "multi_target") and value is not None:
+            elif f.name not in ("objective", "multi_target", "kinematics") and value is not None:
                 value = np.array(value[index])
                 value.setflags(write=False)
             values[f.name] = value
@@ -453,6 +464,7 @@ class PlanningProblem:
             self.pose_cov is None,
             self.p_detect is None and self.max_range is None and self.occluders is None,
             is_trace(self.objective),
+            self.kinematics is None or team.all_disks(self.kinematics),
         )
 
     @cached_property
