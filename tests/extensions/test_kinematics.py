@@ -109,6 +109,7 @@ def test_square_projection_is_the_nearest_point_of_a_brute_force_grid(case):
     wanted = np.concatenate([
         c + rng.uniform(-2.5, 2.5, (60, 2)),  # inside and outside the square
         targets[0] + rng.uniform(-rho, rho, (40, 2)),  # inside a rho disk
+        targets[-1] + rng.uniform(-rho, rho, (40, 2)),  # inside the last one
     ])  # fmt: skip
     for q in wanted:
         got = kin.project(q, c, targets, rho)
@@ -355,21 +356,48 @@ def score_longhand(problem, positions):
     return float(np.trace(np.linalg.inv(Y)))
 
 
-def _problem(seed, steps=3, preset="paper"):
+def sensor_scores_longhand(problem, positions, i, pts):
+    """Return the trace objective with sensor ``i`` moved to each of ``pts`` (P, 2), the
+    others at ``positions``: eq. (9)-(12) written out, vectorized over the points."""
+    t = problem.target
+    Y = np.linalg.inv(problem.prior_cov)
+    for j, p in enumerate(positions):
+        if j != i:
+            Y = Y + info_longhand(p[None] - t, problem, j)[0]
+    Yp = Y + info_longhand(pts - t, problem, i)
+    return (Yp[:, 0, 0] + Yp[:, 1, 1]) / (Yp[:, 0, 0] * Yp[:, 1, 1] - Yp[:, 0, 1] ** 2)
+
+
+def info_longhand(d, problem, i):
+    """Return ``H^T R^{-1} H`` (P, 2, 2) of sensor ``i`` at offsets ``d`` (P, 2) from the
+    target: ``H`` rows ``d / |d|`` and ``(-d_y, d_x) / |d|^2`` (eq. 9)."""
+    q = np.sum(d * d, axis=-1)
+    h1 = d / np.sqrt(q)[:, None]
+    h2 = np.stack([-d[:, 1], d[:, 0]], -1) / q[:, None]
+    return (h1[:, :, None] * h1[:, None, :] / problem.sigma_d2[i]
+            + h2[:, :, None] * h2[:, None, :] / problem.sigma_theta2[i])  # fmt: skip
+
+
+def _problem(seed, steps=3, preset="paper", **overrides):
     from activetrack.baselines.gsr import GSR
 
-    world = activetrack.world.World(preset, 1, kinematics=Square(0.5))
+    world = activetrack.world.World(preset, 1, kinematics=Square(0.5), **overrides)
     world.reset(seeds=[seed])
     for _ in range(steps):
         world.step(GSR().plan(world.planning_problem(0)))
     return world.planning_problem(0)
 
 
+@pytest.mark.parametrize("near", [False, True])
 @pytest.mark.parametrize("seed", [0, 1])
-def test_gsr_plans_inside_the_squares_coordinatewise_optimally(seed):
+def test_gsr_plans_inside_the_squares_coordinatewise_optimally(seed, near):
     from activetrack.baselines.gsr import GSR
 
-    problem = _problem(seed)
+    # Far: the optimum at corners of the squares; near (sensors start about the target, one
+    # sensor much more precise): on the rho circles and inside the squares.
+    close = {"sensor_center": (2.5, 0.0), "sensor_radius": 1.0, "x0": (0.0, 0.0, 0.0, 0.0),
+             "x0_hat": (0.0, 0.0, 0.0, 0.0), "q": 0.1}  # fmt: skip
+    problem = _problem(seed, **(close if near else {}))
     kin = problem.kinematics[0]
     assert isinstance(kin, Square) and not problem.is_paper
     res = GSR(tol=1e-12).plan_with_info(problem)
@@ -377,13 +405,18 @@ def test_gsr_plans_inside_the_squares_coordinatewise_optimally(seed):
         assert kin.feasible(res.positions[i], problem.sensors[i], problem.targets, problem.rho[i])
     assert res.value == pytest.approx(score_longhand(problem, res.positions), rel=1e-10)
     assert res.value <= score_longhand(problem, problem.sensors) * (1 + 1e-12)
-    for i in range(problem.n_sensors):  # no grid point of sensor i's F does better
-        pts = square_grid(problem.sensors[i], 0.5, 81)
-        pts = pts[outside(pts, problem.targets, problem.rho[i])]
-        trial = np.repeat(res.positions[None], len(pts), 0)
-        trial[:, i] = pts
-        best = min(score_longhand(problem, t) for t in trial)
-        assert best >= res.value * (1 - 1e-6), i
+    for i in range(problem.n_sensors):  # no point of sensor i's F does better (dense grid)
+        c = problem.sensors[i]
+        edge = np.linspace(-0.5, 0.5, 20_001)
+        sides = np.concatenate(
+            [np.stack([edge, np.full_like(edge, s)], -1) for s in (-0.5, 0.5)]
+            + [np.stack([np.full_like(edge, s), edge], -1) for s in (-0.5, 0.5)]
+        )
+        pts = np.concatenate([square_grid(c, 0.5, 401), c + sides,
+                              rho_rings(problem.targets, problem.rho[i], 200_001)])  # fmt: skip
+        pts = pts[Square(0.5).reaches(pts, c) & outside(pts, problem.targets, problem.rho[i])]
+        best = float(np.min(sensor_scores_longhand(problem, res.positions, i, pts)))
+        assert best >= res.value * (1 - 1e-9), i
 
 
 def test_gsr_and_the_world_with_squares_and_two_targets():
