@@ -405,6 +405,13 @@ def test_gsr_plans_inside_the_squares_coordinatewise_optimally(seed, near):
         assert kin.feasible(res.positions[i], problem.sensors[i], problem.targets, problem.rho[i])
     assert res.value == pytest.approx(score_longhand(problem, res.positions), rel=1e-10)
     assert res.value <= score_longhand(problem, problem.sensors) * (1 + 1e-12)
+    # The problem's violation measures the square (a point past a corner: its distance).
+    far = res.positions + np.array([0.5, 0.5])
+    gap = np.abs(far - problem.sensors) - 0.5
+    want = np.hypot(*np.maximum(gap, 0.0).T)
+    near = np.hypot(*(far - problem.target).T)
+    want = np.maximum(want, np.maximum(problem.rho - near, 0.0))
+    np.testing.assert_allclose(problem.violation(far), want, rtol=1e-12, atol=1e-15)
     for i in range(problem.n_sensors):  # no point of sensor i's F does better (dense grid)
         c = problem.sensors[i]
         edge = np.linspace(-0.5, 0.5, 20_001)
@@ -417,6 +424,17 @@ def test_gsr_plans_inside_the_squares_coordinatewise_optimally(seed, near):
         pts = pts[Square(0.5).reaches(pts, c) & outside(pts, problem.targets, problem.rho[i])]
         best = float(np.min(sensor_scores_longhand(problem, res.positions, i, pts)))
         assert best >= res.value * (1 - 1e-9), i
+
+
+def test_planners_of_the_disk_geometry_refuse_a_new_kinematics():
+    from activetrack.baselines.gbes import GBES
+    from activetrack.baselines.random_motion import RandomMotion
+
+    problem = _problem(0, steps=0)
+    with pytest.raises(ValueError, match="GBES.*square"):
+        GBES(spacing=0.25).search(problem)
+    with pytest.raises(ValueError, match="RandomMotion.*square"):
+        RandomMotion().plan(problem, np.random.default_rng(0))
 
 
 def test_gsr_and_the_world_with_squares_and_two_targets():

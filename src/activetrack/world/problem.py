@@ -556,6 +556,11 @@ class PlanningProblem:
         """Return each sensor's largest constraint violation (0 when feasible), shape (..., M)."""
         p = np.asarray(next_positions, dtype=np.float64)
         step = np.linalg.norm(p - self.sensors, axis=-1) - self.r
+        if self.kinematics is not None and not team.all_disks(self.kinematics):
+            # A kinematics of its own: the distance to its reach set (its clip).
+            gap = [p[..., i, :] - k.clip(p[..., i, :], self.sensors[..., i, :])
+                   for i, k in enumerate(self.kinematics)]  # fmt: skip
+            step = np.stack([np.hypot(g[..., 0], g[..., 1]) for g in gap], -1)
         near = np.linalg.norm(p[..., None, :, :] - self.targets[..., :, None, :], axis=-1)
         dist = self.rho - near.min(axis=-2)  # the nearest target
         return np.maximum(np.maximum(step, dist), 0.0)
