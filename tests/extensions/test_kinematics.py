@@ -341,6 +341,29 @@ def test_parallel_env_takes_its_action_space_from_the_kinematics():
         assert rng is not None
 
 
+def test_gymnasium_views_take_the_joint_action_space_from_the_kinematics():
+    from gymnasium import spaces
+    from gymnasium.utils.env_checker import check_env
+
+    from activetrack.envs.batched import BatchedActiveTracking
+    from activetrack.envs.centralized import CentralizedTrackingEnv
+
+    team = (Square(0.5), Square(0.25), Square(0.5))
+    env = CentralizedTrackingEnv("paper", kinematics=team)
+    lims = np.repeat([0.5, 0.25, 0.5], 2)
+    assert env.action_space == spaces.Box(-lims.astype(np.float32), lims.astype(np.float32))
+    check_env(env, skip_render_check=True)
+    vec = BatchedActiveTracking(2, "paper", kinematics=team)
+    assert vec.single_action_space == env.action_space
+    vec.reset(seed=[1, 2])
+    before = vec.world.get("sensors").copy()
+    act = np.tile(np.array([0.4, -0.4, 0.3, 0.3, -0.9, 0.1]), (2, 1))
+    vec.step(act)
+    asked = before + np.clip(act.reshape(2, 3, 2), -lims.reshape(3, 2), lims.reshape(3, 2))
+    free = ~vec.world.get("projected")
+    np.testing.assert_array_equal(vec.world.get("sensors")[free], asked[free])
+
+
 # (e) GSR through the numerical step ----------------------------------------------------------
 def score_longhand(problem, positions):
     """Return the trace objective of a one-target range-bearing problem at ``positions``,
