@@ -126,8 +126,7 @@ def relax(
         nonneg = problem.objective.nonnegative
         scale = before if nonneg else np.maximum(np.abs(before), 1.0)
         active[rows] = (gain > tol * scale) & changed[rows].any(axis=1)
-    # (A kinematics of its own skips the approach: it moves by the disk's projection.)
-    if det is not None and not custom and (occ is not None or np.any(np.isfinite(det[1]))):
+    if det is not None and (occ is not None or np.any(np.isfinite(det[1]))):
         s, value = _approach(problem, s, value, current, r, targets, rho, det, (w_d, w_t, pose),
                              occ)  # fmt: skip
     return s.reshape(*shape, M, 2), value.reshape(shape), sweeps.reshape(shape), warm.reshape(shape)
@@ -153,7 +152,12 @@ def _approach(problem, s, value, current, r, targets, rho, det, weights, occ):
     d2 = np.sum((targets[b] - current[b, i][:, None]) ** 2, axis=-1)  # (L, K)
     goal = targets[b, np.argmin(d2, axis=-1)]
     moved = s.copy()
-    moved[b, i] = feasible_set.project(goal, current[b, i], r[b, i], targets[b], rho[b, i])
+    team = problem.kinematics
+    if team is not None and not all_disks(team):  # each sensor's own projection
+        for j, (bj, ij) in enumerate(zip(b.tolist(), i.tolist(), strict=True)):
+            moved[bj, ij] = team[ij].project(goal[j], current[bj, ij], targets[bj], rho[bj, ij])
+    else:
+        moved[b, i] = feasible_set.project(goal, current[b, i], r[b, i], targets[b], rho[b, i])
     if occ is not None:  # a straight move the world allows: around the occluders
         moved[b, i] = project_move(current[b, i], moved[b, i], occ[b], r[b, i])[0]
     w_d, w_t, pose = weights

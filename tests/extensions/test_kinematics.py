@@ -476,6 +476,26 @@ def test_gsr_and_the_world_with_squares_and_two_targets():
         np.testing.assert_array_equal(world.get("sensors"), plan)  # executed as planned
 
 
+@pytest.mark.parametrize("preset", ["urban", "range_only", "uncertain_poses"])
+def test_gsr_and_the_world_with_squares_beyond_the_paper(preset):
+    from activetrack.baselines.gsr import GSR
+
+    kin = Square(0.5)
+    world = activetrack.world.World(preset, 2, kinematics=kin)
+    world.reset(seeds=[0, 1])
+    for _ in range(10):
+        problem = world.planning_problem()
+        plan = GSR().plan(problem)
+        before = world.get("sensors").copy()
+        world.step(plan)
+        after = world.get("sensors")
+        for b in range(2):
+            for i in range(world.n_sensors):
+                assert kin.feasible(plan[b, i], problem.sensors[b, i], problem.targets[b],
+                                    problem.rho[b, i])  # fmt: skip
+                assert kin.reaches(after[b, i], before[b, i])  # (occluders stop moves short)
+
+
 # (f) the look-ahead planner ------------------------------------------------------------------
 def test_lookahead_plans_paths_of_square_steps():
     from activetrack.baselines.lookahead import Lookahead, LookaheadPlanner
