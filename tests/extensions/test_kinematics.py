@@ -316,6 +316,20 @@ def test_world_moves_every_sensor_inside_its_square_and_outside_rho(preset, copi
     assert n_proj > 0  # the rho rule was exercised
 
 
+def test_team_commands_drive_the_world_to_planned_points():
+    from activetrack.baselines.gsr import GSR
+    from activetrack.kinematics.team import TeamMotion
+
+    world = activetrack.world.World("paper", 2, kinematics=Square(0.5))
+    world.reset(seeds=[3, 4])
+    team = TeamMotion(world.scenario.kinematics_models)
+    for _ in range(5):
+        plan = GSR().plan(world.planning_problem())
+        actions = team.commands(plan, world.get("sensors"))
+        world.step_actions(actions)
+        np.testing.assert_allclose(world.get("sensors"), plan, rtol=0, atol=1e-12)
+
+
 # (d) the PettingZoo parallel env -----------------------------------------------------------
 def test_parallel_env_takes_its_action_space_from_the_kinematics():
     from gymnasium import spaces

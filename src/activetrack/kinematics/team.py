@@ -119,6 +119,16 @@ class TeamMotion:
         """Return this team's move in place of the disk's ``move`` (the same kind)."""
         return self.move_to if move is sensor_motion.move_to else self.apply_actions
 
+    def commands(self, points: FloatArray, sensors: FloatArray) -> FloatArray:
+        """Return the actions (..., M, 2) that move ``sensors`` to reachable ``points``
+        (..., M, 2), each sensor's :meth:`Kinematics.command` (what
+        :func:`sensor_motion.actions_to_reach` does for the disk; imitation labels)."""
+        points, sensors = np.asarray(points, np.float64), np.asarray(sensors, np.float64)
+        out = np.empty(np.broadcast_shapes(points.shape, sensors.shape))
+        for i, kin in enumerate(self.team):
+            out[..., i, :] = kin.command(points[..., i, :], sensors[..., i, :])
+        return out
+
     def move_to(self, positions, sensors, target_pred, r, rho):
         """Return ``(next_positions, projected)`` from proposed absolute positions."""
         return self._move(True, positions, sensors, target_pred, rho)
