@@ -49,6 +49,14 @@ from typing import Any
 import numpy as np
 
 from activetrack.baselines.plotting import short_labels
+from activetrack.baselines.rollout import (
+    ExpertAgent,
+    Recorder,
+    Step,
+    policy_agent,
+    reset_policy,
+    rollout,
+)
 from activetrack.baselines.simulation import check_planners, detection_gaps, mean_ci
 from activetrack.files import RunOutputs, prepare_output_dir
 from activetrack.validation import check_int
@@ -262,72 +270,86 @@ def policy_loader(path: Path) -> Any:
         ) from exc
 
 
-def _reset_policy(policy: Any, seed: int) -> None:
-    """Reseed a stochastic policy for the episode with seed ``seed``, if it can be.
-
-    The expert policies' ``reset(seed)`` seeds their planner generator as the simulation
-    runner does (``default_rng([seed, 1])``), so random motion is reproducible and
-    independent of the order of the episodes.
-    """
-    reset = getattr(policy, "reset", None)
-    if callable(reset):
-        reset(seed)
-
-
 def warm_up(env: Any, policy: Any, seed: int) -> None:
     """Make one decision of ``policy`` on the first observation of the episode ``seed``
     and forget it (the policy reset again): compiles what its first call compiles, so
     that the timing of the episodes counts none of it."""
-    _reset_policy(policy, seed)
+    reset_policy(policy, seed)
     obs, _ = env.reset(seed=seed)
     if callable(getattr(policy, "plan", None)):
         policy.plan(env.unwrapped.planning_problem())
     else:
         getattr(policy, "act", policy)(obs)
-    _reset_policy(policy, seed)
+    reset_policy(policy, seed)
+
+
+class _RowRecorder(Recorder):
+    """Keeps the metrics of :func:`run_episode`'s row per episode (serial: the single
+    environment's infos, :meth:`~activetrack.world.World.copy_info`; batched: the world's
+    fields of each copy)."""
+
+    def __init__(self, n: int, on_step: Any = None) -> None:
+        self.traces: list[list[float]] = [[] for _ in range(n)]
+        self.errors: list[list[float]] = [[] for _ in range(n)]
+        self.nees: list[list[float]] = [[] for _ in range(n)]
+        self.seen: list[list[np.ndarray]] = [[] for _ in range(n)]
+        self.totals = [0.0] * n
+        self.seconds = 0.0
+        self.on_step = on_step
+
+    def step(self, step: Step) -> None:
+        world = step.world
+        self.seconds += step.seconds
+        for i, j in zip(step.copies.tolist(), step.episodes.tolist(), strict=True):
+            if step.batched:
+                trace, error = float(world.get("trace", i)), float(world.position_error(i))
+            else:
+                _, trace, error, _, _ = world.copy_info(i)
+            self.traces[j].append(trace)
+            self.errors[j].append(error)
+            self.nees[j].append(float(world.position_nees(i)))
+            self.seen[j].append(world.get("detected", i).any(axis=-1))
+            self.totals[j] += float(step.rewards[i])
+        if self.on_step is not None and not step.batched:
+            self.on_step()
+
+    def row(self, j: int, ms: float) -> tuple[float, ...]:
+        """Return episode ``j``'s row (``ms``: the CPU ms per decision)."""
+        return (
+            float(np.mean(self.traces[j])),
+            float(np.sqrt(np.mean(np.square(self.errors[j])))),
+            self.totals[j],
+            float(np.mean(self.nees[j])),
+            ms,
+            *detection_gaps(np.array(self.seen[j])),
+        )
 
 
 def run_episode(env: Any, policy: Any, seed: int, on_step: Any = None) -> tuple[float, ...]:
     """Return ``(mean_trace, rmse, return, mean_nees, ms_per_step, no_detection,
-    longest_gap)`` of one episode of ``policy`` from ``seed`` (``ms_per_step``: the
+    longest_gap)`` of one episode of ``policy`` from ``seed`` in ``env``'s world (the
+    rollout of :mod:`activetrack.baselines.rollout`, serial; ``ms_per_step``: the
     policy's CPU time per decision in ms; the last two as
-    :func:`activetrack.baselines.simulation.detection_gaps`, NaN without a world).
-    ``on_step()`` is called after every step (progress)."""
-    from activetrack.envs import policy_step
-
-    _reset_policy(policy, seed)
-    obs, _ = env.reset(seed=seed)
-    traces, errors, nees, seen, total = [], [], [], [], 0.0
-    first = env.possible_agents[0]
-    world = getattr(env.unwrapped, "world", None)
-    timed, seconds = _timed(policy)
-    while env.agents:
-        obs, rewards, _, _, infos = policy_step(env, timed, obs)
-        traces.append(infos[first]["trace"])
-        errors.append(infos[first]["position_error"])
-        nees.append(float(world.position_nees(0)) if world is not None else np.nan)
-        if world is not None:
-            seen.append(world.get("detected", 0).any(axis=-1))
-        total += float(rewards[first])
-        if on_step is not None:
-            on_step()
-    errors_arr = np.asarray(errors)
-    gaps = detection_gaps(np.array(seen)) if world is not None else (np.nan, np.nan)
-    return (
-        float(np.mean(traces)),
-        float(np.sqrt(np.mean(errors_arr**2))),
-        total,
-        float(np.mean(nees)),
-        1e3 * seconds[0] / len(traces),
-        *gaps,
-    )
+    :func:`activetrack.baselines.simulation.detection_gaps`). ``on_step()`` is called
+    after every step (progress). The environment is reset to ``seed`` first and holds
+    the episode's end after it."""
+    base = env.unwrapped
+    env.reset(seed=seed)  # the env's own state (agents, renderer) starts the episode
+    recorder = _RowRecorder(1, on_step)
+    steps = rollout(
+        base.world, policy_agent(policy, base.possible_agents), [seed], recorder,
+        clock=time.process_time,
+    )  # fmt: skip
+    base.agents = []  # the episode ended in its world
+    return recorder.row(0, 1e3 * recorder.seconds / steps)
 
 
 def run_batched(
     scenario: Any, overrides: dict[str, Any], policy: Any, seeds: list[int], on_step: Any = None
 ) -> list[tuple[float, ...]]:
     """Return :func:`run_episode`'s rows for a planner policy, each seed's episode a copy of
-    one batched :class:`~activetrack.world.World` (the policy plans every copy at once).
+    one batched :class:`~activetrack.world.World` (the policy plans every copy at once;
+    the rollout of :mod:`activetrack.baselines.rollout`, batched).
 
     The world's copies are the environment's episodes (same seeds, same draws), so a
     deterministic planner's rows equal the serial ones to its tolerance: the batched
@@ -343,44 +365,15 @@ def run_batched(
     """
     from activetrack.world import World
 
-    world = World(scenario, len(seeds), **overrides)
-    world.reset(seeds=seeds)
-    _reset_policy(policy, seeds[0])
-    policy.plan(world.planning_problem())  # warm-up (compilation), not timed
-    _reset_policy(policy, seeds[0])
     n = len(seeds)
-    live = np.ones(n, dtype=bool)
-    columns: list[list[list[float]]] = [[[] for _ in range(n)] for _ in range(4)]
-    traces, errors, nees, seen = columns
-    totals, seconds, steps = np.zeros(n), 0.0, 0
-    while live.any():
-        start = time.process_time()
-        positions = policy.plan(world.planning_problem())
-        seconds += time.process_time() - start
-        rows = np.flatnonzero(live)
-        res = world.step(positions, rows)
-        totals[rows] += np.asarray(res.reward, dtype=np.float64).reshape(-1)
-        steps += 1
-        for i in rows.tolist():
-            traces[i].append(float(world.get("trace", i)))
-            errors[i].append(float(world.position_error(i)))
-            nees[i].append(float(world.position_nees(i)))
-            seen[i].append(world.get("detected", i).any(axis=-1))
-        live &= ~(world.terminated | world.truncated)
-        if on_step is not None:
-            on_step(len(rows))
-    ms = 1e3 * seconds / (n * steps)
-    return [
-        (
-            float(np.mean(traces[i])),
-            float(np.sqrt(np.mean(np.square(errors[i])))),
-            float(totals[i]),
-            float(np.mean(nees[i])),
-            ms,
-            *detection_gaps(np.array(seen[i])),
-        )
-        for i in range(n)
-    ]
+    world = World(scenario, n, **overrides)
+    recorder = _RowRecorder(n)
+    steps = rollout(
+        world, ExpertAgent(policy), seeds, recorder, batched=True, clock=time.process_time,
+        warm_up=True, on_step=on_step,
+    )  # fmt: skip
+    ms = 1e3 * recorder.seconds / (n * steps)
+    return [recorder.row(i, ms) for i in range(n)]
 
 
 def check_batched(batched: object, workers: object, address: object) -> tuple[int, str | None]:
@@ -402,26 +395,6 @@ def batchable(policy: Any) -> bool:
     from activetrack.baselines.policies import GSRPolicy, LookaheadPolicy
 
     return isinstance(policy, (GSRPolicy, LookaheadPolicy))
-
-
-def _timed(policy: Any) -> tuple[Any, list[float]]:
-    """Return ``policy`` behind a proxy that adds its decisions' CPU seconds to the list."""
-    from types import SimpleNamespace
-
-    seconds = [0.0]
-
-    def timing(fn: Any) -> Any:
-        def call(arg: Any) -> Any:
-            start = time.process_time()
-            out = fn(arg)
-            seconds[0] += time.process_time() - start
-            return out
-
-        return call
-
-    if callable(getattr(policy, "plan", None)):
-        return SimpleNamespace(plan=timing(policy.plan)), seconds
-    return SimpleNamespace(act=timing(getattr(policy, "act", policy))), seconds
 
 
 def check_compatible(policy: Any, env: Any, label: str) -> None:
@@ -574,21 +547,18 @@ def _episodes_on_ray(
     address: str | None,
     bar: Any,
     n_steps: int,
-) -> list[list[tuple[float, float, float, float, float]]]:
-    """Return every policy's episode rows, computed as Ray tasks over chunks of ``seeds``."""
+) -> list[list[tuple[float, ...]]]:
+    """Return every policy's episode rows, :func:`run_episodes` as Ray tasks over chunks of
+    ``seeds`` (:func:`activetrack.baselines.distributed.map_seeds`)."""
     from activetrack.baselines import distributed
 
     bar.set_description("ray")
+    cases = [{"scenario": scenario, "overrides": overrides, "policy": p} for p in policies]
     with distributed.session(workers, address) as cpus:
-        parts = distributed.chunks(seeds, distributed.JOBS_PER_CPU * cpus)
-        jobs = [(scenario, overrides, policy, part) for policy in policies for part in parts]
-        done = distributed.run_tasks(
-            run_episodes, jobs, on_done=lambda i: bar.update(len(jobs[i][3]) * n_steps)
+        done = distributed.map_seeds(
+            run_episodes, cases, seeds, cpus, on_done=lambda k: bar.update(k * n_steps)
         )
-    return [
-        [row for chunk in done[k : k + len(parts)] for row in chunk]
-        for k in range(0, len(done), len(parts))
-    ]
+    return [[row for chunk in chunked for row in chunk] for chunked in done]
 
 
 def _gsr_of(results: Sequence[PolicyEvaluation]) -> PolicyEvaluation:
