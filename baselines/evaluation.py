@@ -16,19 +16,11 @@ it is then reported separately. ``ms_per_step`` is the CPU time (``time.process_
 per decision (one ``plan`` or ``act`` call, per copy in a batched run), measured after
 one warm-up decision that is not counted (the compiled kernels' first compilation).
 
-A policy is an expert with ``plan(problem) -> next positions`` (e.g.
-:class:`~activetrack.baselines.policies.GSRPolicy`; its positions are executed with
-``step_positions``), anything with ``act(observations) -> {agent: action}`` (e.g. a
-learned policy), or a name: ``gsr``, ``gsr-restarts``
-(``GSR(restarts=True)``), ``gbes``, ``rm``, or the path of a policy file, e.g. a trained
-``policy.zip``. Every policy is loaded and checked before the first episode runs.
-
-Policy files load through the entry-point group :data:`POLICY_LOADERS`
-(``activetrack.policy_loaders`` in ``pyproject.toml``): an entry named for a file suffix
-(``zip``) names a function ``path -> policy``; the train layer provides ``zip``
-(:func:`activetrack.train.policy_io.load_policy`). Why: ``evaluate(["runs/x/policy.zip"])``
-keeps loading trained policies while baselines, below train, never imports it, and other
-packages can add their own formats.
+A policy is an expert (``plan(problem) -> next positions``), anything with
+``act(observations) -> {agent: action}``, a name or a policy file
+(:mod:`activetrack.baselines.policy_specs`). Every policy is loaded and checked before the
+first episode runs. Every episode is the one episode loop of
+:mod:`activetrack.baselines.rollout`.
 
 :func:`write_results` writes a run's files together (:mod:`activetrack.files`); the
 figure is :func:`activetrack.baselines.plotting.plot_evaluation`. With ``workers`` or an
@@ -38,7 +30,6 @@ the same results.
 
 from __future__ import annotations
 
-import importlib.metadata
 import time
 import warnings
 from collections.abc import Mapping, Sequence
@@ -49,6 +40,14 @@ from typing import Any
 import numpy as np
 
 from activetrack.baselines.plotting import short_labels
+from activetrack.baselines.policy_specs import (  # noqa: F401 (public here too)
+    EXPERT_NAMES,
+    POLICY_LOADERS,
+    check_compatible,
+    policy_loader,
+    policy_loaders,
+    resolve_policy,
+)
 from activetrack.baselines.rollout import (
     ExpertAgent,
     Recorder,
@@ -60,12 +59,6 @@ from activetrack.baselines.rollout import (
 from activetrack.baselines.simulation import check_planners, detection_gaps, mean_ci
 from activetrack.files import RunOutputs, prepare_output_dir
 from activetrack.validation import check_int
-
-#: Names that resolve to the planners' expert policies.
-EXPERT_NAMES = ("gsr", "gsr-restarts", "gbes", "rm", "lookahead")
-#: The entry-point group of the policy file loaders: name = the file suffix without its
-#: dot (lower case), value = ``module:function`` taking the path and returning a policy.
-POLICY_LOADERS = "activetrack.policy_loaders"
 
 
 @dataclass(eq=False)
@@ -200,76 +193,6 @@ def paired_ratio_ci(
     return _bootstrap((values, reference), _ratio, level)
 
 
-def resolve_policy(spec: Any) -> Any:
-    """Return a policy object for a name, a policy file path or an object.
-
-    An object is an expert (``plan(problem) -> positions``) or maps observations to
-    actions (``act(observations) -> {agent: action}``).
-    """
-    if not isinstance(spec, (str, Path)):
-        if not (callable(getattr(spec, "plan", None)) or callable(getattr(spec, "act", None))):
-            raise TypeError(
-                f"a policy needs plan(problem) or act(observations), got {type(spec).__name__}"
-            )
-        return spec
-    name = str(spec)
-    if name.lower() in EXPERT_NAMES:
-        from activetrack.baselines import policies
-
-        return {
-            "gsr": policies.GSRPolicy,
-            "gsr-restarts": lambda: policies.GSRPolicy(restarts=True),
-            "gbes": policies.GBESPolicy,
-            "rm": policies.RMPolicy,
-            # It plans from the prediction each problem carries, for any scenario (the
-            # scenario, here the matching preset, serves problems without one only).
-            "lookahead": lambda: policies.LookaheadPolicy(scenario=None),
-        }[name.lower()]()
-    path = Path(name)
-    if not path.exists() and (path.suffix or len(path.parts) > 1):  # meant as a file
-        raise ValueError(f"{name}: no such policy file")
-    if not path.is_file():
-        raise ValueError(
-            f"unknown policy {name!r}: use one of {list(EXPERT_NAMES)} or the path of a "
-            "policy.zip written by 'activetrack train'"
-        )
-    return policy_loader(path)(path)
-
-
-def policy_loaders() -> dict[str, importlib.metadata.EntryPoint]:
-    """Return the installed policy file loaders, ``{suffix: entry point}``
-    (:data:`POLICY_LOADERS`; not yet imported)."""
-    found = importlib.metadata.entry_points(group=POLICY_LOADERS)
-    return {ep.name.lower(): ep for ep in found}
-
-
-def policy_loader(path: Path) -> Any:
-    """Return the function that loads the policy file ``path`` (by its suffix).
-
-    Raises ``ValueError`` when no installed loader takes the suffix, ``ImportError``
-    (naming the loader) when the loader's module cannot be imported.
-    """
-    suffix = path.suffix.lower().removeprefix(".")
-    loaders = policy_loaders()
-    if suffix not in loaders:
-        # None at all: an install made before the group existed (reinstall registers it).
-        known = ", ".join(f".{s}" for s in sorted(loaders)) or "none; reinstall activetrack"
-        what = f"'.{suffix}' files" if suffix else "files without a suffix"
-        raise ValueError(
-            f"{path}: no policy loader for {what} (installed: {known}; loaders register "
-            f"under the entry-point group {POLICY_LOADERS!r})"
-        )
-    entry = loaders[suffix]
-    try:
-        return entry.load()
-    except ImportError as exc:
-        ours = entry.value.startswith("activetrack.train")
-        hint = "; the train layer needs the [rl] extra: pip install 'activetrack[rl]'"
-        raise ImportError(
-            f"{path}: its loader {entry.value} cannot be imported ({exc}){hint if ours else ''}"
-        ) from exc
-
-
 def warm_up(env: Any, policy: Any, seed: int) -> None:
     """Make one decision of ``policy`` on the first observation of the episode ``seed``
     and forget it (the policy reset again): compiles what its first call compiles, so
@@ -395,21 +318,6 @@ def batchable(policy: Any) -> bool:
     from activetrack.baselines.policies import GSRPolicy, LookaheadPolicy
 
     return isinstance(policy, (GSRPolicy, LookaheadPolicy))
-
-
-def check_compatible(policy: Any, env: Any, label: str) -> None:
-    """Raise ValueError if a learned policy's observation size does not fit ``env``."""
-    meta = getattr(policy, "meta", None)
-    if not meta or "observation_space" not in meta:
-        return
-    size = int(np.prod(meta["observation_space"]["shape"]))
-    per_agent = env.observation_space(env.possible_agents[0]).shape[0]
-    expected = per_agent * (env.n_sensors if meta.get("view") == "centralized" else 1)
-    if size != expected:
-        raise ValueError(
-            f"{label}: trained on observations of size {size}, this scenario has {expected} "
-            f"(trained on scenario {meta.get('scenario', {}).get('name')!r})"
-        )
 
 
 def evaluate(
