@@ -61,9 +61,15 @@ class Step:
     """
 
     def __init__(
-        self, world: World, batched: bool, copies: np.ndarray, episodes: np.ndarray
+        self,
+        world: World,
+        batched: bool,
+        copies: np.ndarray,
+        episodes: np.ndarray,
+        clock: Callable[[], float] = time.perf_counter,
     ) -> None:
         self.world, self.batched, self.copies, self.episodes = world, batched, copies, episodes
+        self.clock = clock
         self.problem: PlanningProblem | None = None
         self.observations: np.ndarray | None = None
         self.positions: FloatArray | None = None
@@ -71,7 +77,6 @@ class Step:
         self.by_actions: np.ndarray | None = None
         self.rewards: FloatArray | None = None
         self.seconds = 0.0
-        self.clock: Callable[[], float] = time.perf_counter
 
     @property
     def index(self) -> int | None:
@@ -178,8 +183,7 @@ def _run(
     live = np.ones(n, dtype=bool)
     while live.any():
         copies = np.flatnonzero(live)
-        step = Step(world, batched, copies, episode_of[copies])
-        step.clock = clock
+        step = Step(world, batched, copies, episode_of[copies], clock)
         agent.decide(step)
         step.rewards = _advance(world, step)
         recorder.step(step)

@@ -217,9 +217,12 @@ def test_rollout_checks_its_world():
 
 def _steps_a_world(path: Path) -> list[int]:
     """Return the lines of ``path`` that call ``step``/``step_actions`` on a world, or
-    ``step_positions`` (an env's world stepped by an expert's plan)."""
+    ``step_positions`` (an env's world stepped by an expert's plan), or loop over an
+    environment's episode (``while env.agents``)."""
     lines = []
     for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.While) and ast.unparse(node.test).endswith(".agents"):
+            lines.append(node.lineno)
         if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute):
             name, owner = node.func.attr, ast.unparse(node.func.value)
             if name == "step_positions" or (
