@@ -30,7 +30,6 @@ the same results.
 
 from __future__ import annotations
 
-import time
 import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -39,6 +38,12 @@ from typing import Any
 
 import numpy as np
 
+from activetrack.baselines.episodes import (  # noqa: F401 (public here too)
+    run_batched,
+    run_episode,
+    run_episodes,
+    warm_up,
+)
 from activetrack.baselines.plotting import short_labels
 from activetrack.baselines.policy_specs import (  # noqa: F401 (public here too)
     EXPERT_NAMES,
@@ -48,15 +53,7 @@ from activetrack.baselines.policy_specs import (  # noqa: F401 (public here too)
     policy_loaders,
     resolve_policy,
 )
-from activetrack.baselines.rollout import (
-    ExpertAgent,
-    Recorder,
-    Step,
-    policy_agent,
-    reset_policy,
-    rollout,
-)
-from activetrack.baselines.simulation import check_planners, detection_gaps, mean_ci
+from activetrack.baselines.simulation import check_planners, mean_ci
 from activetrack.files import RunOutputs, prepare_output_dir
 from activetrack.validation import check_int
 
@@ -193,112 +190,6 @@ def paired_ratio_ci(
     return _bootstrap((values, reference), _ratio, level)
 
 
-def warm_up(env: Any, policy: Any, seed: int) -> None:
-    """Make one decision of ``policy`` on the first observation of the episode ``seed``
-    and forget it (the policy reset again): compiles what its first call compiles, so
-    that the timing of the episodes counts none of it."""
-    reset_policy(policy, seed)
-    obs, _ = env.reset(seed=seed)
-    if callable(getattr(policy, "plan", None)):
-        policy.plan(env.unwrapped.planning_problem())
-    else:
-        getattr(policy, "act", policy)(obs)
-    reset_policy(policy, seed)
-
-
-class _RowRecorder(Recorder):
-    """Keeps the metrics of :func:`run_episode`'s row per episode (serial: the single
-    environment's infos, :meth:`~activetrack.world.World.copy_info`; batched: the world's
-    fields of each copy)."""
-
-    def __init__(self, n: int, on_step: Any = None) -> None:
-        self.traces: list[list[float]] = [[] for _ in range(n)]
-        self.errors: list[list[float]] = [[] for _ in range(n)]
-        self.nees: list[list[float]] = [[] for _ in range(n)]
-        self.seen: list[list[np.ndarray]] = [[] for _ in range(n)]
-        self.totals = [0.0] * n
-        self.seconds = 0.0
-        self.on_step = on_step
-
-    def step(self, step: Step) -> None:
-        world = step.world
-        self.seconds += step.seconds
-        for i, j in zip(step.copies.tolist(), step.episodes.tolist(), strict=True):
-            if step.batched:
-                trace, error = float(world.get("trace", i)), float(world.position_error(i))
-            else:
-                _, trace, error, _, _ = world.copy_info(i)
-            self.traces[j].append(trace)
-            self.errors[j].append(error)
-            self.nees[j].append(float(world.position_nees(i)))
-            self.seen[j].append(world.get("detected", i).any(axis=-1))
-            self.totals[j] += float(step.rewards[i])
-        if self.on_step is not None and not step.batched:
-            self.on_step()
-
-    def row(self, j: int, ms: float) -> tuple[float, ...]:
-        """Return episode ``j``'s row (``ms``: the CPU ms per decision)."""
-        return (
-            float(np.mean(self.traces[j])),
-            float(np.sqrt(np.mean(np.square(self.errors[j])))),
-            self.totals[j],
-            float(np.mean(self.nees[j])),
-            ms,
-            *detection_gaps(np.array(self.seen[j])),
-        )
-
-
-def run_episode(env: Any, policy: Any, seed: int, on_step: Any = None) -> tuple[float, ...]:
-    """Return ``(mean_trace, rmse, return, mean_nees, ms_per_step, no_detection,
-    longest_gap)`` of one episode of ``policy`` from ``seed`` in ``env``'s world (the
-    rollout of :mod:`activetrack.baselines.rollout`, serial; ``ms_per_step``: the
-    policy's CPU time per decision in ms; the last two as
-    :func:`activetrack.baselines.simulation.detection_gaps`). ``on_step()`` is called
-    after every step (progress). The environment is reset to ``seed`` first and holds
-    the episode's end after it."""
-    base = env.unwrapped
-    env.reset(seed=seed)  # the env's own state (agents, renderer) starts the episode
-    recorder = _RowRecorder(1, on_step)
-    steps = rollout(
-        base.world, policy_agent(policy, base.possible_agents), [seed], recorder,
-        clock=time.process_time,
-    )  # fmt: skip
-    base.agents = []  # the episode ended in its world
-    return recorder.row(0, 1e3 * recorder.seconds / steps)
-
-
-def run_batched(
-    scenario: Any, overrides: dict[str, Any], policy: Any, seeds: list[int], on_step: Any = None
-) -> list[tuple[float, ...]]:
-    """Return :func:`run_episode`'s rows for a planner policy, each seed's episode a copy of
-    one batched :class:`~activetrack.world.World` (the policy plans every copy at once;
-    the rollout of :mod:`activetrack.baselines.rollout`, batched).
-
-    The world's copies are the environment's episodes (same seeds, same draws), so a
-    deterministic planner's rows equal the serial ones to its tolerance: the batched
-    world rounds its stacked products differently from the single environment, GSR's
-    numerical steps settle to about 1e-7 m differently in response, which leaves smooth
-    tasks' rows equal to about 1e-6 relative; where the plan can switch between near-tied
-    positions (occluders), a copy's episode can take the other branch, so only the
-    statistics agree. A copy's row does not depend on the batch: the same seed gives the
-    same row bit for bit alone (a batch of one) or among any other copies.
-    ``ms_per_step`` is the batch's CPU time per decision divided by the number of copies,
-    after a warm-up decision (the batch's first, planned twice).
-    ``on_step(k)`` is called after every step with the number of copies that stepped.
-    """
-    from activetrack.world import World
-
-    n = len(seeds)
-    world = World(scenario, n, **overrides)
-    recorder = _RowRecorder(n)
-    steps = rollout(
-        world, ExpertAgent(policy), seeds, recorder, batched=True, clock=time.process_time,
-        warm_up=True, on_step=on_step,
-    )  # fmt: skip
-    ms = 1e3 * recorder.seconds / (n * steps)
-    return [recorder.row(i, ms) for i in range(n)]
-
-
 def check_batched(batched: object, workers: object, address: object) -> tuple[int, str | None]:
     """Return the checked ``(workers, address)``; raise ValueError unless ``batched`` is a
     bool that they allow (a batched run is one process: not with Ray workers)."""
@@ -430,20 +321,6 @@ def evaluate(
             )  # fmt: skip
         )
     return results
-
-
-def run_episodes(
-    scenario: Any, overrides: dict[str, Any], policy: Any, seeds: list[int]
-) -> list[tuple[float, ...]]:
-    """Return :func:`run_episode` on each of ``seeds`` in a new environment (one Ray task)."""
-    from activetrack.envs import parallel_env
-
-    env = parallel_env(scenario, **overrides)
-    try:
-        warm_up(env, policy, seeds[0])
-        return [run_episode(env, policy, s) for s in seeds]
-    finally:
-        env.close()
 
 
 def _episodes_on_ray(

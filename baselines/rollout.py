@@ -4,10 +4,12 @@
 every step's moves (next positions, or actions in units of the reach), steps the world and
 hands each step to a recorder, which keeps what its caller needs. Every experiment runs
 through it: :func:`activetrack.baselines.simulation.simulate` (trajectories, trace, RMSE,
-NEES, planning time), :func:`activetrack.baselines.evaluation.run_episode` and
+NEES, planning time), :func:`activetrack.baselines.episodes.run_episode` and
 ``run_batched`` (the evaluation's rows), the imitation labels
 (:func:`activetrack.train.imitation.rollout_labels` and ``rollout_labels_batched``:
-observations and the expert's actions) and :func:`activetrack.baselines.lookahead.run_batched`;
+observations and the expert's actions), PPO's validation episodes
+(:func:`activetrack.train.ppo.validation_trace`) and
+:func:`activetrack.baselines.lookahead.run_batched`;
 their Ray variants run the same functions on chunks of the seeds
 (:func:`activetrack.baselines.distributed.map_seeds`).
 
