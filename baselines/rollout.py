@@ -60,6 +60,8 @@ class Step:
         rewards: each copy's reward of this step ((N,), NaN for the copies that did not
             step); set by the rollout after the world steps.
         seconds: the decision's time by the rollout's clock (what :meth:`timed` counted).
+        clock: that clock (``time.perf_counter`` for planning time, ``time.process_time``
+            for the evaluation's CPU time).
     """
 
     def __init__(
