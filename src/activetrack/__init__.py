@@ -38,6 +38,7 @@ from activetrack.models.objective import (
     posterior_position_covariance,
     posterior_trace,
 )
+from activetrack.models.sensor import BearingOnly, RangeBearing, RangeOnly, SensorModel
 from activetrack.solvers.analytic import (
     BatchSolution,
     SingleSensorSolution,
@@ -62,6 +63,7 @@ __all__ = [
     "TRACE",
     "WORST_TRACE",
     "BatchSolution",
+    "BearingOnly",
     "SingleSensorSolution",
     "ExtendedKalmanFilter",
     "LinearMotionModel",
@@ -69,8 +71,11 @@ __all__ = [
     "Objective",
     "PlanningProblem",
     "Prediction",
+    "RangeBearing",
+    "RangeOnly",
     "Planner",
     "Scenario",
+    "SensorModel",
     "TraceObjective",
     "WorstTraceObjective",
     "constant_acceleration",
