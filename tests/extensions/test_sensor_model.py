@@ -216,7 +216,29 @@ def test_scenario_maps_names_and_models_once_and_records_them():
     class Shadow(FadingRange):
         name = "range"
 
-    for bad in (FadingRange, Shadow(), "fading_range", 3):
+    class NaNs(FadingRange):
+        name = "nans"
+
+        def noise_covar(self, target, sensor, sigma_d2, sigma_theta2):
+            return super().noise_covar(target, sensor, sigma_d2, sigma_theta2) * np.nan
+
+    class Raises(FadingRange):
+        name = "raises"
+
+        def function(self, target, sensor, orientation=0.0):
+            raise ZeroDivisionError("bug")
+
+    class Shape(FadingRange):
+        name = "shape"
+
+        def function(self, target, sensor, orientation=0.0):
+            return super().function(target, sensor)[..., :1]
+
+    class Built(activetrack.RangeOnly):  # a built-in's code: its overrides would not run
+        def noise_covar(self, target, sensor, sigma_d2, sigma_theta2):
+            return 2 * super().noise_covar(target, sensor, sigma_d2, sigma_theta2)
+
+    for bad in (FadingRange, Shadow(), "fading_range", 3, NaNs(), Raises(), Shape(), Built()):
         with pytest.raises(ValueError, match="sensor_model"):
             activetrack.make_scenario("paper", sensor_model=bad)
 
@@ -341,6 +363,16 @@ def test_gsr_plans_the_new_model_coordinatewise_optimally(seed):
             trial[i] = p
             values.append(score_longhand(problem, trial))
         assert min(values) >= res.value * (1 - 1e-6), i
+
+
+def test_gbes_plans_the_new_model_as_its_exhaustive_grid_search():
+    from activetrack.baselines.gbes import GBES
+
+    problem = _problem(3, steps=3)
+    best = GBES(spacing=0.25).search(problem)
+    every = GBES(spacing=0.25, prune=False).search(problem)
+    assert best.value == pytest.approx(every.value, rel=1e-12)
+    assert best.value == pytest.approx(score_longhand(problem, best.positions), rel=1e-6)
 
 
 # (d) the look-ahead planner --------------------------------------------------------------

@@ -252,7 +252,8 @@ class _BuiltIn(SensorModel):
         target, sensor = np.broadcast_arrays(
             np.asarray(target, np.float64), np.asarray(sensor, np.float64)
         )
-        return sm.measure(target, sensor[..., None, :], self.code, orientation)[..., 0, :]
+        phi = np.asarray(orientation, np.float64)[..., None]  # against the sensor axis
+        return sm.measure(target, sensor[..., None, :], self.code, phi)[..., 0, :]
 
     def jacobian(self, target: Any, sensor: Any, orientation: Any = 0.0) -> FloatArray:
         target, sensor = np.broadcast_arrays(
@@ -290,7 +291,8 @@ class _BuiltIn(SensorModel):
         cov = None if pose_cov is None else np.asarray(pose_cov)[..., None, :, :]
         Y, b = sm.update_terms(
             np.asarray(z)[..., None, :], target_hat, sensor[..., None, :], self.code,
-            w_d, w_t, orientation, cov,
+            np.asarray(w_d)[..., None], np.asarray(w_t)[..., None],
+            np.asarray(orientation, np.float64)[..., None], cov,
         )  # fmt: skip
         return Y[..., 0, :, :], b[..., 0, :]
 
@@ -361,3 +363,31 @@ def as_sensor_model(value: object) -> SensorModel:
             f"least one slot used, got {value.slots!r} and {value.angular!r}"
         )
     return value
+
+
+def checked(model: SensorModel) -> SensorModel:
+    """Return a model of one's own after trying it once on a plain geometry (a sensor 5
+    away, unit variances): its measurement (2,), noise (2, 2) and information (2, 2) must
+    be finite, the information symmetric PSD; else a ``ValueError`` naming
+    ``sensor_model`` (its bug found at validation, not deep inside a step)."""
+    target, sensor = np.zeros(2), np.array([3.0, 4.0])
+    try:
+        z = np.asarray(model.function(target, sensor, 0.0), np.float64)
+        R = np.asarray(model.noise_covar(target, sensor, 1.0, 1.0), np.float64)
+        J = np.asarray(model.information(sensor - target, 1.0, 1.0), np.float64)
+    except Exception as err:  # noqa: BLE001 (any bug of the user's model, reported)
+        raise ValueError(
+            f"sensor_model {model.name!r} failed on a plain geometry: {type(err).__name__}: {err}"
+        ) from err
+    shapes = (z.shape, R.shape, J.shape)
+    if shapes != ((2,), (2, 2), (2, 2)):
+        raise ValueError(
+            f"sensor_model {model.name!r}: function, noise_covar and information must return"
+            f" shapes (2,), (2, 2), (2, 2) for one sensor, got {shapes}"
+        )
+    if not (np.all(np.isfinite(z)) and np.all(np.isfinite(R)) and np.all(np.isfinite(J))):
+        raise ValueError(f"sensor_model {model.name!r} returned NaN or inf on a plain geometry")
+    scale = max(float(np.abs(J).max()), 1e-300)
+    if abs(J[0, 1] - J[1, 0]) > 1e-9 * scale or np.linalg.eigvalsh(J)[0] < -1e-9 * scale:
+        raise ValueError(f"sensor_model {model.name!r}: information must be symmetric PSD")
+    return model

@@ -12,7 +12,7 @@ import numpy as np
 from activetrack.models.measurement import INFORMATION_RATIO_MAX as _INFORMATION_RATIO_MAX
 from activetrack.models.motion import MODELS, LinearMotionModel
 from activetrack.models.objective import OBJECTIVES, Objective
-from activetrack.models.sensor import as_sensor_model
+from activetrack.models.sensor import as_sensor_model, checked
 from activetrack.validation import FloatArray, real_array, spd
 
 #: Accepted ranges (SI units). Chosen so that every quantity the EKF (eq. 3, 11), the
@@ -150,7 +150,7 @@ def _converted_models(sensor_model: object, m: int) -> object:
                 f"sensor_model must be one of {list(SENSOR_MODELS)}, an activetrack.SensorModel"
                 f" or a tuple of {m} of them (one per sensor), got {sensor_model!r} ({err})"
             ) from None
-        return model.name if model.builtin else model
+        return model.name if model.builtin else checked(model)
 
     v = sensor_model
     if isinstance(v, (tuple, list, np.ndarray)):
