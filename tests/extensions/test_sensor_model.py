@@ -398,3 +398,23 @@ def test_lookahead_scores_its_plan_with_the_new_model():
         P = F @ post @ F.T + Q
         x = F @ x
     assert float(res.score) == pytest.approx(total, rel=1e-6)
+
+
+# (e) the rendering -------------------------------------------------------------------------
+def test_rendering_draws_each_sensor_with_its_models_marker():
+    pytest.importorskip("matplotlib")
+    from activetrack.envs.tracking_env import parallel_env
+
+    env = parallel_env(scenario(), render_mode="rgb_array", n_steps=3)
+    env.reset(seed=0)
+    frame = env.render()
+    assert frame.ndim == 3 and frame.shape[-1] == 3
+    r = env._recorder._renderer
+    assert [h.get_marker() for h in r._art["heads"]] == ["o", "D", "D"]
+    legend = r._ax.get_legend()
+    entries = {
+        t.get_text(): h.get_marker()
+        for t, h in zip(legend.get_texts(), legend.legend_handles, strict=True)
+        if hasattr(h, "get_marker")
+    }
+    assert entries["range & bearing"] == "o" and entries["fading_range"] == "D"

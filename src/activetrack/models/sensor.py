@@ -70,8 +70,10 @@ class SensorModel:
     slots: ClassVar[tuple[bool, bool]] = (True, True)
     #: Which slots are angles (wrapped to ``[-pi, pi)`` in measurements and residuals).
     angular: ClassVar[tuple[bool, bool]] = (False, True)
-    #: The Matplotlib marker of its sensors in the rendering.
+    #: The Matplotlib marker of its sensors in the rendering, and their legend label
+    #: (empty: the name).
     marker: ClassVar[str] = "o"
+    label: ClassVar[str] = ""
 
     RANGE_BEARING: ClassVar[SensorCode] = SensorCode.RANGE_BEARING
     RANGE: ClassVar[SensorCode] = SensorCode.RANGE
@@ -304,6 +306,7 @@ class RangeBearing(_BuiltIn):
     code = int(SensorCode.RANGE_BEARING)
     slots = (True, True)
     marker = "o"
+    label = "range & bearing"
 
 
 class RangeOnly(_BuiltIn):
@@ -313,6 +316,7 @@ class RangeOnly(_BuiltIn):
     code = int(SensorCode.RANGE)
     slots = (True, False)
     marker = "s"
+    label = "range only"
 
 
 class BearingOnly(_BuiltIn):
@@ -322,6 +326,7 @@ class BearingOnly(_BuiltIn):
     code = int(SensorCode.BEARING)
     slots = (False, True)
     marker = "^"
+    label = "bearing only"
 
 
 #: The built-in models by name (the strings a scenario accepts), in code order.
