@@ -268,26 +268,37 @@ def test_world_runs_the_new_model_and_its_filter_is_consistent():
     assert band < 0.2  # a 10% error in the NEES would show
 
 
-def test_world_generic_path_equals_the_compiled_range_model_in_the_limit():
+@pytest.mark.parametrize("preset", ["paper", "two_targets", "uncertain_poses", "urban"])
+def test_world_generic_path_equals_the_compiled_range_model_in_the_limit(preset):
     """With an unbounded length ``FadingRange`` is range-only: the generic NumPy path (the
-    model's measure, noise and update) and the compiled kernels of the built-in give the
-    same episodes up to rounding (the same normals)."""
-    N = 50
-    far = activetrack.make_scenario("paper", sensor_model=("range_bearing", FadingRange(1e9),
-                                                           FadingRange(1e9)))  # fmt: skip
-    ref = activetrack.make_scenario("paper", sensor_model=("range_bearing", "range", "range"))
+    model's measure, noise and update; with K targets, uncertain poses, limited sensing,
+    occluders, the iterated EKF) and the compiled kernels of the built-in give the same
+    episodes up to rounding (the same normals)."""
+    N = 20
+    m = activetrack.make_scenario(preset).n_sensors
+    far = activetrack.make_scenario(
+        preset, sensor_model=("range_bearing",) + (FadingRange(1e9),) * (m - 1)
+    )
+    ref = activetrack.make_scenario(preset, sensor_model=("range_bearing",) + ("range",) * (m - 1))
     w1, w2 = activetrack.world.World(far, N), activetrack.world.World(ref, N)
     assert not far.capabilities.builtin_sensors and ref.capabilities.builtin_sensors
     w1.reset(seeds=list(range(N)))
     w2.reset(seeds=list(range(N)))
     rng = np.random.default_rng(2)
     for _ in range(10):
-        target = w2.get("sensors") + rng.uniform(-1, 1, (N, 3, 2)) * ref.r[None, :, None]
+        target = w2.get("sensors") + rng.uniform(-1, 1, (N, m, 2)) * ref.r[None, :, None]
         r1, r2 = w1.step(target), w2.step(target)
-        np.testing.assert_allclose(w1.get("P"), w2.get("P"), rtol=1e-6, atol=1e-9)
-        np.testing.assert_allclose(w1.get("x_hat"), w2.get("x_hat"), rtol=1e-6, atol=1e-8)
+        for k in range(ref.n_targets):
+            np.testing.assert_allclose(w1.get("P", target=k), w2.get("P", target=k),
+                                       rtol=1e-6, atol=1e-9)  # fmt: skip
+            np.testing.assert_allclose(w1.get("x_hat", target=k), w2.get("x_hat", target=k),
+                                       rtol=1e-6, atol=1e-8)  # fmt: skip
         np.testing.assert_allclose(r1.reward, r2.reward, rtol=1e-6)
         np.testing.assert_allclose(w1.observe(), w2.observe(), rtol=1e-4, atol=1e-5)
+        # The planners' score of the same positions, the model's information against the
+        # built-in's closed form.
+        p1, p2 = w1.planning_problem(), w2.planning_problem()
+        np.testing.assert_allclose(p1.score(target), p2.score(target), rtol=1e-6)
 
 
 def test_world_single_copy_steps_like_the_batch():
