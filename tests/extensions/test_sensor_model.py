@@ -376,6 +376,23 @@ def test_gsr_plans_the_new_model_coordinatewise_optimally(seed):
         assert min(values) >= res.value * (1 - 1e-6), i
 
 
+def test_gsr_plans_a_batch_with_the_new_model_like_each_copy():
+    from activetrack.baselines.gsr import GSR
+
+    world = activetrack.world.World(scenario(), 3)
+    world.reset(seeds=[7, 8, 9])
+    problem = world.planning_problem()
+    out = GSR().plan(problem)
+    for b in range(3):
+        single = problem[b]
+        assert single.sensor_objects == problem.sensor_objects
+        assert np.max(single.violation(out[b])) <= 1e-9
+        assert float(single.score(out[b])) == pytest.approx(
+            score_longhand(single, out[b]), rel=1e-6
+        )
+        assert float(single.score(out[b])) <= score_longhand(single, single.sensors)
+
+
 def test_gbes_plans_the_new_model_as_its_exhaustive_grid_search():
     from activetrack.baselines.gbes import GBES
 

@@ -237,10 +237,20 @@ class SensorModel:
         return self.code is not None
 
     def __eq__(self, other: object) -> bool:
-        return type(self) is type(other) and vars(self) == vars(other)
+        """Return whether ``other`` is the same model: same class, equal attributes."""
+        if type(self) is not type(other):
+            return False
+        a, b = vars(self), vars(other)
+        return a.keys() == b.keys() and all(
+            np.array_equal(a[k], b[k])
+            if isinstance(a[k], np.ndarray) or isinstance(b[k], np.ndarray)
+            else bool(a[k] == b[k])
+            for k in a
+        )
 
     def __hash__(self) -> int:
-        return hash((type(self), tuple(sorted(vars(self).items()))))
+        # By class only: equal models hash equal whatever their attributes (arrays too).
+        return hash(type(self))
 
     def __repr__(self) -> str:
         args = ", ".join(f"{k}={v!r}" for k, v in vars(self).items())
@@ -396,3 +406,36 @@ def checked(model: SensorModel) -> SensorModel:
     if abs(J[0, 1] - J[1, 0]) > 1e-9 * scale or np.linalg.eigvalsh(J)[0] < -1e-9 * scale:
         raise ValueError(f"sensor_model {model.name!r}: information must be symmetric PSD")
     return model
+
+
+def check_team(name: str, value: object, m: int) -> None:
+    """Check that ``value`` is a tuple of ``m`` :class:`SensorModel` (else a ``ValueError``
+    naming ``name``)."""
+    if (
+        not isinstance(value, tuple)
+        or len(value) != m
+        or not all(isinstance(v, SensorModel) for v in value)
+    ):
+        raise ValueError(
+            f"{name} must be a tuple of {m} activetrack.SensorModel or None, got {value!r}"
+        )
+
+
+def slot_code(model: SensorModel) -> int:
+    """Return a model's code, or for a model of one's own the code of the built-in that
+    fills the same slots (0 both, 1 the first, 2 the second): what the observation's
+    one-hot and the slot masks read (the kernels never run on it)."""
+    if model.code is not None:
+        return int(model.code)
+    return {(True, True): 0, (True, False): 1, (False, True): 2}[tuple(map(bool, model.slots))]
+
+
+def record(v: object) -> object:
+    """Return a ``sensor_model`` entry (or tuple) for a scenario's record: a model of one's
+    own as ``{"name": its name, "class": "module.QualifiedName"}``, a name as itself."""
+    if isinstance(v, tuple):
+        return tuple(record(e) for e in v)
+    if isinstance(v, SensorModel):
+        cls = type(v)
+        return {"name": v.name, "class": f"{cls.__module__}.{cls.__qualname__}"}
+    return v

@@ -37,6 +37,7 @@ from numpy.typing import ArrayLike
 from activetrack.linalg2 import inv2
 from activetrack.models import sensor_models
 from activetrack.models.objective import TRACE, Objective, is_trace, total_information
+from activetrack.models.sensor import check_team
 from activetrack.solvers._inputs import MAX_SCALE, MIN_SCALE
 from activetrack.validation import FloatArray, as_finite, positive, real_array, spd
 from activetrack.world import capabilities as _capabilities
@@ -68,20 +69,6 @@ def _check_scale(name: str, value: FloatArray, what: str = "") -> None:
         raise ValueError(
             f"{name}{what} must lie in [{lo:g}, {hi:g}] (the planners' scale range), "
             f"got {float(bad.flat[0])!r}"
-        )
-
-
-def _check_sensor_objects(value: object, m: int) -> None:
-    """Check ``sensor_objects``: a tuple of M :class:`activetrack.SensorModel`."""
-    from activetrack.models.sensor import SensorModel  # noqa: PLC0415
-
-    if (
-        not isinstance(value, tuple)
-        or len(value) != m
-        or not all(isinstance(v, SensorModel) for v in value)
-    ):
-        raise ValueError(
-            f"sensor_objects must be a tuple of {m} activetrack.SensorModel or None, got {value!r}"
         )
 
 
@@ -161,7 +148,7 @@ class PlanningProblem:
 
     def __post_init__(self) -> None:
         if self.sensor_objects is not None:
-            _check_sensor_objects(self.sensor_objects, np.shape(self.sensors)[-2])
+            check_team("sensor_objects", self.sensor_objects, np.shape(self.sensors)[-2])
         sensors = as_finite("sensors", self.sensors)
         if sensors.ndim < 2 or sensors.shape[-1] != 2 or sensors.shape[-2] < 1:
             raise ValueError(

@@ -18,7 +18,7 @@ import numpy as np
 
 from activetrack.models.motion import LinearMotionModel, make_model
 from activetrack.models.objective import Objective
-from activetrack.models.sensor import SensorModel, as_sensor_model
+from activetrack.models.sensor import SensorModel, as_sensor_model, record, slot_code
 from activetrack.validation import FloatArray, UnexpectedKeywordError
 from activetrack.world._scenario_fields import (
     _PER_SENSOR,
@@ -401,9 +401,8 @@ class Scenario:
     @property
     def sensor_models(self) -> np.ndarray:
         """Return the per-sensor model codes (M,) int8 (0 range-bearing, 1 range, 2 bearing)."""
-        # A model of one's own gets the code of the built-in filling the same slots (what
-        # the observation's one-hot and the slot masks read; its kernels never run on it).
-        return np.array([_slot_code(s) for s in self.sensor_objects], dtype=np.int8)
+        # (a model of one's own: the code of the built-in filling the same slots)
+        return np.array([slot_code(s) for s in self.sensor_objects], dtype=np.int8)
 
     @property
     def sensor_objects(self) -> tuple[SensorModel, ...]:
@@ -513,31 +512,12 @@ class Scenario:
             if isinstance(v, SensorModel) or (
                 isinstance(v, tuple) and any(isinstance(e, SensorModel) for e in v)
             ):  # a record of which model, as for an objective
-                v = _model_record(v)
+                v = record(v)
             if isinstance(v, Objective):  # a record of which objective, not its code
                 cls = type(v)
                 v = {"name": v.name, "class": f"{cls.__module__}.{cls.__qualname__}"}
             out[f.name] = v.name if isinstance(v, LinearMotionModel) else v
         return out
-
-
-def _slot_code(model: SensorModel) -> int:
-    """Return a model's code, or for a model of one's own the code of the built-in that
-    fills the same slots (0 both, 1 the first, 2 the second)."""
-    if model.code is not None:
-        return int(model.code)
-    return {(True, True): 0, (True, False): 1, (False, True): 2}[tuple(map(bool, model.slots))]
-
-
-def _model_record(v: object) -> object:
-    """Return a ``sensor_model`` entry (or tuple) for ``to_dict``: a model of one's own as
-    ``{"name": its name, "class": "module.QualifiedName"}``."""
-    if isinstance(v, tuple):
-        return tuple(_model_record(e) for e in v)
-    if isinstance(v, SensorModel):
-        cls = type(v)
-        return {"name": v.name, "class": f"{cls.__module__}.{cls.__qualname__}"}
-    return v
 
 
 def _same(a: object, b: object) -> bool:
