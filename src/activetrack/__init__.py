@@ -1,9 +1,11 @@
 """activetrack: multi-robot active target tracking with range and bearing sensors.
 
 The core (this package) holds the paper's mathematics and no RL: target motion models
-(eq. 1-2), the range-bearing measurement model (eq. 4-10), the EKF (eq. 3, 11), the
-covariance objective (eq. 12, 17-19; :class:`Objective`, the base of a new one), the
-analytic single-sensor optimum (Section IV-A), the planning problem and scenario presets.
+(eq. 1-2), the sensors' measurement models (eq. 4-10; :class:`SensorModel`, the base of a
+new one, and the built-ins :class:`RangeBearing`, :class:`RangeOnly`, :class:`BearingOnly`),
+the EKF (eq. 3, 11), the covariance objective (eq. 12, 17-19; :class:`Objective`, the base
+of a new one), the analytic single-sensor optimum (Section IV-A), the planning problem and
+scenario presets.
 The layers ``activetrack.envs``, ``activetrack.baselines`` and ``activetrack.train`` build
 on it, in that order.
 
