@@ -34,6 +34,7 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 from numpy.typing import ArrayLike
 
+from activetrack.estimation import generic
 from activetrack.linalg2 import inv2
 from activetrack.models import sensor_models
 from activetrack.models.objective import TRACE, Objective, is_trace, total_information
@@ -564,8 +565,6 @@ class PlanningProblem:
         (:func:`activetrack.estimation.generic.entries`) with variances ``1 / w``."""
         if self.sensor_objects is None:
             return sensor_models.information_entries(rel, w_d, w_t, pose_cov, detect)
-        from activetrack.estimation import generic  # noqa: PLC0415 (models of one's own)
-
         return generic.entries(self.sensor_objects, rel, 1.0 / w_d, 1.0 / w_t, pose_cov, detect)
 
     def line_of_sight(self, positions: ArrayLike) -> np.ndarray:
