@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from activetrack.estimation import generic
 from activetrack.kinematics import feasible_set
 from activetrack.models import sensor_models
 from activetrack.models.occluders import line_of_sight, project_move
@@ -62,7 +63,8 @@ def relax(
     if occ is not None and occ.batched and len(shape) > 1:  # a layout per flattened copy
         occ = occ[np.repeat(np.arange(shape[0]), B // shape[0])]
     s = _warm_start(current, r, targets, rho)
-    entries = _entries(s, targets, w_d, w_t, pose, det, occ)  # 3 x (B, K, M)
+    team = problem.sensor_objects  # models of one's own, or None (built-in)
+    entries = _entries(s, targets, w_d, w_t, pose, det, occ, team)  # 3 x (B, K, M)
     base = (prior[..., 0, 0], prior[..., 0, 1], prior[..., 1, 1])
     totals = [base[e] + entries[e].sum(axis=-1) for e in range(3)]
     value = problem.objective.of_targets(*totals)
@@ -105,6 +107,7 @@ def relax(
                 cov1,
                 det1,
                 None if occ is None else occ[keep],
+                None if problem.sensor_objects is None else problem.sensor_objects[one],
             )
             for e in range(3):
                 entries[e][keep, :, i] = new[e][..., 0]
@@ -152,7 +155,7 @@ def _approach(problem, s, value, current, r, targets, rho, det, weights, occ):
             prior[..., e0, e1] + x.sum(axis=-1)
             for (e0, e1), x in zip(
                 ((0, 0), (0, 1), (1, 1)),
-                _entries(moved, targets, w_d, w_t, pose, det, occ),
+                _entries(moved, targets, w_d, w_t, pose, det, occ, problem.sensor_objects),
                 strict=True,
             )
         )
@@ -182,6 +185,7 @@ class _Prepared:
     def __init__(self, problem, current, r, targets, rho, w_d, w_t, pose, det, occ) -> None:
         self.args = (current, r, targets, rho, w_d, w_t, pose, det)
         self.occ = occ
+        self.team = problem.sensor_objects  # models of one's own (their information), or None
         self.objective = problem.objective
         B, M = r.shape
         self.m = M
@@ -200,6 +204,7 @@ class _Prepared:
             self.objective,
             detect=None if det is None else tuple(d[rows, cols] for d in det),
             occluders=None if self.occ is None else self.occ[np.asarray(rows).reshape(-1)],
+            models=None if self.team is None else (self.team, cols),
         )  # fmt: skip
 
     def rows(self, sub: np.ndarray, i: int) -> solver_numeric.Prepared:
@@ -253,11 +258,15 @@ def _entries(
     pose: FloatArray | None,
     det: tuple[FloatArray, FloatArray] | None = None,
     occ: object = None,
+    team: tuple | None = None,
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Return the sensors' (expected) information entries about every target, 3 x (B, K, M)."""
+    """Return the sensors' (expected) information entries about every target, 3 x (B, K, M);
+    ``team``: the M sensors' models of one's own (their information), None: built-in."""
     rel = s[:, None, :, :] - targets[:, :, None, :]  # (B, K, M, 2)
     cov = None if pose is None else pose[:, None]
     d = None if det is None else tuple(x[:, None] for x in det)
     if occ is not None:
         d = (*d, line_of_sight(s, targets, occ))
+    if team is not None:
+        return generic.entries(team, rel, 1.0 / w_d[:, None], 1.0 / w_t[:, None], cov, d)
     return sensor_models.information_entries(rel, w_d[:, None], w_t[:, None], cov, d)

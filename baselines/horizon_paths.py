@@ -24,6 +24,7 @@ import math
 
 import numpy as np
 
+from activetrack.estimation import generic
 from activetrack.kinematics.geometry import project_feasible
 from activetrack.kinematics.sensor_motion import move_to
 from activetrack.models import sensor_models
@@ -44,6 +45,7 @@ class PathModel:
         B = math.prod(problem.batch_shape)
         M = problem.n_sensors
         self.paper = problem.is_paper
+        self.team = problem.sensor_objects  # models of one's own (their information), or None
         self.occluders = problem.occluders
         self.sigma_d2 = problem.sigma_d2.reshape(B, M)
         self.sigma_theta2 = problem.sigma_theta2.reshape(B, M)
@@ -123,9 +125,14 @@ class PathModel:
 
                 seen = line_of_sight(pos, np.broadcast_to(tgt, (B, O, H, K, 2)), self.occluders)
                 detect = (*detect, seen)
-        a, b, c = sensor_models.information_entries(
-            rel, self.w_d[row], self.w_t[row], pose, detect
-        )  # (B, O, H, K, M)
+        if self.team is not None:  # each model's information (the generic path)
+            a, b, c = generic.entries(
+                self.team, rel, 1.0 / self.w_d[row], 1.0 / self.w_t[row], pose, detect
+            )
+        else:
+            a, b, c = sensor_models.information_entries(
+                rel, self.w_d[row], self.w_t[row], pose, detect
+            )  # (B, O, H, K, M)
         info = np.stack([np.stack([a, b], -1), np.stack([b, c], -1)], -2)
         info = np.moveaxis(info, 4, 1)  # (B, M, O, H, K, 2, 2)
         return [info[..., k, :, :] for k in range(K)]

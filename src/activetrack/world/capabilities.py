@@ -56,6 +56,9 @@ class Capabilities:
             iterated one: the fused step's kernel.
         trace_objective: the score is the trace (eq. 17): the reward needs no second
             evaluation of the objective.
+        builtin_sensors: every sensor's model is a built-in (:attr:`activetrack.SensorModel.code`):
+            the compiled measurement and filter kernels; else the generic NumPy path
+            (:mod:`activetrack.estimation.generic`) for the world and the planners.
     """
 
     one_target: bool
@@ -66,6 +69,7 @@ class Capabilities:
     no_occluders: bool
     single_update: bool
     trace_objective: bool
+    builtin_sensors: bool = True
 
     @classmethod
     def of(cls, sc: Any) -> Capabilities:
@@ -80,6 +84,7 @@ class Capabilities:
             no_occluders=not sc.has_occluders,
             single_update=sc.filter_iterations == 1,
             trace_objective=sc.objective == "trace",
+            builtin_sensors=all(m.builtin for m in sc.sensor_objects),
         )
 
     @property
@@ -118,5 +123,5 @@ class Capabilities:
     def fused_step(self) -> bool:
         """Whether a whole world step (move, advance, score, predict; with one copy also
         the observation) is one compiled call (:mod:`activetrack.world._loop_kernels`):
-        :attr:`per_target_update` with known poses. Any sensor model."""
-        return self.per_target_update and self.known_poses
+        :attr:`per_target_update` with known poses and built-in sensor models."""
+        return self.per_target_update and self.known_poses and self.builtin_sensors
