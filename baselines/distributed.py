@@ -220,3 +220,32 @@ def run_tasks(
     if missing:
         raise RuntimeError(f"jobs {missing} returned no result")
     return [results[i] for i in range(len(jobs))]
+
+
+def _on_seeds(fn: Callable[..., R], case: dict[str, Any], seeds: list[int]) -> R:
+    """Return ``fn(**case, seeds=seeds)`` (one Ray task of :func:`map_seeds`)."""
+    return fn(**case, seeds=seeds)
+
+
+def map_seeds(
+    fn: Callable[..., R],
+    cases: Sequence[dict[str, Any]],
+    seeds: Sequence[int],
+    cpus: int,
+    on_done: Callable[[int], None] | None = None,
+) -> list[list[R]]:
+    """Return, for every case, ``fn(**case, seeds=chunk)`` for the consecutive chunks of
+    ``seeds`` in order, each computed as a Ray task (inside :func:`session`).
+
+    The one Ray wrapper of the studies: ``fn`` is the serial function of a chunk of seeds
+    (each a use of :func:`activetrack.baselines.rollout.rollout`, whose episodes draw only
+    from their own seeds), so joining the chunks gives the serial results.
+    ``JOBS_PER_CPU * cpus`` chunks per case; ``on_done(k)`` is called as a chunk of ``k``
+    seeds completes.
+    """
+    parts = chunks(seeds, JOBS_PER_CPU * cpus)
+    jobs = [(fn, dict(case), part) for case in cases for part in parts]
+    done = run_tasks(
+        _on_seeds, jobs, on_done=None if on_done is None else (lambda i: on_done(len(jobs[i][2])))
+    )
+    return [done[k : k + len(parts)] for k in range(0, len(done), len(parts))]

@@ -16,19 +16,11 @@ it is then reported separately. ``ms_per_step`` is the CPU time (``time.process_
 per decision (one ``plan`` or ``act`` call, per copy in a batched run), measured after
 one warm-up decision that is not counted (the compiled kernels' first compilation).
 
-A policy is an expert with ``plan(problem) -> next positions`` (e.g.
-:class:`~activetrack.baselines.policies.GSRPolicy`; its positions are executed with
-``step_positions``), anything with ``act(observations) -> {agent: action}`` (e.g. a
-learned policy), or a name: ``gsr``, ``gsr-restarts``
-(``GSR(restarts=True)``), ``gbes``, ``rm``, or the path of a policy file, e.g. a trained
-``policy.zip``. Every policy is loaded and checked before the first episode runs.
-
-Policy files load through the entry-point group :data:`POLICY_LOADERS`
-(``activetrack.policy_loaders`` in ``pyproject.toml``): an entry named for a file suffix
-(``zip``) names a function ``path -> policy``; the train layer provides ``zip``
-(:func:`activetrack.train.policy_io.load_policy`). Why: ``evaluate(["runs/x/policy.zip"])``
-keeps loading trained policies while baselines, below train, never imports it, and other
-packages can add their own formats.
+A policy is an expert (``plan(problem) -> next positions``), anything with
+``act(observations) -> {agent: action}``, a name or a policy file
+(:mod:`activetrack.baselines.policy_specs`). Every policy is loaded and checked before the
+first episode runs. Every episode is the one episode loop of
+:mod:`activetrack.baselines.rollout`.
 
 :func:`write_results` writes a run's files together (:mod:`activetrack.files`); the
 figure is :func:`activetrack.baselines.plotting.plot_evaluation`. With ``workers`` or an
@@ -38,8 +30,6 @@ the same results.
 
 from __future__ import annotations
 
-import importlib.metadata
-import time
 import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -48,16 +38,24 @@ from typing import Any
 
 import numpy as np
 
+from activetrack.baselines.episodes import (  # noqa: F401 (public here too)
+    run_batched,
+    run_episode,
+    run_episodes,
+    warm_up,
+)
 from activetrack.baselines.plotting import short_labels
-from activetrack.baselines.simulation import check_planners, detection_gaps, mean_ci
+from activetrack.baselines.policy_specs import (  # noqa: F401 (public here too)
+    EXPERT_NAMES,
+    POLICY_LOADERS,
+    check_compatible,
+    policy_loader,
+    policy_loaders,
+    resolve_policy,
+)
+from activetrack.baselines.simulation import check_planners, mean_ci
 from activetrack.files import RunOutputs, prepare_output_dir
 from activetrack.validation import check_int
-
-#: Names that resolve to the planners' expert policies.
-EXPERT_NAMES = ("gsr", "gsr-restarts", "gbes", "rm", "lookahead")
-#: The entry-point group of the policy file loaders: name = the file suffix without its
-#: dot (lower case), value = ``module:function`` taking the path and returning a policy.
-POLICY_LOADERS = "activetrack.policy_loaders"
 
 
 @dataclass(eq=False)
@@ -192,197 +190,6 @@ def paired_ratio_ci(
     return _bootstrap((values, reference), _ratio, level)
 
 
-def resolve_policy(spec: Any) -> Any:
-    """Return a policy object for a name, a policy file path or an object.
-
-    An object is an expert (``plan(problem) -> positions``) or maps observations to
-    actions (``act(observations) -> {agent: action}``).
-    """
-    if not isinstance(spec, (str, Path)):
-        if not (callable(getattr(spec, "plan", None)) or callable(getattr(spec, "act", None))):
-            raise TypeError(
-                f"a policy needs plan(problem) or act(observations), got {type(spec).__name__}"
-            )
-        return spec
-    name = str(spec)
-    if name.lower() in EXPERT_NAMES:
-        from activetrack.baselines import policies
-
-        return {
-            "gsr": policies.GSRPolicy,
-            "gsr-restarts": lambda: policies.GSRPolicy(restarts=True),
-            "gbes": policies.GBESPolicy,
-            "rm": policies.RMPolicy,
-            # It plans from the prediction each problem carries, for any scenario (the
-            # scenario, here the matching preset, serves problems without one only).
-            "lookahead": lambda: policies.LookaheadPolicy(scenario=None),
-        }[name.lower()]()
-    path = Path(name)
-    if not path.exists() and (path.suffix or len(path.parts) > 1):  # meant as a file
-        raise ValueError(f"{name}: no such policy file")
-    if not path.is_file():
-        raise ValueError(
-            f"unknown policy {name!r}: use one of {list(EXPERT_NAMES)} or the path of a "
-            "policy.zip written by 'activetrack train'"
-        )
-    return policy_loader(path)(path)
-
-
-def policy_loaders() -> dict[str, importlib.metadata.EntryPoint]:
-    """Return the installed policy file loaders, ``{suffix: entry point}``
-    (:data:`POLICY_LOADERS`; not yet imported)."""
-    found = importlib.metadata.entry_points(group=POLICY_LOADERS)
-    return {ep.name.lower(): ep for ep in found}
-
-
-def policy_loader(path: Path) -> Any:
-    """Return the function that loads the policy file ``path`` (by its suffix).
-
-    Raises ``ValueError`` when no installed loader takes the suffix, ``ImportError``
-    (naming the loader) when the loader's module cannot be imported.
-    """
-    suffix = path.suffix.lower().removeprefix(".")
-    loaders = policy_loaders()
-    if suffix not in loaders:
-        # None at all: an install made before the group existed (reinstall registers it).
-        known = ", ".join(f".{s}" for s in sorted(loaders)) or "none; reinstall activetrack"
-        what = f"'.{suffix}' files" if suffix else "files without a suffix"
-        raise ValueError(
-            f"{path}: no policy loader for {what} (installed: {known}; loaders register "
-            f"under the entry-point group {POLICY_LOADERS!r})"
-        )
-    entry = loaders[suffix]
-    try:
-        return entry.load()
-    except ImportError as exc:
-        ours = entry.value.startswith("activetrack.train")
-        hint = "; the train layer needs the [rl] extra: pip install 'activetrack[rl]'"
-        raise ImportError(
-            f"{path}: its loader {entry.value} cannot be imported ({exc}){hint if ours else ''}"
-        ) from exc
-
-
-def _reset_policy(policy: Any, seed: int) -> None:
-    """Reseed a stochastic policy for the episode with seed ``seed``, if it can be.
-
-    The expert policies' ``reset(seed)`` seeds their planner generator as the simulation
-    runner does (``default_rng([seed, 1])``), so random motion is reproducible and
-    independent of the order of the episodes.
-    """
-    reset = getattr(policy, "reset", None)
-    if callable(reset):
-        reset(seed)
-
-
-def warm_up(env: Any, policy: Any, seed: int) -> None:
-    """Make one decision of ``policy`` on the first observation of the episode ``seed``
-    and forget it (the policy reset again): compiles what its first call compiles, so
-    that the timing of the episodes counts none of it."""
-    _reset_policy(policy, seed)
-    obs, _ = env.reset(seed=seed)
-    if callable(getattr(policy, "plan", None)):
-        policy.plan(env.unwrapped.planning_problem())
-    else:
-        getattr(policy, "act", policy)(obs)
-    _reset_policy(policy, seed)
-
-
-def run_episode(env: Any, policy: Any, seed: int, on_step: Any = None) -> tuple[float, ...]:
-    """Return ``(mean_trace, rmse, return, mean_nees, ms_per_step, no_detection,
-    longest_gap)`` of one episode of ``policy`` from ``seed`` (``ms_per_step``: the
-    policy's CPU time per decision in ms; the last two as
-    :func:`activetrack.baselines.simulation.detection_gaps`, NaN without a world).
-    ``on_step()`` is called after every step (progress)."""
-    from activetrack.envs import policy_step
-
-    _reset_policy(policy, seed)
-    obs, _ = env.reset(seed=seed)
-    traces, errors, nees, seen, total = [], [], [], [], 0.0
-    first = env.possible_agents[0]
-    world = getattr(env.unwrapped, "world", None)
-    timed, seconds = _timed(policy)
-    while env.agents:
-        obs, rewards, _, _, infos = policy_step(env, timed, obs)
-        traces.append(infos[first]["trace"])
-        errors.append(infos[first]["position_error"])
-        nees.append(float(world.position_nees(0)) if world is not None else np.nan)
-        if world is not None:
-            seen.append(world.get("detected", 0).any(axis=-1))
-        total += float(rewards[first])
-        if on_step is not None:
-            on_step()
-    errors_arr = np.asarray(errors)
-    gaps = detection_gaps(np.array(seen)) if world is not None else (np.nan, np.nan)
-    return (
-        float(np.mean(traces)),
-        float(np.sqrt(np.mean(errors_arr**2))),
-        total,
-        float(np.mean(nees)),
-        1e3 * seconds[0] / len(traces),
-        *gaps,
-    )
-
-
-def run_batched(
-    scenario: Any, overrides: dict[str, Any], policy: Any, seeds: list[int], on_step: Any = None
-) -> list[tuple[float, ...]]:
-    """Return :func:`run_episode`'s rows for a planner policy, each seed's episode a copy of
-    one batched :class:`~activetrack.world.World` (the policy plans every copy at once).
-
-    The world's copies are the environment's episodes (same seeds, same draws), so a
-    deterministic planner's rows equal the serial ones to its tolerance: the batched
-    world rounds its stacked products differently from the single environment, GSR's
-    numerical steps settle to about 1e-7 m differently in response, which leaves smooth
-    tasks' rows equal to about 1e-6 relative; where the plan can switch between near-tied
-    positions (occluders), a copy's episode can take the other branch, so only the
-    statistics agree. A copy's row does not depend on the batch: the same seed gives the
-    same row bit for bit alone (a batch of one) or among any other copies.
-    ``ms_per_step`` is the batch's CPU time per decision divided by the number of copies,
-    after a warm-up decision (the batch's first, planned twice).
-    ``on_step(k)`` is called after every step with the number of copies that stepped.
-    """
-    from activetrack.world import World
-
-    world = World(scenario, len(seeds), **overrides)
-    world.reset(seeds=seeds)
-    _reset_policy(policy, seeds[0])
-    policy.plan(world.planning_problem())  # warm-up (compilation), not timed
-    _reset_policy(policy, seeds[0])
-    n = len(seeds)
-    live = np.ones(n, dtype=bool)
-    columns: list[list[list[float]]] = [[[] for _ in range(n)] for _ in range(4)]
-    traces, errors, nees, seen = columns
-    totals, seconds, steps = np.zeros(n), 0.0, 0
-    while live.any():
-        start = time.process_time()
-        positions = policy.plan(world.planning_problem())
-        seconds += time.process_time() - start
-        rows = np.flatnonzero(live)
-        res = world.step(positions, rows)
-        totals[rows] += np.asarray(res.reward, dtype=np.float64).reshape(-1)
-        steps += 1
-        for i in rows.tolist():
-            traces[i].append(float(world.get("trace", i)))
-            errors[i].append(float(world.position_error(i)))
-            nees[i].append(float(world.position_nees(i)))
-            seen[i].append(world.get("detected", i).any(axis=-1))
-        live &= ~(world.terminated | world.truncated)
-        if on_step is not None:
-            on_step(len(rows))
-    ms = 1e3 * seconds / (n * steps)
-    return [
-        (
-            float(np.mean(traces[i])),
-            float(np.sqrt(np.mean(np.square(errors[i])))),
-            float(totals[i]),
-            float(np.mean(nees[i])),
-            ms,
-            *detection_gaps(np.array(seen[i])),
-        )
-        for i in range(n)
-    ]
-
-
 def check_batched(batched: object, workers: object, address: object) -> tuple[int, str | None]:
     """Return the checked ``(workers, address)``; raise ValueError unless ``batched`` is a
     bool that they allow (a batched run is one process: not with Ray workers)."""
@@ -402,41 +209,6 @@ def batchable(policy: Any) -> bool:
     from activetrack.baselines.policies import GSRPolicy, LookaheadPolicy
 
     return isinstance(policy, (GSRPolicy, LookaheadPolicy))
-
-
-def _timed(policy: Any) -> tuple[Any, list[float]]:
-    """Return ``policy`` behind a proxy that adds its decisions' CPU seconds to the list."""
-    from types import SimpleNamespace
-
-    seconds = [0.0]
-
-    def timing(fn: Any) -> Any:
-        def call(arg: Any) -> Any:
-            start = time.process_time()
-            out = fn(arg)
-            seconds[0] += time.process_time() - start
-            return out
-
-        return call
-
-    if callable(getattr(policy, "plan", None)):
-        return SimpleNamespace(plan=timing(policy.plan)), seconds
-    return SimpleNamespace(act=timing(getattr(policy, "act", policy))), seconds
-
-
-def check_compatible(policy: Any, env: Any, label: str) -> None:
-    """Raise ValueError if a learned policy's observation size does not fit ``env``."""
-    meta = getattr(policy, "meta", None)
-    if not meta or "observation_space" not in meta:
-        return
-    size = int(np.prod(meta["observation_space"]["shape"]))
-    per_agent = env.observation_space(env.possible_agents[0]).shape[0]
-    expected = per_agent * (env.n_sensors if meta.get("view") == "centralized" else 1)
-    if size != expected:
-        raise ValueError(
-            f"{label}: trained on observations of size {size}, this scenario has {expected} "
-            f"(trained on scenario {meta.get('scenario', {}).get('name')!r})"
-        )
 
 
 def evaluate(
@@ -551,20 +323,6 @@ def evaluate(
     return results
 
 
-def run_episodes(
-    scenario: Any, overrides: dict[str, Any], policy: Any, seeds: list[int]
-) -> list[tuple[float, ...]]:
-    """Return :func:`run_episode` on each of ``seeds`` in a new environment (one Ray task)."""
-    from activetrack.envs import parallel_env
-
-    env = parallel_env(scenario, **overrides)
-    try:
-        warm_up(env, policy, seeds[0])
-        return [run_episode(env, policy, s) for s in seeds]
-    finally:
-        env.close()
-
-
 def _episodes_on_ray(
     scenario: Any,
     overrides: dict[str, Any],
@@ -574,21 +332,18 @@ def _episodes_on_ray(
     address: str | None,
     bar: Any,
     n_steps: int,
-) -> list[list[tuple[float, float, float, float, float]]]:
-    """Return every policy's episode rows, computed as Ray tasks over chunks of ``seeds``."""
+) -> list[list[tuple[float, ...]]]:
+    """Return every policy's episode rows, :func:`run_episodes` as Ray tasks over chunks of
+    ``seeds`` (:func:`activetrack.baselines.distributed.map_seeds`)."""
     from activetrack.baselines import distributed
 
     bar.set_description("ray")
+    cases = [{"scenario": scenario, "overrides": overrides, "policy": p} for p in policies]
     with distributed.session(workers, address) as cpus:
-        parts = distributed.chunks(seeds, distributed.JOBS_PER_CPU * cpus)
-        jobs = [(scenario, overrides, policy, part) for policy in policies for part in parts]
-        done = distributed.run_tasks(
-            run_episodes, jobs, on_done=lambda i: bar.update(len(jobs[i][3]) * n_steps)
+        done = distributed.map_seeds(
+            run_episodes, cases, seeds, cpus, on_done=lambda k: bar.update(k * n_steps)
         )
-    return [
-        [row for chunk in done[k : k + len(parts)] for row in chunk]
-        for k in range(0, len(done), len(parts))
-    ]
+    return [[row for chunk in chunked for row in chunk] for chunked in done]
 
 
 def _gsr_of(results: Sequence[PolicyEvaluation]) -> PolicyEvaluation:

@@ -399,6 +399,10 @@ def _target_features(problem: PlanningProblem, candidates: list[FloatArray]) -> 
 
             seen = ~blocked(p[:, None, :] + targets[0], targets[None], problem.occluders)
             di = (*di, seen)
+        if problem.sensor_objects is not None:  # a model of one's own: its information
+            J = problem.sensor_objects[i].information(rel, 1 / w_d[i], 1 / w_t[i], cov, di)
+            out.append(np.stack([J[..., 0, 0], J[..., 0, 1], J[..., 1, 1]], -1))
+            continue
         out.append(np.stack(sensor_models.information_entries(rel, w_d[i], w_t[i], cov, di), -1))
     return out
 

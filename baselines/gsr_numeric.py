@@ -32,6 +32,7 @@ from __future__ import annotations
 import numpy as np
 
 from activetrack.baselines import gsr_kinematic
+from activetrack.estimation import generic
 from activetrack.kinematics import feasible_set
 from activetrack.kinematics.team import all_disks
 from activetrack.models import sensor_models
@@ -68,7 +69,8 @@ def relax(
         s = gsr_kinematic.warm_start(problem, current, targets, rho)
     else:
         s = _warm_start(current, r, targets, rho)
-    entries = _entries(s, targets, w_d, w_t, pose, det, occ)  # 3 x (B, K, M)
+    team = problem.sensor_objects  # models of one's own, or None (built-in)
+    entries = _entries(s, targets, w_d, w_t, pose, det, occ, team)  # 3 x (B, K, M)
     base = (prior[..., 0, 0], prior[..., 0, 1], prior[..., 1, 1])
     totals = [base[e] + entries[e].sum(axis=-1) for e in range(3)]
     value = problem.objective.of_targets(*totals)
@@ -80,8 +82,8 @@ def relax(
     # sensor moved); an unchanged subproblem would give the same answer, so it is skipped.
     changed = free.copy()
     if custom:
-        prepared = gsr_kinematic.Prepared(problem, _one_sensor(targets, w_d, w_t, pose, det, occ),
-                                          current, targets, rho)  # fmt: skip
+        one = _one_sensor(targets, w_d, w_t, pose, det, occ, team)
+        prepared = gsr_kinematic.Prepared(problem, one, current, targets, rho)
     else:
         prepared = _Prepared(problem, current, r, targets, rho, w_d, w_t, pose, det, occ)
     for _ in range(max_sweeps):
@@ -115,6 +117,7 @@ def relax(
                 cov1,
                 det1,
                 None if occ is None else occ[keep],
+                None if problem.sensor_objects is None else problem.sensor_objects[one],
             )
             for e in range(3):
                 entries[e][keep, :, i] = new[e][..., 0]
@@ -167,7 +170,7 @@ def _approach(problem, s, value, current, r, targets, rho, det, weights, occ):
             prior[..., e0, e1] + x.sum(axis=-1)
             for (e0, e1), x in zip(
                 ((0, 0), (0, 1), (1, 1)),
-                _entries(moved, targets, w_d, w_t, pose, det, occ),
+                _entries(moved, targets, w_d, w_t, pose, det, occ, problem.sensor_objects),
                 strict=True,
             )
         )
@@ -197,6 +200,7 @@ class _Prepared:
     def __init__(self, problem, current, r, targets, rho, w_d, w_t, pose, det, occ) -> None:
         self.args = (current, r, targets, rho, w_d, w_t, pose, det)
         self.occ = occ
+        self.team = problem.sensor_objects  # models of one's own (their information), or None
         self.objective = problem.objective
         B, M = r.shape
         self.m = M
@@ -215,6 +219,7 @@ class _Prepared:
             self.objective,
             detect=None if det is None else tuple(d[rows, cols] for d in det),
             occluders=None if self.occ is None else self.occ[np.asarray(rows).reshape(-1)],
+            models=None if self.team is None else (self.team, cols),
         )  # fmt: skip
 
     def rows(self, sub: np.ndarray, i: int) -> solver_numeric.Prepared:
@@ -248,9 +253,10 @@ class _Prepared:
         return out
 
 
-def _one_sensor(targets, w_d, w_t, pose, det, occ):
+def _one_sensor(targets, w_d, w_t, pose, det, occ, objects):
     """Return ``entries(pts, b, i)``: sensor ``i``'s entries in copy ``b`` at ``pts`` (P, 2)
-    about every target, 3 x (P, K) (:func:`_entries` of P copies of the sensor)."""
+    about every target, 3 x (P, K) (:func:`_entries` of P copies of the sensor; ``objects``
+    the sensors' models of one's own, or None)."""
 
     def entries(pts: FloatArray, b: int, i: int) -> tuple[FloatArray, ...]:
         n = len(pts)
@@ -258,7 +264,8 @@ def _one_sensor(targets, w_d, w_t, pose, det, occ):
         cov = None if pose is None else pose[row]
         d = None if det is None else tuple(x[row] for x in det)
         layout = None if occ is None else occ[np.array([b])]
-        out = _entries(pts[None], targets[[b]], w_d[row], w_t[row], cov, d, layout)
+        own = None if objects is None else (objects[i],) * n
+        out = _entries(pts[None], targets[[b]], w_d[row], w_t[row], cov, d, layout, own)
         return tuple(x[0].T for x in out)
 
     return entries
@@ -284,11 +291,15 @@ def _entries(
     pose: FloatArray | None,
     det: tuple[FloatArray, FloatArray] | None = None,
     occ: object = None,
+    team: tuple | None = None,
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Return the sensors' (expected) information entries about every target, 3 x (B, K, M)."""
+    """Return the sensors' (expected) information entries about every target, 3 x (B, K, M);
+    ``team``: the M sensors' models of one's own (their information), None: built-in."""
     rel = s[:, None, :, :] - targets[:, :, None, :]  # (B, K, M, 2)
     cov = None if pose is None else pose[:, None]
     d = None if det is None else tuple(x[:, None] for x in det)
     if occ is not None:
         d = (*d, line_of_sight(s, targets, occ))
+    if team is not None:
+        return generic.entries(team, rel, 1.0 / w_d[:, None], 1.0 / w_t[:, None], cov, d)
     return sensor_models.information_entries(rel, w_d[:, None], w_t[:, None], cov, d)

@@ -24,6 +24,7 @@ import math
 
 import numpy as np
 
+from activetrack.estimation import generic
 from activetrack.kinematics.geometry import project_feasible
 from activetrack.kinematics.sensor_motion import move_to
 from activetrack.kinematics.team import TeamMotion, all_disks
@@ -45,9 +46,10 @@ class PathModel:
         B = math.prod(problem.batch_shape)
         M = problem.n_sensors
         self.paper = problem.is_paper
+        self.team = problem.sensor_objects  # models of one's own (their information), or None
         kin = problem.kinematics
         # A kinematics of its own: each step mended by it (the world's TeamMotion rule).
-        self.team = None if kin is None or all_disks(kin) else TeamMotion(kin)
+        self.motion = None if kin is None or all_disks(kin) else TeamMotion(kin)
         self.occluders = problem.occluders
         self.sigma_d2 = problem.sigma_d2.reshape(B, M)
         self.sigma_theta2 = problem.sigma_theta2.reshape(B, M)
@@ -71,12 +73,12 @@ class PathModel:
         ``rho`` broadcast against ``prev.shape[:-1]``; ``targets`` (B, K, 2) this step's.
         """
         B, K = targets.shape[0], targets.shape[-2]
-        if self.team is not None:  # the sensor axis (1) last but one, as the world's
+        if self.motion is not None:  # the sensor axis (1) last but one, as the world's
             pr, pv = np.moveaxis(prop, 1, -2), np.moveaxis(np.broadcast_to(prev, prop.shape), 1, -2)
             t = np.broadcast_to(targets.reshape((B,) + (1,) * (prev.ndim - 3) + (K, 2)),
                                 pr.shape[:-2] + (K, 2))  # fmt: skip
             rh = np.moveaxis(np.broadcast_to(rho, prop.shape[:-1]), 1, -1)
-            moved = np.moveaxis(self.team.move_to(pr, pv, t, None, rh)[0], -2, 1)
+            moved = np.moveaxis(self.motion.move_to(pr, pv, t, None, rh)[0], -2, 1)
         elif self.paper:
             t = targets[:, 0].reshape((B,) + (1,) * (prev.ndim - 2) + (2,))
             return project_feasible(prop - t, prev - t, r, rho) + t
@@ -134,9 +136,14 @@ class PathModel:
 
                 seen = line_of_sight(pos, np.broadcast_to(tgt, (B, O, H, K, 2)), self.occluders)
                 detect = (*detect, seen)
-        a, b, c = sensor_models.information_entries(
-            rel, self.w_d[row], self.w_t[row], pose, detect
-        )  # (B, O, H, K, M)
+        if self.team is not None:  # each model's information (the generic path)
+            a, b, c = generic.entries(
+                self.team, rel, 1.0 / self.w_d[row], 1.0 / self.w_t[row], pose, detect
+            )
+        else:
+            a, b, c = sensor_models.information_entries(
+                rel, self.w_d[row], self.w_t[row], pose, detect
+            )  # (B, O, H, K, M)
         info = np.stack([np.stack([a, b], -1), np.stack([b, c], -1)], -2)
         info = np.moveaxis(info, 4, 1)  # (B, M, O, H, K, 2, 2)
         return [info[..., k, :, :] for k in range(K)]

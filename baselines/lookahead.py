@@ -511,19 +511,27 @@ def run_batched(
     ``deepest`` its deepest realized minimum-distance violation of the *true* target,
     ``max(0, max_k max_i (rho_i - ||p_S_i(k) - p_T(k)||))`` (m; 0: never inside a disk).
     """
-    world = World(scenario, len(seeds))
-    world.reset(seeds=seeds)
-    gsr, previous = GSR(), None
+    from activetrack.baselines import rollout as ro
+
+    class Warm(ro.Agent):  # each step's plan warm-starts the next (GSR: planner None)
+        def start(self, seeds: list[int], batched: bool) -> None:
+            self.gsr, self.previous = GSR(), None
+
+        def decide(self, step: ro.Step) -> None:
+            problem = step.planning_problem()
+            if planner is None:
+                step.positions = self.gsr.plan(problem)
+            else:
+                res = planner.plan_prediction(problem, previous=self.previous)
+                step.positions, self.previous = res.positions, res.plan
+
+    class Record(ro.Recorder):
+        def step(self, step: ro.Step) -> None:
+            w = step.world
+            traces.append(w.trace.copy())
+            d = np.linalg.norm(w.sensors - w.x_true[:, None, :2], axis=-1)
+            deepest[:] = np.maximum(deepest, np.max(w.params.rho - d, axis=1))
+
     traces, deepest = [], np.zeros(len(seeds))
-    while not world.truncated.all():
-        problem = world.planning_problem()
-        if planner is None:
-            positions = gsr.plan(problem)
-        else:
-            res = planner.plan_prediction(problem, previous=previous)
-            positions, previous = res.positions, res.plan
-        world.step(positions)
-        traces.append(world.trace.copy())
-        d = np.linalg.norm(world.sensors - world.x_true[:, None, :2], axis=-1)
-        deepest = np.maximum(deepest, np.max(world.params.rho - d, axis=1))
+    ro.rollout(World(scenario, len(seeds)), Warm(), seeds, Record(), batched=True)
     return np.mean(traces, axis=0), deepest

@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from activetrack.baselines.rollout import PlannerAgent, Recorder, Step, rollout
 from activetrack.validation import FloatArray
 from activetrack.world import World
 from activetrack.world.problem import Planner, PlanningProblem
@@ -109,53 +110,57 @@ def detection_gaps(seen: np.ndarray) -> tuple[float, int]:
     return float(np.mean(~seen)), longest
 
 
+class _RunRecorder(Recorder):
+    """Keeps one serial run's :class:`RunRecord` fields (copy 0, read unbatched)."""
+
+    def __init__(self, limited: bool) -> None:
+        self.limited = limited
+
+    def reset(self, world: World, copy: int, episode: int) -> None:
+        g = world.get
+        self.true_states, self.estimates = [g("x_true", 0).copy()], [g("x_hat", 0).copy()]
+        self.sensors, self.covs = [g("sensors", 0).copy()], [g("P", 0)[..., :2, :2].copy()]
+        self.trace, self.error, self.nees, self.plan_time, self.violation, self.seen = (
+            [], [], [], [], [], [])  # fmt: skip
+
+    def step(self, step: Step) -> None:
+        world, g = step.world, step.world.get
+        self.plan_time.append(step.seconds)
+        self.violation.append(float(np.max(step.problem.violation(step.positions))))
+        self.trace.append(float(g("trace", 0)))
+        self.error.append(float(world.position_error(0)))
+        self.nees.append(float(world.position_nees(0)))
+        if self.limited:
+            self.seen.append(g("detected", 0).any(axis=-1))
+        self.true_states.append(g("x_true", 0).copy())
+        self.estimates.append(g("x_hat", 0).copy())
+        self.sensors.append(g("sensors", 0).copy())
+        self.covs.append(g("P", 0)[..., :2, :2].copy())
+
+    def record(self, seed: int, terminated: bool) -> RunRecord:
+        return RunRecord(
+            seed=int(seed),
+            trace=np.array(self.trace),
+            error=np.array(self.error),
+            nees=np.array(self.nees),
+            plan_time=np.array(self.plan_time),
+            violation=np.array(self.violation),
+            true_states=np.array(self.true_states),
+            estimates=np.array(self.estimates),
+            sensors=np.array(self.sensors),
+            position_covs=np.array(self.covs),
+            terminated=terminated,
+            seen=np.array(self.seen) if self.limited else None,
+        )
+
+
 def simulate(scenario: Scenario, planner: Planner, seed: int) -> RunRecord:
-    """Return one closed-loop run of ``planner`` on ``scenario`` with world seed ``seed``."""
+    """Return one closed-loop run of ``planner`` on ``scenario`` with world seed ``seed``
+    (the rollout of :mod:`activetrack.baselines.rollout`, serial)."""
     world = World(scenario, 1)
-    world.reset(seeds=[seed])
-    plan_rng = np.random.default_rng([seed, 1])
-    m = world.n_sensors
-    g = world.get
-    true_states, estimates = [g("x_true", 0).copy()], [g("x_hat", 0).copy()]
-    sensor_hist, covs = [g("sensors", 0).copy()], [g("P", 0)[..., :2, :2].copy()]
-    trace, error, nees, plan_time, violation, seen = [], [], [], [], [], []
-    limited = world.scenario.limited_sensing
-    terminated = truncated = False
-    while not (terminated or truncated):
-        problem = world.planning_problem(0)
-        t0 = time.perf_counter()
-        nxt = np.asarray(planner.plan(problem, plan_rng), dtype=np.float64)
-        plan_time.append(time.perf_counter() - t0)
-        if nxt.shape != (m, 2) or not np.all(np.isfinite(nxt)):
-            raise ValueError(
-                f"planner {planner!r} returned next positions of shape {nxt.shape} (must be "
-                f"({m}, 2), finite)"
-            )
-        violation.append(float(np.max(problem.violation(nxt))))
-        _, terminated, truncated = world.step(nxt[None])
-        trace.append(float(g("trace", 0)))
-        error.append(float(world.position_error(0)))
-        nees.append(float(world.position_nees(0)))
-        if limited:
-            seen.append(g("detected", 0).any(axis=-1))
-        true_states.append(g("x_true", 0).copy())
-        estimates.append(g("x_hat", 0).copy())
-        sensor_hist.append(g("sensors", 0).copy())
-        covs.append(g("P", 0)[..., :2, :2].copy())
-    return RunRecord(
-        seed=int(seed),
-        trace=np.array(trace),
-        error=np.array(error),
-        nees=np.array(nees),
-        plan_time=np.array(plan_time),
-        violation=np.array(violation),
-        true_states=np.array(true_states),
-        estimates=np.array(estimates),
-        sensors=np.array(sensor_hist),
-        position_covs=np.array(covs),
-        terminated=bool(terminated),
-        seen=np.array(seen) if limited else None,
-    )
+    recorder = _RunRecorder(world.scenario.limited_sensing)
+    rollout(world, PlannerAgent(planner), [seed], recorder)
+    return recorder.record(seed, bool(world.get("terminated", 0)))
 
 
 def check_planners(planners: Iterable[Any], problem: PlanningProblem) -> None:
@@ -337,20 +342,17 @@ def _records_on_ray(
     address: str | None,
     bar: Any,
 ) -> dict[str, list[RunRecord]]:
-    """Return every planner's run records, computed as Ray tasks over chunks of ``seeds``."""
+    """Return every planner's run records, :func:`simulate_seeds` as Ray tasks over chunks
+    of ``seeds`` (:func:`activetrack.baselines.distributed.map_seeds`)."""
     from activetrack.baselines import distributed
 
     bar.set_description("ray")
+    cases = [{"scenario": scenario, "planner": planner} for planner in planners.values()]
     with distributed.session(workers, address) as cpus:
-        parts = distributed.chunks(seeds, distributed.JOBS_PER_CPU * cpus)
-        jobs = [(scenario, planner, part) for planner in planners.values() for part in parts]
-        done = distributed.run_tasks(
-            simulate_seeds, jobs, on_done=lambda i: bar.update(len(jobs[i][2]))
-        )
-    per_planner = [done[k : k + len(parts)] for k in range(0, len(done), len(parts))]
+        done = distributed.map_seeds(simulate_seeds, cases, seeds, cpus, on_done=bar.update)
     return {
         name: [rec for chunk in chunked for rec in chunk]
-        for name, chunked in zip(planners, per_planner, strict=True)
+        for name, chunked in zip(planners, done, strict=True)
     }
 
 

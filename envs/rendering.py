@@ -57,6 +57,7 @@ from typing import Any
 
 import numpy as np
 
+from activetrack.models.sensor import BUILT_IN, SensorModel
 from activetrack.validation import FloatArray
 
 #: The sensing layout of the paper's open plane: no occluders, ranges or detections drawn.
@@ -76,13 +77,17 @@ TARGET_COLORS: tuple[tuple[str, str, str], ...] = (
     ("#4d3800", "#b8860b", "#b8860b"),
     ("#262626", "#7f7f7f", "#7f7f7f"),
 )
-#: Marker and legend label of each sensor model code (0 range and bearing, 1 range only,
-#: 2 bearing only; :data:`activetrack.world.scenarios.SENSOR_MODELS`).
-MODEL_MARKERS: tuple[tuple[str, str], ...] = (
-    ("o", "range & bearing"),
-    ("s", "range only"),
-    ("^", "bearing only"),
-)
+#: Marker and legend label of each built-in sensor model code (0 range and bearing, 1 range
+#: only, 2 bearing only): each model's own :attr:`activetrack.SensorModel.marker` and
+#: ``label`` (a model of one's own brings its own).
+MODEL_MARKERS: tuple[tuple[str, str], ...] = tuple((m.marker, m.label) for m in BUILT_IN.values())
+
+
+def _mark_order(mark: tuple[str, str]) -> tuple[int, str]:
+    """Return the legend order of a (marker, label): the built-ins' codes first."""
+    return (MODEL_MARKERS.index(mark) if mark in MODEL_MARKERS else len(MODEL_MARKERS), mark[1])
+
+
 #: The pose ellipses are drawn at this many standard deviations.
 POSE_SIGMAS = 2.0
 #: Fill and edge colours of the occluders.
@@ -287,8 +292,10 @@ class TrackingRenderer:
         rho: per-sensor minimum distance (M,) (eq. 14).
         size: frame (width, height) in pixels.
         dpi: dots per inch of the figure.
-        models: per-sensor model codes (M,) (0 range and bearing, 1 range only, 2 bearing
-            only; ``Scenario.sensor_models``); None: all range and bearing.
+        models: per-sensor models (M,): :class:`activetrack.SensorModel` objects
+            (``Scenario.sensor_objects``; each drawn with its ``marker``) or the built-ins'
+            codes (0 range and bearing, 1 range only, 2 bearing only); None: all range and
+            bearing.
         pose_cov: per-sensor pose covariances (M, 2, 2) (``Scenario.pose_covariances``),
             drawn as 2-sigma ellipses around the recorded fixes; None: poses are known.
     """
@@ -316,8 +323,16 @@ class TrackingRenderer:
             raise ValueError(f"size must be two positive integers and dpi one, got {size}, {dpi}")
         self.size = (int(size[0]), int(size[1]))
         self.dpi = int(dpi)
-        codes = np.zeros(m, dtype=np.int8) if models is None else np.asarray(models)
-        if (
+        if models is not None and all(isinstance(v, SensorModel) for v in models):
+            if len(models) != m:
+                raise ValueError(f"models must hold {m} sensor models, got {len(models)}")
+            # (marker, label) per sensor, from the models themselves.
+            self._marks = [(v.marker, v.label or v.name) for v in models]
+            codes = np.array([-1 if v.code is None else v.code for v in models], np.int8)
+        else:
+            codes = np.zeros(m, dtype=np.int8) if models is None else np.asarray(models)
+            self._marks = None
+        if self._marks is None and (
             codes.shape != (m,)
             or codes.dtype.kind not in "iu"
             or not np.all((codes >= 0) & (codes < len(MODEL_MARKERS)))
@@ -326,6 +341,8 @@ class TrackingRenderer:
                 f"models must be {m} integer codes in [0, {len(MODEL_MARKERS) - 1}], got {models!r}"
             )
         self.models = codes.astype(np.int8)
+        if self._marks is None:
+            self._marks = [MODEL_MARKERS[c] for c in self.models.tolist()]
         self.pose_cov = None
         if pose_cov is not None:
             cov = np.asarray(pose_cov, dtype=np.float64)
@@ -418,15 +435,14 @@ class TrackingRenderer:
             ax.add_collection(t["ellipses"])
         targets[0]["ellipses"].set_label("3-sigma bounds")
         art.update(targets=targets, trails=[], heads=[], rho=[])
-        for c, code in zip(colors, self.models.tolist(), strict=True):
+        for c, (marker, _) in zip(colors, self._marks, strict=True):
             art["trails"].append(ax.plot([], [], "-", color=c, lw=1.0)[0])
-            art["heads"].append(ax.plot([], [], MODEL_MARKERS[code][0], color=c, ms=5)[0])
+            art["heads"].append(ax.plot([], [], marker, color=c, ms=5)[0])
             art["rho"].append(ax.plot([], [], ":", color=c, lw=0.8)[0])
         art["trails"][0].set_label("sensor trails")
         art["rho"][0].set_label("rho circles")
         if np.any(self.models):  # a legend entry per model present (not for the paper's team)
-            for code in sorted(set(self.models.tolist())):
-                marker, label = MODEL_MARKERS[code]
+            for marker, label in dict.fromkeys(sorted(self._marks, key=_mark_order)):
                 ax.plot([], [], marker, ls="none", color="0.35", ms=5, label=label)
         art["fixes"], art["pose"] = [], None
         if fixes:
@@ -684,7 +700,7 @@ class EpisodeRecorder:
         if self._renderer is None:
             sc = self.world.scenario
             self._renderer = TrackingRenderer(
-                self.world.params.rho, models=sc.sensor_models, pose_cov=sc.pose_covariances
+                self.world.params.rho, models=sc.sensor_objects, pose_cov=sc.pose_covariances
             )
         if self.mode == "rgb_array":
             return self._renderer.rgb_array(self.history)

@@ -38,6 +38,7 @@ import numpy as np
 import torch
 from stable_baselines3.common.policies import ActorCriticPolicy
 
+from activetrack.baselines.rollout import MixedAgent, Recorder, Step, rollout
 from activetrack.kinematics.sensor_motion import actions_to_reach
 from activetrack.train.networks import DEFAULT_NET, NetConfig, build_policy, mean_action
 from activetrack.train.utils import (
@@ -136,6 +137,33 @@ def train_seeds(seed: int, n: int) -> list[int]:
     return list(seeds)
 
 
+class _LabelRecorder(Recorder):
+    """Keeps each episode's observations, the expert's labels (the actions that reach its
+    planned positions) and posterior traces, in episode order."""
+
+    def __init__(self, n: int, on_step: Callable[[int], None] | None = None) -> None:
+        self.obs: list[list[np.ndarray]] = [[] for _ in range(n)]
+        self.actions: list[list[np.ndarray]] = [[] for _ in range(n)]
+        self.traces: list[list[float]] = [[] for _ in range(n)]
+        self.on_step = on_step
+
+    def step(self, step: Step) -> None:
+        problem = step.problem
+        labels = actions_to_reach(step.positions, problem.sensors, problem.r).astype(np.float32)
+        for i, j in zip(step.copies.tolist(), step.episodes.tolist(), strict=True):
+            self.obs[j].append(step.observations[i] if step.batched else step.observations)
+            self.actions[j].append(labels[i] if step.batched else labels)
+            self.traces[j].append(float(step.world.get("trace", i)))
+        if self.on_step is not None:
+            self.on_step(len(step.copies))
+
+    def result(self) -> tuple[Dataset, list[float]]:
+        d = self.obs[0][0].shape[-1]
+        obs = np.concatenate([np.stack(o) for o in self.obs]).reshape(-1, d)
+        actions = np.concatenate([np.stack(a) for a in self.actions]).reshape(-1, 2)
+        return Dataset(obs.astype(np.float32), actions), [float(np.mean(t)) for t in self.traces]
+
+
 def rollout_labels(
     env: Any,
     expert: Any,
@@ -148,7 +176,9 @@ def rollout_labels(
 
     At every step the expert labels all agents' observations; the team then executes the
     expert's actions with probability ``beta`` (or always, without a ``learner``) and the
-    learner's otherwise (``learner`` maps observations (M, D) to actions (M, 2)).
+    learner's otherwise (``learner`` maps observations (M, D) to actions (M, 2)). The
+    episodes run in ``env``'s world (the rollout of :mod:`activetrack.baselines.rollout`,
+    serial, with its :class:`~activetrack.baselines.rollout.MixedAgent`).
 
     Every episode draws from its own generators, made from its seed: the expert's is reset
     with ``reset(seed)`` when it has one (:class:`~activetrack.baselines.PlannerPolicy`:
@@ -157,34 +187,11 @@ def rollout_labels(
     before it, and seeds split over Ray workers give the same labels as one loop.
     ``on_step(1)`` is called after every step (progress).
     """
-    obs_list, act_list, traces = [], [], []
-    for s in seeds:
-        reset = getattr(expert, "reset", None)
-        if callable(reset):
-            reset(s)
-        coin = np.random.default_rng([s, 2])
-        obs_dict, _ = env.reset(seed=s)
-        episode_trace = []
-        while env.agents:
-            agents = list(env.agents)
-            obs = np.stack([obs_dict[a] for a in agents])
-            # The expert plans positions; its label is the action that reaches them.
-            problem = env.planning_problem()
-            planned = expert.plan(problem)
-            labels = actions_to_reach(planned, problem.sensors, problem.r).astype(np.float32)
-            obs_list.append(obs)
-            act_list.append(labels)
-            if learner is None or coin.random() < beta:
-                obs_dict, _, _, _, infos = env.step_positions(planned)
-            else:
-                actions = learner(obs)
-                obs_dict, _, _, _, infos = env.step(dict(zip(agents, actions, strict=True)))
-            episode_trace.append(infos[agents[0]]["trace"])
-            if on_step is not None:
-                on_step(1)
-        traces.append(float(np.mean(episode_trace)))
-    data = Dataset(np.concatenate(obs_list).astype(np.float32), np.concatenate(act_list))
-    return data, traces
+    base = env.unwrapped
+    recorder = _LabelRecorder(len(seeds), on_step)
+    rollout(base.world, MixedAgent(expert, learner, beta), seeds, recorder)
+    base.agents = []  # the last episode ended in its world
+    return recorder.result()
 
 
 def rollout_labels_batched(
@@ -208,45 +215,10 @@ def rollout_labels_batched(
     """
     from activetrack.world import World
 
-    n = len(seeds)
-    world = World(scenario, n, **overrides)
-    world.reset(seeds=seeds)
-    reset = getattr(expert, "reset", None)
-    if callable(reset):
-        reset(seeds[0])  # the batched experts draw nothing; this forgets past episodes
-    coins = [np.random.default_rng([s, 2]) for s in seeds]
-    obs_by: list[list[np.ndarray]] = [[] for _ in range(n)]
-    act_by: list[list[np.ndarray]] = [[] for _ in range(n)]
-    trace_by: list[list[float]] = [[] for _ in range(n)]
-    live = np.ones(n, dtype=bool)
-    while live.any():
-        rows = np.flatnonzero(live)
-        obs = world.observe()  # (N, M, D)
-        problem = world.planning_problem()
-        planned = np.asarray(expert.plan(problem), dtype=np.float64)
-        labels = actions_to_reach(planned, problem.sensors, problem.r).astype(np.float32)
-        for i in rows.tolist():
-            obs_by[i].append(obs[i])
-            act_by[i].append(labels[i])
-        # One coin per live copy and step, drawn only with a learner (as the serial loop).
-        by_expert = np.array([learner is None or coins[i].random() < beta for i in rows])
-        if by_expert.any():
-            world.step(planned, rows[by_expert])
-        if not by_expert.all():
-            own = rows[~by_expert]
-            m, d = obs.shape[1:]
-            acts = np.zeros(planned.shape)
-            acts[own] = np.asarray(learner(obs[own].reshape(-1, d))).reshape(len(own), m, 2)
-            world.step_actions(acts, own)
-        for i in rows.tolist():
-            trace_by[i].append(float(world.get("trace", i)))
-        live &= ~(world.terminated | world.truncated)
-        if on_step is not None:
-            on_step(len(rows))
-    obs_all = np.concatenate([np.stack(o) for o in obs_by]).reshape(-1, obs.shape[-1])
-    act_all = np.concatenate([np.stack(a) for a in act_by]).reshape(-1, 2)
-    data = Dataset(obs_all.astype(np.float32), act_all)
-    return data, [float(np.mean(t)) for t in trace_by]
+    world = World(scenario, len(seeds), **overrides)
+    recorder = _LabelRecorder(len(seeds), on_step)
+    rollout(world, MixedAgent(expert, learner, beta), seeds, recorder, batched=True)
+    return recorder.result()
 
 
 def label_seeds(
@@ -290,13 +262,11 @@ def _labels_on_ray(
     (``on_episodes(k)`` called as a chunk of ``k`` episodes completes)."""
     from activetrack.baselines import distributed
 
-    parts = distributed.chunks(seeds, distributed.JOBS_PER_CPU * cpus)
-    jobs = [(scenario, overrides, expert, part, policy, beta, threads) for part in parts]
-    done = distributed.run_tasks(
-        label_seeds,
-        jobs,
-        on_done=None if on_episodes is None else (lambda i: on_episodes(len(jobs[i][3]))),
-    )
+    case = {
+        "scenario": scenario, "overrides": overrides, "expert": expert, "policy": policy,
+        "beta": beta, "threads": threads,
+    }  # fmt: skip
+    (done,) = distributed.map_seeds(label_seeds, [case], seeds, cpus, on_done=on_episodes)
     data = Dataset(
         np.concatenate([d.obs for d, _ in done]), np.concatenate([d.actions for d, _ in done])
     )

@@ -233,18 +233,21 @@ def validation_trace(
     policy: Any, scenario: Any, episodes: int, view: str = "shared", **overrides: Any
 ) -> float:
     """Return the deterministic policy's mean trace over validation seeds 500000, ...."""
+    from activetrack.baselines import rollout as ro
     from activetrack.envs import parallel_env
     from activetrack.train.policy_io import LearnedPolicy
 
     was_training = policy.training
     learned = LearnedPolicy(policy, {"view": view})
     env = parallel_env(scenario, **overrides)
-    traces = []
-    for s in range(VALIDATION_SEED, VALIDATION_SEED + episodes):
-        obs, _ = env.reset(seed=s)
-        while env.agents:
-            obs, _, _, _, infos = env.step(learned.act(obs))
-            traces.append(infos[env.possible_agents[0]]["trace"])
+    traces: list[float] = []
+
+    class Traces(ro.Recorder):
+        def step(self, step: ro.Step) -> None:
+            traces.append(float(step.world.get("trace", 0)))
+
+    seeds = range(VALIDATION_SEED, VALIDATION_SEED + episodes)
+    ro.rollout(env.world, ro.ActorAgent(learned, env.possible_agents), seeds, Traces())
     policy.train(was_training)
     return float(np.mean(traces))
 

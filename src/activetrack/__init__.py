@@ -1,10 +1,12 @@
 """activetrack: multi-robot active target tracking with range and bearing sensors.
 
 The core (this package) holds the paper's mathematics and no RL: target motion models
-(eq. 1-2), the sensors' kinematics (eq. 13-16; :class:`Kinematics`, the base of a new one,
-and :class:`Disk`), the range-bearing measurement model (eq. 4-10), the EKF (eq. 3, 11), the
-covariance objective (eq. 12, 17-19; :class:`Objective`, the base of a new one), the
-analytic single-sensor optimum (Section IV-A), the planning problem and scenario presets.
+(eq. 1-2), the sensors' measurement models (eq. 4-10; :class:`SensorModel`, the base of a
+new one, and the built-ins :class:`RangeBearing`, :class:`RangeOnly`, :class:`BearingOnly`),
+the sensors' kinematics (eq. 13-16; :class:`Kinematics`, the base of a new one, and
+:class:`Disk`), the EKF (eq. 3, 11), the covariance objective (eq. 12, 17-19;
+:class:`Objective`, the base of a new one), the analytic single-sensor optimum (Section
+IV-A), the planning problem and scenario presets.
 The layers ``activetrack.envs``, ``activetrack.baselines`` and ``activetrack.train`` build
 on it, in that order.
 
@@ -41,6 +43,7 @@ from activetrack.models.objective import (
     posterior_position_covariance,
     posterior_trace,
 )
+from activetrack.models.sensor import BearingOnly, RangeBearing, RangeOnly, SensorModel
 from activetrack.solvers.analytic import (
     BatchSolution,
     SingleSensorSolution,
@@ -65,6 +68,7 @@ __all__ = [
     "TRACE",
     "WORST_TRACE",
     "BatchSolution",
+    "BearingOnly",
     "Disk",
     "SingleSensorSolution",
     "ExtendedKalmanFilter",
@@ -74,8 +78,11 @@ __all__ = [
     "Objective",
     "PlanningProblem",
     "Prediction",
+    "RangeBearing",
+    "RangeOnly",
     "Planner",
     "Scenario",
+    "SensorModel",
     "TraceObjective",
     "WorstTraceObjective",
     "constant_acceleration",

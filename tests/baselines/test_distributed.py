@@ -112,6 +112,22 @@ def test_chunks_keep_the_seeds_in_order():
         assert len(parts) == min(n, len(seeds)) and all(parts)
 
 
+def _echo(tag, seeds):
+    """One chunk's result: the seeds it got, tagged by its case (a Ray task's function)."""
+    return [(tag, s) for s in seeds]
+
+
+def test_map_seeds_joins_every_cases_chunks_in_seed_order():
+    seeds, counts = list(range(10, 23)), []
+    cases = [{"tag": "a"}, {"tag": "b"}]
+    per_case = distributed.map_seeds(_echo, cases, seeds, cpus=2, on_done=counts.append)
+    assert len(per_case) == 2
+    for tag, chunked in zip("ab", per_case, strict=True):
+        assert len(chunked) == min(distributed.JOBS_PER_CPU * 2, len(seeds))
+        assert [row for chunk in chunked for row in chunk] == [(tag, s) for s in seeds]
+    assert sum(counts) == 2 * len(seeds)  # each chunk's seeds reported once
+
+
 def test_a_killed_worker_is_retried_and_each_job_counted_once(tmp_path):
     marker = tmp_path / "killed"
     done: list[int] = []

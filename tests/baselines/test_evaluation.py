@@ -244,8 +244,10 @@ def test_results_in_the_folder_need_overwrite(rm_and_gsr, tmp_path, monkeypatch)
 
 
 def test_evaluation_nees_and_trace_equal_the_simulation_runners():
-    # Two drivers of the same world: evaluate() through the PettingZoo env and the
-    # simulation runner through World directly; the same seeds give the same episodes.
+    # Two entry points of the one episode loop (activetrack.baselines.rollout): evaluate()
+    # with an expert policy in the PettingZoo env's world and the simulation runner with a
+    # planner in a World of its own; the same seeds give the same episodes, bit for bit
+    # (the loop itself is checked against longhand World loops in test_rollout.py).
     from activetrack.baselines import GSR
     from activetrack.baselines.evaluation import evaluate
     from activetrack.baselines.simulation import simulate

@@ -9,7 +9,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from activetrack import Disk
+from activetrack import Disk, SensorModel
 from activetrack.world import World, capabilities, observation
 from activetrack.world.capabilities import Capabilities
 from activetrack.world.problem import PlanningProblem
@@ -17,7 +17,7 @@ from activetrack.world.scenarios import PRESETS, make_scenario
 
 FLAGS = (
     "one_target", "range_bearing", "known_poses", "pose_free_filter", "unlimited_sensing",
-    "no_occluders", "single_update", "trace_objective", "disk_kinematics",
+    "no_occluders", "single_update", "trace_objective", "disk_kinematics", "builtin_sensors",
 )  # fmt: skip
 
 
@@ -25,6 +25,17 @@ class OwnDisk(Disk):
     """A kinematics of its own (not the built-in Disk, though it moves as one)."""
 
     name = "own_disk"
+
+
+class _Distance(SensorModel):
+    """A sensor model of one's own (the distance; the generic path)."""
+
+    name = "distance"
+    slots = (True, False)
+
+    def function(self, target, sensor, orientation=0.0):
+        d = np.asarray(target, float) - np.asarray(sensor, float)
+        return np.stack([np.hypot(d[..., 0], d[..., 1]), 0.0 * d[..., 0]], -1)
 
 
 # Each preset as its description in scenarios.py / docs/tasks.md reads (True: the paper's).
@@ -101,6 +112,7 @@ def expected(fields: dict) -> dict[str, bool]:
         "single_update": fields.get("filter_iterations", 1) == 1,
         "trace_objective": fields.get("objective", "trace") == "trace",
         "disk_kinematics": all(type(k) is Disk for k in fields.get("kinematics", ())),
+        "builtin_sensors": all(isinstance(m, str) for m in models),
     }
     return {
         **f,
@@ -128,6 +140,7 @@ def expected(fields: dict) -> dict[str, bool]:
                 "unlimited_sensing",
                 "single_update",
                 "disk_kinematics",
+                "builtin_sensors",
             )
         ),  # fmt: skip
     }
@@ -142,13 +155,15 @@ def random_fields(rng: np.random.Generator) -> dict:
             x0=((-10.0, -10.0, 4.0, 4.0), (-10.0, 10.0, 4.0, -4.0)),
             x0_hat=((-10.0, -10.0, 4.0, 4.0), (-10.0, 10.0, 4.0, -4.0)),
         )
-    choice = int(rng.integers(4))
+    choice = int(rng.integers(5))
     if choice == 1:
         fields["sensor_model"] = ("range_bearing", "range", "bearing")[int(rng.integers(1, 3))]
     elif choice == 2:  # a mixed team, possibly all range-and-bearing given per sensor
         fields["sensor_model"] = tuple(
             ("range_bearing", "range", "bearing")[int(i)] for i in rng.integers(0, 3, 3)
         )
+    elif choice == 3:  # a model of one's own among built-ins
+        fields["sensor_model"] = ("range_bearing", _Distance(), "bearing")
     if rng.random() < 0.3:
         fields["pose_cov"] = (0.0, 0.5, 0.0) if rng.random() < 0.5 else 0.25
         fields["account_pose"] = bool(rng.random() < 0.5)

@@ -1,6 +1,7 @@
 """Sensor measurement models in one place: range-and-bearing, range-only, bearing-only.
 
-Each sensor ``i`` of a team has a model code (:class:`SensorModel`): range and bearing
+Each sensor ``i`` of a team has a model code (:class:`SensorCode`, the code a built-in
+:class:`activetrack.SensorModel` carries): range and bearing
 (the paper's eq. 4), range only, or bearing only; a team mixes them freely through a
 per-sensor code array of shape (..., M).
 
@@ -65,8 +66,9 @@ from activetrack.models.measurement import ZERO_DISTANCE2, wrap_angle
 from activetrack.validation import FloatArray, as_finite, positive
 
 
-class SensorModel(IntEnum):
-    """The measurement model of one sensor (the code stored per sensor)."""
+class SensorCode(IntEnum):
+    """The code of a built-in measurement model, stored per sensor for the compiled kernels
+    (:attr:`activetrack.SensorModel.code`; the model itself is :class:`activetrack.SensorModel`)."""
 
     RANGE_BEARING = 0  #: distance and bearing, eq. (4)
     RANGE = 1  #: distance only
@@ -381,10 +383,10 @@ def update_terms(
 
 def _codes(value: Any) -> np.ndarray:
     """Return model codes as an int8 array; names (``"range"``) and members are accepted."""
-    names = {m.name.lower(): int(m) for m in SensorModel}
+    names = {m.name.lower(): int(m) for m in SensorCode}
     flat = np.asarray(value, dtype=object)
     out = np.empty(flat.shape, dtype=np.int8)
-    allowed = ", ".join(f"{m.name} ({int(m)})" for m in SensorModel)
+    allowed = ", ".join(f"{m.name} ({int(m)})" for m in SensorCode)
     for idx, v in np.ndenumerate(flat):
         if isinstance(v, str) and v.lower() in names:
             out[idx] = names[v.lower()]
@@ -400,7 +402,7 @@ class SensorTeam:
     """A validated team of M sensors: model codes, noise and optional pose covariances.
 
     Attributes (float64 / int8, broadcast to (..., M), read-only):
-        models: per-sensor :class:`SensorModel` codes (names such as ``"range"`` accepted).
+        models: per-sensor :class:`SensorCode` codes (names such as ``"range"`` accepted).
         sigma_d2: range noise variances, finite > 0 (ignored for bearing-only sensors).
         sigma_theta2: bearing noise variances, finite > 0 (ignored for range-only sensors).
         pose_cov: per-sensor 2x2 PSD covariance of the believed position (..., M, 2, 2),
@@ -468,3 +470,14 @@ class SensorTeam:
     def weights(self) -> tuple[FloatArray, FloatArray]:
         """Return ``(w_d, w_theta)`` (..., M), zero for unused components (:func:`weights`)."""
         return weights(self.models, self.sigma_d2, self.sigma_theta2)
+
+
+def __getattr__(name: str) -> Any:
+    # ``sensor_models.SensorModel`` was the enum of codes; it is now the public base class
+    # (whose RANGE_BEARING, RANGE and BEARING are still the codes). Resolved lazily: the
+    # class is defined on top of this module.
+    if name == "SensorModel":
+        from activetrack.models.sensor import SensorModel  # noqa: PLC0415
+
+        return SensorModel
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -100,9 +100,14 @@ class _Problem:
 
     def __init__(
         self, base, center, r, targets, rho, w_d, w_theta, pose_cov, objective, detect=None,
-        occluders=None,
+        occluders=None, models=None,
     ):  # fmt: skip
-        """Flatten the batch; ``base=None`` leaves the base to :meth:`with_base`."""
+        """Flatten the batch; ``base=None`` leaves the base to :meth:`with_base`.
+
+        ``models = (team, index)``: sensor models of one's own, ``team`` a tuple of
+        :class:`activetrack.SensorModel` and ``index`` (batch shape) each row's model in it,
+        whose :meth:`~activetrack.SensorModel.information` replaces the built-ins' entries
+        (the weights are then ``1/sigma^2``); None: built-in models (the weights')."""
         center = np.asarray(center, dtype=np.float64)
         targets = np.asarray(targets, dtype=np.float64)
         r, rho = np.asarray(r, dtype=np.float64), np.asarray(rho, dtype=np.float64)
@@ -134,6 +139,8 @@ class _Problem:
         self.pc = None if pose_cov is None else flat(pose_cov, (2, 2))[:, None, None]
         self.pc_abs = None if pose_cov is None else self.pc[:, 0]
         self.objective = objective
+        self.team = None if models is None else models[0]
+        self.model_of = None if models is None else flat(np.asarray(models[1]))
         self.minimax = k > 1 and _is_max(objective)
         self.zero = np.zeros((len(self.r), 2))
         self.origins, self.radii = feasible_set.circles(self.zero, self.r, self.t, self.rho)
@@ -181,7 +188,23 @@ class _Problem:
             seen = ~blocked((pts + self.center[:, None])[:, :, None, :],
                             self.t_abs[:, None, :, :], self.occ)  # fmt: skip
             det = (*det, seen)
-        return information_entries(rel, self.wd, self.wt, self.pc, det)
+        return self._information(rel, self.wd, self.wt, self.pc, det)
+
+    def _information(self, rel, wd, wt, pc, det):  # noqa: ANN001, ANN202 (the rows' arrays)
+        """Return :func:`information_entries` of the rows (leading axis B), or with models of
+        one's own each row's model's information."""
+        if self.team is None:
+            return information_entries(rel, wd, wt, pc, det)
+        out = np.zeros((3,) + rel.shape[:-1])
+        for j, model in enumerate(self.team):
+            rows = self.model_of == j
+            if not np.any(rows):
+                continue
+            d = None if det is None else tuple(np.asarray(x)[rows] for x in det)
+            cov = None if pc is None else pc[rows]
+            J = model.information(rel[rows], 1.0 / wd[rows], 1.0 / wt[rows], cov, d)
+            out[0][rows], out[1][rows], out[2][rows] = J[..., 0, 0], J[..., 0, 1], J[..., 1, 1]
+        return out[0], out[1], out[2]
 
     def at_absolute(self, positions: FloatArray) -> FloatArray:
         """Return ``f`` at absolute positions (B, 2), (B,)."""
@@ -189,7 +212,7 @@ class _Problem:
         det = self.det_abs
         if self.occ is not None:
             det = (*det, ~blocked(positions[:, None, :], self.t_abs, self.occ))
-        a, b, c = information_entries(rel, self.wd[:, 0], self.wt[:, 0], self.pc_abs, det)
+        a, b, c = self._information(rel, self.wd[:, 0], self.wt[:, 0], self.pc_abs, det)
         return self.objective.of_targets(self.a0 + a, self.b0 + b, self.c0 + c)
 
     def take(self, rows: np.ndarray) -> _Problem:
@@ -451,14 +474,26 @@ def prepare(
     n_iter: int = 30,
     detect: tuple[FloatArray, FloatArray] | None = None,
     occluders: object = None,
+    models: tuple | None = None,
 ) -> Prepared:
     """Return the base-independent part of a batch of subproblems, flattened to B rows.
 
     Arguments as :func:`solve_sensor` without ``base`` (their leading axes broadcast to
-    the batch shape, flattened row-major).
+    the batch shape, flattened row-major); ``models`` as :class:`_Problem`'s.
     """
     p = _Problem(
-        None, center, r, targets, rho, w_d, w_theta, pose_cov, objective, detect, occluders
+        None,
+        center,
+        r,
+        targets,
+        rho,
+        w_d,
+        w_theta,
+        pose_cov,
+        objective,
+        detect,
+        occluders,
+        models,
     )
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         return Prepared(p, n_boundary, n_interior, n_iter)

@@ -12,6 +12,7 @@ import numpy as np
 from activetrack.models.measurement import INFORMATION_RATIO_MAX as _INFORMATION_RATIO_MAX
 from activetrack.models.motion import MODELS, LinearMotionModel
 from activetrack.models.objective import OBJECTIVES, Objective
+from activetrack.models.sensor import as_sensor_model, checked
 from activetrack.validation import FloatArray, real_array, spd
 
 #: Accepted ranges (SI units). Chosen so that every quantity the EKF (eq. 3, 11), the
@@ -134,23 +135,29 @@ def _converted_motion(motion: object, kk: int) -> Any:
     return one(motion)
 
 
-def _converted_models(sensor_model: object, m: int) -> str | tuple[str, ...]:
-    """Return ``sensor_model`` as a name, or a tuple of M names."""
+def _converted_models(sensor_model: object, m: int) -> object:
+    """Return ``sensor_model`` as one entry or a tuple of M: a built-in by its name (its
+    instance too: ``RangeOnly()`` is ``"range"``), a model of one's own as itself
+    (:func:`activetrack.models.sensor.as_sensor_model`)."""
 
-    def one(v: object) -> str:
+    def one(v: object) -> object:
         if isinstance(v, str) and v in SENSOR_MODELS:
             return v
-        raise ValueError(
-            f"sensor_model must be one of {list(SENSOR_MODELS)} or a tuple of {m} of "
-            f"them (one per sensor), got {sensor_model!r}"
-        )
+        try:
+            model = as_sensor_model(v)
+        except ValueError as err:
+            raise ValueError(
+                f"sensor_model must be one of {list(SENSOR_MODELS)}, an activetrack.SensorModel"
+                f" or a tuple of {m} of them (one per sensor), got {sensor_model!r} ({err})"
+            ) from None
+        return model.name if model.builtin else checked(model)
 
     v = sensor_model
     if isinstance(v, (tuple, list, np.ndarray)):
         if len(v) != m:
             raise ValueError(f"sensor_model must name one model per sensor ({m}), got {len(v)}")
         names = tuple(one(x) for x in v)
-        return names[0] if len(set(names)) == 1 else names
+        return names[0] if all(n == names[0] for n in names) else names
     return one(v)
 
 

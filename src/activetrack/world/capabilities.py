@@ -64,6 +64,9 @@ class Capabilities:
         disk_kinematics: every sensor moves by a built-in
             :class:`activetrack.kinematics.disk.Disk` (``vmax dt``): the compiled moves; else
             the world moves by each kinematics (:class:`activetrack.kinematics.team.TeamMotion`).
+        builtin_sensors: every sensor's model is a built-in (:attr:`activetrack.SensorModel.code`):
+            the compiled measurement and filter kernels; else the generic NumPy path
+            (:mod:`activetrack.estimation.generic`) for the world and the planners.
     """
 
     one_target: bool
@@ -75,6 +78,7 @@ class Capabilities:
     single_update: bool
     trace_objective: bool
     disk_kinematics: bool = True
+    builtin_sensors: bool = True
 
     @classmethod
     def of(cls, sc: Any) -> Capabilities:
@@ -90,6 +94,7 @@ class Capabilities:
             single_update=sc.filter_iterations == 1,
             trace_objective=sc.objective == "trace",
             disk_kinematics=sc.kinematics is None or all_disks(sc.kinematics_models),
+            builtin_sensors=all(m.builtin for m in sc.sensor_objects),
         )
 
     @property
@@ -129,5 +134,8 @@ class Capabilities:
     def fused_step(self) -> bool:
         """Whether a whole world step (move, advance, score, predict; with one copy also
         the observation) is one compiled call (:mod:`activetrack.world._loop_kernels`):
-        :attr:`per_target_update` with known poses and disks. Any sensor model."""
-        return self.per_target_update and self.known_poses and self.disk_kinematics
+        :attr:`per_target_update` with known poses, built-in sensor models and disks."""
+        return (
+            self.per_target_update and self.known_poses and self.builtin_sensors
+            and self.disk_kinematics
+        )  # fmt: skip

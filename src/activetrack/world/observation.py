@@ -95,7 +95,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from activetrack._jit import as_rows
-from activetrack.models.sensor_models import USES
 from activetrack.validation import FloatArray
 from activetrack.world import _observation_kernels as obk
 from activetrack.world._observation_kernels import LOG_STD_MAX, POSITION_MAX
@@ -161,10 +160,11 @@ class Layout:
         base = sensor_constants(sd2, st2, sc.r, sc.per_sensor("rho"), L)
         if not self.extended:
             return base
-        codes = sc.sensor_models
-        uses = USES[codes]  # (M, 2): which of range and bearing each sensor measures
+        # Each model's slots (M, 2): which noise entries it has. The one-hot is its built-in
+        # code, or for a model of one's own that of the built-in filling the same slots.
+        uses = np.array([m.slots for m in sc.sensor_objects], dtype=bool).reshape(-1, 2)
         base[:, :2] = np.where(uses, base[:, :2], 0.0)
-        onehot = np.eye(3)[codes]
+        onehot = np.eye(3)[sc.sensor_models]
         cov = sc.pose_covariances
         pose = np.zeros((sc.n_sensors, 3))
         if cov is not None:

@@ -34,10 +34,12 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 from numpy.typing import ArrayLike
 
+from activetrack.estimation import generic
 from activetrack.kinematics import team
 from activetrack.linalg2 import inv2
 from activetrack.models import sensor_models
 from activetrack.models.objective import TRACE, Objective, is_trace, total_information
+from activetrack.models.sensor import check_team
 from activetrack.solvers._inputs import MAX_SCALE, MIN_SCALE
 from activetrack.validation import FloatArray, as_finite, positive, real_array, spd
 from activetrack.world import capabilities as _capabilities
@@ -123,6 +125,10 @@ class PlanningProblem:
         occluders: an :class:`activetrack.models.occluders.Occluders` (one layout shared by the
             batch, or one per entry of the first batch axis: ``Occluders.stack``) or None:
             a sensor counts no information about a predicted target it cannot see.
+        sensor_objects: each sensor's :class:`activetrack.SensorModel` (a tuple of M shared
+            by the batch) when one is a model of one's own, or None (the built-in models
+            of ``models``). The planners then ask the models for the information
+            (:meth:`information_entries`), never the paper's arithmetic.
         kinematics: each sensor's :class:`activetrack.Kinematics` (a tuple of M, shared by
             the batch; ``r`` is then each one's radius), or None: the disks of radius ``r``.
     """
@@ -142,9 +148,12 @@ class PlanningProblem:
     p_detect: FloatArray | None = None
     max_range: FloatArray | None = None
     occluders: Any = None
+    sensor_objects: tuple | None = None
     kinematics: tuple | None = None
 
     def __post_init__(self) -> None:
+        if self.sensor_objects is not None:
+            check_team("sensor_objects", self.sensor_objects, np.shape(self.sensors)[-2])
         sensors = as_finite("sensors", self.sensors)
         if sensors.ndim < 2 or sensors.shape[-1] != 2 or sensors.shape[-2] < 1:
             raise ValueError(
@@ -347,6 +356,7 @@ class PlanningProblem:
         p_detect: ArrayLike | None = None,
         max_range: ArrayLike | None = None,
         occluders: Any = None,
+        sensor_objects: tuple | None = None,
         kinematics: tuple | None = None,
     ) -> PlanningProblem:
         """Return the problem at ``prediction`` (``prior_cov`` and ``target`` its position
@@ -354,6 +364,7 @@ class PlanningProblem:
         return cls(
             None, None, sensors, r, rho, sigma_d2, sigma_theta2, objective, prediction,
             models, pose_cov, p_detect=p_detect, max_range=max_range, occluders=occluders,
+            sensor_objects=sensor_objects,
             kinematics=kinematics,
         )  # fmt: skip
 
@@ -391,6 +402,11 @@ class PlanningProblem:
         arrays: dict[str, Any] = {"multi_target": multi, "occluders": occ}
         for f in fields(cls):
             if f.name in ("objective", "prediction", "multi_target", "occluders", "kinematics"):
+                continue
+            if f.name == "sensor_objects":
+                if any(p.sensor_objects != problems[0].sensor_objects for p in problems):
+                    raise ValueError("problems must all have the same sensor_objects")
+                arrays[f.name] = problems[0].sensor_objects
                 continue
             vals = [getattr(p, f.name) for p in problems]
             if f.name in ("models", "pose_cov", "p_detect", "max_range"):
@@ -435,7 +451,9 @@ class PlanningProblem:
                     value = indexed(value, index)
             elif f.name == "occluders" and value is not None:  # the layouts of the first axis
                 value = value[index[0] if isinstance(index, tuple) else index]
-            elif f.name not in ("objective", "multi_target", "kinematics") and value is not None:
+            elif f.name not in ("objective", "multi_target", "sensor_objects", "kinematics") and (
+                value is not None
+            ):
                 value = np.array(value[index])
                 value.setflags(write=False)
             values[f.name] = value
@@ -460,7 +478,7 @@ class PlanningProblem:
         arrays."""
         return _capabilities.paper_problem(
             not self.multi_target,
-            self.models is None or not np.any(self.models),
+            (self.models is None or not np.any(self.models)) and self.sensor_objects is None,
             self.pose_cov is None,
             self.p_detect is None and self.max_range is None and self.occluders is None,
             is_trace(self.objective),
@@ -491,7 +509,11 @@ class PlanningProblem:
 
     @cached_property
     def weights(self) -> tuple[FloatArray, FloatArray]:
-        """Return the component weights ``(w_d, w_theta)`` (..., M), 0 for unused ones."""
+        """Return the component weights ``(w_d, w_theta)`` (..., M), 0 for unused ones
+        (with ``sensor_objects``: ``1/sigma^2`` for each slot, what
+        :meth:`information_entries` turns back into the models' variances)."""
+        if self.sensor_objects is not None:
+            return 1.0 / self.sigma_d2, 1.0 / self.sigma_theta2
         models = 0 if self.models is None else self.models
         return sensor_models.weights(models, self.sigma_d2, self.sigma_theta2)
 
@@ -533,10 +555,29 @@ class PlanningProblem:
         det = None if self.detect is None else tuple(d[..., None, :] for d in self.detect)
         if self.occluders is not None:
             det = (*det, self.line_of_sight(pos))
-        a, b, c = sensor_models.team_entries(
-            self.prior_infos, rel, w_d[..., None, :], w_t[..., None, :], cov, det
-        )
+        a, b, c = self.information_entries(rel, w_d[..., None, :], w_t[..., None, :], cov, det)
+        prior = self.prior_infos
+        a, b, c = (prior[..., 0, 0] + a.sum(-1), prior[..., 0, 1] + b.sum(-1),
+                   prior[..., 1, 1] + c.sum(-1))  # fmt: skip
         return self.objective.of_targets(a, b, c)
+
+    def information_entries(
+        self,
+        rel: FloatArray,
+        w_d: FloatArray,
+        w_t: FloatArray,
+        pose_cov: FloatArray | None = None,
+        detect: tuple | None = None,
+    ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Return each sensor's information entries ``(a, b, c)`` (..., M) at offsets
+        ``rel = p_S - p_T`` (..., M, 2), the sensor axis last: the planners' one entry
+        point. Built-in models: :func:`activetrack.models.sensor_models.information_entries`
+        on the weights ``(w_d, w_t)`` (:attr:`weights`, broadcast as the caller needs);
+        ``sensor_objects``: each model's :meth:`activetrack.SensorModel.information`
+        (:func:`activetrack.estimation.generic.entries`) with variances ``1 / w``."""
+        if self.sensor_objects is None:
+            return sensor_models.information_entries(rel, w_d, w_t, pose_cov, detect)
+        return generic.entries(self.sensor_objects, rel, 1.0 / w_d, 1.0 / w_t, pose_cov, detect)
 
     def line_of_sight(self, positions: ArrayLike) -> np.ndarray:
         """Return whether sensors at ``positions`` (..., M, 2) see each predicted target,

@@ -19,6 +19,7 @@ import numpy as np
 from activetrack.kinematics import team
 from activetrack.models.motion import LinearMotionModel, make_model
 from activetrack.models.objective import Objective
+from activetrack.models.sensor import SensorModel, as_sensor_model, record, slot_code
 from activetrack.validation import FloatArray, UnexpectedKeywordError
 from activetrack.world._scenario_fields import (
     _PER_SENSOR,
@@ -130,8 +131,9 @@ class Scenario:
             entries) or per target (K diagonals or K matrices). Every target has its own
             EKF; measurements are labelled by target (known data association).
         sensor_model: per-sensor measurement model, ``"range_bearing"`` (eq. 4),
-            ``"range"`` or ``"bearing"`` (a name for every sensor or a tuple of M); the
-            variance of a component a sensor does not measure is kept but unused.
+            ``"range"`` or ``"bearing"``, or an :class:`activetrack.SensorModel` (a name
+            or model for every sensor or a tuple of M); a built-in's instance is stored as
+            its name. The variance of a component a sensor does not measure is unused.
         pose_cov: covariance of each sensor's position fix (m^2): 0 (known exactly, the
             paper), a variance s >= 0 for every sensor (``s I``), M variances, one 2x2
             matrix for every sensor, or M 2x2 matrices (symmetric positive semidefinite,
@@ -198,7 +200,7 @@ class Scenario:
     max_trace: float | None = None
     reward_scale: float = 1.0
     n_targets: int = 1
-    sensor_model: str | tuple[str, ...] = "range_bearing"
+    sensor_model: str | SensorModel | tuple[str | SensorModel, ...] = "range_bearing"
     pose_cov: float | tuple = 0.0
     account_pose: bool = True
     objective: str | Objective = "trace"
@@ -406,9 +408,15 @@ class Scenario:
     @property
     def sensor_models(self) -> np.ndarray:
         """Return the per-sensor model codes (M,) int8 (0 range-bearing, 1 range, 2 bearing)."""
+        # (a model of one's own: the code of the built-in filling the same slots)
+        return np.array([slot_code(s) for s in self.sensor_objects], dtype=np.int8)
+
+    @property
+    def sensor_objects(self) -> tuple[SensorModel, ...]:
+        """Return each sensor's :class:`activetrack.SensorModel` (M,)."""
         names = self.sensor_model
-        names = (names,) * self.n_sensors if isinstance(names, str) else names
-        return np.array([SENSOR_MODELS.index(n) for n in names], dtype=np.int8)
+        names = names if isinstance(names, tuple) else (names,) * self.n_sensors
+        return tuple(as_sensor_model(n) for n in names)
 
     @property
     def pose_covariances(self) -> FloatArray | None:
@@ -516,6 +524,10 @@ class Scenario:
                 continue
             if isinstance(v, tuple) and any(isinstance(e, LinearMotionModel) for e in v):
                 v = tuple(e.name if isinstance(e, LinearMotionModel) else e for e in v)
+            if isinstance(v, SensorModel) or (
+                isinstance(v, tuple) and any(isinstance(e, SensorModel) for e in v)
+            ):  # a record of which model, as for an objective
+                v = record(v)
             if isinstance(v, Objective):  # a record of which objective, not its code
                 cls = type(v)
                 v = {"name": v.name, "class": f"{cls.__module__}.{cls.__qualname__}"}

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from activetrack._jit import as_rows
-from activetrack.estimation import ekf
+from activetrack.estimation import ekf, generic
 from activetrack.models import _motion_kernels as mtk
 from activetrack.models import sensor_models
 from activetrack.models.motion import matrix
@@ -74,6 +74,9 @@ class LoopParams:
     p_detect: FloatArray | None = None
     occluders: Any = None  # the fixed activetrack.models.occluders.Occluders, or None
     filter_iterations: int = 1  # 1: the EKF of eq. (11); more: the iterated EKF
+    # Every sensor's activetrack.SensorModel when one is not built-in (the generic path,
+    # activetrack.estimation.generic), else None (the compiled kernels of the codes).
+    sensor_objects: tuple | None = None
 
     def __post_init__(self) -> None:
         for name in ("Phi", "Q", "noise_factor"):  # as the targets' (C-contiguous float64)
@@ -136,6 +139,7 @@ class LoopParams:
             sc.detection_probs,
             sc.occluder_set,
             sc.filter_iterations,
+            None if sc.capabilities.builtin_sensors else sc.sensor_objects,
         )
 
     @property
@@ -262,6 +266,12 @@ def measure(
             f" (..., K, 2), got {sensors.shape} and {positions.shape}"
         )
     batch = _batch(targets.shape[:-2], sensors.shape[:-2])
+    if params.sensor_objects is not None:  # a model of one's own: the generic path
+        out = generic.measure(
+            params.sensor_objects, targets, sensors, params.sigma_d2, params.sigma_theta2,
+            params.orientation, noise,
+        )  # fmt: skip
+        return out[..., 0, :, :] if one else out
     out = np.empty(batch + (k, m, 2))
     lk.measure_rows(
         as_rows(targets, batch, (k, 2)), as_rows(sensors, batch, (m, 2)),
@@ -316,6 +326,12 @@ def filter_update(
     taken by sensors the team believes at ``fixes``; only the sensors ``detected`` (..., M)
     measured it (None: every sensor)."""
     iterations = params.filter_iterations
+    if params.sensor_objects is not None:  # a model of one's own: the generic path
+        return generic.update(
+            params.sensor_objects, x_pred, P_pred, z, fixes, params.sigma_d2,
+            params.sigma_theta2, params.orientation, detected, params.filter_pose_cov,
+            iterations,
+        )  # fmt: skip
     if (
         params.models is None
         and params.filter_pose_cov is None

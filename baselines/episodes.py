@@ -1,0 +1,147 @@
+"""The evaluation's episodes: one policy's episodes as rows of metrics, each a use of the
+one episode loop (:func:`activetrack.baselines.rollout.rollout`).
+
+A row is ``(mean_trace, rmse, return, mean_nees, ms_per_step, no_detection,
+longest_gap)`` over steps 1..n_steps of an episode: serially in an environment's world
+(:func:`run_episode`, a chunk of seeds in :func:`run_episodes`, one Ray task), or every
+episode a copy of one batched world (:func:`run_batched`). ``ms_per_step`` is the CPU time
+(``time.process_time``) of the policy's decisions per step, after a warm-up decision that
+is not counted (:func:`warm_up`: the compiled kernels' first compilation).
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+
+from activetrack.baselines.rollout import (
+    ExpertAgent,
+    Recorder,
+    Step,
+    policy_agent,
+    reset_policy,
+    rollout,
+)
+from activetrack.baselines.simulation import detection_gaps
+
+
+def warm_up(env: Any, policy: Any, seed: int) -> None:
+    """Make one decision of ``policy`` on the first observation of the episode ``seed``
+    and forget it (the policy reset again): compiles what its first call compiles, so
+    that the timing of the episodes counts none of it."""
+    reset_policy(policy, seed)
+    obs, _ = env.reset(seed=seed)
+    if callable(getattr(policy, "plan", None)):
+        policy.plan(env.unwrapped.planning_problem())
+    else:
+        getattr(policy, "act", policy)(obs)
+    reset_policy(policy, seed)
+
+
+class _RowRecorder(Recorder):
+    """Keeps the metrics of :func:`run_episode`'s row per episode (serial: the single
+    environment's infos, :meth:`~activetrack.world.World.copy_info`; batched: the world's
+    fields of each copy)."""
+
+    def __init__(self, n: int, on_step: Any = None) -> None:
+        self.traces: list[list[float]] = [[] for _ in range(n)]
+        self.errors: list[list[float]] = [[] for _ in range(n)]
+        self.nees: list[list[float]] = [[] for _ in range(n)]
+        self.seen: list[list[np.ndarray]] = [[] for _ in range(n)]
+        self.totals = [0.0] * n
+        self.seconds = 0.0
+        self.on_step = on_step
+
+    def step(self, step: Step) -> None:
+        world = step.world
+        self.seconds += step.seconds
+        for i, j in zip(step.copies.tolist(), step.episodes.tolist(), strict=True):
+            if step.batched:
+                trace, error = float(world.get("trace", i)), float(world.position_error(i))
+            else:
+                _, trace, error, _, _ = world.copy_info(i)
+            self.traces[j].append(trace)
+            self.errors[j].append(error)
+            self.nees[j].append(float(world.position_nees(i)))
+            self.seen[j].append(world.get("detected", i).any(axis=-1))
+            self.totals[j] += float(step.rewards[i])
+        if self.on_step is not None and not step.batched:
+            self.on_step()
+
+    def row(self, j: int, ms: float) -> tuple[float, ...]:
+        """Return episode ``j``'s row (``ms``: the CPU ms per decision)."""
+        return (
+            float(np.mean(self.traces[j])),
+            float(np.sqrt(np.mean(np.square(self.errors[j])))),
+            self.totals[j],
+            float(np.mean(self.nees[j])),
+            ms,
+            *detection_gaps(np.array(self.seen[j])),
+        )
+
+
+def run_episode(env: Any, policy: Any, seed: int, on_step: Any = None) -> tuple[float, ...]:
+    """Return ``(mean_trace, rmse, return, mean_nees, ms_per_step, no_detection,
+    longest_gap)`` of one episode of ``policy`` from ``seed`` in ``env``'s world (the
+    rollout of :mod:`activetrack.baselines.rollout`, serial; ``ms_per_step``: the
+    policy's CPU time per decision in ms; the last two as
+    :func:`activetrack.baselines.simulation.detection_gaps`). ``on_step()`` is called
+    after every step (progress). The environment is reset to ``seed`` first and holds
+    the episode's end after it."""
+    base = env.unwrapped
+    env.reset(seed=seed)  # the env's own state (agents, renderer) starts the episode
+    recorder = _RowRecorder(1, on_step)
+    steps = rollout(
+        base.world, policy_agent(policy, base.possible_agents), [seed], recorder,
+        clock=time.process_time,
+    )  # fmt: skip
+    base.agents = []  # the episode ended in its world
+    return recorder.row(0, 1e3 * recorder.seconds / steps)
+
+
+def run_batched(
+    scenario: Any, overrides: dict[str, Any], policy: Any, seeds: list[int], on_step: Any = None
+) -> list[tuple[float, ...]]:
+    """Return :func:`run_episode`'s rows for a planner policy, each seed's episode a copy of
+    one batched :class:`~activetrack.world.World` (the policy plans every copy at once;
+    the rollout of :mod:`activetrack.baselines.rollout`, batched).
+
+    The world's copies are the environment's episodes (same seeds, same draws), so a
+    deterministic planner's rows equal the serial ones to its tolerance: the batched
+    world rounds its stacked products differently from the single environment, GSR's
+    numerical steps settle to about 1e-7 m differently in response, which leaves smooth
+    tasks' rows equal to about 1e-6 relative; where the plan can switch between near-tied
+    positions (occluders), a copy's episode can take the other branch, so only the
+    statistics agree. A copy's row does not depend on the batch: the same seed gives the
+    same row bit for bit alone (a batch of one) or among any other copies.
+    ``ms_per_step`` is the batch's CPU time per decision divided by the number of copies,
+    after a warm-up decision (the batch's first, planned twice).
+    ``on_step(k)`` is called after every step with the number of copies that stepped.
+    """
+    from activetrack.world import World
+
+    n = len(seeds)
+    world = World(scenario, n, **overrides)
+    recorder = _RowRecorder(n)
+    steps = rollout(
+        world, ExpertAgent(policy), seeds, recorder, batched=True, clock=time.process_time,
+        warm_up=True, on_step=on_step,
+    )  # fmt: skip
+    ms = 1e3 * recorder.seconds / (n * steps)
+    return [recorder.row(i, ms) for i in range(n)]
+
+
+def run_episodes(
+    scenario: Any, overrides: dict[str, Any], policy: Any, seeds: list[int]
+) -> list[tuple[float, ...]]:
+    """Return :func:`run_episode` on each of ``seeds`` in a new environment (one Ray task)."""
+    from activetrack.envs import parallel_env
+
+    env = parallel_env(scenario, **overrides)
+    try:
+        warm_up(env, policy, seeds[0])
+        return [run_episode(env, policy, s) for s in seeds]
+    finally:
+        env.close()
