@@ -318,7 +318,7 @@ def test_world_moves_every_sensor_inside_its_square_and_outside_rho(preset, copi
 
 def test_team_commands_drive_the_world_to_planned_points():
     from activetrack.baselines.gsr import GSR
-    from activetrack.kinematics.team import TeamMotion
+    from activetrack.kinematics.team import TeamMotion, actions_to_reach
 
     world = activetrack.world.World("paper", 2, kinematics=Square(0.5))
     world.reset(seeds=[3, 4])
@@ -326,6 +326,10 @@ def test_team_commands_drive_the_world_to_planned_points():
     for _ in range(5):
         plan = GSR().plan(world.planning_problem())
         actions = team.commands(plan, world.get("sensors"))
+        np.testing.assert_array_equal(
+            actions,
+            actions_to_reach(world.scenario.kinematics_models, plan, world.get("sensors"), 1.0),
+        )
         world.step_actions(actions)
         np.testing.assert_allclose(world.get("sensors"), plan, rtol=0, atol=1e-12)
 

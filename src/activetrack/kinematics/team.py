@@ -65,6 +65,17 @@ def all_disks(team: tuple[Kinematics, ...]) -> bool:
     return all(type(k) is Disk for k in team)
 
 
+def actions_to_reach(
+    kinematics: Any, points: FloatArray, sensors: FloatArray, r: FloatArray
+) -> FloatArray:
+    """Return the actions (..., M, 2) that move ``sensors`` to reachable ``points``: the
+    disk's :func:`sensor_motion.actions_to_reach` (radius ``r``) when ``kinematics`` (a
+    problem's) is None or all disks, else each sensor's :meth:`Kinematics.command`."""
+    if kinematics is None or all_disks(kinematics):
+        return sensor_motion.actions_to_reach(points, sensors, r)
+    return TeamMotion(kinematics).commands(points, sensors)
+
+
 def require_disks(kinematics: Any, planner: str) -> None:
     """Raise ValueError unless every sensor of a problem moves by a built-in :class:`Disk`
     (``kinematics`` None, or all disks): ``planner`` searches the disk's geometry."""
