@@ -53,6 +53,7 @@ import numpy as np
 from activetrack.baselines._common import sensor_modes
 from activetrack.kinematics import geometry
 from activetrack.kinematics.feasible_set import boundary_arcs
+from activetrack.kinematics.team import require_disks
 from activetrack.models import sensor_models
 from activetrack.models.objective import TRACE, TraceObjective, sensor_information
 from activetrack.validation import FloatArray
@@ -319,6 +320,7 @@ class GBES:
                 ``prune``, the objective does not declare ``convex`` (the bound needs it),
                 or (K > 1) its ``combine`` is neither a sum nor a max.
         """
+        require_disks(problem.kinematics, "GBES")
         if problem.batch_shape:
             raise ValueError(
                 f"search takes a single problem, got batch_shape {problem.batch_shape}; "

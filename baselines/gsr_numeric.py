@@ -31,8 +31,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from activetrack.baselines import gsr_kinematic
 from activetrack.estimation import generic
 from activetrack.kinematics import feasible_set
+from activetrack.kinematics.team import all_disks
 from activetrack.models import sensor_models
 from activetrack.models.occluders import line_of_sight, project_move
 from activetrack.solvers import numeric as solver_numeric
@@ -62,7 +64,11 @@ def relax(
     occ = problem.occluders
     if occ is not None and occ.batched and len(shape) > 1:  # a layout per flattened copy
         occ = occ[np.repeat(np.arange(shape[0]), B // shape[0])]
-    s = _warm_start(current, r, targets, rho)
+    custom = problem.kinematics is not None and not all_disks(problem.kinematics)
+    if custom:  # a kinematics of its own: its own feasible sets (baselines.gsr_kinematic)
+        s = gsr_kinematic.warm_start(problem, current, targets, rho)
+    else:
+        s = _warm_start(current, r, targets, rho)
     team = problem.sensor_objects  # models of one's own, or None (built-in)
     entries = _entries(s, targets, w_d, w_t, pose, det, occ, team)  # 3 x (B, K, M)
     base = (prior[..., 0, 0], prior[..., 0, 1], prior[..., 1, 1])
@@ -75,7 +81,11 @@ def relax(
     # changed[b, i]: sensor i's subproblem in copy b changed since its last solve (another
     # sensor moved); an unchanged subproblem would give the same answer, so it is skipped.
     changed = free.copy()
-    prepared = _Prepared(problem, current, r, targets, rho, w_d, w_t, pose, det, occ)
+    if custom:
+        one = _one_sensor(targets, w_d, w_t, pose, det, occ, team)
+        prepared = gsr_kinematic.Prepared(problem, one, current, targets, rho)
+    else:
+        prepared = _Prepared(problem, current, r, targets, rho, w_d, w_t, pose, det, occ)
     for _ in range(max_sweeps):
         rows = np.flatnonzero(active)
         if rows.size == 0:
@@ -145,7 +155,12 @@ def _approach(problem, s, value, current, r, targets, rho, det, weights, occ):
     d2 = np.sum((targets[b] - current[b, i][:, None]) ** 2, axis=-1)  # (L, K)
     goal = targets[b, np.argmin(d2, axis=-1)]
     moved = s.copy()
-    moved[b, i] = feasible_set.project(goal, current[b, i], r[b, i], targets[b], rho[b, i])
+    team = problem.kinematics
+    if team is not None and not all_disks(team):  # each sensor's own projection
+        for j, (bj, ij) in enumerate(zip(b.tolist(), i.tolist(), strict=True)):
+            moved[bj, ij] = team[ij].project(goal[j], current[bj, ij], targets[bj], rho[bj, ij])
+    else:
+        moved[b, i] = feasible_set.project(goal, current[b, i], r[b, i], targets[b], rho[b, i])
     if occ is not None:  # a straight move the world allows: around the occluders
         moved[b, i] = project_move(current[b, i], moved[b, i], occ[b], r[b, i])[0]
     w_d, w_t, pose = weights
@@ -236,6 +251,24 @@ class _Prepared:
         memory[0][sub], memory[1][sub], memory[2][sub] = chosen, th, x
         memory[3][sub] = True
         return out
+
+
+def _one_sensor(targets, w_d, w_t, pose, det, occ, objects):
+    """Return ``entries(pts, b, i)``: sensor ``i``'s entries in copy ``b`` at ``pts`` (P, 2)
+    about every target, 3 x (P, K) (:func:`_entries` of P copies of the sensor; ``objects``
+    the sensors' models of one's own, or None)."""
+
+    def entries(pts: FloatArray, b: int, i: int) -> tuple[FloatArray, ...]:
+        n = len(pts)
+        row = (np.array([b]), np.full((1, n), i))
+        cov = None if pose is None else pose[row]
+        d = None if det is None else tuple(x[row] for x in det)
+        layout = None if occ is None else occ[np.array([b])]
+        own = None if objects is None else (objects[i],) * n
+        out = _entries(pts[None], targets[[b]], w_d[row], w_t[row], cov, d, layout, own)
+        return tuple(x[0].T for x in out)
+
+    return entries
 
 
 def _warm_start(

@@ -27,6 +27,7 @@ import numpy as np
 from activetrack.estimation import generic
 from activetrack.kinematics.geometry import project_feasible
 from activetrack.kinematics.sensor_motion import move_to
+from activetrack.kinematics.team import TeamMotion, all_disks
 from activetrack.models import sensor_models
 from activetrack.models.objective import sensor_information
 from activetrack.validation import FloatArray
@@ -46,6 +47,9 @@ class PathModel:
         M = problem.n_sensors
         self.paper = problem.is_paper
         self.team = problem.sensor_objects  # models of one's own (their information), or None
+        kin = problem.kinematics
+        # A kinematics of its own: each step mended by it (the world's TeamMotion rule).
+        self.motion = None if kin is None or all_disks(kin) else TeamMotion(kin)
         self.occluders = problem.occluders
         self.sigma_d2 = problem.sigma_d2.reshape(B, M)
         self.sigma_theta2 = problem.sigma_theta2.reshape(B, M)
@@ -69,11 +73,18 @@ class PathModel:
         ``rho`` broadcast against ``prev.shape[:-1]``; ``targets`` (B, K, 2) this step's.
         """
         B, K = targets.shape[0], targets.shape[-2]
-        if self.paper:
+        if self.motion is not None:  # the sensor axis (1) last but one, as the world's
+            pr, pv = np.moveaxis(prop, 1, -2), np.moveaxis(np.broadcast_to(prev, prop.shape), 1, -2)
+            t = np.broadcast_to(targets.reshape((B,) + (1,) * (prev.ndim - 3) + (K, 2)),
+                                pr.shape[:-2] + (K, 2))  # fmt: skip
+            rh = np.moveaxis(np.broadcast_to(rho, prop.shape[:-1]), 1, -1)
+            moved = np.moveaxis(self.motion.move_to(pr, pv, t, None, rh)[0], -2, 1)
+        elif self.paper:
             t = targets[:, 0].reshape((B,) + (1,) * (prev.ndim - 2) + (2,))
             return project_feasible(prop - t, prev - t, r, rho) + t
-        t = targets.reshape((B,) + (1,) * (prev.ndim - 3) + (K, 2))
-        moved = move_to(prop, prev, t, r, rho)[0]
+        else:
+            t = targets.reshape((B,) + (1,) * (prev.ndim - 3) + (K, 2))
+            moved = move_to(prop, prev, t, r, rho)[0]
         if self.occluders is not None:
             from activetrack.models import occluders  # noqa: PLC0415 (occluded scenarios only)
 

@@ -21,6 +21,7 @@ import numpy as np
 
 from activetrack.baselines._common import modes_and_arcs, sensor_modes
 from activetrack.kinematics import geometry
+from activetrack.kinematics.team import require_disks
 from activetrack.validation import FloatArray
 from activetrack.world.problem import PlanningProblem
 
@@ -37,6 +38,7 @@ class RandomMotion:
         Draws exactly one uniform per free sensor from ``rng``, in copy order (row-major
         over the batch axes), then sensor order.
         """
+        require_disks(problem.kinematics, "RandomMotion")
         targets = problem.targets
         if targets.shape[-2] > 1:
             free, out, arcs_of = modes_and_arcs(problem.sensors, targets, problem.r, problem.rho)

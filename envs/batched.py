@@ -51,6 +51,7 @@ from activetrack.world import World
 from activetrack.world.problem import PlanningProblem
 from activetrack.world.scenarios import Scenario, make_scenario
 
+from . import _action_spaces
 from .rendering import EpisodeRecorder
 from .tracking_env import RENDER_MODES, check_no_options, check_render_mode
 
@@ -127,7 +128,7 @@ class BatchedActiveTracking(VectorEnv):
         self.single_observation_space = spaces.Box(
             np.tile(low, m), np.tile(high, m), dtype=np.float32
         )
-        self.single_action_space = spaces.Box(-1.0, 1.0, (2 * m,), dtype=np.float32)
+        self.single_action_space = _action_spaces.joint_space(self.scenario)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         self._autoreset = np.zeros(self.num_envs, dtype=bool)

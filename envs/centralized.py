@@ -31,6 +31,7 @@ from activetrack.validation import FloatArray, real_array
 from activetrack.world.problem import PlanningProblem
 from activetrack.world.scenarios import Scenario
 
+from . import _action_spaces
 from .tracking_env import (
     RENDER_MODES,
     TrackingParallelEnv,
@@ -62,7 +63,7 @@ class CentralizedTrackingEnv(gym.Env):
         box = self.env.observation_space(self.env.possible_agents[0])
         low, high = np.tile(box.low, m), np.tile(box.high, m)
         self.observation_space = spaces.Box(low, high, dtype=np.float32)
-        self.action_space = spaces.Box(-1.0, 1.0, (2 * m,), dtype=np.float32)
+        self.action_space = _action_spaces.joint_space(self.scenario)
 
     @property
     def scenario(self) -> Scenario:

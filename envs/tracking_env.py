@@ -62,6 +62,7 @@ from activetrack.world import World
 from activetrack.world.problem import PlanningProblem
 from activetrack.world.scenarios import Scenario, make_scenario
 
+from . import _action_spaces
 from .rendering import EpisodeRecorder
 
 RENDER_MODES = ("human", "rgb_array")
@@ -85,7 +86,8 @@ class TrackingParallelEnv(ParallelEnv):
 
     Spaces: every agent acts in ``Box(-1, 1, (2,), float32)`` (float64 accepted): its
     displacement as a fraction of its reach ``r_i``; longer vectors are scaled onto the
-    unit disk. It observes ``Box(float32, (5 + 6M,))`` (:mod:`activetrack.world.observation`).
+    unit disk (a scenario's own ``kinematics`` gives its bounds and meaning instead). It
+    observes ``Box(float32, (5 + 6M,))`` (:mod:`activetrack.world.observation`).
     :meth:`state` is the ``6 + 6M`` global state for centralized critics.
 
     Infos (per agent, plain Python values): ``step`` k, ``trace`` the posterior
@@ -129,9 +131,7 @@ class TrackingParallelEnv(ParallelEnv):
         self.observation_spaces = {
             a: spaces.Box(low, high, dtype=np.float32) for a in self.possible_agents
         }
-        self.action_spaces = {
-            a: spaces.Box(-1.0, 1.0, (2,), dtype=np.float32) for a in self.possible_agents
-        }
+        self.action_spaces = _action_spaces.agent_spaces(sc, self.possible_agents)
         slow, shigh = self.world.layout.state_bounds(self.length_scale)
         self.state_space = spaces.Box(slow, shigh, dtype=np.float32)
 

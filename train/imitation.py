@@ -3,9 +3,9 @@
 The expert is :class:`activetrack.baselines.policies.GSRPolicy`: at every step it solves
 the planning problem of the environment (``env.planning_problem()``) and returns the
 sensors' next positions; the label of each agent is the action that reaches its position
-(:func:`activetrack.kinematics.sensor_motion.actions_to_reach`). With parameter sharing every
-(agent, step) pair is one sample ``(observation, expert action)``; the *label budget*
-counts them.
+(:func:`activetrack.kinematics.team.actions_to_reach`: each sensor's kinematics). With
+parameter sharing every (agent, step) pair is one sample ``(observation, expert action)``;
+the *label budget* counts them.
 
 - **BC** rolls out the expert for ``episodes`` episodes and regresses the network's mean
   action on the expert's (mean squared error), for ``epochs`` passes.
@@ -39,7 +39,7 @@ import torch
 from stable_baselines3.common.policies import ActorCriticPolicy
 
 from activetrack.baselines.rollout import MixedAgent, Recorder, Step, rollout
-from activetrack.kinematics.sensor_motion import actions_to_reach
+from activetrack.kinematics.team import actions_to_reach
 from activetrack.train.networks import DEFAULT_NET, NetConfig, build_policy, mean_action
 from activetrack.train.utils import (
     DEFAULT_THREADS,
@@ -149,7 +149,9 @@ class _LabelRecorder(Recorder):
 
     def step(self, step: Step) -> None:
         problem = step.problem
-        labels = actions_to_reach(step.positions, problem.sensors, problem.r).astype(np.float32)
+        labels = actions_to_reach(
+            problem.kinematics, step.positions, problem.sensors, problem.r
+        ).astype(np.float32)
         for i, j in zip(step.copies.tolist(), step.episodes.tolist(), strict=True):
             self.obs[j].append(step.observations[i] if step.batched else step.observations)
             self.actions[j].append(labels[i] if step.batched else labels)

@@ -3,9 +3,10 @@
 The core (this package) holds the paper's mathematics and no RL: target motion models
 (eq. 1-2), the sensors' measurement models (eq. 4-10; :class:`SensorModel`, the base of a
 new one, and the built-ins :class:`RangeBearing`, :class:`RangeOnly`, :class:`BearingOnly`),
-the EKF (eq. 3, 11), the covariance objective (eq. 12, 17-19; :class:`Objective`, the base
-of a new one), the analytic single-sensor optimum (Section IV-A), the planning problem and
-scenario presets.
+the sensors' kinematics (eq. 13-16; :class:`Kinematics`, the base of a new one, and
+:class:`Disk`), the EKF (eq. 3, 11), the covariance objective (eq. 12, 17-19;
+:class:`Objective`, the base of a new one), the analytic single-sensor optimum (Section
+IV-A), the planning problem and scenario presets.
 The layers ``activetrack.envs``, ``activetrack.baselines`` and ``activetrack.train`` build
 on it, in that order.
 
@@ -21,6 +22,8 @@ import importlib.metadata as _metadata
 
 from activetrack import _aliases, _registry
 from activetrack.estimation.ekf import ExtendedKalmanFilter
+from activetrack.kinematics.base import Kinematics
+from activetrack.kinematics.disk import Disk
 from activetrack.models.motion import (
     LinearMotionModel,
     constant_acceleration,
@@ -66,8 +69,10 @@ __all__ = [
     "WORST_TRACE",
     "BatchSolution",
     "BearingOnly",
+    "Disk",
     "SingleSensorSolution",
     "ExtendedKalmanFilter",
+    "Kinematics",
     "LinearMotionModel",
     "LogDetObjective",
     "Objective",

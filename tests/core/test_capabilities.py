@@ -9,7 +9,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from activetrack import SensorModel
+from activetrack import Disk, SensorModel
 from activetrack.world import World, capabilities, observation
 from activetrack.world.capabilities import Capabilities
 from activetrack.world.problem import PlanningProblem
@@ -17,8 +17,14 @@ from activetrack.world.scenarios import PRESETS, make_scenario
 
 FLAGS = (
     "one_target", "range_bearing", "known_poses", "pose_free_filter", "unlimited_sensing",
-    "no_occluders", "single_update", "trace_objective", "builtin_sensors",
+    "no_occluders", "single_update", "trace_objective", "disk_kinematics", "builtin_sensors",
 )  # fmt: skip
+
+
+class OwnDisk(Disk):
+    """A kinematics of its own (not the built-in Disk, though it moves as one)."""
+
+    name = "own_disk"
 
 
 class _Distance(SensorModel):
@@ -105,6 +111,7 @@ def expected(fields: dict) -> dict[str, bool]:
         "no_occluders": not occluded,
         "single_update": fields.get("filter_iterations", 1) == 1,
         "trace_objective": fields.get("objective", "trace") == "trace",
+        "disk_kinematics": all(type(k) is Disk for k in fields.get("kinematics", ())),
         "builtin_sensors": all(isinstance(m, str) for m in models),
     }
     return {
@@ -119,6 +126,7 @@ def expected(fields: dict) -> dict[str, bool]:
                 "pose_free_filter",
                 "unlimited_sensing",
                 "trace_objective",
+                "disk_kinematics",
             )
         ),  # fmt: skip
         "paper_observation": all(
@@ -131,6 +139,7 @@ def expected(fields: dict) -> dict[str, bool]:
                 "known_poses",
                 "unlimited_sensing",
                 "single_update",
+                "disk_kinematics",
                 "builtin_sensors",
             )
         ),  # fmt: skip
@@ -174,6 +183,9 @@ def random_fields(rng: np.random.Generator) -> dict:
         fields["filter_iterations"] = 3
     if rng.random() < 0.3:
         fields["objective"] = ("trace", "worst_trace", "logdet")[int(rng.integers(3))]
+    if rng.random() < 0.3:  # the built-in disks given, or one of them a kinematics of its own
+        own = rng.random() < 0.6
+        fields["kinematics"] = (Disk(1.0), OwnDisk(1.0) if own else Disk(0.5), Disk(1.0))
     return fields
 
 

@@ -112,6 +112,8 @@ class WorldReaders:
             "pose_cov": p.filter_pose_cov,
             "objective": self.objective,
         }
+        if self._team is not None:  # a kinematics that is not the built-in disk
+            extra["kinematics"] = self._team.team
         if p.sensor_objects is not None:  # a model of one's own: the planners ask the models
             extra["sensor_objects"] = p.sensor_objects
         if self._limited:  # the planners count each sensor's information at its expected value

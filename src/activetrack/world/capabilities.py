@@ -18,6 +18,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
+from activetrack.kinematics.team import all_disks
+
 
 def paper_problem(
     one_target: bool,
@@ -25,13 +27,16 @@ def paper_problem(
     pose_free_filter: bool,
     unlimited_sensing: bool,
     trace_objective: bool,
+    disk_kinematics: bool = True,
 ) -> bool:
     """Return whether a planning problem is the paper's (Section IV-A's exact solve and the
     planners' paper arithmetic apply): one target, every sensor range-and-bearing, no pose
-    noise in the filter, every sensor always measures, the trace objective."""
+    noise in the filter, every sensor always measures, the trace objective, every sensor
+    moves by a built-in disk."""
     return (
         one_target and range_bearing and pose_free_filter and unlimited_sensing and trace_objective
-    )
+        and disk_kinematics
+    )  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -56,6 +61,9 @@ class Capabilities:
             iterated one: the fused step's kernel.
         trace_objective: the score is the trace (eq. 17): the reward needs no second
             evaluation of the objective.
+        disk_kinematics: every sensor moves by a built-in
+            :class:`activetrack.kinematics.disk.Disk` (``vmax dt``): the compiled moves; else
+            the world moves by each kinematics (:class:`activetrack.kinematics.team.TeamMotion`).
         builtin_sensors: every sensor's model is a built-in (:attr:`activetrack.SensorModel.code`):
             the compiled measurement and filter kernels; else the generic NumPy path
             (:mod:`activetrack.estimation.generic`) for the world and the planners.
@@ -69,6 +77,7 @@ class Capabilities:
     no_occluders: bool
     single_update: bool
     trace_objective: bool
+    disk_kinematics: bool = True
     builtin_sensors: bool = True
 
     @classmethod
@@ -84,6 +93,7 @@ class Capabilities:
             no_occluders=not sc.has_occluders,
             single_update=sc.filter_iterations == 1,
             trace_objective=sc.objective == "trace",
+            disk_kinematics=sc.kinematics is None or all_disks(sc.kinematics_models),
             builtin_sensors=all(m.builtin for m in sc.sensor_objects),
         )
 
@@ -96,6 +106,7 @@ class Capabilities:
             self.pose_free_filter,
             self.unlimited_sensing,
             self.trace_objective,
+            self.disk_kinematics,
         )
 
     @property
@@ -123,5 +134,8 @@ class Capabilities:
     def fused_step(self) -> bool:
         """Whether a whole world step (move, advance, score, predict; with one copy also
         the observation) is one compiled call (:mod:`activetrack.world._loop_kernels`):
-        :attr:`per_target_update` with known poses and built-in sensor models."""
-        return self.per_target_update and self.known_poses and self.builtin_sensors
+        :attr:`per_target_update` with known poses, built-in sensor models and disks."""
+        return (
+            self.per_target_update and self.known_poses and self.builtin_sensors
+            and self.disk_kinematics
+        )  # fmt: skip

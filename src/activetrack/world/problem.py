@@ -35,6 +35,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from activetrack.estimation import generic
+from activetrack.kinematics import team
 from activetrack.linalg2 import inv2
 from activetrack.models import sensor_models
 from activetrack.models.objective import TRACE, Objective, is_trace, total_information
@@ -128,6 +129,8 @@ class PlanningProblem:
             by the batch) when one is a model of one's own, or None (the built-in models
             of ``models``). The planners then ask the models for the information
             (:meth:`information_entries`), never the paper's arithmetic.
+        kinematics: each sensor's :class:`activetrack.Kinematics` (a tuple of M, shared by
+            the batch; ``r`` is then each one's radius), or None: the disks of radius ``r``.
     """
 
     prior_cov: FloatArray
@@ -146,6 +149,7 @@ class PlanningProblem:
     max_range: FloatArray | None = None
     occluders: Any = None
     sensor_objects: tuple | None = None
+    kinematics: tuple | None = None
 
     def __post_init__(self) -> None:
         if self.sensor_objects is not None:
@@ -261,6 +265,8 @@ class PlanningProblem:
                     "occluders must be an activetrack.models.occluders.Occluders or None, got "
                     f"{type(self.occluders).__name__}"
                 )
+        if self.kinematics is not None:
+            object.__setattr__(self, "kinematics", team.converted(tuple(self.kinematics), m))
         k_axis = (kk,) if multi else ()
         trailing = {
             "prior_cov": (*k_axis, 2, 2),
@@ -351,6 +357,7 @@ class PlanningProblem:
         max_range: ArrayLike | None = None,
         occluders: Any = None,
         sensor_objects: tuple | None = None,
+        kinematics: tuple | None = None,
     ) -> PlanningProblem:
         """Return the problem at ``prediction`` (``prior_cov`` and ``target`` its position
         blocks); the other arguments are the fields of the same names."""
@@ -358,6 +365,7 @@ class PlanningProblem:
             None, None, sensors, r, rho, sigma_d2, sigma_theta2, objective, prediction,
             models, pose_cov, p_detect=p_detect, max_range=max_range, occluders=occluders,
             sensor_objects=sensor_objects,
+            kinematics=kinematics,
         )  # fmt: skip
 
     @classmethod
@@ -393,7 +401,7 @@ class PlanningProblem:
             occ = type(occ).stack([p.occluders for p in problems])
         arrays: dict[str, Any] = {"multi_target": multi, "occluders": occ}
         for f in fields(cls):
-            if f.name in ("objective", "prediction", "multi_target", "occluders"):
+            if f.name in ("objective", "prediction", "multi_target", "occluders", "kinematics"):
                 continue
             if f.name == "sensor_objects":
                 if any(p.sensor_objects != problems[0].sensor_objects for p in problems):
@@ -423,7 +431,10 @@ class PlanningProblem:
                 raise ValueError("problems must all carry a prediction, or none")
             per_target = [stacked([q[k] for q in all_preds]) for k in range(len(all_preds[0]))]
             prediction = tuple(per_target) if multi else per_target[0]
-        return cls(**arrays, objective=objective, prediction=prediction)
+        kin = problems[0].kinematics
+        if any(p.kinematics != kin for p in problems):
+            raise ValueError("problems must all have the same kinematics")
+        return cls(**arrays, objective=objective, prediction=prediction, kinematics=kin)
 
     def __getitem__(self, index: Any) -> PlanningProblem:
         """Return the problem(s) at ``index`` of the batch axes (``problem[i]``: copy ``i``)."""
@@ -440,7 +451,7 @@ class PlanningProblem:
                     value = indexed(value, index)
             elif f.name == "occluders" and value is not None:  # the layouts of the first axis
                 value = value[index[0] if isinstance(index, tuple) else index]
-            elif f.name not in ("objective", "multi_target", "sensor_objects") and (
+            elif f.name not in ("objective", "multi_target", "sensor_objects", "kinematics") and (
                 value is not None
             ):
                 value = np.array(value[index])
@@ -471,6 +482,7 @@ class PlanningProblem:
             self.pose_cov is None,
             self.p_detect is None and self.max_range is None and self.occluders is None,
             is_trace(self.objective),
+            self.kinematics is None or team.all_disks(self.kinematics),
         )
 
     @cached_property
@@ -585,6 +597,11 @@ class PlanningProblem:
         """Return each sensor's largest constraint violation (0 when feasible), shape (..., M)."""
         p = np.asarray(next_positions, dtype=np.float64)
         step = np.linalg.norm(p - self.sensors, axis=-1) - self.r
+        if self.kinematics is not None and not team.all_disks(self.kinematics):
+            # A kinematics of its own: the distance to its reach set (its clip).
+            gap = [p[..., i, :] - k.clip(p[..., i, :], self.sensors[..., i, :])
+                   for i, k in enumerate(self.kinematics)]  # fmt: skip
+            step = np.stack([np.hypot(g[..., 0], g[..., 1]) for g in gap], -1)
         near = np.linalg.norm(p[..., None, :, :] - self.targets[..., :, None, :], axis=-1)
         dist = self.rho - near.min(axis=-2)  # the nearest target
         return np.maximum(np.maximum(step, dist), 0.0)

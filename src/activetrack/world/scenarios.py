@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from activetrack.kinematics import team
 from activetrack.models.motion import LinearMotionModel, make_model
 from activetrack.models.objective import Objective
 from activetrack.models.sensor import SensorModel, as_sensor_model, record, slot_code
@@ -169,6 +170,10 @@ class Scenario:
             is the EKF of eq. (11) (the paper); more is the iterated EKF
             (:func:`activetrack.estimation.ekf.update`), which stays consistent where a target is
             measured again after a long gap, its prediction meters off.
+        kinematics: how each sensor moves in one step: None (the paper's
+            :class:`activetrack.kinematics.disk.Disk` of radius ``vmax_i dt``), an
+            :class:`activetrack.Kinematics` for every sensor, or a tuple of M; with one
+            given, the reach ``r`` is its ``radius`` and ``vmax`` is unused.
 
     One coupled limit: the first predicted position variance (from P0, the model and q)
     may be at most 1e10 times the smallest range variance, so that one update never
@@ -206,6 +211,7 @@ class Scenario:
     occluder_bounds: tuple[float, float, float, float] = (-20.0, -20.0, 20.0, 20.0)
     occluder_size: tuple[float, float] = (2.0, 6.0)
     filter_iterations: int = 1
+    kinematics: Any = None
     _cache: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -256,6 +262,7 @@ class Scenario:
         put("occluder_bounds", bounds)
         put("occluder_size", size)
         put("filter_iterations", _count("filter_iterations", self.filter_iterations, 100))
+        put("kinematics", team.converted(self.kinematics, m))
         ranges = {
             "sigma_d2": (*SIGMA_D2_RANGE, False),
             "sigma_theta2": (*SIGMA_THETA2_RANGE, False),
@@ -486,8 +493,16 @@ class Scenario:
 
     @property
     def r(self) -> FloatArray:
-        """Return the per-sensor reach ``r_i = vmax_i dt`` (eq. 13)."""
+        """Return the per-sensor reach ``r_i = vmax_i dt`` (eq. 13), or each kinematics'
+        radius when ``kinematics`` is given."""
+        if self.kinematics is not None:
+            return team.radii(self.kinematics, self.n_sensors)
         return self.per_sensor("vmax") * self.dt
+
+    @property
+    def kinematics_models(self) -> tuple:  # tuple[activetrack.Kinematics, ...]
+        """Return each sensor's kinematics (M,): ``Disk(vmax_i dt)`` unless given."""
+        return team.models(self.kinematics, self.r)
 
     def replace(self, **overrides: Any) -> Scenario:
         """Return a copy with fields overridden (validated)."""
@@ -516,6 +531,9 @@ class Scenario:
             if isinstance(v, Objective):  # a record of which objective, not its code
                 cls = type(v)
                 v = {"name": v.name, "class": f"{cls.__module__}.{cls.__qualname__}"}
+            if f.name == "kinematics":  # a record of which kinematics, not its code
+                v = [{"name": k.name, "class": f"{type(k).__module__}.{type(k).__qualname__}",
+                      "radius": k.radius} for k in self.kinematics_models]  # fmt: skip
             out[f.name] = v.name if isinstance(v, LinearMotionModel) else v
         return out
 
@@ -529,7 +547,7 @@ def _same(a: object, b: object) -> bool:
 
 
 #: The per-sensor fields :func:`make_scenario` repeats for a new team size.
-_TEAM_FIELDS = (*_PER_SENSOR, "sensor_model", "pose_cov", "max_range", "p_detect")
+_TEAM_FIELDS = (*_PER_SENSOR, "sensor_model", "pose_cov", "max_range", "p_detect", "kinematics")
 
 
 def _per_sensor_tuple(key: str, value: object) -> bool:

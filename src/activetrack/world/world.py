@@ -60,6 +60,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from activetrack.kinematics import sensor_motion
+from activetrack.kinematics.team import TeamMotion
 from activetrack.models.motion import predict, psd_factor
 from activetrack.models.objective import TRACE, as_objective
 from activetrack.validation import FloatArray, as_generator, check_int
@@ -193,6 +194,8 @@ class World(RandomStreams, WorldReaders, OccludedMoves):
         # One target, every sensor measures, the EKF of eq. (11): the advance is one call per
         # step (activetrack.world.tracking.advance_target), else stage by stage.
         self._per_target = caps.per_target_update
+        # A sensor whose kinematics is not a built-in Disk: every move asks its kinematics.
+        self._team = None if caps.disk_kinematics else TeamMotion(sc.kinematics_models)
         if N > 1:  # the step's normals are (copies, n_noise) then; one copy's are (n_noise,)
             self._noise_slices = [
                 ((slice(None), a), (slice(None), b)) for a, b in self._noise_slices
@@ -566,6 +569,7 @@ class World(RandomStreams, WorldReaders, OccludedMoves):
             where = np.empty(x_preds[0].shape[:-1] + (K, 2))
             for k, x in enumerate(x_preds):
                 where[..., k, :] = x[..., :2]
+        move = move if self._team is None else self._team.of(move)
         moved, projected = move(moves, fixes, where, p.r, p.rho)
         if self._occ is not None:  # no move ends in or passes through an occluder
             moved, projected = self._around_occluders(sensors, fixes, moved, projected)
