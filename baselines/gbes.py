@@ -246,12 +246,14 @@ class GBES:
             out.append(np.concatenate(pieces) - origin)
         return out
 
-    def _kinematic_grids(self, problem: PlanningProblem) -> list[FloatArray]:
+    def _kinematic_grids(
+        self, problem: PlanningProblem, absolute: bool = False
+    ) -> list[FloatArray]:
         """Return :meth:`candidates` when the sensors move by their own kinematics: each
         free sensor's boundary grid of its feasible set at ``spacing``, a fixed sensor's
-        next position, relative to ``problem.targets[0]``."""
+        next position, relative to ``problem.targets[0]`` (or ``absolute``)."""
         free, fixed, boundary_of = kinematic_boundaries(problem, self.spacing)
-        origin = problem.targets[0]
+        origin = 0.0 if absolute else problem.targets[0]
         return [
             boundary_of[(i,)] - origin if free[i] else fixed[i : i + 1] - origin
             for i in range(problem.n_sensors)
@@ -353,9 +355,16 @@ class GBES:
             )
         fit = self.fitted(problem)
         total = fit.check(problem)
-        cands = fit.candidates(problem)
-        rel, n_eval = grid_optimum(problem, cands, self.block, self.batch_elements, self.prune)
-        positions = rel + problem.targets[0]
+        args = (self.block, self.batch_elements, self.prune)
+        if own_kinematics(problem):  # the grid points themselves (absolute, feasible)
+            grids = fit._kinematic_grids(problem, absolute=True)
+            cands = [g - problem.targets[0] for g in grids]
+            idx, n_eval = _grid_search(problem, cands, *args)
+            positions = np.stack([grids[i][k] for i, k in enumerate(idx)])
+        else:
+            cands = fit.candidates(problem)
+            idx, n_eval = _grid_search(problem, cands, *args)
+            positions = np.stack([cands[i][k] for i, k in enumerate(idx)]) + problem.targets[0]
         result = GBESResult(
             positions, float(problem.score(positions)), total, n_eval, float(fit.spacing)
         )
@@ -376,6 +385,18 @@ def grid_optimum(
     predicted target (with K targets: the first, ``problem.targets[0]``); the result
     (M, 2) is relative too. Exact over the candidates. ``problem`` is single.
     """
+    idx, n_eval = _grid_search(problem, candidates, block, batch_elements, prune)
+    return np.stack([candidates[i][k] for i, k in enumerate(idx)]), n_eval
+
+
+def _grid_search(
+    problem: PlanningProblem,
+    candidates: list[FloatArray],
+    block: int = 16,
+    batch_elements: int = 1 << 17,
+    prune: bool = True,
+) -> tuple[tuple[int, ...], int]:
+    """Return :func:`grid_optimum` as each sensor's index into its candidates."""
     if prune and not problem.objective.convex:
         raise ValueError(
             f"GBES's branch and bound needs an objective convex in each target's information "
@@ -399,8 +420,7 @@ def grid_optimum(
             search = _BlockSearch(feats, prior[0], block, batch_elements, problem.objective)
         else:
             search = _TargetsSearch(feats, prior, block, batch_elements, problem.objective)
-    idx, n_eval = search.run(prune)
-    return np.stack([candidates[i][k] for i, k in enumerate(idx)]), n_eval
+    return search.run(prune)
 
 
 def _target_features(problem: PlanningProblem, candidates: list[FloatArray]) -> list[FloatArray]:
