@@ -25,11 +25,14 @@ by the nearest target). For K = 1 every function is today's (bit-identical).
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from activetrack._jit import as_rows
 from activetrack.baselines import gsr_kernel as gk
 from activetrack.kinematics import feasible_set, geometry
+from activetrack.kinematics.team import all_disks
 from activetrack.validation import FloatArray
 from activetrack.world.problem import PlanningProblem
 
@@ -188,3 +191,95 @@ def random_problem(
         sigma_d2=rng.uniform(0.5, 5.0, n_sensors),
         sigma_theta2=rng.uniform(0.05, 1.0, n_sensors),
     )
+
+
+#: The most boundary points a grid of one sensor's feasible set may hold (a kinematics of
+#: its own, :func:`kinematic_boundaries`): 4M points, 64 MB.
+MAX_BOUNDARY_POINTS = 1 << 22
+
+
+def own_kinematics(problem: PlanningProblem) -> bool:
+    """Return whether some sensor of ``problem`` moves by a kinematics that is not a
+    built-in :class:`activetrack.Disk` (the planners then ask its kinematics)."""
+    kin = problem.kinematics
+    return kin is not None and not all_disks(kin)
+
+
+def kinematic_boundaries(
+    problem: PlanningProblem, spacing: float | None = None
+) -> tuple[np.ndarray, FloatArray, dict[tuple[int, ...], FloatArray]]:
+    """Return ``(free, fixed, boundary_of)`` of a problem whose sensors move by their own
+    kinematics (``problem.kinematics``), in absolute coordinates, batched.
+
+    ``free`` (..., M): the radius is > 0 and the boundary of the feasible set ``F`` (reach
+    set minus the K ``rho`` disks) has points; ``fixed`` (..., M, 2): the current position
+    of free sensors and of those with radius 0 (they stay), and for the sensors whose
+    ``F`` is empty their kinematics' :meth:`~activetrack.Kinematics.project` of their
+    position (its least violation of eq. 16, the world's rule); ``boundary_of`` maps a free
+    sensor's index ``batch index + (i,)`` to :meth:`~activetrack.Kinematics.boundary` at
+    ``spacing`` (None: ``radius / 1024``), exact repeats dropped, in the kinematics' order.
+
+    Raises:
+        ValueError: ``spacing`` would give a sensor more than :data:`MAX_BOUNDARY_POINTS`
+            (estimated from its radius and the ``rho`` circles before any is built); or
+            as :func:`sensor_modes` (a free sensor with ``rho = 0`` can reach a target).
+    """
+    sensors, targets = problem.sensors, problem.targets
+    team = problem.kinematics
+    rho_all = np.broadcast_to(problem.rho, sensors.shape[:-1])
+    free = np.zeros(sensors.shape[:-1], dtype=bool)
+    fixed = np.array(sensors, dtype=np.float64)
+    boundary_of = {}
+    for idx in np.ndindex(sensors.shape[:-1]):
+        kin, s, t = team[idx[-1]], sensors[idx], targets[idx[:-1]]
+        r, rho = float(kin.radius), float(rho_all[idx])
+        if not r > 0.0:
+            continue
+        pts = boundary_grid(kin, s, t, rho, spacing)
+        if len(pts) == 0:
+            fixed[idx] = kin.project(s, s, t, rho)
+            continue
+        if rho <= 0.0 and bool(np.any(kin.reaches(t, s))):
+            raise ValueError(
+                f"rho must be > 0 for sensors {_where(_flag(free.shape, idx))}: a predicted "
+                "target is within their reach and the information grows without bound near it"
+            )
+        free[idx] = True
+        boundary_of[idx] = pts
+    return free, fixed, boundary_of
+
+
+def boundary_grid(
+    kin: Any, position: FloatArray, targets: FloatArray, rho: float, spacing: float | None
+) -> FloatArray:
+    """Return ``kin``'s :meth:`~activetrack.Kinematics.boundary` of the feasible set of one
+    sensor at ``position`` (targets (K, 2)) at ``spacing`` (None: ``radius / 1024``), exact
+    repeats dropped, in the kinematics' order, (P, 2).
+
+    Raises:
+        ValueError: ``spacing`` would give more than :data:`MAX_BOUNDARY_POINTS`
+            (estimated from the radius and the ``rho`` circles before any is built).
+    """
+    r = float(kin.radius)
+    step = r / 1024 if spacing is None else float(spacing)
+    # The perimeter of a convex reach set is at most 2 pi radius; each rho circle adds
+    # at most 2 pi rho: refuse before building a grid beyond the memory bound.
+    length = 2.0 * np.pi * (r + len(targets) * rho)
+    est = length / step
+    if est > MAX_BOUNDARY_POINTS:
+        raise ValueError(
+            f"spacing must be at least {length / MAX_BOUNDARY_POINTS:.3g} m for the boundary "
+            f"grid of kinematics {kin.name!r} (about {est:.3g} points, more than "
+            f"{MAX_BOUNDARY_POINTS}), got {step!r}"
+        )
+    pts = np.asarray(kin.boundary(position, targets, rho, step), dtype=np.float64)
+    pts = pts.reshape(-1, 2)
+    _, first = np.unique(pts, axis=0, return_index=True)
+    return pts[np.sort(first)]
+
+
+def _flag(shape: tuple[int, ...], idx: tuple[int, ...]) -> np.ndarray:
+    """Return a boolean array of ``shape`` that is True at ``idx`` only."""
+    out = np.zeros(shape, dtype=bool)
+    out[idx] = True
+    return out

@@ -40,6 +40,17 @@ tangent plane ``phi_k(Y_k) >= phi_k(Y0_k) + <G_k, Y_k - Y0_k>``. For a sum over 
 over the sensors; for the largest target (WORST_TRACE, ``combine`` a max)
 ``max_k phi_k >= phi_j >= tangent_j`` for every ``j``, so the bound is the largest over
 ``j`` of target ``j``'s separable bound (``_TargetsSearch._bounds``).
+
+**A kinematics of its own** (``problem.kinematics`` not all built-in
+:class:`activetrack.Disk`): there are no arcs; each free sensor's grid is its kinematics'
+:meth:`~activetrack.Kinematics.boundary` of its feasible set (reach set minus the K ``rho``
+disks) at ``spacing``, exact repeats dropped
+(:func:`activetrack.baselines._common.kinematic_boundaries`); the sizes are counted from
+the built grids (a grid beyond the memory bound is refused from the radius before it is
+built). A sensor whose feasible set is empty goes to its kinematics'
+:meth:`~activetrack.Kinematics.project` of its position, one that cannot move stays. The
+entries and the search are the ones above (``_target_features``: the problem's sensor
+models, detection, occluders).
 """
 
 from __future__ import annotations
@@ -50,10 +61,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from activetrack.baselines._common import sensor_modes
+from activetrack.baselines._common import kinematic_boundaries, own_kinematics, sensor_modes
 from activetrack.kinematics import geometry
 from activetrack.kinematics.feasible_set import boundary_arcs
-from activetrack.kinematics.team import require_disks
 from activetrack.models import sensor_models
 from activetrack.models.objective import TRACE, TraceObjective, sensor_information
 from activetrack.validation import FloatArray
@@ -141,8 +151,10 @@ class GBES:
         """Return each sensor's grid of next positions relative to the target, (K_i, 2).
 
         With K > 1 targets: relative to the first, ``problem.targets[0]``. ``problem`` is
-        single.
+        single. A kinematics of its own: its boundary grids (module docstring).
         """
+        if own_kinematics(problem):
+            return self._kinematic_grids(problem)
         free, fixed_rel = sensor_modes(problem)
         if problem.n_targets > 1:
             return self._boundary_grids(problem, free, fixed_rel)
@@ -165,13 +177,16 @@ class GBES:
 
         The same count as ``len`` of :meth:`candidates`: ``ceil(length / spacing) + 1``
         points per arc, less the shared end points of adjacent arcs (K > 1 targets:
-        :meth:`_arc_plan`). ``problem`` is single.
+        :meth:`_arc_plan`). ``problem`` is single. A kinematics of its own: the sizes of
+        the built grids (:meth:`_kinematic_grids`).
 
         Raises:
             ValueError: (one target) ``spacing`` is below ``_DISTINCT_STEP`` (1e-11 m), near
                 the 1e-12 m at which the grid drops repeated points, so its size cannot be
                 counted.
         """
+        if own_kinematics(problem):
+            return [len(g) for g in self._kinematic_grids(problem)]
         free, _ = sensor_modes(problem)
         if problem.n_targets > 1:
             plans = [self._arc_plan(problem, i) if free[i] else None for i in range(len(free))]
@@ -230,6 +245,19 @@ class GBES:
                 pieces.append(pts[(0 if keep0 else 1) : (n + 1 if keep1 else n)])
             out.append(np.concatenate(pieces) - origin)
         return out
+
+    def _kinematic_grids(
+        self, problem: PlanningProblem, absolute: bool = False
+    ) -> list[FloatArray]:
+        """Return :meth:`candidates` when the sensors move by their own kinematics: each
+        free sensor's boundary grid of its feasible set at ``spacing``, a fixed sensor's
+        next position, relative to ``problem.targets[0]`` (or ``absolute``)."""
+        free, fixed, boundary_of = kinematic_boundaries(problem, self.spacing)
+        origin = 0.0 if absolute else problem.targets[0]
+        return [
+            boundary_of[(i,)] - origin if free[i] else fixed[i : i + 1] - origin
+            for i in range(problem.n_sensors)
+        ]
 
     def _count(self, arcs: list[geometry.Arc]) -> int:
         """Return the number of distinct points :meth:`candidates` keeps on ``arcs``."""
@@ -320,7 +348,6 @@ class GBES:
                 ``prune``, the objective does not declare ``convex`` (the bound needs it),
                 or (K > 1) its ``combine`` is neither a sum nor a max.
         """
-        require_disks(problem.kinematics, "GBES")
         if problem.batch_shape:
             raise ValueError(
                 f"search takes a single problem, got batch_shape {problem.batch_shape}; "
@@ -328,9 +355,16 @@ class GBES:
             )
         fit = self.fitted(problem)
         total = fit.check(problem)
-        cands = fit.candidates(problem)
-        rel, n_eval = grid_optimum(problem, cands, self.block, self.batch_elements, self.prune)
-        positions = rel + problem.targets[0]
+        args = (self.block, self.batch_elements, self.prune)
+        if own_kinematics(problem):  # the grid points themselves (absolute, feasible)
+            grids = fit._kinematic_grids(problem, absolute=True)
+            cands = [g - problem.targets[0] for g in grids]
+            idx, n_eval = _grid_search(problem, cands, *args)
+            positions = np.stack([grids[i][k] for i, k in enumerate(idx)])
+        else:
+            cands = fit.candidates(problem)
+            idx, n_eval = _grid_search(problem, cands, *args)
+            positions = np.stack([cands[i][k] for i, k in enumerate(idx)]) + problem.targets[0]
         result = GBESResult(
             positions, float(problem.score(positions)), total, n_eval, float(fit.spacing)
         )
@@ -351,6 +385,18 @@ def grid_optimum(
     predicted target (with K targets: the first, ``problem.targets[0]``); the result
     (M, 2) is relative too. Exact over the candidates. ``problem`` is single.
     """
+    idx, n_eval = _grid_search(problem, candidates, block, batch_elements, prune)
+    return np.stack([candidates[i][k] for i, k in enumerate(idx)]), n_eval
+
+
+def _grid_search(
+    problem: PlanningProblem,
+    candidates: list[FloatArray],
+    block: int = 16,
+    batch_elements: int = 1 << 17,
+    prune: bool = True,
+) -> tuple[tuple[int, ...], int]:
+    """Return :func:`grid_optimum` as each sensor's index into its candidates."""
     if prune and not problem.objective.convex:
         raise ValueError(
             f"GBES's branch and bound needs an objective convex in each target's information "
@@ -374,8 +420,7 @@ def grid_optimum(
             search = _BlockSearch(feats, prior[0], block, batch_elements, problem.objective)
         else:
             search = _TargetsSearch(feats, prior, block, batch_elements, problem.objective)
-    idx, n_eval = search.run(prune)
-    return np.stack([candidates[i][k] for i, k in enumerate(idx)]), n_eval
+    return search.run(prune)
 
 
 def _target_features(problem: PlanningProblem, candidates: list[FloatArray]) -> list[FloatArray]:

@@ -13,15 +13,28 @@ feasible set (the reach disk minus the K ``rho`` disks,
 ``rho`` disks and ``rho``-circle pieces inside the reach disk); sensors whose feasible set
 is empty go to :func:`activetrack.kinematics.feasible_set.fallback`. With one target
 (any sensor model or pose covariance) the curve ADB as above.
+
+A sensor that moves by a kinematics of its own (``problem.kinematics``, not a built-in
+:class:`activetrack.Disk`) has no curve ADB: it moves to a point drawn uniformly by arc
+length from the whole boundary of its feasible set (reach set minus the K ``rho`` disks),
+as the disk's sensors do with K > 1 targets: its kinematics'
+:meth:`~activetrack.Kinematics.boundary` at ``radius / 1024``, each point weighted by the
+arc it stands for (:func:`arc_weights`). Its sensors whose feasible set is empty go to
+their kinematics' :meth:`~activetrack.Kinematics.project` (the world's rule).
 """
 
 from __future__ import annotations
 
 import numpy as np
+from scipy.spatial import cKDTree
 
-from activetrack.baselines._common import modes_and_arcs, sensor_modes
+from activetrack.baselines._common import (
+    kinematic_boundaries,
+    modes_and_arcs,
+    own_kinematics,
+    sensor_modes,
+)
 from activetrack.kinematics import geometry
-from activetrack.kinematics.team import require_disks
 from activetrack.validation import FloatArray
 from activetrack.world.problem import PlanningProblem
 
@@ -29,7 +42,8 @@ from activetrack.world.problem import PlanningProblem
 class RandomMotion:
     """Each sensor to a uniformly random point of its curve ADB (Section V, "RM").
 
-    With K > 1 targets: of the boundary of its feasible set (see the module docstring).
+    With K > 1 targets, or a kinematics of its own: of the boundary of its feasible set
+    (see the module docstring).
     """
 
     def plan(self, problem: PlanningProblem, rng: np.random.Generator) -> FloatArray:
@@ -38,8 +52,12 @@ class RandomMotion:
         Draws exactly one uniform per free sensor from ``rng``, in copy order (row-major
         over the batch axes), then sensor order.
         """
-        require_disks(problem.kinematics, "RandomMotion")
         targets = problem.targets
+        if own_kinematics(problem):  # each sensor's kinematics draws on its boundary of F
+            _, out, boundary_of = kinematic_boundaries(problem)
+            for k, pts in boundary_of.items():  # row-major over the batch, then the sensors
+                out[k] = draw_on_boundary(pts, rng.random())
+            return out
         if targets.shape[-2] > 1:
             free, out, arcs_of = modes_and_arcs(problem.sensors, targets, problem.r, problem.rho)
             for k in arcs_of:  # free sensors, row-major over the batch, then the sensors
@@ -59,3 +77,24 @@ class RandomMotion:
 
     def __repr__(self) -> str:
         return "RandomMotion()"
+
+
+def arc_weights(points: FloatArray) -> FloatArray:
+    """Return the arc length each of ``points`` (P, 2) stands for on the curve they sample:
+    half the sum of the distances to its two nearest other points (the spacing where the
+    points are evenly spaced; a lone point 1, a pair their distance each). Distinct points."""
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    if len(points) < 3:
+        gap = float(np.hypot(*(points[-1] - points[0]))) if len(points) == 2 else 0.0
+        return np.full(len(points), gap if gap > 0.0 else 1.0)
+    dist, _ = cKDTree(points).query(points, k=3)  # itself, then its two nearest
+    return 0.5 * (dist[:, 1] + dist[:, 2])
+
+
+def draw_on_boundary(points: FloatArray, u: FloatArray | float) -> FloatArray:
+    """Return the points of ``points`` (P, 2) that uniforms ``u`` pick with probability
+    proportional to :func:`arc_weights` (inverse transform), ``shape(u) + (2,)``."""
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    cdf = np.cumsum(arc_weights(points))
+    k = np.searchsorted(cdf, np.asarray(u, dtype=np.float64) * cdf[-1], side="right")
+    return points[np.minimum(k, len(points) - 1)]

@@ -467,17 +467,6 @@ def test_gsr_plans_inside_the_squares_coordinatewise_optimally(seed, near):
         assert best >= res.value * (1 - 1e-9), i
 
 
-def test_planners_of_the_disk_geometry_refuse_a_new_kinematics():
-    from activetrack.baselines.gbes import GBES
-    from activetrack.baselines.random_motion import RandomMotion
-
-    problem = _problem(0, steps=0)
-    with pytest.raises(ValueError, match="GBES.*square"):
-        GBES(spacing=0.25).search(problem)
-    with pytest.raises(ValueError, match="RandomMotion.*square"):
-        RandomMotion().plan(problem, np.random.default_rng(0))
-
-
 def test_gsr_and_the_world_with_squares_and_two_targets():
     from activetrack.baselines.gsr import GSR
 

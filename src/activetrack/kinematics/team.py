@@ -76,17 +76,6 @@ def actions_to_reach(
     return TeamMotion(kinematics).commands(points, sensors)
 
 
-def require_disks(kinematics: Any, planner: str) -> None:
-    """Raise ValueError unless every sensor of a problem moves by a built-in :class:`Disk`
-    (``kinematics`` None, or all disks): ``planner`` searches the disk's geometry."""
-    if kinematics is not None and not all_disks(kinematics):
-        names = sorted({k.name for k in kinematics})
-        raise ValueError(
-            f"{planner} searches the disk's feasible set (Lemma 3's curve ADB); the problem's "
-            f"kinematics {names} is not a built-in Disk: plan it with GSR or the look-ahead"
-        )
-
-
 def _probe(kin: Kinematics, field: str) -> None:
     """Raise ValueError naming ``field`` unless ``kin`` has a name, a radius in [0, 1e9],
     2-D action bounds, and a finite clip and apply of a probe point of the shape asked."""
