@@ -35,6 +35,7 @@ from activetrack.validation import (
     as_finite,
     check_trailing_shape,
     positive,
+    same_attributes,
     spd,
 )
 
@@ -190,6 +191,15 @@ class Objective(abc.ABC):
         _, ga, gb, gc = self.tangent(Y[..., 0, 0], Y[..., 0, 1], Y[..., 1, 1])
         half = 0.5 * gb
         return np.stack([np.stack([ga, half], -1), np.stack([half, gc], -1)], -2)
+
+    def __eq__(self, other: object) -> bool:
+        """Return whether ``other`` is the same objective: same class, equal attributes
+        (a copy or a pickle equals its original, so scenarios and problems compare)."""
+        return same_attributes(self, other)
+
+    def __hash__(self) -> int:
+        # By class only: equal objectives hash equal whatever their attributes.
+        return hash(type(self))
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}()"
