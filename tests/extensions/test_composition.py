@@ -286,6 +286,46 @@ def test_a_kinematics_that_returns_nan_mid_episode_is_named_not_silent(by):
             assert np.all(np.isfinite(w.get("sensors", 0)))
 
 
+class NaNProject(Square):
+    """Finite clip and apply; its projection out of a ``rho`` disk NaN."""
+
+    name = "nan_project"
+
+    def project(self, wanted, position, targets, rho):
+        return np.full(2, np.nan)
+
+
+def test_a_kinematics_whose_projection_is_nan_is_named_not_silent():
+    w = World(activetrack.make_scenario("paper", kinematics=NaNProject(30.0)), 1)
+    w.reset(seeds=[0])
+    target = w.planning_problem(0).target  # the predicted target the rho rule keeps off
+    with pytest.raises(ValueError, match="nan_project"):
+        w.step(np.repeat(np.reshape(target, (1, 2)), 3, 0))  # every sensor onto it
+
+
+class LateNaNObjective(EOptimal):
+    """Finite on the validation's probe; NaN once it has scored ``after`` times."""
+
+    name = "late_nan"
+
+    def __init__(self, after):
+        self.after, self.calls = after, 0
+
+    def of_entries(self, a, b, c):
+        self.calls += 1
+        return super().of_entries(a, b, c) * (np.nan if self.calls > self.after else 1.0)
+
+
+def test_an_objective_that_returns_nan_mid_episode_is_named_not_silent():
+    w = World(activetrack.make_scenario("paper", objective=LateNaNObjective(after=10**9)), 1)
+    w.objective.after = w.objective.calls + 3  # NaN from the 4th score on
+    w.reset(seeds=[0])
+    with pytest.raises(ValueError, match="objective 'late_nan'"):
+        for _ in range(6):
+            res = w.step(w.get("sensors", 0))
+            assert np.isfinite(res.reward)
+
+
 @pytest.mark.parametrize(("preset", "objective"), [("paper", "logdet"),
                                                    ("two_targets", "worst_trace")])  # fmt: skip
 def test_vector_env_rewards_the_scenarios_objective(preset, objective):

@@ -175,4 +175,9 @@ class TeamMotion:
                     continue
                 out[idx + (i,)] = kin.project(want[idx], p[idx], targets[idx], rho[idx + (i,)])
                 projected[idx + (i,)] = True
+            if not np.all(np.isfinite(out[..., i, :])):
+                raise ValueError(
+                    f"kinematics[{i}] {kin.name!r} ({type(kin).__name__}) returned NaN or "
+                    "inf from its project (the move out of a rho disk) on this step"
+                )
         return out, projected

@@ -309,6 +309,20 @@ LOGDET = LogDetObjective()
 OBJECTIVES: dict[str, Objective] = {o.name: o for o in (TRACE, WORST_TRACE, LOGDET)}
 
 
+def combined(objective: Objective, values: FloatArray) -> FloatArray:
+    """Return ``objective.combine(values)`` over the last axis (the targets), the world's
+    score; a ``ValueError`` naming the objective if it is NaN or inf (a new objective that
+    passed the scenario's probe may still fail on an episode's covariances: said, not a
+    silent NaN reward)."""
+    out = objective.combine(values)
+    if not np.all(np.isfinite(values)) or not np.all(np.isfinite(out)):
+        raise ValueError(
+            f"objective {objective.name!r} ({type(objective).__name__}) returned NaN or inf"
+            " on this step's posterior covariances (positive definite)"
+        )
+    return out
+
+
 def is_trace(objective: Objective) -> bool:
     """Return whether ``objective`` is the paper's trace itself (a :class:`TraceObjective`,
     not a subclass, which may change any method): Section IV-A's exact solve applies."""
