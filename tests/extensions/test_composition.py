@@ -93,22 +93,31 @@ def test_pettingzoo_parallel_and_aec_api_tests():
     np.testing.assert_array_equal(space.high, np.float32([H, H]))
     before = penv.world.get("sensors", 0)
     a = np.array([[0.5, -0.2], [-0.7, 0.7], [0.1, 0.0]])
-    penv.step({f"sensor_{i}": a[i].astype(np.float32) for i in range(3)})
+    _, rewards, *_ = penv.step({f"sensor_{i}": a[i].astype(np.float32) for i in range(3)})
+    for r in rewards.values():  # every agent's reward: minus the objective, not the trace
+        assert r == pytest.approx(-eoptimal_longhand(penv.world), rel=1e-10)
     np.testing.assert_allclose(penv.world.get("sensors", 0), before + a.astype(np.float32),
                                rtol=0, atol=1e-12)  # fmt: skip
 
 
 def test_gymnasium_env_checker_make_and_vector_env():
     import gymnasium
+    import pettingzoo
     from gymnasium.utils.env_checker import check_env
 
     from activetrack.envs import BatchedActiveTracking, CentralizedTrackingEnv
 
     check_env(CentralizedTrackingEnv(composed()), skip_render_check=True)
+    cenv = CentralizedTrackingEnv(composed())
+    cenv.reset(seed=2)
+    _, reward, *_ = cenv.step(np.zeros(6, np.float32))
+    assert reward == pytest.approx(-eoptimal_longhand(cenv.env.world), rel=1e-10)
     e = gymnasium.make("activetrack/ActiveTracking-v0", scenario=composed())
     e.reset(seed=0)
     assert isinstance(e.unwrapped.scenario.objective, EOptimal)
     # The scenario's fields as keywords, as the registration forwards them.
+    p = pettingzoo.make("parallel", "activetrack/ActiveTracking-v0", scenario=composed())
+    assert p.scenario == composed()
     k = gymnasium.make(
         "activetrack/ActiveTracking-v0", sensor_model=composed().sensor_model,
         kinematics=Square(H), objective=EOptimal(),

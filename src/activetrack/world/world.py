@@ -82,7 +82,7 @@ class StepResult(NamedTuple):
     """What one step returns for the copies it advanced (NumPy scalars for one copy).
 
     Attributes:
-        reward: ``-reward_scale * tr P(k+1|k+1)_11``.
+        reward: ``-reward_scale`` times the objective (by default ``tr P(k+1|k+1)_11``).
         terminated: the trace exceeded ``max_trace``.
         truncated: the episode reached ``n_steps``.
     """
