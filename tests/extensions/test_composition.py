@@ -463,3 +463,21 @@ def test_rewritten_models_plan_with_gsr_as_the_built_ins(which):
         b.step(pb)
         np.testing.assert_allclose(a.get("sensors", 0), b.get("sensors", 0), rtol=0, atol=1e-12)
         np.testing.assert_allclose(a.get("P", 0), b.get("P", 0), rtol=1e-9, atol=1e-12)
+
+
+def test_evaluation_writes_a_record_of_new_concepts_passed_as_overrides(tmp_path):
+    """The evaluation's ``episodes.json`` records the overrides; objects of one's own as the
+    scenario records them (by name and class), not a crash of ``json`` after the episodes."""
+    from activetrack.baselines.evaluation import run_evaluation
+
+    team = composed().sensor_model
+    run_evaluation(["gsr"], "paper", episodes=2, out_dir=tmp_path / "out", plot=False,
+                   progress=False, n_steps=3, kinematics=Square(H), objective=EOptimal(),
+                   sensor_model=team)  # fmt: skip
+    meta = json.loads((tmp_path / "out" / "episodes.json").read_text())
+    text = json.dumps(meta)
+    for name in ('"square"', '"e_optimal"', '"fading_range"'):
+        assert name in text
+    want = json.loads(json.dumps(composed(n_steps=3).to_dict()))
+    for key in ("kinematics", "objective", "sensor_model", "n_steps"):
+        assert key in text and json.dumps(want[key]) in text
