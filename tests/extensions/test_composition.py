@@ -123,6 +123,23 @@ def test_gymnasium_env_checker_make_and_vector_env():
         kinematics=Square(H), objective=EOptimal(),
     )  # fmt: skip
     assert k.unwrapped.scenario == composed()
+    made = gymnasium.make_vec(
+        "activetrack/ActiveTracking-v0", num_envs=2, kinematics=Square(H),
+        sensor_model=composed().sensor_model, objective=EOptimal(),
+    )  # fmt: skip
+    assert made.scenario == composed()
+    # reset(seed=s) twice: the same episodes.
+    runs = []
+    for _ in range(2):
+        obs, _ = made.reset(seed=9)
+        rng = np.random.default_rng(1)
+        out = [obs]
+        for _ in range(5):
+            obs, rew, *_ = made.step(rng.uniform(-H, H, (2, 6)).astype(np.float32))
+            out += [obs, rew]
+        runs.append(out)
+    for x, y in zip(*runs, strict=True):
+        np.testing.assert_array_equal(x, y)
     vec = BatchedActiveTracking(4, composed())
     vec.reset(seed=1)
     for _ in range(3):
