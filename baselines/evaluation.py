@@ -56,6 +56,7 @@ from activetrack.baselines.policy_specs import (  # noqa: F401 (public here too)
 from activetrack.baselines.simulation import check_planners, mean_ci
 from activetrack.files import RunOutputs, prepare_output_dir
 from activetrack.validation import check_int
+from activetrack.world.scenarios import make_scenario
 
 
 @dataclass(eq=False)
@@ -512,6 +513,10 @@ def run_evaluation(
         print("gsr was not requested: it was evaluated on the same seeds as the ratio's reference")
     if outputs is not None:
         given = scenario.to_dict() if hasattr(scenario, "to_dict") else scenario  # a Scenario
+        # Overrides as the scenario records them (a model, kinematics or objective of one's
+        # own by name and class: JSON has no object).
+        record = make_scenario(scenario, **overrides).to_dict()
+        overrides = {k: record.get(k, v) for k, v in overrides.items()}
         meta = {"scenario": given, "overrides": overrides, "episodes": episodes, "seed": seed}
         paths = write_results(results, outputs, meta, plot=plot)
         print("wrote " + ", ".join(str(p) for p in paths.values()))

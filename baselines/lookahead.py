@@ -508,7 +508,7 @@ def run_batched(
     """Return ``(mean_trace, deepest)`` per seed of closed-loop episodes in one batched world.
 
     ``planner`` None runs GSR. ``mean_trace`` is each episode's mean posterior trace and
-    ``deepest`` its deepest realized minimum-distance violation of the *true* target,
+    ``deepest`` its deepest realized minimum-distance violation of the *true* targets,
     ``max(0, max_k max_i (rho_i - ||p_S_i(k) - p_T(k)||))`` (m; 0: never inside a disk).
     """
     from activetrack.baselines import rollout as ro
@@ -529,8 +529,10 @@ def run_batched(
         def step(self, step: ro.Step) -> None:
             w = step.world
             traces.append(w.trace.copy())
-            d = np.linalg.norm(w.sensors - w.x_true[:, None, :2], axis=-1)
-            deepest[:] = np.maximum(deepest, np.max(w.params.rho - d, axis=1))
+            # Every true target's position (N, K, 2) (each target's own state size).
+            targets = np.stack([w.get("x_true", target=k)[:, :2] for k in range(w.n_targets)], 1)
+            d = np.linalg.norm(w.sensors[:, None] - targets[:, :, None], axis=-1)  # (N, K, M)
+            deepest[:] = np.maximum(deepest, np.max(w.params.rho - d, axis=(1, 2)))
 
     traces, deepest = [], np.zeros(len(seeds))
     ro.rollout(World(scenario, len(seeds)), Warm(), seeds, Record(), batched=True)

@@ -240,7 +240,7 @@ class BatchedActiveTracking(VectorEnv):
         centers = [rec.centers() for rec in self._recorders]
         world_step(moves, None if resetting is None else ~resetting)
         terminated, truncated = w.terminated.copy(), w.truncated.copy()
-        rewards = -self.scenario.reward_scale * w.trace
+        rewards = -self.scenario.reward_scale * w.score  # the objective (the trace by default)
         infos: dict[str, Any] = {}
         if resetting is not None:
             w.reset(resetting)

@@ -7,7 +7,8 @@ same random draws, same configuration keywords) for single-agent libraries:
   ``[a_0x, a_0y, a_1x, a_1y, ...]`` (each a displacement in units of the reach, eq. 13);
 - observation ``Box(float32, (M (5 + 6M),))``: the agents' observations concatenated in
   agent order (layout in :mod:`activetrack.world.observation`);
-- reward ``-reward_scale * tr P(k+1|k+1)_11`` (eq. 12, 17), the team's shared reward.
+- reward ``-reward_scale`` times the scenario's objective (by default the trace
+  ``tr P(k+1|k+1)_11``, eq. 12, 17), the team's shared reward.
 
 The episode truncates itself after ``scenario.n_steps`` steps, so it is registered
 without a ``TimeLimit`` (``gymnasium.make`` adds none). Registered as

@@ -12,8 +12,8 @@ timeline:
 3. the true target moves (eq. 2), every sensor measures (eq. 4), the EKF updates
    (eq. 11), with the step's ``n + 2M`` standard normals drawn from the episode
    generator, in the same order as the simulation runner;
-4. every agent gets the reward ``-reward_scale * tr P(k+1|k+1)_11``: minus the paper's
-   objective (eq. 12, 17) with the default ``reward_scale = 1``;
+4. every agent gets the reward ``-reward_scale`` times the scenario's objective at the
+   posterior (``tr P(k+1|k+1)_11`` by default, the paper's eq. 12, 17);
 5. the estimate is predicted again for the next observation.
 
 After ``scenario.n_steps`` steps every agent is truncated; if ``scenario.max_trace`` is

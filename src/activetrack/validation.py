@@ -296,3 +296,23 @@ def as_generator(name: str, seed: Any) -> np.random.Generator:
             f"{name} must be an integer >= 0 (or a SeedSequence, BitGenerator or Generator), "
             f"got {seed!r}"
         ) from None
+
+
+def same_attributes(a: object, b: object) -> bool:
+    """Return whether ``a`` and ``b`` are of the same class with equal instance attributes
+    (arrays compared by value): the equality of a user's model, kinematics or objective,
+    so that a copy, a pickle (Ray ships them to workers) or a twin built the same way
+    equals the original."""
+    if type(a) is not type(b):
+        return False
+    da, db = getattr(a, "__dict__", {}), getattr(b, "__dict__", {})
+    if da.keys() != db.keys():
+        return False
+    for k, x in da.items():
+        y = db[k]
+        if isinstance(x, np.ndarray) or isinstance(y, np.ndarray):
+            if not np.array_equal(x, y):
+                return False
+        elif not bool(x == y):
+            return False
+    return True

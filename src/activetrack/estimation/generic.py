@@ -40,6 +40,18 @@ def groups(models: Sequence[SensorModel]) -> list[tuple[SensorModel, np.ndarray]
     return [(model, np.array(idx)) for model, idx in out]
 
 
+def _finite(model: SensorModel, what: str, *arrays: FloatArray) -> None:
+    """Raise ValueError naming the model unless ``arrays`` are finite: a model of one's own
+    that passed the scenario's probe may still return NaN or inf on a geometry of an
+    episode, which would otherwise turn the filter's covariance or a plan NaN silently."""
+    if not all(np.all(np.isfinite(a)) for a in arrays):
+        raise ValueError(
+            f"sensor_model {model.name!r} ({type(model).__name__}) returned NaN or inf from "
+            f"its {what} on this step's geometry; a model must be finite for every sensor "
+            "and target position (detection is the scenario's max_range and p_detect)"
+        )
+
+
 def _per_sensor(value: FloatArray | float, idx: np.ndarray, m: int) -> FloatArray:
     """Return a per-sensor value (scalar, (M,) or (..., M)) at the sensors ``idx``."""
     v = np.asarray(value, np.float64)
@@ -71,6 +83,7 @@ def measure(
             _per_sensor(sigma_d2, idx, m), _per_sensor(sigma_theta2, idx, m),
             normals[..., idx, :], _per_sensor(orientation, idx, m),
         )  # fmt: skip
+        _finite(model, "measure", out[..., idx, :])
     return out
 
 
@@ -102,6 +115,7 @@ def update_terms(
             keep = np.asarray(mask)[..., idx]
             Yi = np.where(keep[..., None, None], Yi, 0.0)
             bi = np.where(keep[..., None], bi, 0.0)
+        _finite(model, "update_terms (its Jacobian, noise or residual)", Yi, bi)
         Y = Y + Yi.sum(axis=-3)
         b = b + bi.sum(axis=-2)
     return Y, b
@@ -187,5 +201,6 @@ def entries(
             np.broadcast_to(sigma_theta2, shape)[..., idx],
             cov, det, np.broadcast_to(orientation, shape)[..., idx],
         )  # fmt: skip
+        _finite(model, "information", J)
         a[..., idx], b[..., idx], c[..., idx] = J[..., 0, 0], J[..., 0, 1], J[..., 1, 1]
     return a, b, c

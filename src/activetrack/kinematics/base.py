@@ -39,7 +39,7 @@ from abc import ABC, abstractmethod
 
 import numpy as np
 
-from activetrack.validation import FloatArray
+from activetrack.validation import FloatArray, same_attributes
 
 #: Relative tolerance of the membership tests (as the disk's,
 #: :data:`activetrack.kinematics.sensor_motion.TOL`).
@@ -226,6 +226,15 @@ class Kinematics(ABC):
         g = rim[:, None, :] - targets
         margin = np.min(np.hypot(g[..., 0], g[..., 1]), axis=-1) - rho
         return rim[int(np.argmax(margin))].copy()
+
+    def __eq__(self, other: object) -> bool:
+        """Return whether ``other`` is the same kinematics: same class, equal attributes
+        (a copy or a pickle equals its original, so scenarios and problems compare)."""
+        return same_attributes(self, other)
+
+    def __hash__(self) -> int:
+        # By class only: equal kinematics hash equal whatever their attributes (arrays too).
+        return hash(type(self))
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}(radius={self.radius!r})"

@@ -148,6 +148,11 @@ class TeamMotion:
         for i, kin in enumerate(self.team):
             p = sensors[..., i, :]
             want = kin.clip(x[..., i, :], p) if absolute else kin.apply(x[..., i, :], p)
+            if not np.all(np.isfinite(want)):  # a bug of the kinematics: said, not stored
+                raise ValueError(
+                    f"kinematics[{i}] {kin.name!r} ({type(kin).__name__}) returned NaN or "
+                    f"inf from its {'clip' if absolute else 'apply'} on this step's positions"
+                )
             out[..., i, :] = want
             if not kin.radius > 0.0:  # a sensor that cannot move stays, even inside
                 continue
@@ -159,4 +164,9 @@ class TeamMotion:
                     continue
                 out[idx + (i,)] = kin.project(want[idx], p[idx], targets[idx], rho[idx + (i,)])
                 projected[idx + (i,)] = True
+            if not np.all(np.isfinite(out[..., i, :])):
+                raise ValueError(
+                    f"kinematics[{i}] {kin.name!r} ({type(kin).__name__}) returned NaN or "
+                    "inf from its project (the move out of a rho disk) on this step"
+                )
         return out, projected

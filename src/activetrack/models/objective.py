@@ -35,6 +35,7 @@ from activetrack.validation import (
     as_finite,
     check_trailing_shape,
     positive,
+    same_attributes,
     spd,
 )
 
@@ -191,6 +192,15 @@ class Objective(abc.ABC):
         half = 0.5 * gb
         return np.stack([np.stack([ga, half], -1), np.stack([half, gc], -1)], -2)
 
+    def __eq__(self, other: object) -> bool:
+        """Return whether ``other`` is the same objective: same class, equal attributes
+        (a copy or a pickle equals its original, so scenarios and problems compare)."""
+        return same_attributes(self, other)
+
+    def __hash__(self) -> int:
+        # By class only: equal objectives hash equal whatever their attributes.
+        return hash(type(self))
+
     def __repr__(self) -> str:
         return f"{type(self).__name__}()"
 
@@ -297,6 +307,20 @@ WORST_TRACE = WorstTraceObjective()
 LOGDET = LogDetObjective()
 #: The objectives by name (:attr:`activetrack.Scenario.objective`).
 OBJECTIVES: dict[str, Objective] = {o.name: o for o in (TRACE, WORST_TRACE, LOGDET)}
+
+
+def combined(objective: Objective, values: FloatArray) -> FloatArray:
+    """Return ``objective.combine(values)`` over the last axis (the targets), the world's
+    score; a ``ValueError`` naming the objective if it is NaN or inf (a new objective that
+    passed the scenario's probe may still fail on an episode's covariances: said, not a
+    silent NaN reward)."""
+    out = objective.combine(values)
+    if not np.all(np.isfinite(values)) or not np.all(np.isfinite(out)):
+        raise ValueError(
+            f"objective {objective.name!r} ({type(objective).__name__}) returned NaN or inf"
+            " on this step's posterior covariances (positive definite)"
+        )
+    return out
 
 
 def is_trace(objective: Objective) -> bool:

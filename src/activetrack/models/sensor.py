@@ -42,7 +42,7 @@ import numpy as np
 from activetrack.models import sensor_models as sm
 from activetrack.models.measurement import ZERO_DISTANCE2, wrap_angle
 from activetrack.models.sensor_models import SensorCode
-from activetrack.validation import FloatArray
+from activetrack.validation import FloatArray, same_attributes
 
 #: Step of the central differences of the default :meth:`SensorModel.jacobian`, relative to
 #: the distance (the truncation error is O(step^2), the rounding O(eps / step)).
@@ -238,15 +238,7 @@ class SensorModel:
 
     def __eq__(self, other: object) -> bool:
         """Return whether ``other`` is the same model: same class, equal attributes."""
-        if type(self) is not type(other):
-            return False
-        a, b = vars(self), vars(other)
-        return a.keys() == b.keys() and all(
-            np.array_equal(a[k], b[k])
-            if isinstance(a[k], np.ndarray) or isinstance(b[k], np.ndarray)
-            else bool(a[k] == b[k])
-            for k in a
-        )
+        return same_attributes(self, other)
 
     def __hash__(self) -> int:
         # By class only: equal models hash equal whatever their attributes (arrays too).

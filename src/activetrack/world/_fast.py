@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from activetrack._jit import as_rows
+from activetrack.models.objective import combined
 from activetrack.world import _loop_kernels as loop_kernels
 from activetrack.world import _observation_kernels as observation_kernels
 from activetrack.world import observation
@@ -78,8 +79,8 @@ def step_one(w: World, absolute: bool, moves: Any, name: str) -> tuple[Any, Any,
     t["x_true"], t["x_hat"], t["P"], t["x_pred"], t["P_pred"] = (
         x_next_true, x_post, P_post, x_pred, P_next)  # fmt: skip
     trace = np.float64(trace)
-    score = trace if w._plain else w.objective.combine(
-        np.stack([w.objective.of_covariance(P_post)], -1)
+    score = trace if w._plain else combined(
+        w.objective, np.stack([w.objective.of_covariance(P_post)], -1)
     )  # fmt: skip
     terminated = trace > w._max_trace
     new = {"sensors": new_sensors, "fixes": new_sensors, "projected": projected,

@@ -387,7 +387,7 @@ class PlanningProblem:
         if not problems:
             raise ValueError("problems must hold at least one problem")
         objective = problems[0].objective
-        if any(p.objective is not objective for p in problems):
+        if any(p.objective != objective for p in problems):
             raise ValueError("problems must all have the same objective")
         multi = problems[0].multi_target
         if any(p.multi_target != multi for p in problems):

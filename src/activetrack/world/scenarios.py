@@ -123,7 +123,7 @@ class Scenario:
             PettingZoo's name for it, ``max_cycles``.
         max_trace: optional early termination when the posterior trace exceeds it
             [1e-300, 1e300], or None.
-        reward_scale: the environments' reward is ``-reward_scale * trace`` (1 = the paper)
+        reward_scale: the reward is ``-reward_scale`` times the objective (1 = the paper)
             [1e-12, 1e12].
         n_targets: number of targets K [1, 100]. With K > 1, ``motion`` and ``q`` may be
             per target (a tuple of K), ``x0`` and ``x0_hat`` are per target (K rows, each

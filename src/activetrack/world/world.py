@@ -62,7 +62,7 @@ import numpy as np
 from activetrack.kinematics import sensor_motion
 from activetrack.kinematics.team import TeamMotion
 from activetrack.models.motion import predict, psd_factor
-from activetrack.models.objective import TRACE, as_objective
+from activetrack.models.objective import TRACE, as_objective, combined
 from activetrack.validation import FloatArray, as_generator, check_int
 from activetrack.world import _fast, observation, tracking
 from activetrack.world._occluded import OccludedMoves
@@ -82,7 +82,7 @@ class StepResult(NamedTuple):
     """What one step returns for the copies it advanced (NumPy scalars for one copy).
 
     Attributes:
-        reward: ``-reward_scale * tr P(k+1|k+1)_11``.
+        reward: ``-reward_scale`` times the objective (by default ``tr P(k+1|k+1)_11``).
         terminated: the trace exceeded ``max_trace``.
         truncated: the episode reached ``n_steps``.
     """
@@ -380,7 +380,7 @@ class World(RandomStreams, WorldReaders, OccludedMoves):
             "fixes": self._fix(sensors, e) if self._pose else sensors,
             "k": 0,
             "trace": trace,
-            "score": trace if self._plain else float(self.objective.combine(np.array(score))),
+            "score": trace if self._plain else float(combined(self.objective, np.array(score))),
             "projected": False,
             "n_projected": 0,
             "terminated": False,
@@ -484,7 +484,7 @@ class World(RandomStreams, WorldReaders, OccludedMoves):
             sensors, fixes, projected = sensors[sel], fixes[sel], projected[sel]
             if detected is not None:
                 detected = detected[sel]
-        score = trace if self._plain else self.objective.combine(np.stack(scores, -1))
+        score = trace if self._plain else combined(self.objective, np.stack(scores, -1))
         terminated = trace > self._max_trace  # never when max_trace is None (inf)
         new = {
             "sensors": sensors,
