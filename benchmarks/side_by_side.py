@@ -27,7 +27,16 @@ few percent. Valgrind's virtual CPU has fewer instruction sets than the host (no
 and numba keys its cached machine code by the CPU, so the tool asks valgrind which CPU it
 shows, compiles every kernel for that CPU once, natively (an untimed warm-up run of each
 worker, into a numba cache folder of its own, ``--cache-dir``), and refuses a count during
-which numba compiled anything. The two sides run at the same time (``--jobs``).
+which numba compiled anything. The two sides run at the same time (``--jobs``). All
+seven kinds take about 30 minutes on a loaded 2-core machine when the kernels are not yet
+cached for valgrind's CPU (the first run of a checkout), less afterwards.
+``--callgrind-out DIR`` keeps the profiles; ``benchmarks/callgrind_diff.py DIR KIND`` then
+says which functions' instructions per call differ between the sides.
+
+Any two checkouts, neither of them this one (each with its own ``.venv``)::
+
+    OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/side_by_side.py \
+        --old ../baseline --new ../other --instructions --json instructions.json
 
 ``--compile`` times a cold compile instead: every kernel of each checkout
 (``activetrack.kernel_cache.compile_all``, what ``activetrack kernels`` runs) into a fresh
@@ -323,7 +332,7 @@ def _default_cache_dir() -> Path:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--old", type=Path, help="the other checkout (with its .venv)")
+    parser.add_argument("--old", type=Path, help="the old checkout (with its .venv)")
     parser.add_argument(
         "--new", type=Path, help="the new checkout (default: the one holding this script)"
     )
@@ -367,13 +376,27 @@ def main() -> None:
         parser.error("--jobs must be >= 1")
     if args.json and not args.json.parent.is_dir():
         parser.error(f"--json: no folder {args.json.parent}")
+    if args.json and args.json.exists():
+        parser.error(f"--json: {args.json} exists (results are not overwritten)")
+    if args.callgrind_out and any(args.callgrind_out.glob("callgrind.*")):
+        parser.error(f"--callgrind-out: {args.callgrind_out} holds profiles already")
     new_root = (args.new or Path(__file__).resolve().parents[1]).resolve()
     sides = {"old": args.old.resolve(), "new": new_root}
     for side, root in sides.items():
         if not (root / ".venv/bin/python").exists():
             parser.error(f"--{side}: no {root / '.venv/bin/python'}")
-    print(f"old: {sides['old']}\nnew: {sides['new']}")
-    rows: dict[str, dict] = {}
+    rows: dict[str, dict] = {"checkouts": {}}
+    for side, root in sides.items():
+        head = subprocess.run(
+            ["git", "-C", str(root), "rev-parse", "--short", "HEAD"], capture_output=True, text=True
+        ).stdout.strip()
+        dirty = subprocess.run(
+            ["git", "-C", str(root), "status", "--porcelain", "--untracked-files=no"],
+            capture_output=True,
+            text=True,
+        ).stdout.strip()
+        rows["checkouts"][side] = {"path": str(root), "commit": head, "modified": bool(dirty)}
+        print(f"{side}: {root} at {head or '?'}{' (modified)' if dirty else ''}")
     if args.compile:
         results: dict[str, list[dict]] = {"old": [], "new": []}
         for r in range(args.rounds):
