@@ -316,3 +316,16 @@ def same_attributes(a: object, b: object) -> bool:
         elif not bool(x == y):
             return False
     return True
+
+
+class ComparedByValue:
+    """Equality by value for the concept objects a user subclasses (a sensor model, a
+    kinematics, an objective): same class and equal attributes (:func:`same_attributes`),
+    so scenarios and planning problems built from copies, pickles or twins compare equal."""
+
+    def __eq__(self, other: object) -> bool:
+        return same_attributes(self, other)
+
+    def __hash__(self) -> int:
+        # By class only: equal objects hash equal whatever their attributes (arrays too).
+        return hash(type(self))

@@ -39,7 +39,7 @@ from abc import ABC, abstractmethod
 
 import numpy as np
 
-from activetrack.validation import FloatArray, same_attributes
+from activetrack.validation import ComparedByValue, FloatArray
 
 #: Relative tolerance of the membership tests (as the disk's,
 #: :data:`activetrack.kinematics.sensor_motion.TOL`).
@@ -59,7 +59,7 @@ def outside_disks(points: FloatArray, targets: FloatArray, rho: float, tol: floa
     return np.all(np.hypot(e[..., 0], e[..., 1]) >= rho * (1.0 - tol), axis=-1)
 
 
-class Kinematics(ABC):
+class Kinematics(ComparedByValue, ABC):
     """How one sensor moves in one step (module docstring); subclass it for a new one.
 
     Subclasses set ``name`` (a non-empty string, recorded in ``Scenario.to_dict``) and
@@ -226,15 +226,6 @@ class Kinematics(ABC):
         g = rim[:, None, :] - targets
         margin = np.min(np.hypot(g[..., 0], g[..., 1]), axis=-1) - rho
         return rim[int(np.argmax(margin))].copy()
-
-    def __eq__(self, other: object) -> bool:
-        """Return whether ``other`` is the same kinematics: same class, equal attributes
-        (a copy or a pickle equals its original, so scenarios and problems compare)."""
-        return same_attributes(self, other)
-
-    def __hash__(self) -> int:
-        # By class only: equal kinematics hash equal whatever their attributes (arrays too).
-        return hash(type(self))
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}(radius={self.radius!r})"

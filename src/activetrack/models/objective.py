@@ -31,11 +31,11 @@ from numpy.typing import ArrayLike
 from activetrack._jit import kernel
 from activetrack.linalg2 import inv2, rotation, trace_inv2
 from activetrack.validation import (
+    ComparedByValue,
     FloatArray,
     as_finite,
     check_trailing_shape,
     positive,
-    same_attributes,
     spd,
 )
 
@@ -89,7 +89,7 @@ def total_information(
 TANGENT_STEP = float(np.finfo(np.float64).eps ** (1.0 / 3.0))
 
 
-class Objective(abc.ABC):
+class Objective(ComparedByValue, abc.ABC):
     """The score of a configuration: a function ``phi_k(Y_k)`` of each target's total
     position information ``Y_k = P11_k^{-1} + sum_i info_ik`` (2x2 symmetric positive
     definite, eq. 12, 17), combined over the K targets (:meth:`combine`). Planners minimize
@@ -191,15 +191,6 @@ class Objective(abc.ABC):
         _, ga, gb, gc = self.tangent(Y[..., 0, 0], Y[..., 0, 1], Y[..., 1, 1])
         half = 0.5 * gb
         return np.stack([np.stack([ga, half], -1), np.stack([half, gc], -1)], -2)
-
-    def __eq__(self, other: object) -> bool:
-        """Return whether ``other`` is the same objective: same class, equal attributes
-        (a copy or a pickle equals its original, so scenarios and problems compare)."""
-        return same_attributes(self, other)
-
-    def __hash__(self) -> int:
-        # By class only: equal objectives hash equal whatever their attributes.
-        return hash(type(self))
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}()"

@@ -42,14 +42,14 @@ import numpy as np
 from activetrack.models import sensor_models as sm
 from activetrack.models.measurement import ZERO_DISTANCE2, wrap_angle
 from activetrack.models.sensor_models import SensorCode
-from activetrack.validation import FloatArray, same_attributes
+from activetrack.validation import ComparedByValue, FloatArray
 
 #: Step of the central differences of the default :meth:`SensorModel.jacobian`, relative to
 #: the distance (the truncation error is O(step^2), the rounding O(eps / step)).
 FD_STEP = 1e-6
 
 
-class SensorModel:
+class SensorModel(ComparedByValue):
     """The measurement model of one sensor: subclass it to define a new sensor.
 
     A subclass sets :attr:`name` (a short identifier, not a built-in's), :attr:`slots` and
@@ -235,14 +235,6 @@ class SensorModel:
     def builtin(self) -> bool:
         """Whether this is a built-in model (its compiled kernels apply)."""
         return self.code is not None
-
-    def __eq__(self, other: object) -> bool:
-        """Return whether ``other`` is the same model: same class, equal attributes."""
-        return same_attributes(self, other)
-
-    def __hash__(self) -> int:
-        # By class only: equal models hash equal whatever their attributes (arrays too).
-        return hash(type(self))
 
     def __repr__(self) -> str:
         args = ", ".join(f"{k}={v!r}" for k, v in vars(self).items())
