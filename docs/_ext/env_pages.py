@@ -61,6 +61,10 @@ def header_rows(env_id: str) -> list[tuple[str, str]]:
             ("Action space (Gymnasium)", _code(genv.action_space)),
             ("Observation shape (per agent)", _code(penv.observation_space(agent0).shape)),
             ("Observation shape (Gymnasium)", _code(genv.observation_space.shape)),
+            (
+                "Observation layout",
+                "[Concepts: the observation layout](../concepts.md#the-observation-layout)",
+            ),
             ("State shape", _code(penv.state_space.shape)),
             ("Episode length", f"{_code(sc.n_steps)} steps of {_code(sc.dt)} s"),
             ("Targets", _code(sc.n_targets)),
@@ -70,6 +74,20 @@ def header_rows(env_id: str) -> list[tuple[str, str]]:
     finally:
         genv.close()
         penv.close()
+
+
+def _preset_table(preset: str) -> list[str]:
+    """Return the Markdown table of a preset's fields (those that differ from the paper's)."""
+    from activetrack.world.presets import PRESETS
+
+    fields = {k: v for k, v in PRESETS[preset].items() if k != "name"}
+    if not fields:
+        return ["None: this is the paper's setup (Section V)."]
+    return [
+        "| field | value |",
+        "|---|---|",
+        *(f"| {_code(k)} | {_code(v)} |" for k, v in fields.items()),
+    ]
 
 
 def _manual(obj: Any, config: Any) -> str:
@@ -84,10 +102,12 @@ def _manual(obj: Any, config: Any) -> str:
 
 def page(env_id: str, config: Any = None) -> str:
     """Return the Markdown source of the page of ``env_id``."""
+    from activetrack._registry import ALL_IDS
     from activetrack.envs.centralized import CentralizedTrackingEnv
     from activetrack.envs.tracking_env import TrackingParallelEnv
 
     name = page_name(env_id)
+    preset = ALL_IDS[env_id]
     rows = header_rows(env_id)
     lines = [
         f"# {name}",
@@ -97,6 +117,15 @@ def page(env_id: str, config: Any = None) -> str:
         "| | |",
         "|---|---|",
         *(f"| {field} | {value} |" for field, value in rows),
+        "",
+        "## The scenario",
+        "",
+        f"The preset {_code(preset)} (`activetrack.make_scenario({preset!r})`); its fields that",
+        "differ from the paper's defaults (every field and its accepted range:",
+        "{py:class}`activetrack.Scenario`; any of them can be overridden by keyword,",
+        f"`gymnasium.make({env_id!r}, n_sensors=8)`):",
+        "",
+        *_preset_table(preset),
         "",
         "## The multi-agent environment (PettingZoo)",
         "",
