@@ -62,7 +62,7 @@ def _copy_source(dest: Path) -> Path:
     """Copy the project without its virtual environment, caches and build outputs."""
     ignore = shutil.ignore_patterns(
         ".git", ".venv", "results", "build", "dist", "*.egg-info", "__pycache__", ".*_cache",
-        ".benchmarks", "*.pyc",
+        ".benchmarks", "*.pyc", "_build",
     )  # fmt: skip
     return Path(shutil.copytree(ROOT, dest, ignore=ignore))
 

@@ -149,7 +149,8 @@ class TrackingPolicy(ActorCriticPolicy):
 
     Args:
         action_gain: the gain K of :func:`saturate`; None keeps SB3's linear mean.
-        *args, **kwargs: as for ``ActorCriticPolicy`` (no gSDE: a diagonal Gaussian).
+        *args: as for ``ActorCriticPolicy``.
+        **kwargs: as for ``ActorCriticPolicy`` (no gSDE: a diagonal Gaussian).
     """
 
     def __init__(self, *args: Any, action_gain: float | None = 100.0, **kwargs: Any) -> None:

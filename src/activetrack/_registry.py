@@ -27,6 +27,7 @@ if TYPE_CHECKING:  # (importlib.abc alone costs ~20 ms at import)
     from importlib.machinery import ModuleSpec
     from types import ModuleType
 
+#: The paper's environment id (Section V's setup, the ``paper`` preset).
 ENV_ID = "activetrack/ActiveTracking-v0"
 #: The tasks beyond the paper: registered id -> preset (:data:`activetrack.world.scenarios.TASKS`).
 TASK_IDS = {

@@ -46,6 +46,8 @@ _BLOCKS = (
     ((-10.0, 12.0), (-6.0, 12.0), (-6.0, 16.0), (-10.0, 16.0)),
 )
 
+#: The named presets, name -> the Scenario fields that differ from the defaults (the
+#: paper's): ``paper``, ``homogeneous`` and the :data:`TASKS`.
 PRESETS: dict[str, dict[str, Any]] = {
     # Section V: heterogeneous team of three, CV target, 50 steps of 0.1 s.
     "paper": {},

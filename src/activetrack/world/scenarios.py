@@ -96,9 +96,9 @@ class Scenario:
     every sensor) or a tuple of M floats, vectors as tuples of floats, ``P0`` as a tuple
     (its diagonal) or a tuple of tuples. An invalid value raises a ``ValueError`` naming
     the field and its accepted range; strings, bools, ``None``, complex numbers, NaN and
-    inf are rejected wherever a number is expected.
+    inf are rejected wherever a number is expected. Accepted ranges are in brackets.
 
-    Attributes (accepted ranges in brackets):
+    Attributes:
         name: label of the preset it came from (a string).
         n_sensors: team size M [1, 10000].
         sigma_d2, sigma_theta2: per-sensor range (m^2) [1e-8, 1e8] and bearing (rad^2)
