@@ -34,3 +34,38 @@ from hypothesis import settings  # noqa: E402 (after the BLAS kernels are pinned
 settings.register_profile("ci", derandomize=True)
 settings.register_profile("explore", derandomize=False)
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
+
+
+import shutil  # noqa: E402
+import subprocess  # noqa: E402
+import sys  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import pytest  # noqa: E402
+
+
+@pytest.fixture(scope="session")
+def docs_site(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """Build the manual once per run, as ``make docs`` does (``-W --keep-going``), from a
+    copy of ``docs/`` in a temporary folder (the generated pages are written there, not
+    into the checkout); return the HTML folder. Skips without the ``[docs]`` extra."""
+    for module in ("sphinx", "myst_parser", "furo"):
+        pytest.importorskip(module, reason="the [docs] extra is not installed")
+    tmp = tmp_path_factory.mktemp("docs")
+    root = Path(__file__).resolve().parents[1]
+    src = Path(
+        shutil.copytree(
+            root / "docs",
+            tmp / "src",
+            ignore=shutil.ignore_patterns("_build", "environments", "api.rst"),
+        )
+    )
+    out = tmp / "html"
+    run = subprocess.run(
+        [sys.executable, "-m", "sphinx", "-b", "html", "-W", "--keep-going", "-q", src, out],
+        capture_output=True,
+        text=True,
+        timeout=900,
+    )
+    assert run.returncode == 0, f"sphinx failed:\n{run.stdout[-4000:]}\n{run.stderr[-4000:]}"
+    return out

@@ -11,9 +11,6 @@ from __future__ import annotations
 
 import ast
 import re
-import shutil
-import subprocess
-import sys
 from html.parser import HTMLParser
 from pathlib import Path
 
@@ -37,25 +34,9 @@ pytestmark = pytest.mark.slow
 
 
 @pytest.fixture(scope="module")
-def site(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """Build the site as ``make docs`` does (``-W --keep-going``) and return its folder."""
-    tmp = tmp_path_factory.mktemp("docs")
-    src = Path(
-        shutil.copytree(
-            ROOT / "docs",
-            tmp / "src",
-            ignore=shutil.ignore_patterns("_build", "environments", "api.rst"),
-        )
-    )
-    out = tmp / "html"
-    run = subprocess.run(
-        [sys.executable, "-m", "sphinx", "-b", "html", "-W", "--keep-going", "-q", src, out],
-        capture_output=True,
-        text=True,
-        timeout=600,
-    )
-    assert run.returncode == 0, f"sphinx failed:\n{run.stdout[-4000:]}\n{run.stderr[-4000:]}"
-    return out
+def site(docs_site: Path) -> Path:
+    """The built site (``tests/conftest.py``'s ``docs_site``)."""
+    return docs_site
 
 
 class _Table(HTMLParser):

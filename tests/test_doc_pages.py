@@ -1,0 +1,71 @@
+"""Every Python block of the README and of the manual's pages runs as written and prints
+what the page shows (the rules are in :mod:`tests.doc_blocks`).
+
+The pages are found, not listed: the README and every Markdown page under ``docs/`` that
+Sphinx builds (the generated environment pages are checked by ``tests/test_docs.py``).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from tests.doc_blocks import assert_prints, python_blocks, run_blocks
+
+ROOT = Path(__file__).resolve().parents[1]
+#: Pages Sphinx does not build (``docs/conf.py``'s ``exclude_patterns``) or generates.
+NOT_PAGES = {"docs/sensor-models-design.md"}
+PAGES = [
+    p.relative_to(ROOT).as_posix()
+    for p in [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))]
+    if not {"_build", "environments"} & set(p.relative_to(ROOT).parts)
+    and p.relative_to(ROOT).as_posix() not in NOT_PAGES
+]
+WITH_CODE = [p for p in PAGES if python_blocks((ROOT / p).read_text(encoding="utf-8"))]
+
+
+def test_the_pages_are_found():
+    assert "README.md" in WITH_CODE and "docs/index.md" in PAGES
+
+
+@pytest.mark.parametrize("page", WITH_CODE)
+def test_python_blocks_print_what_the_page_shows(page, tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    assert run_blocks(page, (ROOT / page).read_text(encoding="utf-8"), capsys) > 0
+
+
+def test_output_comparison():
+    """The comparison itself, on made-up outputs."""
+    assert_prints(
+        "[ 1.93 -2.03] 2.0987 (4,)\nname", "[ 1.92806615 -2.02795447] 2.098699 (4,)\nname"
+    )
+    assert_prints("[4.0 ...] 1 True", "[ 4.00000000e+00 -1.43e-15] 1 True")
+    assert_prints("1.2e-05", "1.24e-05")
+    for printed in [
+        "[ 1.92806615 -2.02795447] 2.0982 (4,)\nname",  # 2.0982 does not round to 2.0987
+        "[ 1.92806615 -2.02795447] 2.098699 (5,)\nname",  # an integer differs
+        "[ 1.92806615 -2.02795447] 2.098699 (4,)\nnames",  # the text differs
+        "[ 1.92806615 -2.02795447 7.0] 2.098699 (4,)\nname",  # one number more
+    ]:
+        with pytest.raises(AssertionError):
+            assert_prints("[ 1.93 -2.03] 2.0987 (4,)\nname", printed)
+    with pytest.raises(AssertionError):
+        assert_prints("1.2e-05", "1.26e-05")
+    with pytest.raises(AssertionError):
+        assert_prints("12 3", "123")  # separated numbers stay separate
+
+
+def test_a_block_that_prints_other_than_shown_fails(tmp_path, capsys):
+    page = "```python\nprint(1 + 1)\n```\n\n```text\n3\n```\n"
+    with pytest.raises(AssertionError, match="printed 2"):
+        run_blocks("made-up.md", page, capsys)
+    with pytest.raises(AssertionError, match="no output block"):
+        run_blocks("made-up.md", "```python\nprint(2)\n```\n", capsys)
+    # The blocks of a page share one namespace, in order.
+    assert (
+        run_blocks(
+            "made-up.md", "```python\nx = 2\n```\n```python\nprint(x)\n```\n```text\n2\n```", capsys
+        )
+        == 2
+    )
