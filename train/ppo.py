@@ -39,6 +39,7 @@ import numpy as np
 import torch
 from stable_baselines3 import PPO
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList, CheckpointCallback
+from stable_baselines3.common.logger import Logger
 from stable_baselines3.common.vec_env import VecEnv, VecMonitor, VecNormalize
 
 from activetrack.files import RunOutputs, atomic_path, prepare_output_dir
@@ -291,7 +292,7 @@ def build_ppo(
     lr = config.learning_rate
     # SB3 calls a schedule with the fraction of the current learn() call still to go.
     schedule = lr if config.lr_schedule == "constant" else (lambda remaining: remaining * lr)
-    return PPO(
+    model = PPO(
         TrackingPolicy,
         venv,
         learning_rate=schedule,
@@ -311,6 +312,11 @@ def build_ppo(
         device="cpu",
         verbose=0,
     )
+    if tensorboard_log is None:
+        # Without a log folder SB3 makes an empty ``SB3-<date>`` folder in the system's
+        # temporary folder at every ``learn``; a logger with no outputs writes nothing.
+        model.set_logger(Logger(folder=None, output_formats=[]))
+    return model
 
 
 def warm_start(model: PPO, init: str | Path, log_std_init: float | None) -> dict[str, Any]:

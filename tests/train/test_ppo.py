@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import tempfile
 from dataclasses import replace
 
 import numpy as np
@@ -45,6 +46,14 @@ def test_same_seed_same_parameters_different_seed_different():
     # Training moved the parameters away from the (seeded) initialization.
     fresh = build_ppo(make_training_env("paper", 2, "shared", True, 0.99), TINY, seed=5)
     assert not np.array_equal(params_vector(fresh.policy), pa)
+
+
+def test_training_without_an_output_folder_writes_no_file(tmp_path, monkeypatch):
+    # SB3 names its default log folder after tempfile.gettempdir(); point it at tmp_path.
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    train_ppo("paper", seed=0, config=replace(TINY, total_timesteps=256))
+    # (torch may keep its own compile cache there; SB3's log folders must not appear.)
+    assert list(tmp_path.glob("SB3-*")) == []
 
 
 def test_centralized_view_trains_with_plain_sb3(tmp_path):
