@@ -93,12 +93,22 @@ def serve(site: Path) -> Iterator[str]:
         thread.join()
 
 
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+_UMASK = _umask()
+
+
 def _write_png(data: bytes, dest: Path, overwrite: bool) -> None:
     """Write ``data`` to a temporary file beside ``dest`` and rename it into place."""
     fd, tmp = tempfile.mkstemp(dir=dest.parent, prefix=f".{dest.name}.", suffix=".tmp")
     try:
         with os.fdopen(fd, "wb") as f:
             f.write(data)
+        os.chmod(tmp, 0o666 & ~_UMASK)  # mkstemp's 0600 -> what open() would have given
         if overwrite:
             os.replace(tmp, dest)
         else:
