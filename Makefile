@@ -7,7 +7,7 @@ STAMP  := $(VENV)/.installed
 DEMO_STAMP := $(VENV)/.installed-demo
 DEMO_RUNS ?= 20
 
-.PHONY: install demo test test-fast lint bench docs docs-serve clean
+.PHONY: install demo test test-fast lint bench docs docs-serve docs-screenshots clean
 
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -59,6 +59,23 @@ docs: $(STAMP)
 
 docs-serve: docs
 	$(PY) -m http.server --directory docs/_build/html 8000
+
+# The index and an environment page in headless Chromium (Debian's chromium and
+# chromium-driver, installed here with apt-get when missing and we are root): fails on any
+# console error; the PNGs go to $(SCREENSHOTS), replacing those of an earlier run.
+SCREENSHOTS ?= docs/_build/screenshots
+docs-screenshots: docs
+	@if [ ! -x /usr/bin/chromium ] || [ ! -x /usr/bin/chromedriver ]; then \
+		if [ "$$(id -u)" = 0 ] && command -v apt-get > /dev/null; then \
+			apt-get update -q && apt-get install -y -q chromium chromium-driver || exit 1; \
+		else \
+			echo "docs-screenshots needs /usr/bin/chromium and /usr/bin/chromedriver:"; \
+			echo "  sudo apt-get update && sudo apt-get install -y chromium chromium-driver"; \
+			echo "(Debian/Ubuntu; see docs/developer/building-the-manual.md)"; \
+			exit 1; \
+		fi; \
+	fi
+	$(PY) docs/scripts/screenshots.py docs/_build/html $(SCREENSHOTS) --overwrite
 
 clean:
 	rm -rf $(VENV) results .pytest_cache docs/_build docs/environments docs/api.rst

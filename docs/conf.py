@@ -39,3 +39,5 @@ napoleon_numpy_docstring = False
 
 html_theme = "furo"
 html_title = "activetrack"
+# Browsers ask for a favicon; without one each page logs a 404 in the console.
+html_favicon = "_static/favicon.svg"
