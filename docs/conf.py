@@ -28,7 +28,7 @@ extensions = [
 ]
 
 source_suffix = {".rst": "restructuredtext", ".md": "markdown"}
-exclude_patterns = ["_build", "sensor-models-design.md"]
+exclude_patterns = ["_build"]
 # Headings of the Markdown pages get anchors, so links like tasks.md#the-models resolve.
 myst_heading_anchors = 3
 

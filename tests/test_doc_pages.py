@@ -7,6 +7,7 @@ Sphinx builds (the generated environment pages are checked by ``tests/test_docs.
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import pytest
@@ -15,7 +16,7 @@ from tests.doc_blocks import assert_prints, python_blocks, run_blocks
 
 ROOT = Path(__file__).resolve().parents[1]
 #: Pages Sphinx does not build (``docs/conf.py``'s ``exclude_patterns``) or generates.
-NOT_PAGES = {"docs/sensor-models-design.md"}
+NOT_PAGES: set[str] = set()
 PAGES = [
     p.relative_to(ROOT).as_posix()
     for p in [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))]
@@ -23,6 +24,22 @@ PAGES = [
     and p.relative_to(ROOT).as_posix() not in NOT_PAGES
 ]
 WITH_CODE = [p for p in PAGES if python_blocks((ROOT / p).read_text(encoding="utf-8"))]
+
+#: The README is read in five minutes; the manual holds the rest.
+README_MAX_LINES = 200
+
+#: A word that looks like a commit: 7 to 40 hex digits, at least one digit and one letter,
+#: not part of a longer word, file name or number (``regression_x.json``, ``1.2345678e5``,
+#: ``12345678e5`` are not commits; ``1000000`` and ``deadbeef`` have no letter or digit).
+COMMIT = re.compile(
+    r"(?<![\w.])(?![0-9]+e[0-9]+(?!\w))(?=[0-9a-f]*[0-9])(?=[0-9a-f]*[a-f])[0-9a-f]{7,40}(?!\w)",
+    re.IGNORECASE,
+)
+
+
+def commits_named(text: str) -> list[str]:
+    """Return the commit-like words of ``text``, in order."""
+    return COMMIT.findall(text)
 
 
 def test_the_pages_are_found():
@@ -69,3 +86,34 @@ def test_a_block_that_prints_other_than_shown_fails(tmp_path, capsys):
         )
         == 2
     )
+
+
+def test_the_readme_is_short():
+    lines = (ROOT / "README.md").read_text(encoding="utf-8").splitlines()
+    assert len(lines) <= README_MAX_LINES, f"README.md has {len(lines)} lines"
+
+
+@pytest.mark.parametrize("page", PAGES)
+def test_no_page_names_a_commit(page):
+    """Which commit measured what is provenance: it goes to CHANGELOG.md, not the manual."""
+    named = commits_named((ROOT / page).read_text(encoding="utf-8"))
+    assert not named, f"{page} names commits {named}; move that provenance to CHANGELOG.md"
+
+
+def test_the_commit_pattern():
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    full = "bb518205aff6ebdc562250b19fb081941ffb6378"
+    for planted, found in [
+        ("measured at 843a345", "843a345"),
+        ("since bb51820.", "bb51820"),
+        (f"3048 of 3907 arrays equal against {full}", full),
+        ("(commit a3f1f0f)", "a3f1f0f"),
+        ("an export of 5FB3C6D", "5FB3C6D"),
+    ]:
+        assert commits_named(readme + "\n" + planted + "\n") == [found]
+    ordinary = (
+        "seeds 1000..1099, 1000000 steps, 12345678 runs, deadbeef, facade, float64, sha256, "
+        "1.2345678e5, 12345678e5, 2e+04, 4.9e-16, 0x1f, 1e10, regression_bb51820.json, "
+        "abc1234def56789abc1234def56789abc1234def5678"  # 44 digits: longer than a commit
+    )
+    assert commits_named(ordinary) == []
