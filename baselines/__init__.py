@@ -11,7 +11,11 @@
   the planners as expert policies for the environments (planning problems to next
   positions);
 - :func:`simulate` / :func:`run_monte_carlo`: a planner driving the closed tracking loop
-  (:class:`activetrack.world.World`) with per-step metrics, over seeds.
+  (:class:`activetrack.world.World`) with per-step metrics, over seeds;
+- :func:`evaluate` / :func:`summaries`: policies (planners or policy files) on the same
+  held-out seeds, paired with GSR; :func:`map_seeds`: a function of seeds on Ray workers,
+  equal to the serial loop (both imported on first use: they bring the plotting and Ray
+  helpers).
 
 A planner is anything with ``plan(problem, rng) -> next_positions`` of shape
 ``problem.batch_shape + (M, 2)``, see :class:`activetrack.Planner`.
@@ -57,5 +61,24 @@ __all__ = [
     "mean_ci",
     "random_problem",
     "run_monte_carlo",
+    "evaluate",
+    "map_seeds",
     "simulate",
+    "summaries",
 ]
+
+#: Public names imported on first use (module attribute -> the module that holds it).
+_LAZY = {
+    "evaluate": "activetrack.baselines.evaluation",
+    "summaries": "activetrack.baselines.evaluation",
+    "map_seeds": "activetrack.baselines.distributed",
+}
+
+
+def __getattr__(name: str):
+    """Return the lazily imported public names of :data:`_LAZY`."""
+    if name in _LAZY:
+        import importlib
+
+        return getattr(importlib.import_module(_LAZY[name]), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -54,6 +54,7 @@ from activetrack.world.prediction import Prediction
 from activetrack.world.presets import PRESETS
 from activetrack.world.problem import Planner, PlanningProblem
 from activetrack.world.scenarios import Scenario, make_scenario
+from activetrack.world.world import World
 
 _aliases.install()
 
@@ -84,6 +85,7 @@ __all__ = [
     "Scenario",
     "SensorModel",
     "TraceObjective",
+    "World",
     "WorstTraceObjective",
     "constant_acceleration",
     "constant_velocity",
