@@ -24,6 +24,7 @@ from activetrack import _aliases, _registry
 from activetrack.estimation.ekf import ExtendedKalmanFilter
 from activetrack.kinematics.base import Kinematics
 from activetrack.kinematics.disk import Disk
+from activetrack.metrics.gospa import GOSPAResult, gospa
 from activetrack.models.motion import (
     LinearMotionModel,
     constant_acceleration,
@@ -72,6 +73,7 @@ __all__ = [
     "Disk",
     "SingleSensorSolution",
     "ExtendedKalmanFilter",
+    "GOSPAResult",
     "Kinematics",
     "LinearMotionModel",
     "LogDetObjective",
@@ -89,6 +91,7 @@ __all__ = [
     "constant_velocity",
     "from_continuous",
     "from_matrices",
+    "gospa",
     "lemma2_rotation",
     "make_scenario",
     "posterior_position_covariance",
