@@ -25,6 +25,7 @@ from activetrack.estimation.ekf import ExtendedKalmanFilter
 from activetrack.kinematics.base import Kinematics
 from activetrack.kinematics.disk import Disk
 from activetrack.metrics.gospa import GOSPAResult, gospa
+from activetrack.models.behaviour import Evasive, FilterModel, Maneuvering, TargetBehaviour
 from activetrack.models.motion import (
     LinearMotionModel,
     constant_acceleration,
@@ -71,12 +72,15 @@ __all__ = [
     "BatchSolution",
     "BearingOnly",
     "Disk",
+    "Evasive",
+    "FilterModel",
     "SingleSensorSolution",
     "ExtendedKalmanFilter",
     "GOSPAResult",
     "Kinematics",
     "LinearMotionModel",
     "LogDetObjective",
+    "Maneuvering",
     "Objective",
     "PlanningProblem",
     "Prediction",
@@ -85,6 +89,7 @@ __all__ = [
     "Planner",
     "Scenario",
     "SensorModel",
+    "TargetBehaviour",
     "TraceObjective",
     "WorstTraceObjective",
     "constant_acceleration",
