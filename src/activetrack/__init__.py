@@ -22,6 +22,7 @@ import importlib.metadata as _metadata
 
 from activetrack import _aliases, _registry
 from activetrack.estimation.ekf import ExtendedKalmanFilter
+from activetrack.estimation.imm import IMMFilter
 from activetrack.kinematics.base import Kinematics
 from activetrack.kinematics.disk import Disk
 from activetrack.metrics.gospa import GOSPAResult, gospa
@@ -77,6 +78,7 @@ __all__ = [
     "SingleSensorSolution",
     "ExtendedKalmanFilter",
     "GOSPAResult",
+    "IMMFilter",
     "Kinematics",
     "LinearMotionModel",
     "LogDetObjective",
