@@ -10,6 +10,7 @@ import itertools
 import numpy as np
 import pytest
 from scipy import stats
+from scipy.linalg import block_diag
 
 from activetrack import (
     ExtendedKalmanFilter,
@@ -373,3 +374,54 @@ def test_bad_update_inputs_name_the_argument():
                       ("sensors", [3])]:  # fmt: skip
         with pytest.raises(ValueError, match=rf"^{name} "):
             f.update(**{**good, name: bad})
+
+
+def test_log_likelihoods_against_an_explicit_innovation_density():
+    # A mixed team (range and bearing, range only, bearing only, oriented sensors), two
+    # modes, one sensor not measuring, uncertain sensor positions: each mode's log N(nu;
+    # 0, S) from explicit distance and bearing formulas, central-difference Jacobians and
+    # scipy's multivariate normal.
+    from activetrack import BearingOnly, RangeBearing, RangeOnly
+    from activetrack.estimation.imm import log_likelihoods
+
+    rng = np.random.default_rng(9)
+    team = (RangeBearing(), RangeOnly(), BearingOnly(), RangeBearing())
+    sensors = rng.uniform(-10, 10, (4, 2))
+    phi = rng.uniform(-np.pi, np.pi, 4)
+    sd2, st2 = rng.uniform(0.1, 1.0, 4), rng.uniform(1e-3, 1e-2, 4)
+    z = np.stack([rng.uniform(5, 15, 4), rng.uniform(-np.pi, np.pi, 4)], 1)
+    mask = np.array([True, True, True, False])
+    pose = np.stack([np.diag(rng.uniform(0.01, 0.1, 2)) for _ in range(4)])
+    x = rng.normal(0, 2, (2, 4))
+    A = rng.normal(size=(2, 4, 4))
+    P = A @ A.transpose(0, 2, 1) + np.eye(4)
+
+    def h(p, i):
+        d = p - sensors[i]
+        return np.array([np.hypot(*d), np.arctan2(d[1], d[0]) - phi[i]])
+
+    def wrap(a):
+        return (a + np.pi) % (2 * np.pi) - np.pi
+
+    for cov in (None, pose):
+        got = log_likelihoods(team, z, x, P, sensors, sd2, st2, phi, mask, cov)
+        for j in range(2):
+            p = x[j, :2]
+            nus, Hs, Rs = [], [], []
+            for i, slots in enumerate([(0, 1), (0,), (1,), ()]):
+                if not mask[i]:
+                    continue
+                J = np.stack([(h(p + e, i) - h(p - e, i)) / 2e-6 for e in 1e-6 * np.eye(2)], 1)
+                nu = z[i] - h(p, i)
+                nu[1] = wrap(nu[1])
+                Rfull = np.diag([sd2[i], st2[i]])
+                if cov is not None:
+                    Rfull = Rfull + J @ cov[i] @ J.T
+                s = list(slots)
+                nus.append(nu[s])
+                Hs.append(J[s])
+                Rs.append(Rfull[np.ix_(s, s)])
+            H = np.concatenate(Hs)
+            S = H @ P[j, :2, :2] @ H.T + block_diag(*Rs)
+            want = stats.multivariate_normal(np.zeros(len(S)), S).logpdf(np.concatenate(nus))
+            assert got[j] == pytest.approx(want, rel=1e-7, abs=1e-7)

@@ -5,7 +5,7 @@ assignment metric", FUSION 2017) compares the set of true targets ``X`` with the
 estimates ``Y`` (points of the same dimension, e.g. positions). With cut-off ``c > 0``,
 order ``1 <= p < inf`` and ``alpha = 2`` (the value for which it decomposes), their
 Proposition 1 writes it over partial assignments ``gamma`` (sets of pairs ``(i, j)``, each
-``i`` and each ``j`` in at most one pair):
+``i`` and each ``j`` in at most one pair)::
 
     d(X, Y) = ( min_gamma  sum_{(i, j) in gamma} |x_i - y_j|^p
                 + c^p / 2 (|X| + |Y| - 2 |gamma|) )^(1/p),

@@ -207,7 +207,7 @@ class Maneuvering(TargetBehaviour):
     every mode, ``dt`` the step, ``initial`` the distribution of the first mode (default:
     mode 0). Each mode is :func:`coordinated_turn` (exact). :attr:`models` are the modes'
     :class:`~activetrack.LinearMotionModel`, the mode set an IMM filter of the same
-    parameters uses (:meth:`activetrack.IMMFilter` ``models=behaviour.models``).
+    parameters uses (:class:`activetrack.IMMFilter` with ``models=behaviour.models``).
     """
 
     name = "maneuvering"
