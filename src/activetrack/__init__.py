@@ -26,7 +26,13 @@ from activetrack.estimation.imm import IMMFilter
 from activetrack.kinematics.base import Kinematics
 from activetrack.kinematics.disk import Disk
 from activetrack.metrics.gospa import GOSPAResult, gospa
-from activetrack.models.behaviour import Evasive, FilterModel, Maneuvering, TargetBehaviour
+from activetrack.models.behaviour import (
+    Evasive,
+    FilterModel,
+    Maneuvering,
+    StopAndGo,
+    TargetBehaviour,
+)
 from activetrack.models.motion import (
     LinearMotionModel,
     constant_acceleration,
@@ -76,6 +82,7 @@ __all__ = [
     "Evasive",
     "FilterModel",
     "SingleSensorSolution",
+    "StopAndGo",
     "ExtendedKalmanFilter",
     "GOSPAResult",
     "IMMFilter",

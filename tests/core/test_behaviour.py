@@ -11,7 +11,15 @@ import pytest
 from scipy import stats
 from scipy.integrate import solve_ivp
 
-from activetrack import Evasive, FilterModel, Maneuvering, TargetBehaviour, constant_velocity
+from activetrack import (
+    Evasive,
+    FilterModel,
+    IMMFilter,
+    Maneuvering,
+    StopAndGo,
+    TargetBehaviour,
+    constant_velocity,
+)
 from activetrack.models.behaviour import coordinated_turn
 
 
@@ -217,3 +225,64 @@ def test_steps_reject_bad_inputs():
         b.step(np.zeros(4), np.random.default_rng(0), mode=3)
     with pytest.raises(ValueError, match="^model "):
         FilterModel("cv")
+
+
+def test_stop_and_go_chain_stops_and_move_offs():
+    b = StopAndGo(speed=2.0, p_stop=0.1, p_go=0.25, q=0.0, dt=0.5)
+    rng = np.random.default_rng(3)
+    x, mode = np.array([0.0, 0.0, 2.0, 0.0]), 0
+    counts = np.zeros((2, 2))
+    headings = []
+    for _ in range(40_000):
+        x_next, m_next = b.step(x, rng, mode=mode)
+        counts[mode, m_next] += 1
+        if m_next == 1:  # stopped: where it was, at rest
+            assert np.array_equal(x_next[:2], x[:2]) and np.all(x_next[2:] == 0.0)
+        elif mode == 1:  # moved off at its speed (q = 0: no noise) and moved on
+            assert np.hypot(*x_next[2:]) == pytest.approx(2.0, rel=1e-12)
+            np.testing.assert_allclose(x_next[:2], x[:2] + 0.5 * x_next[2:], rtol=1e-12)
+            headings.append(np.arctan2(x_next[3], x_next[2]))
+        x, mode = x_next * np.array([0, 0, 1, 1]), m_next
+    stat, df = transition_chi2(counts, b.transition)
+    hi = stats.chi2.ppf(0.999, df)
+    assert stat < hi
+    wrong = StopAndGo(2.0, 0.11, 0.275, 0.0, 0.5).transition  # both rates 10% off
+    assert transition_chi2(counts, wrong)[0] > hi
+    # Uniform headings: the mean resultant length of n uniform angles is about 1/sqrt(n)
+    # (Rayleigh); 4/sqrt(n) bounds it with probability 1 - exp(-16).
+    h = np.array(headings)
+    assert np.hypot(np.cos(h).mean(), np.sin(h).mean()) < 4 / np.sqrt(h.size)
+
+
+def test_stop_and_go_modes_run_in_an_imm():
+    # The two modes as linear models (the stopped one with a singular covariance) keep
+    # the IMM's covariance symmetric positive definite and find the stops.
+    b = StopAndGo(3.0, 0.1, 0.2, 0.05, 1.0)
+    f = IMMFilter([b.moving_model, b.stopped_model], b.transition, np.zeros(4), np.eye(4))
+    rng = np.random.default_rng(0)
+    x, m = np.array([0.0, 0.0, 3.0, 0.0]), 0
+    offsets = np.array([[10.0, 0.0], [0.0, 10.0]])
+    right = 0
+    for _ in range(60):
+        x, m = b.step(x, rng, mode=m)
+        s = x[:2] + offsets
+        rel = x[:2] - s
+        z = np.stack([np.hypot(rel[:, 0], rel[:, 1]), np.arctan2(rel[:, 1], rel[:, 0])], 1)
+        f.predict()
+        f.update(z + rng.normal(0, [0.3, 0.01], (2, 2)), s, 0.09, 1e-4)
+        assert np.array_equal(f.P, f.P.T) and np.linalg.eigvalsh(f.P)[0] > 0
+        right += int(np.argmax(f.mu) == m)
+    assert right >= 50  # the mode is told apart most of the time (not a tuned threshold:
+    # a filter guessing by the stationary probabilities would be right 2/3 of the time)
+
+
+@pytest.mark.parametrize(
+    "kwargs,field",
+    [({"speed": 0.0}, "speed"), ({"p_stop": 1.5}, "p_stop"), ({"p_go": -0.1}, "p_go"),
+     ({"p_go": np.nan}, "p_go"), ({"q": -1.0}, "q"), ({"dt": np.inf}, "dt")],
+)  # fmt: skip
+def test_stop_and_go_rejects_bad_parameters_naming_the_field(kwargs, field):
+    args = {"speed": 1.0, "p_stop": 0.1, "p_go": 0.2, "q": 0.1, "dt": 1.0}
+    args.update(kwargs)
+    with pytest.raises(ValueError, match=rf"^{field} "):
+        StopAndGo(**args)

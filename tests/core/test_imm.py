@@ -324,7 +324,9 @@ def test_predicted_mixture_is_what_the_filter_exposes_after_predict():
     f = IMMFilter(b.models, PI, X0, P0, mode_probs=MU0, sensor_model=Position())
     f.predict()
     f.update(np.array([[0.5, 0.8]]), SENSOR, SD2, ST2)
+    x_next, P_next = f.predicted()  # the planners' look-ahead leaves the filter as it is
     f.predict()
+    assert np.array_equal(x_next, f.x) and np.array_equal(P_next, f.P)
     rng = np.random.default_rng(0)
     n = 200_000
     modes = rng.choice(3, size=n, p=f.mu)

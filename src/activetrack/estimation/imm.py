@@ -289,6 +289,13 @@ class IMMFilter:
         self.mu = c
         self.x, self.P = combine(c, self.xs, self.Ps)
 
+    def predicted(self) -> tuple[FloatArray, FloatArray]:
+        """Return the next step's predicted mixture ``(x(k+1|k), P(k+1|k))`` without
+        changing the filter: what a planner deciding the next sensor positions plans with
+        (its position block is Lemma 1's ``P11``)."""
+        c, x0, P0 = mix(self.mu, self.transition, self.xs, self.Ps)
+        return combine(c, *predict(self.models, x0, P0))
+
     def update(
         self,
         z: ArrayLike,

@@ -36,7 +36,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from activetrack.models import _motion_kernels as mtk
-from activetrack.models.motion import LinearMotionModel, from_continuous
+from activetrack.models.motion import LinearMotionModel, from_continuous, from_matrices
 from activetrack.validation import (
     ComparedByValue,
     FloatArray,
@@ -265,6 +265,77 @@ class Maneuvering(TargetBehaviour):
             raise ValueError(f"mode must be in [0, {self.n_modes - 1}], got {mode!r}")
         j = _draw(self.transition[int(mode)], rng)
         return self.models[j].sample_next(self._state(x, 4), rng), j
+
+
+class StopAndGo(TargetBehaviour):
+    """A target that stops and goes: a two-mode Markov chain, moving (mode 0, eq. 2 with
+    eq. 39's constant velocity of intensity ``q``) and stopped (mode 1: it stays where it
+    is, velocity 0).
+
+    ``p_stop`` is the probability of stopping at a step while moving, ``p_go`` of moving
+    off at a step while stopped (a stop then lasts a geometric number of steps, mean
+    ``1 / p_go``). Moving off, the target starts at ``speed`` in a direction drawn
+    uniformly (a stopped target has no heading), then moves on in the same step. As a
+    linear model the stopped mode is :attr:`stopped_model` (``Phi = diag(1, 1, 0, 0)``, no
+    noise; :attr:`moving_model` the moving one), so an IMM can carry both (the move-off
+    is a jump no linear mode describes).
+    """
+
+    name = "stop_and_go"
+
+    def __init__(self, speed: float, p_stop: float, p_go: float, q: float, dt: float) -> None:
+        self.speed = real_scalar("speed", speed)
+        self.p_stop = check_float("p_stop", p_stop, 0.0, 1.0)
+        self.p_go = check_float("p_go", p_go, 0.0, 1.0)
+        self.q = real_scalar("q", q, allow_zero=True)
+        self.dt = real_scalar("dt", dt)
+        self.moving_model = coordinated_turn(0.0, self.q, self.dt)
+        self.stopped_model = from_matrices(
+            np.diag([1.0, 1.0, 0.0, 0.0]), np.eye(4), np.zeros((4, 4)), self.dt, "stopped"
+        )
+
+    _FIELDS = ("speed", "p_stop", "p_go", "q", "dt")
+
+    def __eq__(self, other: object) -> bool:  # by the parameters (the models derive from them)
+        return type(other) is type(self) and all(
+            getattr(self, k) == getattr(other, k) for k in self._FIELDS
+        )
+
+    __hash__ = TargetBehaviour.__hash__
+
+    @property
+    def n_modes(self) -> int:
+        """Return 2: moving (0) and stopped (1)."""
+        return 2
+
+    @property
+    def transition(self) -> FloatArray:
+        """Return the mode chain's matrix ``[[1 - p_stop, p_stop], [p_go, 1 - p_go]]``."""
+        return np.array([[1.0 - self.p_stop, self.p_stop], [self.p_go, 1.0 - self.p_go]])
+
+    def step(
+        self,
+        x: FloatArray,
+        rng: np.random.Generator,
+        sensors: FloatArray | None = None,
+        mode: int = 0,
+    ) -> tuple[FloatArray, int]:
+        """Return ``(x_next, m_next)``: the mode switches (one uniform), then a stopped
+        target stays (velocity 0), a moving one moves with eq. (2) (four normals), after
+        drawing a heading (one uniform) if it has just moved off."""
+        if mode not in (0, 1):
+            raise ValueError(f"mode must be 0 (moving) or 1 (stopped), got {mode!r}")
+        x = self._state(x, 4)
+        j = _draw(self.transition[mode], rng)
+        if j == 1:
+            out = x.copy()
+            out[2:] = 0.0
+            return out, 1
+        if mode == 1:
+            a = 2.0 * np.pi * rng.random()
+            x = x.copy()
+            x[2:] = self.speed * np.array([np.cos(a), np.sin(a)])
+        return self.moving_model.sample_next(x, rng), 0
 
 
 def _draw(p: FloatArray, rng: np.random.Generator) -> int:
