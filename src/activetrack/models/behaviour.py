@@ -1,4 +1,4 @@
-"""How a true target moves: :class:`TargetBehaviour`, the public base, and three behaviours.
+"""How a true target moves: :class:`TargetBehaviour`, the public base, and four behaviours.
 
 The motion model (:mod:`activetrack.models.motion`, eq. 1-3, 39) is what the *filter*
 believes; a behaviour is what the *target* does. Until now they were one thing: the target
@@ -11,6 +11,7 @@ reactive behaviour, the sensors' true positions:
 - :class:`Maneuvering`: a Markov switch between constant velocity and coordinated turns
   of given rates (the jump Markov linear system an IMM filter assumes, Bar-Shalom, Li and
   Kirubarajan 2001, ch. 11), each mode discretized exactly (:func:`coordinated_turn`);
+- :class:`StopAndGo`: moving (eq. 39) and stopped, a two-mode Markov chain;
 - :class:`Evasive`: a scripted evader that runs straight away from the nearest sensor at
   its speed limit, optionally only when a sensor is within a detection range.
 
