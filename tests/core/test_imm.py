@@ -427,3 +427,39 @@ def test_log_likelihoods_against_an_explicit_innovation_density():
             S = H @ P[j, :2, :2] @ H.T + block_diag(*Rs)
             want = stats.multivariate_normal(np.zeros(len(S)), S).logpdf(np.concatenate(nus))
             assert got[j] == pytest.approx(want, rel=1e-7, abs=1e-7)
+
+
+def test_the_functions_batch_over_leading_axes():
+    # Independent filters on a leading axis (the world's copies) give each filter's own
+    # result: mixing, prediction, likelihoods, updates, probabilities and the mixture.
+    from activetrack import RangeBearing, RangeOnly
+    from activetrack.estimation import imm
+
+    rng = np.random.default_rng(12)
+    b = behaviour()
+    B, r, m = 3, 3, 2
+    mu = rng.dirichlet(np.ones(r), size=B)
+    x = rng.normal(0, 2, (B, r, 4))
+    A = rng.normal(size=(B, r, 4, 4))
+    P = A @ A.transpose(0, 1, 3, 2) + np.eye(4)
+    sensors = rng.uniform(-10, 10, (B, m, 2))
+    z = np.stack([rng.uniform(5, 10, (B, m)), rng.uniform(-3, 3, (B, m))], -1)
+    mask = np.array([[True, True], [True, False], [False, True]])
+    sd2, st2, phi = np.array([0.2, 0.3]), np.array([1e-3, 2e-3]), np.zeros(m)
+    team = (RangeBearing(), RangeOnly())
+    c, x0, P0 = imm.mix(mu, PI, x, P)
+    xp, Pp = imm.predict(b.models, x0, P0)
+    xu, Pu, ll = imm.update(team, xp, Pp, z, sensors, sd2, st2, phi, mask)
+    post = imm.mode_probabilities(c, ll)
+    xm, Pm = imm.combine(post, xu, Pu)
+    for i in range(B):
+        ci, x0i, P0i = imm.mix(mu[i], PI, x[i], P[i])
+        np.testing.assert_allclose(c[i], ci, rtol=1e-14)
+        np.testing.assert_allclose(P0[i], P0i, rtol=1e-13, atol=1e-14)
+        xpi, Ppi = imm.predict(b.models, x0i, P0i)
+        xui, Pui, lli = imm.update(team, xpi, Ppi, z[i], sensors[i], sd2, st2, phi, mask[i])
+        np.testing.assert_allclose(ll[i], lli, rtol=1e-12)
+        np.testing.assert_allclose(Pu[i], Pui, rtol=1e-12, atol=1e-14)
+        xmi, Pmi = imm.combine(imm.mode_probabilities(ci, lli), xui, Pui)
+        np.testing.assert_allclose(xm[i], xmi, rtol=1e-12, atol=1e-14)
+        np.testing.assert_allclose(Pm[i], Pmi, rtol=1e-12, atol=1e-14)

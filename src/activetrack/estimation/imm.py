@@ -60,18 +60,18 @@ _LOG_2PI = math.log(2.0 * math.pi)
 def mix(
     mu: FloatArray, transition: FloatArray, x: FloatArray, P: FloatArray
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Return the IMM's mixing ``(c, x0, P0)``: the predicted mode probabilities ``c`` (r,)
-    and each mode's mixed initial mean (r, n) and covariance (r, n, n) from the
-    mode-conditioned ``x`` (r, n), ``P`` (r, n, n) with probabilities ``mu`` (r,) (BLK eq.
-    11.6.6-11.6.7). A mode of predicted probability 0 keeps its own estimate."""
+    """Return the IMM's mixing ``(c, x0, P0)``: the predicted mode probabilities ``c``
+    (..., r) and each mode's mixed initial mean (..., r, n) and covariance (..., r, n, n)
+    from the mode-conditioned ``x`` (..., r, n), ``P`` (..., r, n, n) with probabilities
+    ``mu`` (..., r) (BLK eq. 11.6.6-11.6.7; leading axes: independent filters). A mode of
+    predicted probability 0 keeps its own estimate."""
     c = mu @ transition
-    w = transition * mu[:, None]  # w[i, j] = Pi[i, j] mu_i
-    safe = np.where(c > 0.0, c, 1.0)
-    w = np.where(c > 0.0, w / safe, np.eye(len(mu)))  # mu_{i|j}, columns sum to 1
-    x0 = np.einsum("ij,in->jn", w, x)
-    d = x[None, :, :] - x0[:, None, :]  # d[j, i] = x_i - x0_j
-    spread = np.einsum("ji,jin,jim->jnm", w.T, d, d)
-    P0 = np.einsum("ij,inm->jnm", w, P) + spread
+    w = transition * mu[..., :, None]  # w[i, j] = Pi[i, j] mu_i
+    pos = c[..., None, :] > 0.0
+    w = np.where(pos, w / np.where(pos, c[..., None, :], 1.0), np.eye(mu.shape[-1]))
+    x0 = np.einsum("...ij,...in->...jn", w, x)  # w[i, j] = mu_{i|j}: columns sum to 1
+    d = x[..., None, :, :] - x0[..., :, None, :]  # d[j, i] = x_i - x0_j
+    P0 = np.einsum("...ij,...inm->...jnm", w, P) + np.einsum("...ij,...jin,...jim->...jnm", w, d, d)
     return c, x0, 0.5 * (P0 + np.swapaxes(P0, -1, -2))
 
 
@@ -79,19 +79,24 @@ def predict(
     models: Sequence[LinearMotionModel], x0: FloatArray, P0: FloatArray
 ) -> tuple[FloatArray, FloatArray]:
     """Return each mode's prediction (eq. 3 with its own model) from the mixed initial
-    conditions ``x0`` (r, n), ``P0`` (r, n, n): ``(x (r, n), P (r, n, n))``."""
-    out = [motion_predict(x0[j], P0[j], m.Phi, m.Q) for j, m in enumerate(models)]
-    return np.stack([o[0] for o in out]), np.stack([o[1] for o in out])
+    conditions ``x0`` (..., r, n), ``P0`` (..., r, n, n): ``(x, P)`` of the same shapes."""
+    out = [
+        motion_predict(x0[..., j, :], P0[..., j, :, :], m.Phi, m.Q) for j, m in enumerate(models)
+    ]
+    return np.stack([o[0] for o in out], axis=-2), np.stack([o[1] for o in out], axis=-3)
 
 
 def combine(weights: FloatArray, x: FloatArray, P: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """Return the mean (n,) and covariance (n, n) of the Gaussian mixture
-    ``sum_j weights_j N(x_j, P_j)`` (moment matching, BLK eq. 11.6.11-11.6.12): exactly
-    symmetric, positive definite when every ``P_j`` is."""
-    xm = weights @ x
-    d = x - xm
-    Pm = np.einsum("j,jnm->nm", weights, P) + np.einsum("j,jn,jm->nm", weights, d, d)
-    return xm, 0.5 * (Pm + Pm.T)
+    """Return the mean (..., n) and covariance (..., n, n) of the Gaussian mixture
+    ``sum_j weights_j N(x_j, P_j)`` (moment matching, BLK eq. 11.6.11-11.6.12; ``weights``
+    (..., r), ``x`` (..., r, n), ``P`` (..., r, n, n)): exactly symmetric, positive definite
+    when every ``P_j`` is."""
+    xm = np.einsum("...j,...jn->...n", weights, x)
+    d = x - xm[..., None, :]
+    Pm = np.einsum("...j,...jnm->...nm", weights, P) + np.einsum(
+        "...j,...jn,...jm->...nm", weights, d, d
+    )
+    return xm, 0.5 * (Pm + np.swapaxes(Pm, -1, -2))
 
 
 def _used(
@@ -102,15 +107,16 @@ def _used(
     sigma_theta2: FloatArray,
     mask: np.ndarray,
 ) -> np.ndarray:
-    """Return which sensors (r, M) the EKF takes for each mode's predicted ``position``
-    (r, 2) and ``P11`` (r, 2, 2): measured (``mask``), not at zero distance, not within a
-    built-in bearing's near distance (:mod:`activetrack.estimation.ekf`)."""
-    rel = sensors[None, :, :] - position[:, None, :]
+    """Return which sensors (..., r, M) the EKF takes for each mode's predicted
+    ``position`` (..., r, 2) and ``P11`` (..., r, 2, 2), sensors at ``sensors`` (..., M, 2)
+    with ``mask`` (..., M): measured, not at zero distance, not within a built-in
+    bearing's near distance (:mod:`activetrack.estimation.ekf`)."""
+    rel = sensors[..., None, :, :] - position[..., :, None, :]
     n2 = rel[..., 0] ** 2 + rel[..., 1] ** 2
-    near = (P11[:, 0, 0] + P11[:, 1, 1])[:, None] / INFORMATION_RATIO_MAX
+    near = (P11[..., 0, 0] + P11[..., 1, 1])[..., None] / INFORMATION_RATIO_MAX
     bearing = np.array([m.builtin and m.slots[1] for m in team])
     too_near = bearing & (near / sigma_theta2 > n2)
-    return mask & (n2 >= ZERO_DISTANCE2) & ~too_near
+    return mask[..., None, :] & (n2 >= ZERO_DISTANCE2) & ~too_near
 
 
 def log_likelihoods(
@@ -125,37 +131,45 @@ def log_likelihoods(
     mask: np.ndarray,
     pose_cov: FloatArray | None = None,
 ) -> FloatArray:
-    """Return each mode's ``log N(nu; 0, S)`` (r,) of the measurements ``z`` (M, 2): ``nu``
-    the stacked residuals of the used slots of the sensors the EKF takes (:func:`_used`)
-    at the mode's predicted position ``x[j, :2]`` and ``S = H P11 H^T + R`` (with ``H
-    Sigma_s H^T`` added to each sensor's ``R`` for uncertain sensor positions), from each
-    sensor model's function, Jacobian, noise and residual (one call per distinct model);
-    ``x`` (r, n), ``P`` (r, n, n), ``sensors`` (M, 2), per-sensor arrays (M,). A slot left
-    out is a unit-variance dummy with zero residual and Jacobian (it adds nothing)."""
-    r, m = x.shape[0], sensors.shape[0]
-    p, P11 = x[:, :2], P[:, :2, :2]
-    keep = _used(team, p, P11, sensors, sigma_theta2, mask)  # (r, M)
-    nu, H, R = np.zeros((r, m, 2)), np.zeros((r, m, 2, 2)), np.zeros((r, m, 2, 2))
+    """Return each mode's ``log N(nu; 0, S)`` (..., r) of the measurements ``z`` (..., M,
+    2): ``nu`` the stacked residuals of the used slots of the sensors the EKF takes
+    (:func:`_used`) at the mode's predicted position ``x[..., j, :2]`` and ``S = H P11 H^T
+    + R`` (with ``H Sigma_s H^T`` added to each sensor's ``R`` for uncertain sensor
+    positions, ``pose_cov`` (..., M, 2, 2)), from each sensor model's function, Jacobian,
+    noise and residual (one call per distinct model); ``x`` (..., r, n), ``P`` (..., r, n,
+    n), ``sensors`` (..., M, 2), ``mask`` (..., M), per-sensor arrays (M,). A slot left out
+    is a unit-variance dummy with zero residual and Jacobian (it adds nothing)."""
+    batch, r, m = x.shape[:-2], x.shape[-2], sensors.shape[-2]
+    z = np.broadcast_to(z, batch + (m, 2))
+    sensors = np.broadcast_to(sensors, batch + (m, 2))
+    mask = np.broadcast_to(mask, batch + (m,))
+    p, P11 = x[..., :2], P[..., :2, :2]
+    keep = _used(team, p, P11, sensors, sigma_theta2, mask)  # (..., r, M)
+    nu, H, R = (
+        np.zeros(keep.shape + (2,)),
+        np.zeros(keep.shape + (2, 2)),
+        np.zeros(keep.shape + (2, 2)),
+    )
     slot = np.zeros((m, 2), bool)
     for model, idx in generic.groups(team):
-        pt, s, phi = p[:, None, :], sensors[None, idx, :], orientation[idx]
-        H[:, idx] = model.jacobian(pt, s, phi)
-        R[:, idx] = model.noise_covar(pt, s, sigma_d2[idx], sigma_theta2[idx])
-        nu[:, idx] = model.residual(z[idx], model.function(pt, s, phi))
+        pt, s, phi = p[..., :, None, :], sensors[..., None, idx, :], orientation[idx]
+        H[..., idx, :, :] = model.jacobian(pt, s, phi)
+        R[..., idx, :, :] = model.noise_covar(pt, s, sigma_d2[idx], sigma_theta2[idx])
+        nu[..., idx, :] = model.residual(z[..., None, idx, :], model.function(pt, s, phi))
         slot[idx] = model.slots
     if pose_cov is not None:
-        R = R + H @ pose_cov @ H.mT
-    used = keep[:, :, None] & slot[None, :, :]  # (r, M, 2)
-    nu = np.where(used, nu, 0.0).reshape(r, 2 * m)
-    H = np.where(used[..., None], H, 0.0).reshape(r, 2 * m, 2)
+        R = R + H @ np.asarray(pose_cov)[..., None, :, :, :] @ H.mT
+    used = keep[..., None] & slot  # (..., r, M, 2)
+    nu = np.where(used, nu, 0.0).reshape(batch + (r, 2 * m))
+    H = np.where(used[..., None], H, 0.0).reshape(batch + (r, 2 * m, 2))
     R = np.where(used[..., None] & used[..., None, :], R, 0.0)
     R = R + np.where(used, 0.0, 1.0)[..., None] * np.eye(2)  # the dummies' unit variance
     S = H @ P11 @ H.mT
     for i in range(m):  # block diagonal: the sensors measure independently
-        S[:, 2 * i : 2 * i + 2, 2 * i : 2 * i + 2] += R[:, i]
+        S[..., 2 * i : 2 * i + 2, 2 * i : 2 * i + 2] += R[..., i, :, :]
     L = np.linalg.cholesky(0.5 * (S + S.mT))
     u = np.linalg.solve(L, nu[..., None])[..., 0]
-    d = used.reshape(r, -1).sum(axis=1)
+    d = used.reshape(batch + (r, 2 * m)).sum(axis=-1)
     logdet = np.sum(np.log(np.diagonal(L, axis1=-2, axis2=-1)), axis=-1)
     return -0.5 * np.sum(u * u, axis=-1) - logdet - 0.5 * d * _LOG_2PI
 
@@ -173,14 +187,19 @@ def update(
     pose_cov: FloatArray | None = None,
     iterations: int = 1,
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Return each mode's EKF posterior (eq. 11) and log-likelihood: ``(x (r, n), P (r, n,
-    n), log_lik (r,))`` from the predictions ``x`` (r, n), ``P`` (r, n, n); one sensor
-    model per sensor (``team``, M), the rest per sensor (M, ...). Built-in teams take the
-    compiled :func:`activetrack.estimation.ekf.update` (the world's), others
-    :func:`activetrack.estimation.generic.update`."""
+    """Return each mode's EKF posterior (eq. 11) and log-likelihood: ``(x (..., r, n), P
+    (..., r, n, n), log_lik (..., r))`` from the predictions ``x`` (..., r, n), ``P`` (...,
+    r, n, n); one sensor model per sensor (``team``, M), ``z`` and ``sensors`` (..., M, 2),
+    ``mask`` (..., M), ``pose_cov`` (..., M, 2, 2) or None, the rest per sensor (M,).
+    Built-in teams take the compiled :func:`activetrack.estimation.ekf.update` (the
+    world's), others :func:`activetrack.estimation.generic.update`."""
     ll = log_likelihoods(
         team, z, x, P, sensors, sigma_d2, sigma_theta2, orientation, mask, pose_cov
     )
+    # The measurements are every mode's: a mode axis before the sensors'.
+    z, sensors, mask = z[..., None, :, :], sensors[..., None, :, :], mask[..., None, :]
+    if pose_cov is not None:
+        pose_cov = np.asarray(pose_cov)[..., None, :, :, :]
     if all(m.builtin for m in team):
         codes = np.array([m.code for m in team], np.int8)
         if not np.any(codes) and pose_cov is None:  # range and bearing: the EKF's own call
@@ -204,13 +223,12 @@ def update(
 
 def mode_probabilities(c: FloatArray, log_lik: FloatArray) -> FloatArray:
     """Return ``mu_j = Lambda_j c_j / sum_l Lambda_l c_l`` (BLK eq. 11.6.10) from the
-    predicted probabilities ``c`` and the log-likelihoods, in the log domain (no
+    predicted probabilities ``c`` (..., r) and the log-likelihoods, in the log domain (no
     underflow when every likelihood is tiny)."""
     with np.errstate(divide="ignore"):
         a = np.log(c) + log_lik
-    a = a - np.max(a)
-    w = np.exp(a)
-    return w / w.sum()
+    w = np.exp(a - np.max(a, axis=-1, keepdims=True))
+    return w / w.sum(axis=-1, keepdims=True)
 
 
 class IMMFilter:
