@@ -463,3 +463,26 @@ def test_the_functions_batch_over_leading_axes():
         xmi, Pmi = imm.combine(imm.mode_probabilities(ci, lli), xui, Pui)
         np.testing.assert_allclose(xm[i], xmi, rtol=1e-12, atol=1e-14)
         np.testing.assert_allclose(Pm[i], Pmi, rtol=1e-12, atol=1e-14)
+
+
+def test_mixed_built_in_team_takes_the_compiled_update_equal_to_the_generic_one():
+    # Range-only and bearing-only sensors: the compiled path of the sensor codes
+    # (ekf.update with models and weights) against the NumPy path of the same models
+    # (generic.update, each model's own information terms), one mode.
+    from activetrack import BearingOnly, RangeOnly
+    from activetrack.estimation import generic
+
+    team = (RangeOnly(), BearingOnly(), RangeOnly())
+    model = constant_velocity(0.2, 1.0)
+    f = IMMFilter([model], [[1.0]], X0, P0, sensor_model=team)
+    rng = np.random.default_rng(8)
+    x, P = X0, P0
+    for _ in range(10):
+        sensors = rng.uniform(-10, 10, (3, 2))
+        z = np.stack([rng.uniform(3, 12, 3), rng.uniform(-3, 3, 3)], -1)
+        f.predict()
+        f.update(z, sensors, 0.3, 0.01)
+        x, P = model.predict(x, P)
+        x, P = generic.update(team, x, P, z, sensors, 0.3, 0.01, np.zeros(3))
+        np.testing.assert_allclose(f.x, x, rtol=1e-10, atol=1e-12)
+        np.testing.assert_allclose(f.P, P, rtol=1e-10, atol=1e-12)
