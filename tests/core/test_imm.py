@@ -282,7 +282,7 @@ def test_imm_is_consistent_on_maneuvering_targets_where_the_cv_ekf_is_not():
     # t-interval). Expected value 2 for a filter whose mean and covariance are the
     # posterior's (whatever its shape): the IMM's moments approximate them; the EKF on
     # the constant-velocity model alone (the same q) ignores the turns.
-    dt, q, steps, runs = 1.0, 0.01, 40, 120
+    dt, q, steps, runs = 1.0, 0.01, 35, 100
     Pi = np.array([[0.90, 0.05, 0.05], [0.10, 0.90, 0.0], [0.10, 0.0, 0.90]])
     b = Maneuvering([0.0, 0.25, -0.25], Pi, q=q, dt=dt, initial=[1 / 3] * 3)
     cv = constant_velocity(q, dt)
