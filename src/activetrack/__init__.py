@@ -22,8 +22,17 @@ import importlib.metadata as _metadata
 
 from activetrack import _aliases, _registry
 from activetrack.estimation.ekf import ExtendedKalmanFilter
+from activetrack.estimation.imm import IMMFilter
 from activetrack.kinematics.base import Kinematics
 from activetrack.kinematics.disk import Disk
+from activetrack.metrics.gospa import GOSPAResult, gospa
+from activetrack.models.behaviour import (
+    Evasive,
+    FilterModel,
+    Maneuvering,
+    StopAndGo,
+    TargetBehaviour,
+)
 from activetrack.models.motion import (
     LinearMotionModel,
     constant_acceleration,
@@ -71,11 +80,17 @@ __all__ = [
     "BatchSolution",
     "BearingOnly",
     "Disk",
+    "Evasive",
+    "FilterModel",
     "SingleSensorSolution",
+    "StopAndGo",
     "ExtendedKalmanFilter",
+    "GOSPAResult",
+    "IMMFilter",
     "Kinematics",
     "LinearMotionModel",
     "LogDetObjective",
+    "Maneuvering",
     "Objective",
     "PlanningProblem",
     "Prediction",
@@ -84,6 +99,7 @@ __all__ = [
     "Planner",
     "Scenario",
     "SensorModel",
+    "TargetBehaviour",
     "TraceObjective",
     "World",
     "WorstTraceObjective",
@@ -91,6 +107,7 @@ __all__ = [
     "constant_velocity",
     "from_continuous",
     "from_matrices",
+    "gospa",
     "lemma2_rotation",
     "make_scenario",
     "posterior_position_covariance",
