@@ -248,7 +248,7 @@ def evaluate(
     an environment of its own, so the results equal the serial ones. ``batched`` runs each
     deterministic planner (GSR, the look-ahead planner) on all episodes at once in a
     batched world (:func:`run_batched`: far faster for the look-ahead planner; its rows
-    equal the serial ones to the planner's tolerance, see there); the others (random
+    equal the serial ones bit for bit, see there); the others (random
     motion, learned policies) still run episode by episode.
     """
     from tqdm.auto import tqdm
