@@ -108,14 +108,12 @@ def run_batched(
     one batched :class:`~activetrack.world.World` (the policy plans every copy at once;
     the rollout of :mod:`activetrack.baselines.rollout`, batched).
 
-    The world's copies are the environment's episodes (same seeds, same draws), so a
-    deterministic planner's rows equal the serial ones to its tolerance: the batched
-    world rounds its stacked products differently from the single environment, GSR's
-    numerical steps settle to about 1e-7 m differently in response, which leaves smooth
-    tasks' rows equal to about 1e-6 relative; where the plan can switch between near-tied
-    positions (occluders), a copy's episode can take the other branch, so only the
-    statistics agree. A copy's row does not depend on the batch: the same seed gives the
-    same row bit for bit alone (a batch of one) or among any other copies.
+    The world's copies are the environment's episodes (same seeds, same draws; a copy's
+    numbers equal a single environment's bit for bit) and the planners' batched paths plan
+    each copy as alone, so a deterministic planner's rows equal the serial ones bit for
+    bit (tests/baselines/test_batch_independence.py: GSR on every preset), and a copy's
+    row does not depend on the batch: the same seed gives the same row alone (a batch of
+    one) or among any other copies.
     ``ms_per_step`` is the batch's CPU time per decision divided by the number of copies,
     after a warm-up decision (the batch's first, planned twice).
     ``on_step(k)`` is called after every step with the number of copies that stepped.

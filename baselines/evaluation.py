@@ -7,14 +7,21 @@ whatever the actions), and their differences are paired.
 
 Per episode (steps 1..n_steps, as in :mod:`activetrack.baselines.simulation`): the mean
 trace of the posterior position covariance, the RMSE of the position estimate and the
-return (sum of rewards). Per policy: the mean trace with its BCa bootstrap 95% interval
-(:func:`bootstrap_ci`: the episode traces are positive and heavy-tailed, and a Student-t
-interval of them can reach below zero) and its median, the RMSE and return with Student-t
-95% intervals, and the ratio of its mean trace to GSR's with a paired BCa bootstrap 95%
-interval. GSR is always evaluated (the ratio's reference) even when it is not asked for;
-it is then reported separately. ``ms_per_step`` is the CPU time (``time.process_time``)
-per decision (one ``plan`` or ``act`` call, per copy in a batched run), measured after
-one warm-up decision that is not counted (the compiled kernels' first compilation).
+return (sum of rewards). Per policy: the mean trace and the mean RMSE with BCa bootstrap
+95% intervals (:func:`bootstrap_ci`: the episodes' traces and RMSEs are positive and
+heavy-tailed, and a Student-t interval of them can reach below zero), the median trace,
+the return with a Student-t 95% interval, and the ratio of its mean trace to GSR's with a
+paired BCa bootstrap 95% interval. GSR is always evaluated (the ratio's reference) even
+when it is not asked for; it is then reported separately. ``cpu_ms_per_decision`` is the
+CPU time (``time.process_time``) per decision (one ``plan`` or ``act`` call, per copy in
+a batched run), measured after one warm-up decision that is not counted (the compiled
+kernels' first compilation).
+
+The JSON summary (:meth:`PolicyEvaluation.summary`) names the episodes' seeds
+``seed_range`` ``{"first": ..., "last": ...}`` (as the simulation's ``results.json``);
+``ms_per_step`` is a deprecated alias of ``cpu_ms_per_decision`` (the same value, kept
+for readers of the files written before), and :func:`format_table` still reads a summary
+written before that name (``ms_per_step`` only).
 
 A policy is an expert (``plan(problem) -> next positions``), anything with
 ``act(observations) -> {agent: action}``, a name or a policy file
@@ -90,11 +97,18 @@ class PolicyEvaluation:
     longest_gap: np.ndarray | None = None
 
     def summary(self, reference: PolicyEvaluation | None = None) -> dict[str, Any]:
-        """Return the JSON summary; the ratio is to ``reference``'s mean trace (GSR)."""
+        """Return the JSON summary; the ratio is to ``reference``'s mean trace (GSR).
+
+        ``cpu_ms_per_decision`` is the mean CPU time per decision (ms, after a warm-up),
+        ``ms_per_step`` its deprecated alias (the same value); ``seed_range`` the first and
+        last seed (the episodes' seeds are consecutive).
+        """
         mt = float(np.mean(self.mean_trace))
         mt_lo, mt_hi = bootstrap_ci(self.mean_trace)
-        rm, rm_lo, rm_hi = mean_ci(self.rmse)
+        rm = float(np.mean(self.rmse))
+        rm_lo, rm_hi = bootstrap_ci(self.rmse)  # positive and heavy-tailed, as the trace
         ret, ret_lo, ret_hi = mean_ci(self.returns)
+        ms = None if self.ms_per_step is None else float(np.mean(self.ms_per_step))
         out: dict[str, Any] = {
             "policy": self.policy,
             "label": short_labels([self.policy])[0],
@@ -108,11 +122,12 @@ class PolicyEvaluation:
             "nees": None
             if self.nees is None or not np.all(np.isfinite(self.nees))
             else float(np.mean(self.nees)),
-            "ms_per_step": None if self.ms_per_step is None else float(np.mean(self.ms_per_step)),
+            "cpu_ms_per_decision": ms,
+            "ms_per_step": ms,  # deprecated alias of cpu_ms_per_decision
             "ratio_to_gsr": None,
             "ratio_to_gsr_ci95": None,
             "episodes": len(self.seeds),
-            "seeds": [self.seeds[0], self.seeds[-1]],
+            "seed_range": {"first": self.seeds[0], "last": self.seeds[-1]},
             "requested": self.requested,
         }
         if self.no_detection is not None and np.all(np.isfinite(self.no_detection)):
@@ -233,7 +248,7 @@ def evaluate(
     an environment of its own, so the results equal the serial ones. ``batched`` runs each
     deterministic planner (GSR, the look-ahead planner) on all episodes at once in a
     batched world (:func:`run_batched`: far faster for the look-ahead planner; its rows
-    equal the serial ones to the planner's tolerance, see there); the others (random
+    equal the serial ones bit for bit, see there); the others (random
     motion, learned policies) still run episode by episode.
     """
     from tqdm.auto import tqdm
@@ -368,7 +383,8 @@ def format_table(rows: Sequence[dict[str, Any]]) -> str:
 
     Policies by their short label (a policy file's folder; the full path is the JSON's
     ``policy``); the mean trace with its bootstrap interval, then its median; ``CPU
-    ms/decision`` is ``ms_per_step`` (CPU time per decision after a warm-up).
+    ms/decision`` is ``cpu_ms_per_decision`` (CPU time per decision after a warm-up; a
+    summary written before that name gives its ``ms_per_step``).
     """
     width = max([len("policy")] + [len(r.get("label", r["policy"])) + 12 for r in rows])
     head = (
@@ -386,7 +402,8 @@ def format_table(rows: Sequence[dict[str, Any]]) -> str:
             rlo, rhi = r["ratio_to_gsr_ci95"]
             ratio = f"{r['ratio_to_gsr']:.3f} [{rlo:.3f}, {rhi:.3f}]"
         nees = "-" if r.get("nees") is None else f"{r['nees']:.2f}"
-        ms = "-" if r.get("ms_per_step") is None else f"{r['ms_per_step']:.3g}"
+        cpu_ms = r.get("cpu_ms_per_decision", r.get("ms_per_step"))
+        ms = "-" if cpu_ms is None else f"{cpu_ms:.3g}"
         line = (
             f"{name:<{width}} {trace:>26} {median:>8} {r['rmse']:>7.3f} {nees:>5} {ms:>15} "
             f"{r['mean_return']:>8.2f} {ratio:>22}"
@@ -411,7 +428,8 @@ def write_results(
     """Write ``results.json`` (a list, one object per policy), ``episodes.json`` and the plot.
 
     Returns the written paths by name (``results``, ``episodes``, ``plot``). ``meta``
-    (scenario, seeds...) goes to ``episodes.json`` along with every episode's metrics.
+    (scenario, seeds...) goes to ``episodes.json`` along with every episode's metrics
+    (``cpu_ms_per_decision`` with its deprecated alias ``ms_per_step``, as the summary).
     ``out_dir`` is a folder (checked by :func:`~activetrack.files.prepare_output_dir`:
     one that holds results needs ``overwrite``) or the :class:`RunOutputs` of one checked
     earlier. The files are committed together (a failed write leaves the previous ones);
@@ -429,7 +447,13 @@ def write_results(
                 "rmse": r.rmse.tolist(),
                 "return": r.returns.tolist(),
                 **({} if r.nees is None else {"nees": r.nees.tolist()}),
-                **({} if r.ms_per_step is None else {"ms_per_step": r.ms_per_step.tolist()}),
+                **(
+                    {}
+                    if r.ms_per_step is None  # ms_per_step: deprecated alias, as the summary's
+                    else dict.fromkeys(
+                        ("cpu_ms_per_decision", "ms_per_step"), r.ms_per_step.tolist()
+                    )
+                ),
                 **(
                     {}
                     if r.no_detection is None

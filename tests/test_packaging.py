@@ -6,6 +6,8 @@ hints visible to a type checker (PEP 561).
 from __future__ import annotations
 
 import importlib.metadata
+import json
+import shlex
 import shutil
 import subprocess
 import sys
@@ -73,28 +75,41 @@ def _run(args: list, cwd: Path, timeout: float = 900) -> str:
     return out.stdout
 
 
-def _link_dependencies(metadata: str, folder: Path) -> set[str]:
-    """Link into ``folder`` (to put on a venv's path) every file of the distributions of
-    this environment that the wheel's ``metadata`` requires, without extras, transitively;
-    return their names. Each requirement must be met by the version found here."""
+def _required(requirements: list[str], missing_ok: bool = False) -> set[str]:
+    """Return the (canonical) names of the distributions of this environment that
+    ``requirements`` name, with theirs, transitively (extras followed, markers evaluated).
+    Each requirement must be met by the version found here; ``missing_ok``: one not
+    installed here is left out (with what it requires)."""
     from packaging.requirements import Requirement
     from packaging.utils import canonicalize_name
 
-    folder.mkdir()
-    todo = [(Requirement(r), "") for r in Parser().parsestr(metadata).get_all("Requires-Dist")]
+    todo = [(Requirement(r), "") for r in requirements]
     done: set[tuple[str, str]] = set()  # (distribution, extra) whose requirements are queued
     while todo:
         req, extra = todo.pop()
         if req.marker is not None and not req.marker.evaluate({"extra": extra}):
             continue
         name = canonicalize_name(req.name)
-        dist = importlib.metadata.distribution(name)
+        try:
+            dist = importlib.metadata.distribution(name)
+        except importlib.metadata.PackageNotFoundError:
+            if missing_ok:
+                continue
+            raise
         assert req.specifier.contains(dist.version, prereleases=True), (req, dist.version)
         for e in {""} | req.extras:
             if (name, e) not in done:
                 done.add((name, e))
                 todo += [(Requirement(r), e) for r in dist.requires or ()]
-    names = {name for name, _ in done}
+    return {name for name, _ in done}
+
+
+def _link_dependencies(metadata: str, folder: Path) -> set[str]:
+    """Link into ``folder`` (to put on a venv's path) every file of the distributions of
+    this environment that the wheel's ``metadata`` requires, without extras, transitively;
+    return their names. Each requirement must be met by the version found here."""
+    folder.mkdir()
+    names = _required(Parser().parsestr(metadata).get_all("Requires-Dist"))
     for name in names:
         dist = importlib.metadata.distribution(name)
         assert dist.files, f"{name}: no RECORD"
@@ -103,6 +118,110 @@ def _link_dependencies(metadata: str, folder: Path) -> set[str]:
             if not (folder / top).exists():
                 (folder / top).symlink_to(site / top)
     return names
+
+
+def _make_rules() -> dict[str, tuple[list[str], list[str]]]:
+    """Return the Makefile's rules: target -> (prerequisites, recipe lines), continuation
+    lines joined."""
+    text = (ROOT / "Makefile").read_text().replace("\\\n", " ")
+    rules: dict[str, tuple[list[str], list[str]]] = {}
+    recipe: list[str] | None = None
+    for line in text.splitlines():
+        if line.startswith("\t") and recipe is not None:
+            recipe.append(line.strip())
+        elif ":" in line and not line.startswith(("#", " ")) and ":=" not in line:
+            target, _, prerequisites = line.partition(":")
+            recipe = []
+            rules[target.strip()] = (prerequisites.split(), recipe)
+        elif line.strip() and not line.startswith("#"):
+            recipe = None
+    return rules
+
+
+#: Run in a fresh interpreter as if the distributions named in argv[1] and their modules
+#: (argv[2]) were not installed: every import finder asked for such a module answers None,
+#: as for a module not found (``import`` raises ModuleNotFoundError, and
+#: ``importlib.util.find_spec`` answers None), and their metadata is not found; then the
+#: CLI on argv[3]; it prints the blocked modules loaded after that (none: what the
+#: interpreter's start loaded before, setuptools' ``_distutils_hack`` from its ``.pth``, is
+#: no import of the demo's). (Not ``sys.modules[name] = None``: scipy takes a name in
+#: ``sys.modules`` for a loaded module.)
+WITHOUT_RUN = """
+import json, sys
+
+before = set(sys.modules)
+from packaging.utils import canonicalize_name
+
+dists, modules = set(json.loads(sys.argv[1])), set(json.loads(sys.argv[2]))
+
+
+class Without:
+    def __init__(self, inner):
+        self.inner = inner
+
+    def find_spec(self, name, path=None, target=None):
+        if name.partition(".")[0] in modules:
+            return None
+        return self.inner.find_spec(name, path, target)
+
+    def find_distributions(self, *args, **kwargs):
+        found = getattr(self.inner, "find_distributions", lambda *a, **k: ())(*args, **kwargs)
+        return [d for d in found if canonicalize_name(d.metadata["Name"] or "") not in dists]
+
+    def __getattr__(self, attr):
+        return getattr(self.inner, attr)
+
+
+sys.meta_path[:] = [Without(f) for f in sys.meta_path]
+from activetrack.cli import main
+
+code = main(json.loads(sys.argv[3]))
+print("exit", code, "loaded", sorted((set(sys.modules) - before) & modules))
+"""
+
+
+def test_the_demo_installs_and_runs_without_the_extras(tmp_path):
+    """``make demo`` installs the project without extras (``pip install -e .``: the core,
+    envs and baselines) and runs the demo's command; that command, with one run, runs to
+    its results in an interpreter where every module of the extras is unimportable: the
+    distributions the extras require, transitively (torch, Ray, SB3, pytest, the other
+    dev tools...), less those the base dependencies require."""
+    from packaging.utils import canonicalize_name
+
+    rules = _make_rules()
+    prerequisites, recipe = rules["demo"]
+    assert prerequisites == ["$(DEMO_STAMP)"]  # not the full install's stamp
+    installs = [shlex.split(line) for line in rules["$(DEMO_STAMP)"][1] if "pip install" in line]
+    targets = [[t for t in cmd[cmd.index("install") + 1 :] if not t.startswith("-")]
+               for cmd in installs]  # fmt: skip
+    assert targets == [["pip"], ["."]], installs  # pip itself, then the project: no extra
+    assert not any("[" in t for cmd in installs for t in cmd)
+    (command,) = (shlex.split(line) for line in recipe)
+    assert command[0] == "$(VENV)/bin/activetrack" and command[1] == "simulate"
+    argv = [{"$(DEMO_RUNS)": "1"}.get(t, t) for t in command[1:]]
+    argv[argv.index("--out") + 1] = str(tmp_path / "demo")
+    assert "1" in argv and "--planner" in argv
+
+    base = _required(PROJECT["dependencies"])
+    extras = [r for reqs in PROJECT["optional-dependencies"].values() for r in reqs]
+    left_out = _required(extras, missing_ok=True) - base
+    blocked = sorted(
+        module
+        for module, dists in importlib.metadata.packages_distributions().items()
+        if all(canonicalize_name(d) in left_out for d in dists)
+    )
+    installed = {"torch", "ray", "stable_baselines3", "pytest", "hypothesis", "sympy"}
+    installed &= set(importlib.metadata.packages_distributions())
+    assert installed <= set(blocked) and "numpy" not in blocked
+    out = subprocess.run(
+        [sys.executable, "-c", WITHOUT_RUN, *map(json.dumps, (sorted(left_out), blocked, argv))],
+        capture_output=True, text=True, timeout=300, cwd=tmp_path,
+    )  # fmt: skip
+    assert out.returncode == 0, out.stderr[-3000:]
+    assert "exit 0 loaded []" in out.stdout, (out.stdout[-2000:], out.stderr[-2000:])
+    results = json.loads((tmp_path / "demo" / "results.json").read_text())
+    assert sorted(results) == sorted(argv[i + 1] for i, t in enumerate(argv) if t == "--planner")
+    assert all(r["seed_range"] == {"first": 0, "last": 0} for r in results.values())
 
 
 SMOKE = """

@@ -132,12 +132,21 @@ IMPROVED: dict[str, tuple[str, str]] = {
 }
 
 #: Evaluation summaries' entries redefined or added by design since the recording (issue
-#: 35): the intervals of the mean trace and of the ratio to GSR are BCa bootstrap ones (their
-#: coverage is tested in tests/baselines/test_evaluation.py), ``label`` and
-#: ``median_trace`` are new. They are left out of both sides; the rest is compared as usual.
+#: 35): the intervals of the mean trace, of the RMSE and of the ratio to GSR are BCa
+#: bootstrap ones (their coverage is tested in tests/baselines/test_evaluation.py),
+#: ``label``, ``median_trace`` and ``cpu_ms_per_decision`` (CPU time, as the recording's
+#: left-out ``ms_per_step``) are new. They are left out of both sides; the rest is compared
+#: as usual.
 REDEFINED: dict[str, tuple[str, ...]] = dict.fromkeys(
     ["evaluation", "evaluation_reference"],
-    ("mean_trace_ci95", "ratio_to_gsr_ci95", "label", "median_trace"),
+    (
+        "mean_trace_ci95",
+        "rmse_ci95",
+        "ratio_to_gsr_ci95",
+        "label",
+        "median_trace",
+        "cpu_ms_per_decision",
+    ),
 )
 
 #: Dicts that gained keys by design since the recording, per case: the key of the dict, and
@@ -184,11 +193,13 @@ FIXED: dict[str, tuple[int, tuple[str, ...], str]] = {
 def _seed_ranges(obj: Any) -> Any:
     """Return recorded data with each summary's ``"seeds": [first, last]`` renamed
     ``"seed_range": {"first": ..., "last": ...}`` (issue 35: the pair read as two seeds;
-    the same values under the new name). A Monte Carlo summary is a dict holding
-    ``mean_trace_ci95`` and ``max_violation`` (a policy evaluation's keeps its ``seeds``)."""
+    the same values under the new name). A summary is a dict holding ``mean_trace_ci95``
+    and ``max_violation`` (Monte Carlo) or ``ratio_to_gsr`` (a policy evaluation's); the
+    evaluation's per-policy ``results`` keep their list of every seed."""
     if isinstance(obj, dict):
         out = {k: _seed_ranges(v) for k, v in obj.items()}
-        if {"mean_trace_ci95", "max_violation", "seeds"} <= out.keys():
+        summary = {"max_violation", "ratio_to_gsr"} & out.keys()
+        if summary and {"mean_trace_ci95", "seeds"} <= out.keys():
             first, last = out.pop("seeds")
             out["seed_range"] = {"first": first, "last": last}
         return out

@@ -36,7 +36,7 @@ def _without_timings(obj):
         return {
             k: _without_timings(v)
             for k, v in obj.items()
-            if not k.startswith(("plan_time", "ms_per_step"))
+            if not k.startswith(("plan_time", "ms_per_step", "cpu_ms_per_decision"))
         }
     if isinstance(obj, list):
         return [_without_timings(v) for v in obj]

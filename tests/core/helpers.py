@@ -98,26 +98,39 @@ def segments_enter(paths, a, b, n=201):
     return in_any(paths, pts).reshape(n, -1).any(axis=0)
 
 
-def misspecify_filter(world, r_scale):
+def misspecify_filter(world, r_scale=1.0, q_scale=1.0):
     """Return ``world`` with a mis-modelled filter: it assumes measurement noise
-    ``r_scale * R`` while the world still draws the measurements with R (call before the
-    first reset).
+    ``r_scale * R`` and process noise ``q_scale * Q`` while the world still draws the
+    measurements with R and the targets' motion with Q (call before the first reset).
 
     The filter reads the weights ``1/sigma^2`` (``params.weights``; in the one-target
-    compiled step, the table's W columns); the draws read ``noise_std`` (the table's STD
-    columns), left unchanged.
+    compiled step, the table's W columns) and each target's ``Q`` (``params.targets``; in
+    the compiled step, the last of its matrices ``(Phi, noise_factor, Q)``); the draws read
+    ``noise_std`` (the table's STD columns) and ``noise_factor`` (a square root of the
+    true Q), left unchanged.
     """
     import dataclasses
 
     from activetrack.world import _loop_kernels as loop_kernels
+    from activetrack.world.tracking import TargetParams
 
     wd, wt = world.params.weights
-    world.params = dataclasses.replace(world.params, weights=(wd / r_scale, wt / r_scale))
+    targets = tuple(
+        TargetParams(t.Phi, q_scale * t.Q, t.noise_factor) for t in world.params.targets
+    )
+    world.params = dataclasses.replace(
+        world.params,
+        weights=(wd / r_scale, wt / r_scale),
+        Q=q_scale * world.params.Q,
+        targets=targets,
+    )
     if world._fused:
         table = world._fused_args[0].copy()
         table[:, loop_kernels.W_D] /= r_scale
         table[:, loop_kernels.W_T] /= r_scale
-        world._fused_args = (table, world._fused_args[1])
+        matrices = world._fused_args[1].copy()
+        matrices[2] *= q_scale
+        world._fused_args = (table, matrices)
     return world
 
 

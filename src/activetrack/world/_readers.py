@@ -252,16 +252,9 @@ class WorldReaders:
             )
             (x0, x1, *_), (h0, h1, *_) = x.tolist(), h.tolist()
             err = math.hypot(x0 - h0, x1 - h1)  # position_error(index), without a call
-        else:  # the root mean square over the targets, on Python numbers as above
-            sq = 0.0
-            for t in self._t:
-                x, h = (
-                    (t["x_true"], t["x_hat"]) if self._one
-                    else (t["x_true"][index], t["x_hat"][index])
-                )  # fmt: skip
-                (x0, x1, *_), (h0, h1, *_) = x.tolist(), h.tolist()
-                sq += (x0 - h0) ** 2 + (x1 - h1) ** 2
-            err = math.sqrt(sq / self.n_targets)
+        else:  # the root mean square over the targets: position_error's own arithmetic, so
+            # that a serial episode's infos equal its batched copy's bit for bit
+            err = float(self.position_error(index))
         return (
             int(get("k")),
             float(get("trace")),
