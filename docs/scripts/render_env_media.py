@@ -1,7 +1,7 @@
 """Render the environment pages' media: per registered id, a GIF of an episode of the
 expert and the expert's and random motion's figures on the task's held-out episodes.
 
-Usage (from the repository's root; about 10 minutes on one core)::
+Usage (from the repository's root; about 13 minutes of CPU for every id)::
 
     python docs/scripts/render_env_media.py            # every id
     python docs/scripts/render_env_media.py --ids activetrack/Urban-v0
