@@ -44,6 +44,10 @@ from .tracking_env import (
 class CentralizedTrackingEnv(gym.Env):
     """One agent choosing every sensor's move; see the module docstring for the spaces.
 
+    Starting state, rewards and episode end are those of
+    :class:`~activetrack.envs.tracking_env.TrackingParallelEnv` (the same episode: the
+    joint reward is the agents' shared reward, ``terminated``/``truncated`` theirs).
+
     Info keys: ``step``, ``trace``, ``position_error``, ``max_trace_exceeded`` (as in the
     parallel env), ``projected`` (M,) bool and ``n_projected`` (M,) int arrays.
     """

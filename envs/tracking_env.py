@@ -84,6 +84,30 @@ class TrackingParallelEnv(ParallelEnv):
         render_mode: ``None``, ``"rgb_array"`` or ``"human"``.
         **overrides: any :class:`Scenario` field, e.g. ``n_sensors=8, rho=1.5``.
 
+    Starting State:
+        :meth:`reset` with ``seed`` starts the episode generator ``default_rng(seed)``.
+        The true target state is the scenario's ``x0`` (``target_init="fixed"``) or is
+        drawn from ``N(x0_hat, P0)`` (``"gaussian"``, every task beyond the paper); the
+        filter starts at ``x0_hat, P0`` and is predicted once, so the first observation
+        carries ``x_hat(1|0), P(1|0)``. The sensors start uniformly (by area) in the disk
+        of radius ``sensor_radius`` about ``sensor_center``; with ``random_occluders`` the
+        episode's rectangles are drawn too.
+
+    Rewards:
+        Every agent gets the team's reward each step: ``-reward_scale`` times the
+        scenario's ``objective`` at the posterior ``P(k+1|k+1)``: ``"trace"`` is the sum
+        over targets of ``tr P_11``, the posterior position covariance's trace (the
+        paper's eq. 12, 17), ``"worst_trace"`` the largest of them, ``"logdet"`` the sum of
+        their log-determinants (:mod:`activetrack.models.objective`). The return is the sum
+        over the episode's steps.
+
+    Episode End:
+        Truncation: after ``n_steps`` steps every agent is truncated (the episode's
+        length; ``max_cycles`` is the same keyword). Termination: only when ``max_trace``
+        is set, as soon as the posterior trace (summed over targets) exceeds it (the info
+        ``max_trace_exceeded``). Either way the ``agents`` list empties and :meth:`reset`
+        starts the next episode.
+
     Spaces: every agent acts in ``Box(-1, 1, (2,), float32)`` (float64 accepted): its
     displacement as a fraction of its reach ``r_i``; longer vectors are scaled onto the
     unit disk (a scenario's own ``kinematics`` gives its bounds and meaning instead). It

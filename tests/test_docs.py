@@ -1,16 +1,25 @@
 """The manual builds with warnings as errors, and every registered environment has its
-page, whose header table agrees with the environment itself.
+page, whose header table, media, figures, arguments and example agree with the library.
 
 The site is built from a copy of ``docs/`` in a temporary folder (the generated pages are
 written there, not into the checkout). The header tables are checked against what the
 environments made from each id produce here (their spaces, the arrays ``reset`` and
-``state`` return, the length of an episode), not against the generator's code.
+``state`` return, the length of an episode), not against the generator's code. The
+pages' figures (``docs/_static/envs/<Name>.json``, made by
+``docs/scripts/render_env_media.py``) are checked by re-running some of their episodes
+through the library and recomputing their statistics with numpy; the arguments table by
+making the environment with each default shown and with values outside each range shown;
+the usage example by running it (:mod:`tests.doc_blocks`).
 """
 
 from __future__ import annotations
 
 import ast
+import dataclasses
+import functools
+import json
 import re
+import sys
 from html.parser import HTMLParser
 from pathlib import Path
 
@@ -26,8 +35,11 @@ import pettingzoo  # noqa: E402
 
 import activetrack  # noqa: E402,F401  (registers the ids)
 from activetrack._registry import ALL_IDS  # noqa: E402
+from tests.doc_blocks import python_blocks, run_blocks  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
+MEDIA = ROOT / "docs" / "_static" / "envs"
+IDS = sorted(ALL_IDS)
 
 # The build takes about 15 s on one core (autodoc imports the train layer: torch, SB3).
 pytestmark = pytest.mark.slow
@@ -167,3 +179,175 @@ def test_api_reference_documents_every_public_name(site: Path):
             if where and hasattr(obj, "__qualname__"):
                 documented.add(f'id="{mod.__name__}.{obj.__qualname__}"')
             assert any(d in html for d in documented), f"{mod.__name__}.{name}"
+
+
+def _name(env_id: str) -> str:
+    return env_id.split("/", 1)[1]
+
+
+@functools.cache
+def _page(env_id: str) -> str:
+    """The Markdown of ``env_id``'s page, from the generator (no Sphinx build)."""
+    sys.path.insert(0, str(ROOT / "docs" / "_ext"))
+    try:
+        import env_pages
+    finally:
+        sys.path.remove(str(ROOT / "docs" / "_ext"))
+    return env_pages.page(env_id)
+
+
+def _section(text: str, heading: str) -> str:
+    """The text of the ``## heading`` section of a page."""
+    match = re.search(rf"^## {re.escape(heading)}\n(.*?)(?=^## |\Z)", text, re.S | re.M)
+    assert match is not None, heading
+    return match.group(1)
+
+
+def _table(text: str) -> list[list[str]]:
+    """The rows (cells, unescaped) of the Markdown table in ``text``, header excluded."""
+    rows = [line for line in text.splitlines() if line.startswith("|")][2:]
+    return [[c.strip().replace("\\|", "|") for c in re.split(r"(?<!\\)\|", r)[1:-1]] for r in rows]
+
+
+def test_every_id_has_a_small_gif_of_several_frames_that_its_page_shows(site: Path):
+    from PIL import Image
+
+    total = 0
+    for env_id in IDS:
+        name = _name(env_id)
+        gif = MEDIA / f"{name}.gif"
+        with Image.open(gif) as im:
+            assert im.format == "GIF"
+            assert im.n_frames >= 10, (name, im.n_frames)
+            im.seek(im.n_frames - 1)  # every frame decodes
+            im.convert("RGB")
+        size = gif.stat().st_size
+        assert size < 400 * 1024, (name, size)
+        total += size
+        # The built page shows it (Sphinx copies it beside the pages), so does the index.
+        html = (site / "environments" / f"{name}.html").read_text(encoding="utf-8")
+        assert f'src="../_images/{name}.gif"' in html, name
+        assert (site / "_images" / f"{name}.gif").read_bytes() == gif.read_bytes()
+        index = (site / "environments" / "index.html").read_text(encoding="utf-8")
+        assert f'src="../_images/{name}.gif"' in index, name
+    assert total < 3 * 1024 * 1024, total
+
+
+def _figures(env_id: str) -> dict:
+    return json.loads((MEDIA / f"{_name(env_id)}.json").read_text(encoding="utf-8"))
+
+
+@pytest.mark.parametrize("env_id", IDS)
+def test_stored_figures_are_the_library_s_and_their_statistics(env_id: str):
+    from activetrack.baselines.evaluation import run_episode
+    from activetrack.baselines.policy_specs import resolve_policy
+    from activetrack.envs import parallel_env
+    from activetrack.world.scenarios import make_scenario
+
+    data = _figures(env_id)
+    sc = make_scenario(ALL_IDS[env_id])
+    assert data["env_id"] == env_id and data["scenario"] == ALL_IDS[env_id]
+    episodes = data["episodes"]["policies"]
+    seeds = list(range(1000, 1100))
+    assert set(episodes) == {"gsr", "rm"}
+    # A few episodes re-run through the library give the stored per-episode figures
+    # (mean trace, RMSE, return, NEES; the CPU time is the machine's). GSR's first episode
+    # is re-run by the page's usage example (test_usage_example_runs_...).
+    env = parallel_env(ALL_IDS[env_id])
+    try:
+        for policy, rerun in (("gsr", seeds[1:3]), ("rm", seeds[:1])):
+            for seed in rerun:
+                j = episodes[policy]["seeds"].index(seed)
+                got = run_episode(env, resolve_policy(policy), seed)
+                stored = [episodes[policy][k][j] for k in ("mean_trace", "rmse", "return", "nees")]
+                np.testing.assert_allclose(got[:4], stored, rtol=1e-9, err_msg=f"{policy} {seed}")
+    finally:
+        env.close()
+    # The summaries are the statistics of the stored episodes, recomputed here.
+    summary = {r["policy"]: r for r in data["results"]}
+    gsr_mean = np.mean(episodes["gsr"]["mean_trace"])
+    for policy, ep in episodes.items():
+        r = summary[policy]
+        assert ep["seeds"] == seeds and r["seeds"] == [1000, 1099] and r["episodes"] == 100
+        trace = np.asarray(ep["mean_trace"])
+        assert np.all(trace > 0)
+        np.testing.assert_allclose(r["mean_trace"], np.mean(trace), rtol=1e-12)
+        np.testing.assert_allclose(r["median_trace"], np.median(trace), rtol=1e-12)
+        np.testing.assert_allclose(r["rmse"], np.mean(ep["rmse"]), rtol=1e-12)
+        np.testing.assert_allclose(r["mean_return"], np.mean(ep["return"]), rtol=1e-12)
+        np.testing.assert_allclose(r["nees"], np.mean(ep["nees"]), rtol=1e-12)
+        np.testing.assert_allclose(r["ms_per_step"], np.mean(ep["ms_per_step"]), rtol=1e-12)
+        np.testing.assert_allclose(r["ratio_to_gsr"], np.mean(trace) / gsr_mean, rtol=1e-12)
+        if "no_detection" in r:  # limited sensing: the mean fraction, the longest gap
+            np.testing.assert_allclose(r["no_detection"], np.mean(ep["no_detection"]), rtol=1e-12)
+            assert r["longest_gap"] == max(ep["longest_gap"])
+        # The bootstrap interval of the mean: around it, and within the episodes' range.
+        lo, hi = r["mean_trace_ci95"]
+        assert trace.min() <= lo < np.mean(trace) < hi <= trace.max()
+        # With the trace objective the reward is -reward_scale times the step's trace:
+        # the return is -reward_scale n_steps times the episode's mean trace.
+        assert sc.objective == "trace" and sc.max_trace is None
+        np.testing.assert_allclose(ep["return"], -sc.reward_scale * sc.n_steps * trace, rtol=1e-9)
+    # The page shows these figures: each row's mean trace and median, to 4 digits.
+    rows = {
+        row[0].strip("`"): row
+        for row in _table(_section(_page(env_id), "The expert and random motion"))
+    }
+    assert set(rows) == {"gsr", "rm"}
+    for policy, ep in episodes.items():
+        shown = re.match(r"(\S+) \[(\S+), (\S+)\]", rows[policy][1]).groups()
+        assert float(shown[0]) == pytest.approx(np.mean(ep["mean_trace"]), rel=5e-4)
+        assert float(rows[policy][2]) == pytest.approx(np.median(ep["mean_trace"]), rel=5e-4)
+
+
+def _out_of_range(accepted: str) -> list[object]:
+    """Values just outside the range the page shows (``[lo, hi]``, ``0 or [lo, hi]``, ``an
+    integer in [lo, hi]``), or none if it shows no range."""
+    match = re.search(r"(an integer in )?(0 or )?\[([^,\]]+), ([^\]]+)\]$", accepted)
+    if match is None:
+        return []
+    integer, _, lo, hi = match.groups()
+    if integer:
+        return [int(lo) - 1, int(hi) + 1]
+    lo, hi = float(lo), float(hi)
+    below = lo / 10 if lo > 0 else (-1.0 if lo == 0 else lo * 10)
+    return [below, hi * 10]
+
+
+@pytest.mark.parametrize("env_id", IDS)
+def test_arguments_on_the_page_are_accepted_and_their_ranges_enforced(env_id: str):
+    from activetrack.world.scenarios import Scenario, make_scenario
+
+    rows = _table(_section(_page(env_id), "Arguments"))
+    defaults = {row[0].strip("`"): ast.literal_eval(row[2].strip("`")) for row in rows}
+    fields = {f.name for f in dataclasses.fields(Scenario) if f.init}
+    assert set(defaults) == fields | {"scenario", "render_mode", "max_cycles"}
+    # Every argument with its default, alone and all together: the id's environment.
+    for name, value in defaults.items():
+        gymnasium.make(env_id, **{name: value}).close()
+    env = gymnasium.make(env_id, **defaults)
+    assert env.unwrapped.scenario == make_scenario(ALL_IDS[env_id])
+    env.close()
+    # Outside the range shown: refused, naming the argument.
+    tried = 0
+    for name, _, default, accepted in rows:
+        if not isinstance(ast.literal_eval(default.strip("`")), (int, float, type(None))):
+            continue  # a vector or a name: its entries' range is checked by the core's tests
+        name = name.strip("`")
+        for value in _out_of_range(accepted):
+            with pytest.raises(ValueError, match=name):
+                gymnasium.make(env_id, **{name: value})
+            tried += 1
+    assert tried >= 30, tried
+
+
+@pytest.mark.parametrize("env_id", IDS)
+def test_usage_example_runs_and_prints_what_the_page_shows(env_id, tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    text = _page(env_id)
+    assert len(python_blocks(text)) == 1
+    assert run_blocks(f"environments/{_name(env_id)}.md", text, capsys) == 1
+    # The example's episode is the figures' first: its printed mean trace is theirs.
+    gsr = _figures(env_id)["episodes"]["policies"]["gsr"]
+    shown = python_blocks(text)[0][1].split()[-1]
+    assert float(shown) == pytest.approx(gsr["mean_trace"][0], rel=5e-4)

@@ -5,7 +5,7 @@ raises a ``ValueError`` naming the field and its accepted range.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -45,6 +45,142 @@ _PER_SENSOR = ("sigma_d2", "sigma_theta2", "vmax", "rho", "orientation")
 SENSOR_MODELS = ("range_bearing", "range", "bearing")
 #: Objective names (:data:`activetrack.models.objective.OBJECTIVES`).
 OBJECTIVE_NAMES = ("trace", "worst_trace", "logdet")
+
+
+class Bounds(NamedTuple):
+    """A numeric field's accepted values, for each of its entries (every sensor's, every
+    coordinate's): ``lo <= x <= hi``, also ``0`` when ``zero``; only integers when
+    ``integer``."""
+
+    lo: float
+    hi: float
+    zero: bool = False
+    integer: bool = False
+
+    def __str__(self) -> str:
+        """Return the range as the fields' error messages word it."""
+        if self.integer:
+            return f"an integer in [{int(self.lo)}, {int(self.hi)}]"
+        span = f"[{self.lo:g}, {self.hi:g}]"
+        return f"0 or {span}" if self.zero and self.lo > 0 else span
+
+
+#: Every numeric :class:`~activetrack.world.scenarios.Scenario` field's accepted values
+#: (per entry of a vector or per-sensor field; ``P0`` and ``pose_cov``: their diagonal's
+#: entries), the one place the checks read them from.
+BOUNDS: dict[str, Bounds] = {
+    "n_sensors": Bounds(1, N_SENSORS_MAX, integer=True),
+    "n_steps": Bounds(1, N_STEPS_MAX, integer=True),
+    "n_targets": Bounds(1, N_TARGETS_MAX, integer=True),
+    "random_occluders": Bounds(0, 100, integer=True),
+    "filter_iterations": Bounds(1, 100, integer=True),
+    "dt": Bounds(*DT_RANGE),
+    "sensor_radius": Bounds(0.0, LENGTH_MAX),
+    "reward_scale": Bounds(*REWARD_SCALE_RANGE),
+    "max_trace": Bounds(*MAX_TRACE_RANGE),
+    "q": Bounds(0.0, Q_MAX, zero=True),
+    "sigma_d2": Bounds(*SIGMA_D2_RANGE),
+    "sigma_theta2": Bounds(*SIGMA_THETA2_RANGE),
+    "vmax": Bounds(0.0, SPEED_MAX, zero=True),
+    "rho": Bounds(0.0, LENGTH_MAX, zero=True),
+    "orientation": Bounds(-ORIENTATION_MAX, ORIENTATION_MAX, zero=True),
+    "max_range": Bounds(1e-6, LENGTH_MAX),
+    "p_detect": Bounds(0.0, 1.0, zero=True),
+    "x0": Bounds(-STATE_MAX, STATE_MAX, zero=True),
+    "x0_hat": Bounds(-STATE_MAX, STATE_MAX, zero=True),
+    "P0": Bounds(*P0_RANGE),
+    "pose_cov": Bounds(0.0, POSE_COV_MAX, zero=True),
+    "sensor_center": Bounds(-LENGTH_MAX, LENGTH_MAX, zero=True),
+    "occluder_bounds": Bounds(-LENGTH_MAX, LENGTH_MAX, zero=True),
+    "occluder_size": Bounds(1e-6, LENGTH_MAX),
+}
+
+#: The named values of the fields that take names (or an object of their kind instead,
+#: :data:`CHOICE_KINDS`).
+CHOICES: dict[str, tuple[Any, ...]] = {
+    "target_init": ("fixed", "gaussian"),
+    "motion": tuple(sorted(MODELS)),
+    "sensor_model": SENSOR_MODELS,
+    "objective": OBJECTIVE_NAMES,
+    "account_pose": (True, False),
+}
+#: What a field of :data:`CHOICES` takes besides its names (one per sensor or target where
+#: the field is per sensor or per target).
+CHOICE_KINDS: dict[str, str] = {
+    "motion": "activetrack.models.motion.LinearMotionModel",
+    "sensor_model": "activetrack.SensorModel",
+    "objective": "activetrack.Objective",
+}
+
+
+#: How the fields of :data:`BOUNDS` that are more than one number are given (the bounds
+#: hold for each entry).
+FORMS: dict[str, str] = {
+    **dict.fromkeys(_PER_SENSOR, "per sensor (one for all, or a tuple of M), each"),
+    "max_range": "None (unlimited), or per sensor (one for all, or a tuple of M), each",
+    "p_detect": "per sensor (one for all, or a tuple of M), each",
+    "max_trace": "None (no termination), or",
+    "q": "one for all targets (or a tuple of K with n_targets > 1),",
+    "x0": "the target state (n entries; K rows with n_targets > 1), each entry",
+    "x0_hat": "the target state (n entries; K rows with n_targets > 1), each entry",
+    "P0": "its diagonal (n entries) or an n x n symmetric positive definite matrix (shared, "
+    "or one per target with n_targets > 1), each diagonal entry",
+    "pose_cov": "a variance, M variances, a 2x2 matrix or M 2x2 matrices (symmetric "
+    "positive semidefinite), each variance",
+    "sensor_center": "(x, y), each",
+    "occluder_bounds": "(xmin, ymin, xmax, ymax) with min < max, each",
+    "occluder_size": "(lo, hi) with lo <= hi, each",
+}
+
+
+def accepted(name: str) -> str:
+    """Return the accepted values of the Scenario field ``name`` in words: its
+    :data:`FORMS` and :data:`BOUNDS`, or its :data:`CHOICES` (the polygons, kinematics and
+    label otherwise)."""
+    if name in BOUNDS:
+        return f"{FORMS[name]} in {BOUNDS[name]}" if name in FORMS else str(BOUNDS[name])
+    if name in CHOICES:
+        named = " or ".join(repr(c) for c in CHOICES[name])
+        if name in CHOICE_KINDS:
+            named += f", or an {CHOICE_KINDS[name]}"
+        return (
+            f"per sensor (one for all, or a tuple of M): {named}"
+            if name == "sensor_model"
+            else named
+        )
+    from activetrack.models.occluders import MAX_VERTICES  # noqa: PLC0415 (occluded scenarios)
+
+    return {
+        "occluders": f"simple polygons of >= 3 (x, y) vertices, at most {MAX_VERTICES} "
+        "vertices in all (random rectangles' included), coordinates at most "
+        f"{LENGTH_MAX:g} in magnitude",
+        "kinematics": "None (a disk of radius vmax dt), an activetrack.Kinematics, or a tuple of M",
+        "name": "a string",
+    }[name]
+
+
+def _count_field(name: str, value: object) -> int:
+    """Return the integer field ``name`` checked against its :data:`BOUNDS`."""
+    b = BOUNDS[name]
+    return _count(name, value, int(b.hi), lo=int(b.lo))
+
+
+def _real_field(name: str, value: object) -> float:
+    """Return the real scalar field ``name`` checked against its :data:`BOUNDS`."""
+    b = BOUNDS[name]
+    return _real(name, value, b.lo, b.hi, zero=b.zero)
+
+
+def _sensor_field(name: str, value: object, m: int) -> float | tuple[float, ...]:
+    """Return the per-sensor field ``name`` checked against its :data:`BOUNDS`."""
+    b = BOUNDS[name]
+    return _sensor_values(name, value, m, b.lo, b.hi, zero=b.zero)
+
+
+def _vector_field(name: str, value: object, n: int, why: str = "") -> tuple:
+    """Return the vector field ``name`` (``n`` entries) checked against its :data:`BOUNDS`."""
+    b = BOUNDS[name.split("[")[0]]
+    return _vector(name, value, n, b.lo, b.hi, zero=b.zero, why=why)
 
 
 def _count(name: str, value: object, hi: int, lo: int = 1) -> int:
@@ -198,8 +334,7 @@ def _per_target_states(key: str, value: object, dims: list[int]) -> tuple:
             f"n_targets > 1, got {value!r}"
         )
     return tuple(
-        _vector(f"{key}[{k}]", r, n, -STATE_MAX, STATE_MAX, zero=True)
-        for k, (r, n) in enumerate(zip(rows, dims, strict=True))
+        _vector_field(f"{key}[{k}]", r, n) for k, (r, n) in enumerate(zip(rows, dims, strict=True))
     )
 
 
@@ -277,7 +412,7 @@ def _converted_random_occluders(
 ) -> tuple[int, tuple, tuple]:
     """Return ``random_occluders``, ``occluder_bounds`` and ``occluder_size`` checked (the
     fixed ``occluders`` given converted)."""
-    random_occluders = _count("random_occluders", random_occluders, 100, lo=0)
+    random_occluders = _count_field("random_occluders", random_occluders)
     from activetrack.models.occluders import MAX_VERTICES  # noqa: PLC0415 (occluded scenarios)
 
     fixed = sum(len(poly) for poly in occluders)
@@ -286,14 +421,13 @@ def _converted_random_occluders(
             f"occluders and random_occluders must have at most {MAX_VERTICES} vertices in "
             f"all (4 a random rectangle), got {fixed} + 4 x {random_occluders}"
         )
-    b = _vector("occluder_bounds", occluder_bounds, 4, -LENGTH_MAX, LENGTH_MAX,
-                zero=True)  # fmt: skip
+    b = _vector_field("occluder_bounds", occluder_bounds, 4)
     if not (b[0] < b[2] and b[1] < b[3]):
         raise ValueError(
             f"occluder_bounds must be (xmin, ymin, xmax, ymax) with xmin < xmax and "
             f"ymin < ymax, got {occluder_bounds!r}"
         )
-    size = _vector("occluder_size", occluder_size, 2, 1e-6, LENGTH_MAX, zero=False)
+    size = _vector_field("occluder_size", occluder_size, 2)
     if size[0] > size[1]:
         raise ValueError(f"occluder_size must be (lo, hi) with lo <= hi, got {size!r}")
     least = 1e-6 * max(1.0, max(abs(v) for v in b))  # random_layout's smallest side

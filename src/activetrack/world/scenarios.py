@@ -23,6 +23,7 @@ from activetrack.models.sensor import SensorModel, as_sensor_model, record, slot
 from activetrack.validation import FloatArray, UnexpectedKeywordError
 from activetrack.world._scenario_fields import (
     _PER_SENSOR,
+    CHOICES,
     DT_RANGE,
     INFORMATION_RATIO_MAX,
     LENGTH_MAX,
@@ -48,12 +49,12 @@ from activetrack.world._scenario_fields import (
     _converted_p0,
     _converted_pose_cov,
     _converted_random_occluders,
-    _count,
+    _count_field,
     _per_target_p0,
     _per_target_states,
-    _real,
-    _sensor_values,
-    _vector,
+    _real_field,
+    _sensor_field,
+    _vector_field,
 )
 from activetrack.world.capabilities import Capabilities
 from activetrack.world.presets import EXTENSIONS, PRESETS, TASKS
@@ -220,23 +221,22 @@ class Scenario:
 
         if not isinstance(self.name, str):
             raise ValueError(f"name must be a string, got {self.name!r}")
-        m = _count("n_sensors", self.n_sensors, N_SENSORS_MAX)
+        m = _count_field("n_sensors", self.n_sensors)
         put("n_sensors", m)
-        put("n_steps", _count("n_steps", self.n_steps, N_STEPS_MAX))
-        put("dt", _real("dt", self.dt, *DT_RANGE))
-        put("sensor_radius", _real("sensor_radius", self.sensor_radius, 0.0, LENGTH_MAX))
-        put("reward_scale", _real("reward_scale", self.reward_scale, *REWARD_SCALE_RANGE))
+        put("n_steps", _count_field("n_steps", self.n_steps))
+        for key in ("dt", "sensor_radius", "reward_scale"):
+            put(key, _real_field(key, getattr(self, key)))
         if self.max_trace is not None:
-            put("max_trace", _real("max_trace", self.max_trace, *MAX_TRACE_RANGE))
-        if not isinstance(self.target_init, str) or self.target_init not in ("fixed", "gaussian"):
+            put("max_trace", _real_field("max_trace", self.max_trace))
+        if not isinstance(self.target_init, str) or self.target_init not in CHOICES["target_init"]:
             raise ValueError(f"target_init must be 'fixed' or 'gaussian', got {self.target_init!r}")
-        kk = _count("n_targets", self.n_targets, N_TARGETS_MAX)
+        kk = _count_field("n_targets", self.n_targets)
         put("n_targets", kk)
         put("motion", _converted_motion(self.motion, kk))
         if kk > 1 and isinstance(self.q, (tuple, list, np.ndarray)):
-            put("q", _vector("q", self.q, kk, 0.0, Q_MAX, zero=True, why=" (one per target)"))
+            put("q", _vector_field("q", self.q, kk, why=" (one per target)"))
         else:
-            put("q", _real("q", self.q, 0.0, Q_MAX, zero=True))
+            put("q", _real_field("q", self.q))
         put("objective", _converted_objective(self.objective))
         if not isinstance(self.account_pose, (bool, np.bool_)):
             raise ValueError(f"account_pose must be True or False, got {self.account_pose!r}")
@@ -244,34 +244,23 @@ class Scenario:
         put("sensor_model", _converted_models(self.sensor_model, m))
         put("pose_cov", _converted_pose_cov(self.pose_cov, m))
         if self.max_range is not None:
-            put("max_range", _sensor_values("max_range", self.max_range, m, 1e-6, LENGTH_MAX,
-                                            zero=False))  # fmt: skip
-        put("p_detect", _sensor_values("p_detect", self.p_detect, m, 0.0, 1.0, zero=True))
+            put("max_range", _sensor_field("max_range", self.max_range, m))
+        put("p_detect", _sensor_field("p_detect", self.p_detect, m))
         occluders, occ = _converted_occluders(self.occluders)
         if occ is not None:
             self._cache["occluders"] = occ
         put("occluders", occluders)
-        put(
-            "sensor_center",
-            _vector("sensor_center", self.sensor_center, 2, -LENGTH_MAX, LENGTH_MAX, zero=True),
-        )
+        put("sensor_center", _vector_field("sensor_center", self.sensor_center, 2))
         count, bounds, size = _converted_random_occluders(
             self.random_occluders, self.occluders, self.occluder_bounds, self.occluder_size
         )
         put("random_occluders", count)
         put("occluder_bounds", bounds)
         put("occluder_size", size)
-        put("filter_iterations", _count("filter_iterations", self.filter_iterations, 100))
+        put("filter_iterations", _count_field("filter_iterations", self.filter_iterations))
         put("kinematics", team.converted(self.kinematics, m))
-        ranges = {
-            "sigma_d2": (*SIGMA_D2_RANGE, False),
-            "sigma_theta2": (*SIGMA_THETA2_RANGE, False),
-            "vmax": (0.0, SPEED_MAX, True),
-            "rho": (0.0, LENGTH_MAX, True),
-            "orientation": (-ORIENTATION_MAX, ORIENTATION_MAX, True),
-        }
-        for key, (lo, hi, zero) in ranges.items():
-            put(key, _sensor_values(key, getattr(self, key), m, lo, hi, zero=zero))
+        for key in _PER_SENSOR:
+            put(key, _sensor_field(key, getattr(self, key), m))
         reach = np.asarray(self.vmax) * self.dt
         if np.any(reach > LENGTH_MAX):
             raise ValueError(
@@ -283,7 +272,7 @@ class Scenario:
             why = f" (the state of motion={getattr(self.motion, 'name', self.motion)!r})"
             for key in ("x0", "x0_hat"):
                 value = getattr(self, key)
-                put(key, _vector(key, value, n, -STATE_MAX, STATE_MAX, zero=True, why=why))
+                put(key, _vector_field(key, value, n, why=why))
             put("P0", _converted_p0(self.P0, n, self.motion))
         else:
             dims = [mdl.dim for mdl in self.target_models]
