@@ -14,7 +14,7 @@ from typing import Any
 EXTENSIONS = (
     "n_targets", "sensor_model", "pose_cov", "account_pose", "objective", "max_range",
     "p_detect", "occluders", "random_occluders", "occluder_bounds", "occluder_size",
-    "filter_iterations", "kinematics",
+    "filter_iterations", "kinematics", "target_behaviour",
 )  # fmt: skip
 
 #: The beyond-the-paper tasks start the filter consistent: the true state is drawn from
