@@ -64,6 +64,8 @@ PRESET_FLAGS = {
         "no_occluders": False,
         "single_update": False,
     },  # fmt: skip
+    "maneuvering": {**dict.fromkeys(FLAGS, True), "filter_targets": False},
+    "evader": {**dict.fromkeys(FLAGS, True), "filter_targets": False},
 }
 
 # Which paths each preset takes, as docs/architecture.md and the presets describe them.
@@ -77,6 +79,9 @@ PRESET_PATHS = {  # (paper_model, paper_problem, paper_observation, fused_step)
     "uncertain_poses": (False, False, False, False),
     "urban": (False, False, False, False),
     "urban_random": (False, False, False, False),
+    # the paper's measurement setup; the targets' behaviours: stage by stage
+    "maneuvering": (True, True, True, False),
+    "evader": (True, True, True, False),
 }
 
 

@@ -208,3 +208,10 @@ def test_single_model_filter_is_inconsistent_against_a_maneuvering_target():
     turns = _mean_nees(TURNS)
     lo, hi = nees_band(turns, dim=4)
     assert turns.mean() > hi, (turns.mean(), hi)
+
+
+def test_the_tasks_behaviours_print_as_their_construction():
+    from activetrack.world.presets import EVADER, MANEUVERING
+
+    for b in (MANEUVERING, EVADER, TURNS):  # the docs' preset tables show this text
+        assert eval(repr(b), {"Maneuvering": Maneuvering, "Evasive": Evasive}) == b

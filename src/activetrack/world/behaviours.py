@@ -24,6 +24,7 @@ generators, so its numbers do not depend on the other copies.
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -34,16 +35,20 @@ from activetrack.validation import FloatArray
 _WHAT = "target_behaviour must be None, an activetrack.TargetBehaviour or a tuple of one per target"
 
 
-def converted(value: object, models: tuple, x0s: tuple, sensors: FloatArray) -> Any:
+def converted(value: object, sc: Any) -> Any:
     """Return the scenario field ``target_behaviour`` checked: None, one behaviour (for
     every target) or a tuple of K (one behaviour when all K are equal).
 
-    Each behaviour is probed once from its target's ``x0`` (its model ``models[k]``) with
-    the sensors at ``sensors`` (M, 2): a state of another dimension than the target's
-    model, a failing step or a non-finite next state raises a ValueError naming the field.
+    ``sc`` is the scenario, its other fields converted. Each behaviour is probed once from
+    its target's ``x0`` with every sensor at ``sensor_center``: a state of another
+    dimension than the target's model, a failing step, a non-finite next state or a
+    behaviour's own time step (its ``dt``, a :class:`~activetrack.FilterModel`'s model's)
+    other than the scenario's ``dt`` raises a ValueError naming the field.
     """
     if value is None:
         return None
+    models, x0s, dt = sc.target_models, sc.target_states("x0"), sc.dt
+    sensors = np.broadcast_to(np.asarray(sc.sensor_center, np.float64), (sc.n_sensors, 2))
     kk = len(models)
     if isinstance(value, TargetBehaviour):
         each = (value,) * kk
@@ -54,7 +59,14 @@ def converted(value: object, models: tuple, x0s: tuple, sensors: FloatArray) -> 
     else:
         raise ValueError(f"{_WHAT}, got {value!r}")
     for k, (b, model, x0) in enumerate(zip(each, models, x0s, strict=True)):
-        _probe(b, f"target_behaviour (target {k})", model.dim, x0, sensors)
+        name = f"target_behaviour (target {k})"
+        step = b.model.dt if isinstance(b, FilterModel) else getattr(b, "dt", None)
+        if step is not None and not math.isclose(float(step), dt, rel_tol=1e-12):
+            raise ValueError(
+                f"{name}: its time step {float(step):g} must be the scenario's dt ({dt:g}); "
+                f"build the behaviour with dt={dt:g}"
+            )
+        _probe(b, name, model.dim, x0, sensors)
     return each[0] if all(b == each[0] for b in each) else each
 
 

@@ -295,8 +295,7 @@ class Scenario:
             for key in ("x0", "x0_hat"):
                 put(key, _per_target_states(key, getattr(self, key), dims))
             put("P0", _per_target_p0(self.P0, dims))
-        put("target_behaviour", behaviours.converted(self.target_behaviour, self.target_models,
-            self.target_states("x0"), np.broadcast_to(self.sensor_center, (m, 2))))  # fmt: skip
+        put("target_behaviour", behaviours.converted(self.target_behaviour, self))
         self._check_information_ratio()
         if self.random_occluders:  # a layout can be drawn (the reset would fail otherwise)
             self.draw_occluders(np.random.default_rng(0))
