@@ -64,6 +64,16 @@ def test_bad_values_name_the_field(value, match):
         make_scenario("paper", target_behaviour=value, **kw)
 
 
+def test_a_behaviour_of_another_time_step_names_the_field():
+    # the task's behaviour was built for dt = 0.1: another dt would move the target in
+    # steps of 0.1 s while the filter predicts over dt
+    with pytest.raises(ValueError, match=r"target_behaviour \(target 0\).*0\.1.*dt \(0\.05\)"):
+        make_scenario("maneuvering", dt=0.05)
+    with pytest.raises(ValueError, match=r"target_behaviour .*time step 0\.2"):
+        make_scenario("paper", target_behaviour=FilterModel(make_model("cv", 10.0, 0.2)))
+    assert make_scenario("maneuvering", dt=0.05, target_behaviour=None).target_behaviour is None
+
+
 def test_wrong_count_names_the_field():
     with pytest.raises(ValueError, match=r"target_behaviour .* one per target \(2\), got 3"):
         make_scenario("two_targets", target_behaviour=(TURNS,) * 3)
