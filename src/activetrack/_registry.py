@@ -38,6 +38,8 @@ TASK_IDS = {
     "activetrack/UncertainPoses-v0": "uncertain_poses",
     "activetrack/Urban-v0": "urban",
     "activetrack/UrbanRandom-v0": "urban_random",
+    "activetrack/Maneuvering-v0": "maneuvering",
+    "activetrack/Evader-v0": "evader",
 }
 #: Every registered id and its preset (``ActiveTracking-v0`` is the paper).
 ALL_IDS = {ENV_ID: "paper", **TASK_IDS}

@@ -9,7 +9,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from activetrack import Disk, SensorModel
+from activetrack import Disk, FilterModel, SensorModel
 from activetrack.world import World, capabilities, observation
 from activetrack.world.capabilities import Capabilities
 from activetrack.world.problem import PlanningProblem
@@ -18,6 +18,7 @@ from activetrack.world.scenarios import PRESETS, make_scenario
 FLAGS = (
     "one_target", "range_bearing", "known_poses", "pose_free_filter", "unlimited_sensing",
     "no_occluders", "single_update", "trace_objective", "disk_kinematics", "builtin_sensors",
+    "filter_targets",
 )  # fmt: skip
 
 
@@ -63,6 +64,8 @@ PRESET_FLAGS = {
         "no_occluders": False,
         "single_update": False,
     },  # fmt: skip
+    "maneuvering": {**dict.fromkeys(FLAGS, True), "filter_targets": False},
+    "evader": {**dict.fromkeys(FLAGS, True), "filter_targets": False},
 }
 
 # Which paths each preset takes, as docs/architecture.md and the presets describe them.
@@ -76,6 +79,9 @@ PRESET_PATHS = {  # (paper_model, paper_problem, paper_observation, fused_step)
     "uncertain_poses": (False, False, False, False),
     "urban": (False, False, False, False),
     "urban_random": (False, False, False, False),
+    # the paper's measurement setup; the targets' behaviours: stage by stage
+    "maneuvering": (True, True, True, False),
+    "evader": (True, True, True, False),
 }
 
 
@@ -113,6 +119,7 @@ def expected(fields: dict) -> dict[str, bool]:
         "trace_objective": fields.get("objective", "trace") == "trace",
         "disk_kinematics": all(type(k) is Disk for k in fields.get("kinematics", ())),
         "builtin_sensors": all(isinstance(m, str) for m in models),
+        "filter_targets": fields.get("target_behaviour") is None,
     }
     return {
         **f,
@@ -141,6 +148,7 @@ def expected(fields: dict) -> dict[str, bool]:
                 "single_update",
                 "disk_kinematics",
                 "builtin_sensors",
+                "filter_targets",
             )
         ),  # fmt: skip
     }
@@ -186,6 +194,8 @@ def random_fields(rng: np.random.Generator) -> dict:
     if rng.random() < 0.3:  # the built-in disks given, or one of them a kinematics of its own
         own = rng.random() < 0.6
         fields["kinematics"] = (Disk(1.0), OwnDisk(1.0) if own else Disk(0.5), Disk(1.0))
+    if rng.random() < 0.2:  # true targets that follow a behaviour (here their own model)
+        fields["target_behaviour"] = FilterModel(make_scenario("paper").model)
     return fields
 
 

@@ -31,6 +31,8 @@ def test_every_task_is_a_valid_scenario_with_its_layout():
         # Detection flags (K per sensor block) and rays with limited sensing.
         d = 7 * K + 12 * M + (K * M if sc.limited_sensing else 0)
         rays = observation.RAYS if sc.has_occluders else 0  # each agent's own in its view
+        if sc.capabilities.paper_observation:  # (the paper's sensors: the paper's layout)
+            d, rays = 5 + 6 * M, 0
         assert obs.shape == (M, d + rays), name
         assert w.state(0).shape == (d + M * rays + 1,)
         low, high = w.layout.bounds()
@@ -187,7 +189,11 @@ def _nees_runs(
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("name", [t for t in TASKS if not make_scenario(t).limited_sensing])
+@pytest.mark.parametrize(
+    "name",  # (a target that maneuvers or evades makes the filter inconsistent: by design)
+    [t for t in TASKS if not make_scenario(t).limited_sensing
+     and make_scenario(t).capabilities.filter_targets],
+)  # fmt: skip
 def test_filter_is_consistent_on_every_task(name):
     # The mean over 200 runs of each run's time-averaged position NEES (per target) lies
     # in the 99% band of that statistic (tests.core.helpers.nees_band: runs independent,

@@ -63,6 +63,14 @@ class TargetBehaviour(ComparedByValue, abc.ABC):
     #: Whether :meth:`step` reads the sensors' true positions.
     reactive: ClassVar[bool] = False
 
+    def __repr__(self) -> str:
+        """Return ``Name(field=value, ...)``: the ``_FIELDS`` a behaviour is built from if it
+        lists them, else its public attributes (arrays as lists)."""
+        keys = getattr(self, "_FIELDS", None) or [k for k in vars(self) if not k.startswith("_")]
+        args = (f"{k}={np.asarray(v).tolist() if isinstance(v, np.ndarray) else v!r}"
+                for k in keys for v in [getattr(self, k)])  # fmt: skip
+        return f"{type(self).__name__}({', '.join(args)})"
+
     @property
     def n_modes(self) -> int:
         """Return the number of discrete modes (1 for a behaviour without modes)."""

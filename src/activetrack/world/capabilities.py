@@ -67,6 +67,9 @@ class Capabilities:
         builtin_sensors: every sensor's model is a built-in (:attr:`activetrack.SensorModel.code`):
             the compiled measurement and filter kernels; else the generic NumPy path
             (:mod:`activetrack.estimation.generic`) for the world and the planners.
+        filter_targets: no ``target_behaviour``: every true target moves by its filter's
+            own model (eq. 2), in the compiled step; else the world moves each by its
+            behaviour (:mod:`activetrack.world.behaviours`), stage by stage.
     """
 
     one_target: bool
@@ -79,6 +82,7 @@ class Capabilities:
     trace_objective: bool
     disk_kinematics: bool = True
     builtin_sensors: bool = True
+    filter_targets: bool = True
 
     @classmethod
     def of(cls, sc: Any) -> Capabilities:
@@ -95,6 +99,7 @@ class Capabilities:
             trace_objective=sc.objective == "trace",
             disk_kinematics=sc.kinematics is None or all_disks(sc.kinematics_models),
             builtin_sensors=all(m.builtin for m in sc.sensor_objects),
+            filter_targets=sc.target_behaviour is None,
         )
 
     @property
@@ -128,7 +133,10 @@ class Capabilities:
     def per_target_update(self) -> bool:
         """Whether the world's advance moves, measures and filters the one target in one
         call (:func:`activetrack.world.tracking.advance_target`), not stage by stage."""
-        return self.one_target and self.unlimited_sensing and self.single_update
+        return (
+            self.one_target and self.unlimited_sensing and self.single_update
+            and self.filter_targets
+        )  # fmt: skip
 
     @property
     def fused_step(self) -> bool:

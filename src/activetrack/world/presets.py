@@ -1,5 +1,6 @@
 """The named scenario presets: the paper's setup (Section V), M identical sensors, and the
-tasks beyond the paper (several targets, sensor models, uncertain poses, limited sensing).
+tasks beyond the paper (several targets, sensor models, uncertain poses, limited sensing,
+targets that maneuver or evade).
 
 Each preset is a dict of :class:`activetrack.world.scenarios.Scenario` fields that differ
 from the defaults (the paper's); :func:`activetrack.world.scenarios.make_scenario` builds it.
@@ -9,12 +10,14 @@ from __future__ import annotations
 
 from typing import Any
 
+from activetrack.models.behaviour import Evasive, Maneuvering
+
 #: The fields added beyond the paper's setup (several targets, sensor models, poses,
 #: limited sensing).
 EXTENSIONS = (
     "n_targets", "sensor_model", "pose_cov", "account_pose", "objective", "max_range",
     "p_detect", "occluders", "random_occluders", "occluder_bounds", "occluder_size",
-    "filter_iterations", "kinematics",
+    "filter_iterations", "kinematics", "target_behaviour",
 )  # fmt: skip
 
 #: The beyond-the-paper tasks start the filter consistent: the true state is drawn from
@@ -45,6 +48,19 @@ _BLOCKS = (
     ((-16.0, 6.0), (-12.0, 6.0), (-12.0, 10.0), (-16.0, 10.0)),
     ((-10.0, 12.0), (-6.0, 12.0), (-6.0, 16.0), (-10.0, 16.0)),
 )
+
+#: The maneuvering task's target: constant velocity (mode 0, where it starts) and
+#: coordinated turns of +-1 rad/s (at the paper's 10 m/s, 10 m/s^2 of lateral acceleration),
+#: each mode kept with probability 0.9 per step (a mean sojourn of 1 s), the filter's q.
+MANEUVERING = Maneuvering(
+    turn_rates=(0.0, 1.0, -1.0),
+    transition=((0.9, 0.05, 0.05), (0.05, 0.9, 0.05), (0.05, 0.05, 0.9)),
+    q=10.0,
+    dt=0.1,
+)
+#: The evader task's target: it runs straight from the nearest sensor at the sensors' speed
+#: (vmax = 10 m/s), always.
+EVADER = Evasive(speed=10.0, dt=0.1)
 
 #: The named presets, name -> the Scenario fields that differ from the defaults (the
 #: paper's): ``paper``, ``homogeneous`` and the :data:`TASKS`.
@@ -127,10 +143,31 @@ PRESETS: dict[str, dict[str, Any]] = {
         "occluder_bounds": (-24.0, -10.0, 12.0, 20.0),
         "occluder_size": (2.0, 5.0),
     },
+    # The paper's team (three range-and-bearing sensors) against the paper's target that
+    # turns (MANEUVERING); the filter keeps its constant-velocity model.
+    "maneuvering": {
+        "name": "maneuvering",
+        "target_init": "gaussian",
+        "P0": _TASK["P0"],
+        "x0": (0.0, 0.0, -8.0, 6.0),
+        "x0_hat": (0.0, 0.0, -8.0, 6.0),
+        "target_behaviour": MANEUVERING,
+    },
+    # Four range-and-bearing sensors (the paper's sensor 1) against a target that runs from
+    # the nearest of them at their own speed (EVADER).
+    "evader": {
+        **_TASK,
+        "name": "evader",
+        "sigma_d2": 2.0,
+        "sigma_theta2": 0.25,
+        "x0": (0.0, 0.0, -8.0, 6.0),
+        "x0_hat": (0.0, 0.0, -8.0, 6.0),
+        "target_behaviour": EVADER,
+    },
 }
 
 #: The named tasks beyond the paper (presets with registered environment ids).
 TASKS = (
     "two_targets", "range_only", "bearing_only", "mixed", "uncertain_poses", "urban",
-    "urban_random",
+    "urban_random", "maneuvering", "evader",
 )  # fmt: skip

@@ -21,6 +21,7 @@ from activetrack.models.motion import LinearMotionModel, make_model
 from activetrack.models.objective import Objective
 from activetrack.models.sensor import SensorModel, as_sensor_model, record, slot_code
 from activetrack.validation import FloatArray, UnexpectedKeywordError
+from activetrack.world import behaviours
 from activetrack.world._scenario_fields import (
     _PER_SENSOR,
     CHOICES,
@@ -175,6 +176,9 @@ class Scenario:
             :class:`activetrack.kinematics.disk.Disk` of radius ``vmax_i dt``), an
             :class:`activetrack.Kinematics` for every sensor, or a tuple of M; with one
             given, the reach ``r`` is its ``radius`` and ``vmax`` is unused.
+        target_behaviour: how the true targets move: None (their filter's own model, eq.
+            2), an :class:`activetrack.TargetBehaviour` for every target, or a tuple of K
+            (:mod:`activetrack.world.behaviours`); the filter keeps its model.
 
     One coupled limit: the first predicted position variance (from P0, the model and q)
     may be at most 1e10 times the smallest range variance, so that one update never
@@ -213,6 +217,7 @@ class Scenario:
     occluder_size: tuple[float, float] = (2.0, 6.0)
     filter_iterations: int = 1
     kinematics: Any = None
+    target_behaviour: Any = None
     _cache: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -279,6 +284,7 @@ class Scenario:
             for key in ("x0", "x0_hat"):
                 put(key, _per_target_states(key, getattr(self, key), dims))
             put("P0", _per_target_p0(self.P0, dims))
+        put("target_behaviour", behaviours.converted(self.target_behaviour, self))
         self._check_information_ratio()
         if self.random_occluders:  # a layout can be drawn (the reset would fail otherwise)
             self.draw_occluders(np.random.default_rng(0))
@@ -523,6 +529,8 @@ class Scenario:
             if f.name == "kinematics":  # a record of which kinematics, not its code
                 v = [{"name": k.name, "class": f"{type(k).__module__}.{type(k).__qualname__}",
                       "radius": k.radius} for k in self.kinematics_models]  # fmt: skip
+            if f.name == "target_behaviour":  # a record of which behaviours, not their code
+                v = behaviours.record(v)
             out[f.name] = v.name if isinstance(v, LinearMotionModel) else v
         return out
 

@@ -9,7 +9,8 @@ follows the paper's timeline:
    a
    planner's absolute positions (:meth:`World.step`) or from actions in units of the reach
    (:meth:`World.step_actions`);
-2. **advance**: the true target moves (eq. 2), every sensor measures distance and bearing
+2. **advance**: the true target moves (eq. 2; or by its behaviour,
+   :mod:`activetrack.world.behaviours`), every sensor measures distance and bearing
    (eq. 4) and the EKF updates (eq. 11): :func:`activetrack.world.tracking.advance`;
 3. **score**: the trace of the posterior position covariance (eq. 12, 17); the reward is
    ``-reward_scale`` times it;
@@ -67,8 +68,10 @@ from activetrack.validation import FloatArray, as_generator, check_int
 from activetrack.world import _fast, observation, tracking
 from activetrack.world._occluded import OccludedMoves
 from activetrack.world._readers import _TARGET_FIELDS, WorldReaders
+from activetrack.world._selection import CopySelection
 from activetrack.world._sizes import WORLD_BYTES_MAX, world_bytes
 from activetrack.world._streams import RandomStreams
+from activetrack.world.behaviours import TargetMotion
 from activetrack.world.scenarios import Scenario, make_scenario
 
 #: Steps of noise a copy draws per generator call in a world of several copies.
@@ -92,7 +95,7 @@ class StepResult(NamedTuple):
     truncated: Any
 
 
-class World(RandomStreams, WorldReaders, OccludedMoves):
+class World(CopySelection, RandomStreams, WorldReaders, OccludedMoves, TargetMotion):
     """``num_copies`` independent tracking episodes of one scenario, stepped together.
 
     Args:
@@ -276,35 +279,7 @@ class World(RandomStreams, WorldReaders, OccludedMoves):
         self._s: dict[str, Any] = state
         #: Per-target state: x_true, x_hat, P, x_pred, P_pred of each target.
         self._t: list[dict[str, Any]] = targets
-
-    # Selections -------------------------------------------------------------------------
-    def _rows(self, sel: _Selection) -> np.ndarray:
-        """Return the copy indices of a selection."""
-        return np.arange(self.num_copies)[sel] if isinstance(sel, slice) else np.atleast_1d(sel)
-
-    def _select(self, indices: Any) -> _Selection | None:
-        """Return the selection of ``indices`` (None: all copies); None if it is empty.
-
-        A world of one copy selects with the integer 0, so a step runs on unbatched arrays.
-        """
-        N = self.num_copies
-        if indices is None:
-            return 0 if N == 1 else slice(None)
-        idx = np.asarray(indices)
-        if idx.dtype == np.bool_:
-            if idx.shape != (N,):
-                raise ValueError(f"a copy mask must have shape ({N},), got {idx.shape}")
-            idx = np.flatnonzero(idx)
-        elif idx.ndim != 1 or (idx.size and not np.issubdtype(idx.dtype, np.integer)):
-            raise ValueError(f"copy indices must be a 1-d integer array, got {indices!r}")
-        idx = idx.astype(np.int64)
-        if idx.size and (idx.min() < 0 or idx.max() >= N or np.unique(idx).size != idx.size):
-            raise ValueError(f"copy indices must be distinct and in [0, {N - 1}], got {indices!r}")
-        if idx.size == 0:
-            return None
-        if idx.size == N:
-            return 0 if N == 1 else slice(None)
-        return idx
+        self._init_behaviours()  # the true targets' behaviours (activetrack.world.behaviours)
 
     # Reset ------------------------------------------------------------------------------
     def reset(
@@ -398,6 +373,7 @@ class World(RandomStreams, WorldReaders, OccludedMoves):
         else:
             for key, value in new.items():
                 self._s[key][sel] = value
+        self._reset_behaviours(rows)  # (spawned generators: the copies' streams do not move)
         self._noise_left[sel] = 0
         if self._noise is not None:
             self._draw_noise(rows)
@@ -587,7 +563,7 @@ class World(RandomStreams, WorldReaders, OccludedMoves):
             moved_t = [
                 tracking.move_target(tp, t["x_true"][calc], noise[proc])
                 for t, tp, (proc, _) in zip(tgt, p.targets, self._noise_slices, strict=True)
-            ]  # fmt: skip
+            ] if self._behaviours is None else self._move_targets(sel, calc, noise)  # fmt: skip
             true_pos = np.empty(moved_t[0].shape[:-1] + (K, 2))
             for k, x in enumerate(moved_t):
                 true_pos[..., k, :] = x[..., :2]
