@@ -262,7 +262,7 @@ class Scenario:
         put("occluder_bounds", bounds)
         put("occluder_size", size)
         put("filter_iterations", _count("filter_iterations", self.filter_iterations, 100))
-        put("kinematics", team.converted(self.kinematics, m))
+        put("kinematics", team.converted(self.kinematics, m, self.dt))
         ranges = {
             "sigma_d2": (*SIGMA_D2_RANGE, False),
             "sigma_theta2": (*SIGMA_THETA2_RANGE, False),
