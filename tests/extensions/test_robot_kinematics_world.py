@@ -219,3 +219,35 @@ def test_envs_pass_the_api_checks_with_robots(name):
     assert vec.single_observation_space.contains(obs[0].reshape(-1))
     np.testing.assert_allclose(obs[..., -2:], feats, rtol=0, atol=1e-6)
 
+
+@pytest.mark.parametrize("name", ["unicycle", "double_integrator"])
+def test_rendering_draws_each_sensors_heading(name):
+    from activetrack.envs.rendering import HEADING_LENGTH
+    from activetrack.envs.tracking_env import parallel_env
+
+    env = parallel_env("paper", kinematics=ROBOTS[name], render_mode="rgb_array")
+    env.reset(seed=1)
+    env.step({a: env.action_space(a).sample() for a in env.agents})
+    frame = env.render()
+    assert frame.ndim == 3 and frame.shape[-1] == 3
+    world = env.world
+    states = world.sensor_states(0)
+    kin = world.scenario.kinematics
+    if isinstance(kin, Unicycle):  # the heading, longhand
+        direction = np.stack([np.cos(states[:, 2]), np.sin(states[:, 2])], -1)
+    else:  # the velocity over the top speed
+        direction = states[:, 2:] / kin.v_max
+    rho = world.scenario.per_sensor("rho")
+    lines = env._recorder._renderer._art["headings"]
+    for i, line in enumerate(lines):
+        x, y = line.get_data()
+        np.testing.assert_allclose(np.c_[x, y][0], states[i, :2], rtol=0, atol=1e-12)
+        tip = states[i, :2] + HEADING_LENGTH * rho[i] * direction[i]
+        np.testing.assert_allclose(np.c_[x, y][1], tip, rtol=0, atol=1e-12)
+    env.close()
+    # The paper's disks draw no heading.
+    plain = parallel_env("paper", render_mode="rgb_array")
+    plain.reset(seed=1)
+    plain.render()
+    assert all(len(line.get_data()[0]) == 0 for line in plain._recorder._renderer._art["headings"])
+    plain.close()
