@@ -251,3 +251,40 @@ def test_rendering_draws_each_sensors_heading(name):
     plain.render()
     assert all(len(line.get_data()[0]) == 0 for line in plain._recorder._renderer._art["headings"])
     plain.close()
+
+
+@pytest.mark.parametrize("name", ["unicycle", "double_integrator"])
+def test_occluders_stop_robots_with_a_consistent_state(name):
+    from activetrack.models.occluders import blocked, inside
+
+    kin = ROBOTS[name]
+    # A wall between the sensors (which start facing the target, to the west) and it.
+    wall = (((16.0, -30.0), (16.4, -30.0), (16.4, 30.0), (16.0, 30.0)),)
+    world = World("paper", 2, kinematics=kin, occluders=wall, sensor_center=(18.5, 0.0),
+                  sensor_radius=1.5)  # fmt: skip
+    world.reset(seeds=[3, 4])
+    bound, dt = world.scenario.kinematics, world.scenario.dt
+    occ = world.occluders()
+    rng = np.random.default_rng(9)
+    stopped = 0
+    for _ in range(12):
+        before = world.sensor_states()
+        act = rng.uniform(-0.2, 0.2, (2, 3, 2)) + [0.8, 0.0]  # full speed ahead (or west)
+        if isinstance(bound, DoubleIntegrator):
+            act = act + [-0.8, 0.0]
+            act[..., 0] -= 0.8
+        world.step_actions(act)
+        after = world.sensor_states()
+        assert not np.any(inside(after[..., :2], occ))
+        free = bound.apply(act, before)
+        for c in range(2):
+            for i in range(3):
+                if not blocked(before[c, i, :2], free[c, i], occ):
+                    np.testing.assert_array_equal(after[c, i, :2], free[c, i])
+                    continue  # the free move (its state: checked above)
+                # Stopped short by a block: the rest of the state is that of the command
+                # reaching the nearest reachable point to where the sensor stopped.
+                stopped += 1
+                near = bound.clip(after[c, i, :2], before[c, i])
+                check_step(bound, before[c, i][None], np.r_[near, after[c, i, 2:]][None], dt)
+    assert stopped > 0
