@@ -25,8 +25,10 @@ segment from ``position`` to a point of ``R`` lies in ``R``): :meth:`project` se
 candidates that can be nearest (the clipped point, the radial projections onto the
 ``rho`` circles, dense points of the boundary of ``F``), so it is exact where one of the
 first two is feasible and otherwise within the boundary's spacing ``radius / 4096``.
-The only built-in kinematics is :class:`activetrack.kinematics.disk.Disk`, the paper's
-disk of radius ``vmax dt``, whose methods are the compiled functions of this package.
+The built-in kinematics: :class:`activetrack.kinematics.disk.Disk`, the paper's disk of
+radius ``vmax dt``, whose methods are the compiled functions of this package; and, on
+:class:`activetrack.kinematics.pieces.PiecewiseReach` (exact nearest points on a reach set
+bounded by smooth pieces, star-shaped or not), the robots below.
 
 Shapes: ``position`` (2,), ``targets`` (K, 2) and ``rho`` a float for one sensor;
 :meth:`reaches`, :meth:`clip`, :meth:`apply` and :meth:`command` also broadcast over
