@@ -225,19 +225,21 @@ def kinematic_boundaries(
             as :func:`sensor_modes` (a free sensor with ``rho = 0`` can reach a target).
     """
     sensors, targets = problem.sensors, problem.targets
+    states = sensors if problem.sensor_states is None else problem.sensor_states
     team = problem.kinematics
     rho_all = np.broadcast_to(problem.rho, sensors.shape[:-1])
     free = np.zeros(sensors.shape[:-1], dtype=bool)
     fixed = np.array(sensors, dtype=np.float64)
     boundary_of = {}
     for idx in np.ndindex(sensors.shape[:-1]):
-        kin, s, t = team[idx[-1]], sensors[idx], targets[idx[:-1]]
+        kin, t = team[idx[-1]], targets[idx[:-1]]
+        s = states[idx][: kin.state_dim]  # its state (a heading, a velocity: beyond it)
         r, rho = float(kin.radius), float(rho_all[idx])
         if not r > 0.0:
             continue
         pts = boundary_grid(kin, s, t, rho, spacing)
         if len(pts) == 0:
-            fixed[idx] = kin.project(s, s, t, rho)
+            fixed[idx] = kin.project(sensors[idx], s, t, rho)
             continue
         if rho <= 0.0 and bool(np.any(kin.reaches(t, s))):
             raise ValueError(

@@ -36,14 +36,34 @@ _ROUNDS = 400
 
 
 def candidates(kin, position: FloatArray, targets: FloatArray, rho: float) -> FloatArray:
-    """Return sensor candidates (P, 2), all in ``F`` (or its projection's fallback)."""
+    """Return sensor candidates (P, 2), all in ``F`` (or its projection's fallback), of a
+    sensor in state ``position`` (its position, or its whole state: ``kin.state_dim``)."""
     r = float(kin.radius)
+    xy = np.asarray(position, dtype=np.float64)[:2]
     edge = kin.boundary(position, targets, rho, max(r, 1e-300) * CANDIDATE_SPACING)
     t = np.linspace(-r, r, GRID)
-    grid = position + np.stack(np.meshgrid(t, t), -1).reshape(-1, 2)
+    grid = xy + np.stack(np.meshgrid(t, t), -1).reshape(-1, 2)
     grid = grid[kin.feasible(grid, position, targets, rho)]
-    here = kin.project(position, position, targets, rho)[None]
+    here = kin.project(xy, position, targets, rho)[None]
     return np.concatenate([here, edge.reshape(-1, 2), grid])
+
+
+def _projected(kin, pts: FloatArray, p: FloatArray, t: FloatArray, rho: float) -> FloatArray:
+    """Return :meth:`~activetrack.Kinematics.project` of each of ``pts`` (P, 2): their
+    :meth:`~activetrack.Kinematics.clip` in one call where that is feasible (then the
+    nearest point of ``F``), the projection of the others one by one."""
+    out = np.asarray(kin.clip(pts, p), dtype=np.float64).reshape(-1, 2).copy()
+    for j in np.flatnonzero(~kin.feasible(out, p, t, rho)):
+        out[j] = kin.project(pts[j], p, t, rho)
+    return out
+
+
+def states_of(problem, current: FloatArray) -> FloatArray:
+    """Return the sensors' states (B, M, S): ``problem.sensor_states`` flattened like
+    ``current`` (B, M, 2), or ``current`` when the problem has none."""
+    if problem.sensor_states is None:
+        return current
+    return problem.sensor_states.reshape(current.shape[:2] + (-1,))
 
 
 class Prepared:
@@ -55,6 +75,7 @@ class Prepared:
         self.objective = problem.objective
         self.entries = entries  # (s (B, 1, 2), copies, sensor) -> 3 x (B, K, 1)
         self.current, self.targets, self.rho = current, targets, rho
+        self.states = states_of(problem, current)
         self.cache: dict[tuple[int, int], FloatArray] = {}
 
     def _value(self, b: int, i: int, pts: FloatArray, base: tuple) -> FloatArray:
@@ -68,7 +89,7 @@ class Prepared:
         kin = self.team[i]
         pos, val = np.empty((len(sub), 2)), np.empty(len(sub))
         for j, b in enumerate(sub.tolist()):
-            p, t, rho = self.current[b, i], self.targets[b], float(self.rho[b, i])
+            p, t, rho = self.states[b, i, : kin.state_dim], self.targets[b], float(self.rho[b, i])
             key = (b, i)
             if key not in self.cache:  # the candidates do not change over the sweeps
                 self.cache[key] = candidates(kin, p, t, rho)
@@ -82,7 +103,7 @@ class Prepared:
             for _ in range(_ROUNDS):
                 if step <= stop:
                     break
-                trial = np.array([kin.project(x + step * d, p, t, rho) for d in _DIRS])
+                trial = _projected(kin, x + step * _DIRS, p, t, rho)
                 tv = self._value(b, i, trial, own)
                 k = int(np.argmin(tv))
                 if tv[k] < fx:
@@ -97,8 +118,10 @@ def warm_start(problem, current: FloatArray, targets: FloatArray, rho: FloatArra
     """Return the current positions (B, M, 2), each infeasible one projected onto its ``F``
     by its kinematics."""
     s = current.copy()
+    states = states_of(problem, current)
     for i, kin in enumerate(problem.kinematics):
         for b in range(len(s)):
-            if not kin.feasible(s[b, i], s[b, i], targets[b], rho[b, i]):
-                s[b, i] = kin.project(s[b, i], current[b, i], targets[b], rho[b, i])
+            st = states[b, i, : kin.state_dim]
+            if not kin.feasible(s[b, i], st, targets[b], rho[b, i]):
+                s[b, i] = kin.project(s[b, i], st, targets[b], rho[b, i])
     return s

@@ -50,6 +50,11 @@ class PathModel:
         kin = problem.kinematics
         # A kinematics of its own: each step mended by it (the world's TeamMotion rule).
         self.motion = None if kin is None or all_disks(kin) else TeamMotion(kin)
+        # A state beyond the position (a heading, a velocity): paths carry whole states
+        # (B, M, ..., S), advanced by the kinematics each step, from the problem's.
+        self.n_state = 2 if self.motion is None else self.motion.state_dim
+        states = problem.sensor_states
+        self.states0 = None if states is None else states.reshape(B, M, self.n_state)
         self.occluders = problem.occluders
         self.sigma_d2 = problem.sigma_d2.reshape(B, M)
         self.sigma_theta2 = problem.sigma_theta2.reshape(B, M)
@@ -58,6 +63,20 @@ class PathModel:
         self.pose_cov = None if problem.pose_cov is None else problem.pose_cov.reshape(B, M, 2, 2)
         detect = problem.detect
         self.detect = None if detect is None else tuple(d.reshape(B, M) for d in detect)
+
+    def begin(self, start: FloatArray) -> FloatArray:
+        """Return the states (B, M, S) of sensors at ``start`` (B, M, 2): ``start`` itself
+        when S is 2, else the problem's states beyond the position appended."""
+        if self.n_state == 2 or self.states0 is None:
+            return start
+        return np.concatenate([start, self.states0[..., 2:]], -1)
+
+    def restated(self, points: FloatArray, states: FloatArray) -> FloatArray:
+        """Return the states (B, M, S) after the moves from ``states`` to the reachable
+        ``points`` (B, M, 2) (``points`` when S is 2)."""
+        if self.n_state == 2:
+            return points
+        return self.motion.restate(points, states)
 
     def mend(
         self,
@@ -71,8 +90,25 @@ class PathModel:
 
         ``prop`` must be within reach ``r`` of ``prev`` (or is scaled onto it); ``r`` and
         ``rho`` broadcast against ``prev.shape[:-1]``; ``targets`` (B, K, 2) this step's.
+        With a state beyond the position (S > 2) ``prev`` holds states (B, M, ..., S) and
+        so does the result (the kinematics' next states; a move an occluder stops short
+        keeps the rest of the state of its unstopped move).
         """
         B, K = targets.shape[0], targets.shape[-2]
+        if self.n_state > 2:
+            shape = prop.shape[:-1] + (self.n_state,)
+            pr, pv = np.moveaxis(prop, 1, -2), np.moveaxis(np.broadcast_to(prev, shape), 1, -2)
+            t = np.broadcast_to(targets.reshape((B,) + (1,) * (prev.ndim - 3) + (K, 2)),
+                                pr.shape[:-2] + (K, 2))  # fmt: skip
+            rh = np.moveaxis(np.broadcast_to(rho, prop.shape[:-1]), 1, -1)
+            nxt = np.moveaxis(self.motion.move(True, pr, pv, t, rh)[2], -2, 1)
+            if self.occluders is not None:
+                from activetrack.models import occluders  # noqa: PLC0415
+
+                start = np.broadcast_to(prev, shape)[..., :2]
+                nxt = nxt.copy()
+                nxt[..., :2] = occluders.project_move(start, nxt[..., :2], self.occluders, r)[0]
+            return nxt
         if self.motion is not None:  # the sensor axis (1) last but one, as the world's
             pr, pv = np.moveaxis(prop, 1, -2), np.moveaxis(np.broadcast_to(prev, prop.shape), 1, -2)
             t = np.broadcast_to(targets.reshape((B,) + (1,) * (prev.ndim - 3) + (K, 2)),
@@ -169,12 +205,13 @@ def heading_paths(
     B, M = start.shape[:2]
     O, H = dirs.shape[0], targets.shape[1]
     out = np.empty((B, M, O, H, 2))
-    prev = np.broadcast_to(start[:, :, None], (B, M, O, 2))
+    begin = model.begin(start)
+    prev = np.broadcast_to(begin[:, :, None], (B, M, O, begin.shape[-1]))
     step = r[:, :, None, None] * dirs
     rr, rh = r[:, :, None], rho[:, :, None]
     for h in range(H):
-        prev = model.mend(prev + step, prev, targets[:, h], rr, rh)
-        out[:, :, :, h] = prev
+        prev = model.mend(prev[..., :2] + step, prev, targets[:, h], rr, rh)
+        out[:, :, :, h] = prev[..., :2]
     return out
 
 
@@ -189,13 +226,14 @@ def bearing_paths(
     B, M = start.shape[:2]
     O, H, K = dirs.shape[0], targets.shape[1], targets.shape[2]
     out = np.empty((B, M, K * O, H, 2))
-    prev = np.broadcast_to(start[:, :, None], (B, M, K * O, 2))
+    begin = model.begin(start)
+    prev = np.broadcast_to(begin[:, :, None], (B, M, K * O, begin.shape[-1]))
     offset = rho[:, :, None, None] * dirs  # (B, M, O, 2)
     rr, rh = r[:, :, None], rho[:, :, None]
     for h in range(H):
         goal = (targets[:, h, None, :, None] + offset[:, :, None]).reshape(B, M, K * O, 2)
-        prev = model.mend(toward(prev, goal, rr), prev, targets[:, h], rr, rh)
-        out[:, :, :, h] = prev
+        prev = model.mend(toward(prev[..., :2], goal, rr), prev, targets[:, h], rr, rh)
+        out[:, :, :, h] = prev[..., :2]
     return out
 
 
@@ -218,8 +256,8 @@ def shifted_paths(
         last = last + vel
         goals[:, :, h] = last
     out = np.empty((B, M, H, 2))
-    prev = start
+    prev = model.begin(start)
     for h in range(H):
-        prev = model.mend(toward(prev, goals[:, :, h], r), prev, targets[:, h], r, rho)
-        out[:, :, h] = prev
+        prev = model.mend(toward(prev[..., :2], goals[:, :, h], r), prev, targets[:, h], r, rho)
+        out[:, :, h] = prev[..., :2]
     return out

@@ -230,7 +230,7 @@ class Lookahead:
         shape = problem.batch_shape
         paths = np.empty((B, M, H, 2))
         covs = [P for _, P, _, _ in preds]
-        sensors = start
+        sensors, states = start, model.begin(start)
         # The problem's own fields (models, pose, sensing limits, occluders) at every step.
         fixed = {f.name: getattr(problem, f.name) for f in fields(problem)}
         fixed.update(prediction=None, rho=rho_eff.reshape(shape + (M,)))
@@ -245,8 +245,11 @@ class Lookahead:
                 "target": (means[:, h] if multi else means[:, h, 0]).reshape(
                     shape + ((K,) if multi else ()) + (2,)),
                 "sensors": sensors.reshape(shape + (M, 2)),
+                "sensor_states": None if model.n_state == 2 else
+                states.reshape(shape + (M, model.n_state)),
             })  # fmt: skip
             sensors = np.asarray(self._gsr.plan(step), dtype=np.float64).reshape(B, M, 2)
+            states = model.restated(sensors, states)  # (a heading, a velocity: advanced)
             paths[:, :, h] = sensors
             if h + 1 < H:
                 here = model.information(sensors[:, :, None, None], means[:, h, None])

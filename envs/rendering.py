@@ -19,6 +19,10 @@ The environment records one :class:`Snapshot` per time step in an :class:`Episod
 * with uncertain sensor poses, each sensor's position fix (the position the team
   believes and plans from: a small cross) and the 2-sigma ellipse of its pose
   covariance around the fix;
+* with a kinematics that carries a heading or a velocity (:class:`activetrack.Unicycle`,
+  :class:`activetrack.DoubleIntegrator`), a thick line in the sensor's colour from its
+  position along its heading, :data:`HEADING_LENGTH` ``rho_i`` long (a velocity: that
+  length times the speed over the top speed);
 * the step and the posterior trace ``tr P(k|k)_11`` (summed over the targets) above.
 
 With limited sensing (issue 13: occluders, a finite ``max_range`` or ``p_detect < 1``;
@@ -95,6 +99,8 @@ OCCLUDER_FACE = "#d0d0d0"
 OCCLUDER_EDGE = "#8c8c8c"
 #: Colour of the dashed line from a sensor to a target it did not measure.
 MISSED_COLOR = "#a0a0a0"
+#: The length of a drawn heading, in units of the sensor's ``rho``.
+HEADING_LENGTH = 0.5
 #: Line style of the sensing range circles: sparse dots (the rho circles are dense ``:``).
 RANGE_STYLE = (0, (1, 3))
 
@@ -114,6 +120,9 @@ class Snapshot:
     detected: np.ndarray | None = None  # which sensor measured which target at k, (K, M) bool
     occluders: tuple[FloatArray, ...] = ()  # the occluder polygons, (n_i, 2) each
     max_range: FloatArray | None = None  # per-sensor sensing range (inf: unlimited), (M,)
+    # A kinematics with a state beyond the position: each sensor's observed features (M, F),
+    # a unicycle's heading (cos, sin), a double integrator's velocity over its top speed.
+    motion: FloatArray | None = None
 
     @property
     def n_targets(self) -> int:
@@ -147,7 +156,7 @@ class EpisodeHistory:
 
     def append(
         self, k, x_true, x_est, P, sensors, center, fixes=None, *,
-        detected=None, occluders=None, max_range=None,
+        detected=None, occluders=None, max_range=None, motion=None,
     ) -> None:  # fmt: skip
         """Record time step ``k`` (the position parts are copied).
 
@@ -158,7 +167,9 @@ class EpisodeHistory:
         bool, which sensor measured which target at step ``k`` (None: unlimited sensing);
         ``occluders`` an :class:`activetrack.models.occluders.Occluders` or a sequence of (n_i, 2)
         polygons (None: none); ``max_range`` (M,) the sensing ranges, > 0, inf for
-        unlimited (None: all unlimited).
+        unlimited (None: all unlimited). ``motion`` (M, F), F >= 2: each sensor's heading
+        ``(cos, sin)`` or velocity over its top speed, drawn as a short line from the sensor
+        (:meth:`activetrack.Kinematics.features`; None: nothing drawn).
         """
         targets = np.array([v[:2] for v in _per_target(x_true, 1)], dtype=np.float64)
         estimates = np.array([v[:2] for v in _per_target(x_est, 1)], dtype=np.float64)
@@ -188,9 +199,13 @@ class EpisodeHistory:
                 raise ValueError(
                     f"max_range must be {shape[1]} values in (0, inf], got {max_range!r}"
                 )
+        if motion is not None:
+            motion = np.array(motion, dtype=np.float64)
+            if motion.ndim != 2 or motion.shape[0] != shape[1] or motion.shape[1] < 2:
+                raise ValueError(f"motion must have shape ({shape[1]}, F >= 2), got {motion.shape}")
         self.frames.append(
             Snapshot(int(k), targets, estimates, covs, sensors, centers, fixes, detected,
-                     self._polygons(occluders), max_range)
+                     self._polygons(occluders), max_range, motion)
         )  # fmt: skip
 
     def _polygons(self, occluders: Any) -> tuple[FloatArray, ...]:
@@ -217,7 +232,8 @@ class EpisodeHistory:
         (:func:`predicted_positions` before the step); None: the posterior estimates (at
         reset, before any move). The fixes are recorded when the poses are uncertain; with
         limited sensing (``world.scenario.limited_sensing``) the step's detections
-        (``world.get("detected", copy)``), the world's occluders and sensing ranges.
+        (``world.get("detected", copy)``), the world's occluders and sensing ranges; with a
+        kinematics that carries a heading or a velocity its features (``motion``).
         """
         g, i = world.get, copy
         K = world.n_targets
@@ -235,7 +251,14 @@ class EpisodeHistory:
             detected=g("detected", i) if limited else None,
             occluders=world.occluders(i) if limited else None,
             max_range=p.max_range if limited else None,
+            motion=_headings(world, i),
         )
+
+
+def _headings(world: Any, copy: int) -> FloatArray | None:
+    """Return copy ``copy``'s sensors' kinematic features (M, F >= 2) to draw, or None."""
+    feats = world._motion_features(copy)
+    return None if feats is None or feats.shape[-1] < 2 else feats
 
 
 def _same_polygons(a: tuple[FloatArray, ...], b: tuple[FloatArray, ...]) -> bool:
@@ -434,10 +457,11 @@ class TrackingRenderer:
         for t in targets:
             ax.add_collection(t["ellipses"])
         targets[0]["ellipses"].set_label("3-sigma bounds")
-        art.update(targets=targets, trails=[], heads=[], rho=[])
+        art.update(targets=targets, trails=[], heads=[], rho=[], headings=[])
         for c, (marker, _) in zip(colors, self._marks, strict=True):
             art["trails"].append(ax.plot([], [], "-", color=c, lw=1.0)[0])
             art["heads"].append(ax.plot([], [], marker, color=c, ms=5)[0])
+            art["headings"].append(ax.plot([], [], "-", color=c, lw=1.6)[0])
             art["rho"].append(ax.plot([], [], ":", color=c, lw=0.8)[0])
         art["trails"][0].set_label("sensor trails")
         art["rho"][0].set_label("rho circles")
@@ -465,7 +489,7 @@ class TrackingRenderer:
             *(t["est"] for t in targets), *art["trails"], *art["rho"],
             *([art["pose"]] if art["pose"] is not None else []),
             *(a for t in targets for a in (t["now_ellipse"], t["true_now"], t["est_now"])),
-            *art["heads"], *art["fixes"], art["title"],
+            *art["heads"], *art["headings"], *art["fixes"], art["title"],
         ]  # fmt: skip
         if not human:
             # Blitting: the axes, ticks and legend (text is slow) are drawn into a cached
@@ -513,6 +537,12 @@ class TrackingRenderer:
                     [np.vstack([c + ring, [np.nan, np.nan]]) for c in last.centers]
                 )
             circle.set_data(rings[:, 0], rings[:, 1])
+        for i, line in enumerate(art["headings"]):  # heading or velocity: HEADING_LENGTH rho
+            if last.motion is None:
+                line.set_data([], [])
+                continue
+            tip = last.sensors[i] + HEADING_LENGTH * self.rho[i] * last.motion[i, :2]
+            line.set_data([last.sensors[i, 0], tip[0]], [last.sensors[i, 1], tip[1]])
         extra = []
         if art["fixes"]:
             fixes = last.sensors if last.fixes is None else last.fixes

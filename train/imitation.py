@@ -149,9 +149,10 @@ class _LabelRecorder(Recorder):
 
     def step(self, step: Step) -> None:
         problem = step.problem
-        labels = actions_to_reach(
-            problem.kinematics, step.positions, problem.sensors, problem.r
-        ).astype(np.float32)
+        states = problem.sensors if problem.sensor_states is None else problem.sensor_states
+        labels = actions_to_reach(problem.kinematics, step.positions, states, problem.r).astype(
+            np.float32
+        )
         for i, j in zip(step.copies.tolist(), step.episodes.tolist(), strict=True):
             self.obs[j].append(step.observations[i] if step.batched else step.observations)
             self.actions[j].append(labels[i] if step.batched else labels)

@@ -3,8 +3,10 @@
 The core (this package) holds the paper's mathematics and no RL: target motion models
 (eq. 1-2), the sensors' measurement models (eq. 4-10; :class:`SensorModel`, the base of a
 new one, and the built-ins :class:`RangeBearing`, :class:`RangeOnly`, :class:`BearingOnly`),
-the sensors' kinematics (eq. 13-16; :class:`Kinematics`, the base of a new one, and
-:class:`Disk`), the EKF (eq. 3, 11), the covariance objective (eq. 12, 17-19;
+the sensors' kinematics (eq. 13-16; :class:`Kinematics`, the base of a new one, the paper's
+:class:`Disk`, and robots with a state beyond the position: :class:`Unicycle`, a heading
+and a turning limit, and :class:`DoubleIntegrator`, bounded acceleration and speed), the
+EKF (eq. 3, 11), the covariance objective (eq. 12, 17-19;
 :class:`Objective`, the base of a new one), the analytic single-sensor optimum (Section
 IV-A), the planning problem and scenario presets.
 The layers ``activetrack.envs``, ``activetrack.baselines`` and ``activetrack.train`` build
@@ -25,6 +27,8 @@ from activetrack.estimation.ekf import ExtendedKalmanFilter
 from activetrack.estimation.imm import IMMFilter
 from activetrack.kinematics.base import Kinematics
 from activetrack.kinematics.disk import Disk
+from activetrack.kinematics.double_integrator import DoubleIntegrator
+from activetrack.kinematics.unicycle import Unicycle
 from activetrack.metrics.gospa import GOSPAResult, gospa
 from activetrack.models.behaviour import (
     Evasive,
@@ -82,6 +86,7 @@ __all__ = [
     "Disk",
     "Evasive",
     "FilterModel",
+    "DoubleIntegrator",
     "SingleSensorSolution",
     "StopAndGo",
     "ExtendedKalmanFilter",
@@ -102,6 +107,7 @@ __all__ = [
     "TargetBehaviour",
     "TraceObjective",
     "World",
+    "Unicycle",
     "WorstTraceObjective",
     "constant_acceleration",
     "constant_velocity",

@@ -25,12 +25,30 @@ segment from ``position`` to a point of ``R`` lies in ``R``): :meth:`project` se
 candidates that can be nearest (the clipped point, the radial projections onto the
 ``rho`` circles, dense points of the boundary of ``F``), so it is exact where one of the
 first two is feasible and otherwise within the boundary's spacing ``radius / 4096``.
-The only built-in kinematics is :class:`activetrack.kinematics.disk.Disk`, the paper's
-disk of radius ``vmax dt``, whose methods are the compiled functions of this package.
+The built-in kinematics: :class:`activetrack.kinematics.disk.Disk`, the paper's disk of
+radius ``vmax dt``, whose methods are the compiled functions of this package; and, on
+:class:`activetrack.kinematics.pieces.PiecewiseReach` (exact nearest points on a reach set
+bounded by smooth pieces, star-shaped or not), the robots below.
 
 Shapes: ``position`` (2,), ``targets`` (K, 2) and ``rho`` a float for one sensor;
 :meth:`reaches`, :meth:`clip`, :meth:`apply` and :meth:`command` also broadcast over
 leading axes (``position`` (..., 2)). Positions are absolute (not relative to a target).
+
+**A state beyond the position.** A kinematics may move more than a point: a heading (a
+unicycle, :class:`activetrack.kinematics.unicycle.Unicycle`), a velocity (a double
+integrator, :class:`activetrack.kinematics.double_integrator.DoubleIntegrator`). It then
+sets :attr:`Kinematics.state_dim` > 2, and every method's ``position`` argument is the
+sensor's whole *state* (..., ``state_dim``): the position ``(x, y)`` first, then the rest;
+the reach set, and every answer, depend on all of it (returned points stay (..., 2)). Such
+a kinematics also gives :meth:`Kinematics.initial_state` (the state at a reset),
+:meth:`Kinematics.advance` (the state after a step, from the agent's action) and
+:meth:`Kinematics.features` (what of it the agent observes, :attr:`n_features` numbers in
+[-1, 1]); one that needs the step's duration ``dt`` gives :meth:`Kinematics.bind` (the
+scenario binds its ``dt`` once). With ``state_dim = 2`` (the :class:`Disk`, any
+kinematics written before) the state is the position and nothing changes. The world keeps
+each sensor's state beyond the position (``World.get("motion")``, ``World.sensor_states``;
+:mod:`activetrack.world._motion_state`), the planners see it as
+``PlanningProblem.sensor_states``.
 """
 
 from __future__ import annotations
@@ -71,8 +89,11 @@ class Kinematics(ComparedByValue, ABC):
     #: Bounds of one agent's action (the environments' ``Box(action_low, action_high)``).
     action_low: tuple[float, ...] = (-1.0, -1.0)
     action_high: tuple[float, ...] = (1.0, 1.0)
-    #: The state the kinematics moves: a position (a heading is for robots to come).
+    #: The numbers of one sensor's state: its position (x, y), then what the kinematics
+    #: carries beyond it (module docstring); 2: the position alone.
     state_dim: int = 2
+    #: The entries of :meth:`features` (the agent's observation of its state), in [-1, 1].
+    n_features: int = 0
 
     # What a subclass gives --------------------------------------------------------------
     @property
@@ -96,6 +117,29 @@ class Kinematics(ComparedByValue, ABC):
         """Return points on the boundary of the reach set, at most ``spacing`` apart, (P, 2)
         (empty when ``radius`` is 0)."""
 
+    # The state beyond the position (defaults: the state is the position) ------------------
+    def bind(self, dt: float) -> Kinematics:
+        """Return this kinematics for steps of ``dt`` seconds (the scenario's; called once at
+        validation): itself, unless its motion depends on ``dt``."""
+        return self
+
+    def initial_state(self, positions: FloatArray, toward: FloatArray) -> FloatArray:
+        """Return the state (..., ``state_dim``) of sensors starting at ``positions``
+        (..., 2), facing the point ``toward`` (..., 2) (the targets' prior mean). Default:
+        the position."""
+        return np.array(np.broadcast_to(_f64(positions), np.shape(positions)), dtype=np.float64)
+
+    def advance(self, actions: FloatArray, state: FloatArray) -> FloatArray:
+        """Return the state (..., ``state_dim``) after the step an agent's ``actions``
+        (..., 2) ask for from ``state``; its position is :meth:`apply`'s (up to rounding).
+        Default: :meth:`apply`."""
+        return self.apply(actions, state)
+
+    def features(self, state: FloatArray) -> FloatArray:
+        """Return what the agent observes of its ``state`` beyond the position, (...,
+        :attr:`n_features`), in [-1, 1]. Default: nothing."""
+        return np.zeros(np.shape(state)[:-1] + (0,))
+
     # Defaults ---------------------------------------------------------------------------
     def apply(self, actions: FloatArray, position: FloatArray) -> FloatArray:
         """Return the point an agent's ``actions`` (..., 2) ask for, inside the reach set.
@@ -104,7 +148,7 @@ class Kinematics(ComparedByValue, ABC):
         clipped to ``[action_low, action_high]``, then :meth:`clip`.
         """
         a = np.clip(_f64(actions), self.action_low, self.action_high)
-        return self.clip(_f64(position) + self.radius * a, position)
+        return self.clip(_f64(position)[..., :2] + self.radius * a, position)
 
     def command(self, points: FloatArray, position: FloatArray) -> FloatArray:
         """Return the actions that :meth:`apply` turns into ``points`` (reachable), (..., 2).
@@ -113,7 +157,7 @@ class Kinematics(ComparedByValue, ABC):
         (zero when the radius is 0), exact up to rounding.
         """
         r = float(self.radius)
-        d = _f64(points) - _f64(position)
+        d = _f64(points) - _f64(position)[..., :2]
         return d / r if r > 0.0 else np.zeros_like(d)
 
     def feasible(
@@ -129,11 +173,12 @@ class Kinematics(ComparedByValue, ABC):
         """Return points on the boundary of ``F``, at most about ``spacing`` apart, (P, 2):
         the reach set's boundary outside every ``rho`` disk, and each ``rho`` circle's points
         inside the reach set and outside the other disks (empty when ``F`` is)."""
-        position, targets = _f64(position), _f64(targets).reshape(-1, 2)
+        state, targets = _f64(position), _f64(targets).reshape(-1, 2)
+        position = state[:2]
         r = float(self.radius)
         if not r > 0.0:
             return np.empty((0, 2))
-        edge = self.reach_boundary(position, spacing).reshape(-1, 2)
+        edge = self.reach_boundary(state, spacing).reshape(-1, 2)
         pts = [edge[outside_disks(edge, targets, rho)]]
         for tk in targets if rho > 0.0 else ():
             # Only the arc within the radius of ``position`` can be reached: angles about
@@ -147,7 +192,7 @@ class Kinematics(ComparedByValue, ABC):
             n = max(8, int(np.ceil(2.0 * half * rho / spacing)) + 1)
             t = float(np.arctan2(v[1], v[0])) + np.linspace(-half, half, n)
             circ = tk + rho * np.stack([np.cos(t), np.sin(t)], -1)
-            pts.append(circ[self.feasible(circ, position, targets, rho)])
+            pts.append(circ[self.feasible(circ, state, targets, rho)])
         return np.concatenate(pts)
 
     def sample(
@@ -161,7 +206,8 @@ class Kinematics(ComparedByValue, ABC):
         """Return ``n`` points (n, 2) uniform in ``F`` (rejection from the disk of
         :attr:`radius`, at most 64 rounds); missing points (``F`` of no area) are drawn from
         :meth:`boundary`, or are :meth:`project` of ``position`` when that is empty too."""
-        position, targets = _f64(position), _f64(targets).reshape(-1, 2)
+        state, targets = _f64(position), _f64(targets).reshape(-1, 2)
+        position = state[:2]
         r = float(self.radius)
         got: list[FloatArray] = []
         count = 0
@@ -171,16 +217,16 @@ class Kinematics(ComparedByValue, ABC):
             u = rng.random((max(4 * n, 64), 2))
             rad, ang = r * np.sqrt(u[:, 0]), 2.0 * np.pi * u[:, 1]
             pts = position + rad[:, None] * np.stack([np.cos(ang), np.sin(ang)], -1)
-            pts = pts[self.feasible(pts, position, targets, rho)]
+            pts = pts[self.feasible(pts, state, targets, rho)]
             got.append(pts)
             count += len(pts)
         pts = np.concatenate(got)[:n] if got else np.empty((0, 2))
         if len(pts) < n:
-            edge = self.boundary(position, targets, rho, max(r, 1e-300) / 256)
+            edge = self.boundary(state, targets, rho, max(r, 1e-300) / 256)
             if len(edge):
                 extra = edge[rng.integers(len(edge), size=n - len(pts))]
             else:
-                extra = np.tile(self.project(position, position, targets, rho), (n - len(pts), 1))
+                extra = np.tile(self.project(position, state, targets, rho), (n - len(pts), 1))
             pts = np.concatenate([pts, extra])
         return pts
 
@@ -195,7 +241,8 @@ class Kinematics(ComparedByValue, ABC):
         set's boundary that violates eq. (16) least (largest ``min_k |s - t_k| - rho``).
         A sensor that cannot move (``radius`` 0) stays.
         """
-        q, position = _f64(wanted).reshape(2), _f64(position).reshape(2)
+        q, state = _f64(wanted).reshape(2), _f64(position).reshape(-1)
+        position = state[:2]
         targets = _f64(targets).reshape(-1, 2)
         r = float(self.radius)
         if not r > 0.0:
@@ -206,23 +253,23 @@ class Kinematics(ComparedByValue, ABC):
         radial = targets + rho * toward
         # Exact answers first: q itself; the nearest point of R when feasible (no point of F
         # is nearer); q in R inside disk k: the nearest point outside disk k when feasible.
-        quick = np.concatenate([q[None], self.clip(q, position)[None]])
-        if self.reaches(q, position):
+        quick = np.concatenate([q[None], self.clip(q, state)[None]])
+        if self.reaches(q, state):
             quick = np.concatenate([quick, radial[d < rho]])
-        ok = self.feasible(quick, position, targets, rho)
+        ok = self.feasible(quick, state, targets, rho)
         if np.any(ok):
             return quick[int(np.argmax(ok))].copy()
-        radial = self.clip(radial, position)
+        radial = self.clip(radial, state)
         spacing = r * PROJECT_SPACING
         cand = np.concatenate(
-            [q[None], self.clip(q, position)[None], radial,
-             self.boundary(position, targets, rho, spacing)]
+            [q[None], self.clip(q, state)[None], radial,
+             self.boundary(state, targets, rho, spacing)]
         )  # fmt: skip
-        ok = self.feasible(cand, position, targets, rho)
+        ok = self.feasible(cand, state, targets, rho)
         if np.any(ok):
             cand = cand[ok]
             return cand[int(np.argmin(np.hypot(*(cand - q).T)))].copy()
-        rim = np.concatenate([position[None], self.reach_boundary(position, spacing)])
+        rim = np.concatenate([position[None], self.reach_boundary(state, spacing)])
         g = rim[:, None, :] - targets
         margin = np.min(np.hypot(g[..., 0], g[..., 1]), axis=-1) - rho
         return rim[int(np.argmax(margin))].copy()

@@ -38,7 +38,9 @@ class WorldReaders:
         the targets' posterior position traces), ``score`` (the objective, minus the
         reward; the trace for one target), ``projected``, ``n_projected``, ``terminated``,
         ``truncated``, ``detected`` (K, M): which sensor measured which target at the
-        last step (all True with unlimited sensing; all False right after a reset). A
+        last step (all True with unlimited sensing; all False right after a reset),
+        ``motion`` (M, S - 2): each sensor's state beyond its position when a kinematics
+        carries one (a heading, a velocity; :mod:`activetrack.world._motion_state`). A
         per-target field is target ``target``'s; ``target=None`` gives
         the only target's (K = 1, shapes as in the paper) or all targets stacked on an
         axis after the copies' (K > 1, e.g. ``x_pred`` (N, K, n); their state dimensions
@@ -114,6 +116,8 @@ class WorldReaders:
         }
         if self._team is not None:  # a kinematics that is not the built-in disk
             extra["kinematics"] = self._team.team
+            if self._n_motion:  # a heading, a velocity: the kinematics see the whole state
+                extra["sensor_states"] = self.sensor_states(index)
         if p.sensor_objects is not None:  # a model of one's own: the planners ask the models
             extra["sensor_objects"] = p.sensor_objects
         if self._limited:  # the planners count each sensor's information at its expected value
@@ -160,13 +164,17 @@ class WorldReaders:
             observation.ray_readings(
                 self.get("sensors", index), self.occluders(index), out[..., -rays:]
             )
+        motion = self._motion_features(index)
+        if motion is not None:  # each agent's own heading or velocity, last
+            out = np.concatenate([out, motion.astype(np.float32)], -1)
         return out
 
     def state(self, index: int | None = None) -> np.ndarray:
         """Return the global state, float32 (N, D + 1) or (D + 1,) for one copy."""
         target, sensor = observation.features(*self._feature_args(index))
         elapsed = self.get("k", index) / self._n_steps
-        return observation.global_state(target, sensor, elapsed, self._rays(index))
+        return observation.global_state(target, sensor, elapsed, self._rays(index),
+                                        self._motion_features(index))  # fmt: skip
 
     def _rays(self, index: int | None) -> FloatArray | None:
         """Return every agent's range-finder readings (..., M, RAYS), or None (no occluders)."""

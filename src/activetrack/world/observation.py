@@ -69,6 +69,13 @@ observation ends with its own :data:`RAYS` range-finder readings: rays at the an
 occluder edge over :data:`RAY_MAX` (1: nothing within ``RAY_MAX`` m). Sizes: sensor
 block ``12 + K``, observation ``7K + (12 + K) M (+ RAYS)``; the global state holds every
 agent's rays (``M RAYS``) before ``k / n_steps``.
+
+**A state beyond the position** (a kinematics with ``n_features > 0``:
+:mod:`activetrack.world._motion_state`). Each agent's observation (either layout) ends
+with its own F kinematic features (``Layout.motion``: a unicycle's heading as ``(cos,
+sin)``, a double integrator's velocity over its top speed; zero-padded to the team's
+largest F), in [-1, 1]; the global state holds every agent's (``M F``) after the rays and
+before ``k / n_steps``.
 :class:`Layout` says which layout a scenario uses and its sizes and bounds.
 
 **Bounds** (:meth:`Layout.bounds`, the spaces' boxes). Bounded by definition: the
@@ -90,7 +97,7 @@ value of a working episode; the inverse maps (:func:`decode_target`,
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -126,6 +133,10 @@ class Layout:
         n_sensors: M.
         flags: detection flags per sensor block (K with limited sensing, else 0).
         rays: range-finder rays per agent (:data:`RAYS` with occluders, else 0).
+        motion: the kinematic features per agent (the largest ``n_features`` of the
+            team's kinematics: a heading's ``(cos, sin)``, a velocity over the top speed),
+            in [-1, 1], at the end of its observation; the global state holds every agent's
+            after the rays.
     """
 
     extended: bool
@@ -133,6 +144,7 @@ class Layout:
     n_sensors: int
     flags: int = 0
     rays: int = 0
+    motion: int = 0
 
     @property
     def target_dim(self) -> int:
@@ -147,12 +159,13 @@ class Layout:
     @property
     def obs_dim(self) -> int:
         """Return the size of one agent's observation."""
-        return self.target_dim + self.sensor_dim * self.n_sensors + self.rays
+        return self.target_dim + self.sensor_dim * self.n_sensors + self.rays + self.motion
 
     @property
     def state_dim(self) -> int:
         """Return the size of the global state."""
-        return self.target_dim + self.sensor_dim * self.n_sensors + self.rays * self.n_sensors + 1
+        per_agent = self.rays + self.motion
+        return self.target_dim + self.sensor_dim * self.n_sensors + per_agent * self.n_sensors + 1
 
     def sensor_constants(self, sc: Scenario, L: float) -> FloatArray:
         """Return the constant entries of every sensor block: (M, 4) or (M, 10)."""
@@ -178,6 +191,10 @@ class Layout:
         """Return float32 ``(low, high)`` of one agent's observation (module docstring,
         "Bounds"); without the ``length_scale`` L the log noise entries and the pose
         standard deviations are left unbounded (their bounds scale with L)."""
+        if self.motion:  # the agent's kinematic features, last, in [-1, 1]
+            low, high = replace(self, motion=0).bounds(length_scale)
+            one = np.ones(self.motion, dtype=np.float32)
+            return np.concatenate([low, -one]), np.concatenate([high, one])
         if not self.extended:
             return observation_bounds(self.n_sensors, length_scale)
         low = np.full(self.obs_dim, -np.inf, dtype=np.float32)
@@ -204,12 +221,15 @@ class Layout:
 
     def state_bounds(self, length_scale: float | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Return float32 ``(low, high)`` of the global state (:meth:`bounds`, every
-        agent's rays, and the elapsed fraction in [0, 1])."""
-        low, high = self.bounds(length_scale)
+        agent's rays and kinematic features, and the elapsed fraction in [0, 1])."""
+        low, high = replace(self, motion=0).bounds(length_scale)
         if self.rays:  # every agent's rays instead of one agent's
             extra = np.float32(np.ones(self.rays * (self.n_sensors - 1)))
             low = np.concatenate([low, 0.0 * extra]).astype(np.float32)
             high = np.concatenate([high, extra]).astype(np.float32)
+        if self.motion:
+            one = np.ones(self.motion * self.n_sensors, dtype=np.float32)
+            low, high = np.concatenate([low, -one]), np.concatenate([high, one])
         return np.append(low, np.float32(0.0)), np.append(high, np.float32(1.0))
 
 
@@ -241,9 +261,11 @@ def layout_of(sc: Scenario) -> Layout:
     (``paper_observation``), else the extended one, with detection flags unless sensing
     is unlimited and range-finder rays when there are occluders."""
     caps = sc.capabilities
+    motion = 0 if sc.kinematics is None else max(k.n_features for k in sc.kinematics_models)
     return Layout(
         not caps.paper_observation, sc.n_targets, sc.n_sensors,
         0 if caps.unlimited_sensing else sc.n_targets, 0 if caps.no_occluders else RAYS,
+        int(motion),
     )  # fmt: skip
 
 
@@ -431,16 +453,21 @@ def global_state(
     sensor: FloatArray,
     elapsed: FloatArray | float,
     rays: FloatArray | None = None,
+    motion: FloatArray | None = None,
 ) -> np.ndarray:
     """Return the global state, float32 of shape (..., 6 + 6M) (with ``rays`` (..., M, R):
-    every agent's rays before the elapsed fraction)."""
+    every agent's rays, then with ``motion`` (..., M, F) every agent's kinematic features,
+    before the elapsed fraction)."""
     m, td, sd = sensor.shape[-2], target.shape[-1], sensor.shape[-1]
     nr = 0 if rays is None else rays.shape[-1] * m
-    out = np.empty(sensor.shape[:-2] + (td + sd * m + nr + 1,), dtype=np.float32)
+    nm = 0 if motion is None else motion.shape[-1] * m
+    out = np.empty(sensor.shape[:-2] + (td + sd * m + nr + nm + 1,), dtype=np.float32)
     out[..., :td] = target
     out[..., td : td + sd * m] = sensor.reshape(sensor.shape[:-2] + (m * sd,))
     if nr:
-        out[..., td + sd * m : -1] = rays.reshape(rays.shape[:-2] + (nr,))
+        out[..., td + sd * m : td + sd * m + nr] = rays.reshape(rays.shape[:-2] + (nr,))
+    if nm:
+        out[..., td + sd * m + nr : -1] = motion.reshape(motion.shape[:-2] + (nm,))
     out[..., -1] = elapsed
     return out
 

@@ -161,3 +161,36 @@ def broadcast_batches(batch_of: dict[str, tuple[int, ...]]) -> tuple[int, ...]:
     except ValueError:
         listed = ", ".join(f"{k} {v}" for k, v in batch_of.items())
         raise ValueError(f"the batch axes of the fields do not broadcast: {listed}") from None
+
+
+def attach(
+    self: Any,
+    pred: Prediction,
+    batch: tuple[int, ...],
+    check_cov: bool,
+    check_target: bool,
+    k: int | None = None,
+) -> Prediction:
+    """Return ``pred`` broadcast to ``batch``, checking (where given rather than derived)
+    that its position blocks are the planning problem ``self``'s ``prior_cov`` and
+    ``target`` (target ``k``'s)."""
+    prior_cov = self.prior_cov if k is None else self.prior_cov[..., k, :, :]
+    target = self.target if k is None else self.target[..., k, :]
+    if pred.batch_shape != batch:
+        n = pred.dim
+        mean = np.array(np.broadcast_to(pred.mean, batch + (n,)))
+        cov = np.array(np.broadcast_to(pred.cov, batch + (n, n)))
+        mean.setflags(write=False)
+        cov.setflags(write=False)
+        pred = pred._trusted(mean, cov)
+    if check_cov and not np.array_equal(pred.cov[..., :2, :2], prior_cov):
+        raise ValueError(
+            "prior_cov must equal prediction.cov[..., :2, :2] (the predicted position "
+            "covariance); pass prior_cov=None, or use PlanningProblem.from_prediction"
+        )
+    if check_target and not np.array_equal(pred.mean[..., :2], target):
+        raise ValueError(
+            "target must equal prediction.mean[..., :2] (the predicted position); pass "
+            "target=None, or use PlanningProblem.from_prediction"
+        )
+    return pred

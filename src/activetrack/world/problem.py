@@ -1,24 +1,24 @@
 """The planning problem of one time step, eq. (15)-(17), and the planner protocol.
 
-At step k every planner sees the predicted target position ``p_T(k+1|k)`` with its 2x2
-covariance, the sensors' current positions and their parameters, and returns the
-sensors' next absolute positions minimizing the objective of eq. (17) (by default the
-trace of the posterior position covariance, :data:`activetrack.models.objective.TRACE`) subject
-to the reach (eq. 15) and the minimum distance (eq. 16).
+At step k every planner sees the predicted target position ``p_T(k+1|k)`` with its 2x2 covariance,
+the sensors' current positions and their parameters, and returns the sensors' next absolute
+positions minimizing the objective of eq. (17) (by default the trace of the posterior position
+covariance, :data:`activetrack.models.objective.TRACE`) subject to the reach (eq. 15) and the
+minimum distance (eq. 16).
 
-A :class:`PlanningProblem` holds one such problem or a batch of independent ones (an
-optional leading batch axis on every array, e.g. the copies of a batched environment);
-planners return next positions of shape ``batch_shape + (M, 2)``.
+A :class:`PlanningProblem` holds one such problem or a batch of independent ones (an optional
+leading batch axis on every array, e.g. the copies of a batched environment); planners return next
+positions of shape ``batch_shape + (M, 2)``.
 
-A problem may also carry the filter's full :class:`Prediction` (eq. 3: ``x_hat(k+1|k)``
-with the velocity, the whole ``P(k+1|k)`` and the motion model ``Phi, Q`` of eq. 2), which
-planners that look several steps ahead need; ``prior_cov`` and ``target`` are then its
-position blocks (:meth:`PlanningProblem.from_prediction` derives them).
+A problem may also carry the filter's full :class:`Prediction` (eq. 3: ``x_hat(k+1|k)`` with the
+velocity, the whole ``P(k+1|k)`` and the motion model ``Phi, Q`` of eq. 2), which planners that look
+several steps ahead need; ``prior_cov`` and ``target`` are then its position blocks
+(:meth:`PlanningProblem.from_prediction` derives them).
 
-Beyond the paper a problem may have K targets (``multi_target``: ``prior_cov`` (..., K,
-2, 2), ``target`` (..., K, 2); every sensor keeps ``rho`` from every predicted target;
-the objective combines the targets' values), sensors of other measurement models
-(``models``, :mod:`activetrack.models.sensor_models`) and uncertain position fixes (``pose_cov``):
+Beyond the paper a problem may have K targets (``multi_target``: ``prior_cov`` (..., K, 2, 2),
+``target`` (..., K, 2); every sensor keeps ``rho`` from every predicted target; the objective
+combines the targets' values), sensors of other measurement models (``models``,
+:mod:`activetrack.models.sensor_models`) and uncertain position fixes (``pose_cov``):
 :meth:`PlanningProblem.score` then sums the effective information ``J_eff`` of
 :func:`activetrack.models.sensor_models.team_entries` per target. :attr:`PlanningProblem.is_paper`
 says whether the paper's exact single-sensor solve (Section IV-A) applies.
@@ -45,6 +45,7 @@ from activetrack.validation import FloatArray, as_finite, positive, real_array, 
 from activetrack.world import capabilities as _capabilities
 from activetrack.world.prediction import (
     Prediction,
+    attach,
     broadcast_batches,
     indexed,
     stacked,
@@ -84,6 +85,16 @@ def _eigenvalues2(cov: FloatArray) -> FloatArray:
     # The small one from the determinant (no cancellation): a c - b^2 = big * small.
     small = (a * c - b * b) / np.where(big > 0, big, 1.0)
     return np.stack([small, big], axis=-1) * s[..., None]
+
+
+#: What a missing optional field of a problem stands for when problems are stacked.
+_FILLS: dict[str, Any] = {
+    "models": lambda p: np.zeros(p.n_sensors, np.int8),  # range and bearing
+    "pose_cov": lambda p: np.zeros((p.n_sensors, 2, 2)),  # known positions
+    "p_detect": lambda p: np.full(p.n_sensors, 1.0),  # always
+    "max_range": lambda p: np.full(p.n_sensors, np.inf),  # unlimited
+    "sensor_states": None,  # (no default)
+}
 
 
 @dataclass(frozen=True, eq=False)
@@ -131,6 +142,8 @@ class PlanningProblem:
             (:meth:`information_entries`), never the paper's arithmetic.
         kinematics: each sensor's :class:`activetrack.Kinematics` (a tuple of M, shared by
             the batch; ``r`` is then each one's radius), or None: the disks of radius ``r``.
+        sensor_states: the sensors' states (..., M, S) when a kinematics carries more than the
+            position (:func:`activetrack.kinematics.team.checked_states`), or None.
     """
 
     prior_cov: FloatArray
@@ -150,6 +163,7 @@ class PlanningProblem:
     occluders: Any = None
     sensor_objects: tuple | None = None
     kinematics: tuple | None = None
+    sensor_states: FloatArray | None = None
 
     def __post_init__(self) -> None:
         if self.sensor_objects is not None:
@@ -267,6 +281,10 @@ class PlanningProblem:
                 )
         if self.kinematics is not None:
             object.__setattr__(self, "kinematics", team.converted(tuple(self.kinematics), m))
+        if self.sensor_states is not None:
+            states = team.checked_states(self.sensor_states, sensors, self.kinematics)
+            values["sensor_states"], batch_of["sensor_states"] = states, states.shape[:-2]
+            batch = broadcast_batches(batch_of)
         k_axis = (kk,) if multi else ()
         trailing = {
             "prior_cov": (*k_axis, 2, 2),
@@ -274,6 +292,7 @@ class PlanningProblem:
             "sensors": (m, 2),
             "models": (m,),
             "pose_cov": (m, 2, 2),
+            "sensor_states": np.shape(values.get("sensor_states", np.zeros((m, 2))))[-2:],
         }
         for name, value in values.items():
             shape = batch + trailing.get(name, (m,))
@@ -293,44 +312,13 @@ class PlanningProblem:
             )
         if pred is not None and multi:
             held = tuple(
-                self._attach(q, batch, not derived, not derived_target, k)
+                attach(self, q, batch, not derived, not derived_target, k)
                 for k, q in enumerate(pred)
             )
             object.__setattr__(self, "prediction", held)
         elif pred is not None:
-            pred = self._attach(pred, batch, not derived, not derived_target)
+            pred = attach(self, pred, batch, not derived, not derived_target)
             object.__setattr__(self, "prediction", pred)
-
-    def _attach(
-        self,
-        pred: Prediction,
-        batch: tuple[int, ...],
-        check_cov: bool,
-        check_target: bool,
-        k: int | None = None,
-    ) -> Prediction:
-        """Return ``pred`` broadcast to ``batch``, checking (where given rather than derived)
-        that its position blocks are ``prior_cov`` and ``target`` (target ``k``'s)."""
-        prior_cov = self.prior_cov if k is None else self.prior_cov[..., k, :, :]
-        target = self.target if k is None else self.target[..., k, :]
-        if pred.batch_shape != batch:
-            n = pred.dim
-            mean = np.array(np.broadcast_to(pred.mean, batch + (n,)))
-            cov = np.array(np.broadcast_to(pred.cov, batch + (n, n)))
-            mean.setflags(write=False)
-            cov.setflags(write=False)
-            pred = pred._trusted(mean, cov)
-        if check_cov and not np.array_equal(pred.cov[..., :2, :2], prior_cov):
-            raise ValueError(
-                "prior_cov must equal prediction.cov[..., :2, :2] (the predicted position "
-                "covariance); pass prior_cov=None, or use PlanningProblem.from_prediction"
-            )
-        if check_target and not np.array_equal(pred.mean[..., :2], target):
-            raise ValueError(
-                "target must equal prediction.mean[..., :2] (the predicted position); pass "
-                "target=None, or use PlanningProblem.from_prediction"
-            )
-        return pred
 
     @property
     def predictions(self) -> tuple[Prediction, ...] | None:
@@ -358,14 +346,14 @@ class PlanningProblem:
         occluders: Any = None,
         sensor_objects: tuple | None = None,
         kinematics: tuple | None = None,
+        sensor_states: ArrayLike | None = None,
     ) -> PlanningProblem:
         """Return the problem at ``prediction`` (``prior_cov`` and ``target`` its position
         blocks); the other arguments are the fields of the same names."""
         return cls(
             None, None, sensors, r, rho, sigma_d2, sigma_theta2, objective, prediction,
             models, pose_cov, p_detect=p_detect, max_range=max_range, occluders=occluders,
-            sensor_objects=sensor_objects,
-            kinematics=kinematics,
+            sensor_objects=sensor_objects, kinematics=kinematics, sensor_states=sensor_states,
         )  # fmt: skip
 
     @classmethod
@@ -409,20 +397,14 @@ class PlanningProblem:
                 arrays[f.name] = problems[0].sensor_objects
                 continue
             vals = [getattr(p, f.name) for p in problems]
-            if f.name in ("models", "pose_cov", "p_detect", "max_range"):
+            if f.name in _FILLS:  # None in some problems: filled with the default's value
                 if all(v is None for v in vals):
                     arrays[f.name] = None
                     continue
-                if f.name in ("p_detect", "max_range"):  # None: always, unlimited
-                    fill = 1.0 if f.name == "p_detect" else np.inf
-                    vals = [np.full(p.n_sensors, fill) if v is None else v
-                            for v, p in zip(vals, problems, strict=True)]  # fmt: skip
-                elif f.name == "models":
-                    vals = [np.zeros(p.n_sensors, np.int8) if v is None else v
-                            for v, p in zip(vals, problems, strict=True)]  # fmt: skip
-                else:
-                    vals = [np.zeros((p.n_sensors, 2, 2)) if v is None else v
-                            for v, p in zip(vals, problems, strict=True)]  # fmt: skip
+                if _FILLS[f.name] is None and any(v is None for v in vals):
+                    raise ValueError(f"problems must all carry {f.name}, or none")
+                vals = [_FILLS[f.name](p) if v is None else v
+                        for v, p in zip(vals, problems, strict=True)]  # fmt: skip
             arrays[f.name] = np.stack(vals)
         all_preds = [p.predictions for p in problems]
         prediction: Any = None
@@ -599,7 +581,8 @@ class PlanningProblem:
         step = np.linalg.norm(p - self.sensors, axis=-1) - self.r
         if self.kinematics is not None and not team.all_disks(self.kinematics):
             # A kinematics of its own: the distance to its reach set (its clip).
-            gap = [p[..., i, :] - k.clip(p[..., i, :], self.sensors[..., i, :])
+            s = self.sensors if self.sensor_states is None else self.sensor_states
+            gap = [p[..., i, :] - k.clip(p[..., i, :], team.state_of(k, s[..., i, :]))
                    for i, k in enumerate(self.kinematics)]  # fmt: skip
             step = np.stack([np.hypot(g[..., 0], g[..., 1]) for g in gap], -1)
         near = np.linalg.norm(p[..., None, :, :] - self.targets[..., :, None, :], axis=-1)

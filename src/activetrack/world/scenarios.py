@@ -263,7 +263,7 @@ class Scenario:
         put("occluder_bounds", bounds)
         put("occluder_size", size)
         put("filter_iterations", _count_field("filter_iterations", self.filter_iterations))
-        put("kinematics", team.converted(self.kinematics, m))
+        put("kinematics", team.converted(self.kinematics, m, self.dt))
         for key in _PER_SENSOR:
             put(key, _sensor_field(key, getattr(self, key), m))
         reach = np.asarray(self.vmax) * self.dt

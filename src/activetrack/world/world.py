@@ -6,8 +6,7 @@ follows the paper's timeline:
 
 1. **move**: the sensors go to their next positions within reach and outside the ``rho``
    disks around the predicted target (eq. 13-16, :mod:`activetrack.kinematics.sensor_motion`), from
-   a
-   planner's absolute positions (:meth:`World.step`) or from actions in units of the reach
+   a planner's absolute positions (:meth:`World.step`) or from actions in units of the reach
    (:meth:`World.step_actions`);
 2. **advance**: the true target moves (eq. 2; or by its behaviour,
    :mod:`activetrack.world.behaviours`), every sensor measures distance and bearing
@@ -66,6 +65,7 @@ from activetrack.models.motion import predict, psd_factor
 from activetrack.models.objective import TRACE, as_objective, combined
 from activetrack.validation import FloatArray, as_generator, check_int
 from activetrack.world import _fast, observation, tracking
+from activetrack.world._motion_state import MotionState
 from activetrack.world._occluded import OccludedMoves
 from activetrack.world._readers import _TARGET_FIELDS, WorldReaders
 from activetrack.world._selection import CopySelection
@@ -95,7 +95,7 @@ class StepResult(NamedTuple):
     truncated: Any
 
 
-class World(CopySelection, RandomStreams, WorldReaders, OccludedMoves, TargetMotion):
+class World(CopySelection, RandomStreams, WorldReaders, OccludedMoves, TargetMotion, MotionState):
     """``num_copies`` independent tracking episodes of one scenario, stepped together.
 
     Args:
@@ -270,6 +270,7 @@ class World(CopySelection, RandomStreams, WorldReaders, OccludedMoves, TargetMot
         }
         if self._limited:  # which sensor detected which target at the last step
             state["detected"] = np.zeros((K, m), dtype=bool)
+        self._motion_setup(state)  # a heading, a velocity: _motion_state
         if not self._one:
             state = {k: np.broadcast_to(v, (N, *np.shape(v))).copy() for k, v in state.items()}
             targets = [
@@ -364,6 +365,7 @@ class World(CopySelection, RandomStreams, WorldReaders, OccludedMoves, TargetMot
         }
         if self._limited:
             new["detected"] = False
+        self._motion_start(new, sensors)
         if self._one:
             new["projected"] = np.zeros(self.n_sensors, dtype=bool)
             new["n_projected"] = np.zeros(self.n_sensors, dtype=np.int64)
@@ -472,6 +474,7 @@ class World(CopySelection, RandomStreams, WorldReaders, OccludedMoves, TargetMot
         }
         if detected is not None:
             new["detected"] = detected
+        self._motion_store(new, sel, partial)
         if self._one:
             truncated = _fast.store_one(self, new, bool(np.count_nonzero(projected)))
         else:
@@ -545,10 +548,7 @@ class World(CopySelection, RandomStreams, WorldReaders, OccludedMoves, TargetMot
             where = np.empty(x_preds[0].shape[:-1] + (K, 2))
             for k, x in enumerate(x_preds):
                 where[..., k, :] = x[..., :2]
-        move = move if self._team is None else self._team.of(move)
-        moved, projected = move(moves, fixes, where, p.r, p.rho)
-        if self._occ is not None:  # no move ends in or passes through an occluder
-            moved, projected = self._around_occluders(sensors, fixes, moved, projected)
+        moved, projected = self._move_sensors(move, moves, sensors, fixes, where, calc)
         noise = self._noise_of(sel, isinstance(sel, np.ndarray))
         if self._pose:  # the true sensor makes the believed displacement; a new fix
             sensors = sensors + (moved - fixes)
