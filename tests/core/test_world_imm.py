@@ -12,7 +12,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from activetrack import Evasive, IMMSpec, Maneuvering, constant_acceleration, constant_velocity
+from activetrack import (
+    Evasive,
+    IMMFilter,
+    IMMSpec,
+    Maneuvering,
+    constant_acceleration,
+    constant_velocity,
+)
 from activetrack.world import World
 from activetrack.world.presets import MANEUVERING
 from activetrack.world.scenarios import make_scenario
@@ -53,6 +60,48 @@ def test_one_mode_imm_world_is_the_ekf_world_bit_for_bit(name, overrides):
     probs = imm.mode_probabilities
     assert ekf.mode_probabilities is None and len(probs) == sc.n_targets
     assert all(np.array_equal(p, np.ones((n, 1))) for p in probs)
+
+
+@pytest.mark.parametrize("overrides", [{}, {"p_detect": 0.6}])
+def test_imm_world_is_the_imm_filter_on_the_worlds_measurements(monkeypatch, overrides):
+    # The world's IMM against the validated stateful activetrack.IMMFilter (itself tested
+    # against the exact Gaussian-sum posterior, tests/core/test_imm.py) fed the very
+    # measurements the world drew (recorded from its measurement function) and the sensors
+    # that detected the target: the posterior mixture is x_hat/P, the predicted mixture
+    # x_pred/P_pred, the mode probabilities the filter's, at every step.
+    from activetrack.world import tracking
+
+    drawn = []
+    measure = tracking.measure
+
+    def recorded(*args):
+        z = measure(*args)
+        drawn.append(z)
+        return z
+
+    monkeypatch.setattr(tracking, "measure", recorded)
+    sc = make_scenario("maneuvering", **overrides)
+    spec = IMMSpec.from_behaviour(MANEUVERING)
+    w = World(sc, estimator=spec)
+    w.reset(seeds=[4])
+    f = IMMFilter(spec.models, spec.transition, sc.x0_hat, sc.initial_cov, spec.initial)
+    f.predict()
+    np.testing.assert_array_equal(w.get("x_pred", 0), f.x)
+    np.testing.assert_array_equal(w.get("P_pred", 0), f.P)
+    rng, missed = np.random.default_rng(2), 0
+    sd2, st2 = sc.per_sensor("sigma_d2"), sc.per_sensor("sigma_theta2")
+    for _ in range(sc.n_steps):
+        w.step_actions(rng.uniform(-1.0, 1.0, (sc.n_sensors, 2)))
+        seen = w.get("detected", 0)[0]
+        missed += int(np.count_nonzero(~seen))
+        f.update(drawn[-1][0], w.get("sensors", 0), sd2, st2, sensors=seen)
+        np.testing.assert_array_equal(w.mode_probabilities[0], f.mu)
+        np.testing.assert_array_equal(w.get("x_hat", 0), f.x)
+        np.testing.assert_array_equal(w.get("P", 0), f.P)
+        f.predict()
+        np.testing.assert_array_equal(w.get("x_pred", 0), f.x)
+        np.testing.assert_array_equal(w.get("P_pred", 0), f.P)
+    assert len(drawn) == sc.n_steps and (missed > 0) == ("p_detect" in overrides)
 
 
 def _position_nees(x, x_hat, P):
