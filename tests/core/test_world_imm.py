@@ -131,8 +131,8 @@ def _nees_runs(estimator, runs):
 def test_imm_world_is_consistent_on_maneuvering_where_the_ekf_world_is_not():
     # The statistic: the mean over 200 runs of each run's time-averaged position NEES, its
     # 99% band tests.core.helpers.nees_band's (runs i.i.d., a t-interval around 2). On
-    # these seeds (2 s each): the IMM 2.035 (posterior) and 2.039 (prediction), bands
-    # about 2 +- 0.096; the constant-velocity EKF 3.54 and 4.06, above its bands.
+    # these seeds (2 s each): the IMM 2.021 (posterior) and 2.021 (prediction), bands
+    # about 2 +- 0.098; the constant-velocity EKF 3.48 and 4.01, above its bands.
     runs = 200
     imm_post, imm_pred = _nees_runs(IMMSpec.from_behaviour(MANEUVERING), runs)
     ekf_post, ekf_pred = _nees_runs("ekf", runs)
