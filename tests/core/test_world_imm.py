@@ -186,6 +186,7 @@ def test_the_default_is_the_ekf_and_the_record_names_the_imm():
     assert spec != IMMSpec(MANEUVERING.models, MANEUVERING.transition)  # uniform initial
     imm = make_scenario("maneuvering", estimator=spec)
     assert imm == make_scenario("maneuvering", estimator=IMMSpec.from_behaviour(MANEUVERING))
+    assert imm == make_scenario("maneuvering", estimator="imm")  # the behaviour's mode set
     assert imm.to_dict()["estimator"] == {
         "name": "imm",
         "models": [mdl.name for mdl in MANEUVERING.models],
@@ -200,8 +201,16 @@ CV = constant_velocity(10.0, 0.1)
 @pytest.mark.parametrize(
     ("make", "message"),
     [
-        (lambda: make_scenario("paper", estimator="imm"), r"estimator must be 'ekf' or an"),
-        (lambda: make_scenario("paper", estimator=None), r"estimator must be 'ekf' or an"),
+        (lambda: make_scenario("paper", estimator="IMM"), r"estimator must be 'ekf', 'imm' or"),
+        (lambda: make_scenario("paper", estimator=None), r"estimator must be 'ekf', 'imm' or"),
+        (
+            lambda: make_scenario("paper", estimator="imm"),
+            r"estimator='imm' needs one target_behaviour with a mode set.*None",
+        ),
+        (
+            lambda: make_scenario("evader", estimator="imm"),
+            r"estimator='imm' needs one target_behaviour with a mode set.*Evasive",
+        ),
         (lambda: IMMSpec([], [[1.0]]), r"estimator: IMMSpec models must be a non-empty"),
         (lambda: IMMSpec([CV, CV], [[0.9, 0.2], [0.5, 0.5]]), r"estimator: .*row-stochastic"),
         (lambda: IMMSpec([CV, CV], [[1.1, -0.1], [0.5, 0.5]]), r"estimator: .*entries in \[0, 1\]"),

@@ -158,8 +158,8 @@ def accepted(name: str) -> str:
         "name": "a string",
         "target_behaviour": "None (the filter's own model), an activetrack.TargetBehaviour, or a "
         "tuple of K",
-        "estimator": "'ekf', or an activetrack.IMMSpec (modes of the targets' state and dt, "
-        "a row-stochastic transition matrix)",
+        "estimator": "'ekf', 'imm' (the target_behaviour's mode set), or an "
+        "activetrack.IMMSpec (modes of the targets' state and dt, a row-stochastic transition)",
     }[name]
 
 

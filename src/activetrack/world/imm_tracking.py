@@ -42,7 +42,7 @@ from activetrack.models.behaviour import distribution, stochastic_matrix
 from activetrack.models.motion import LinearMotionModel
 from activetrack.validation import FloatArray
 
-_WHAT = "estimator must be 'ekf' or an activetrack.IMMSpec"
+_WHAT = "estimator must be 'ekf', 'imm' or an activetrack.IMMSpec"
 
 
 class IMMSpec:
@@ -131,9 +131,20 @@ class IMMSpec:
 def converted(value: object, sc: Any) -> Any:
     """Return the scenario field ``estimator`` checked: ``"ekf"`` or an :class:`IMMSpec`
     whose modes have every target's state dimension and the scenario's ``dt``
-    (``sc``: the scenario, its other fields converted); else a ValueError naming it."""
+    (``sc``: the scenario, its other fields converted); ``"imm"`` is the spec of the
+    scenario's ``target_behaviour`` (:meth:`IMMSpec.from_behaviour`; one behaviour with a
+    mode set for every target). Else a ValueError naming the field."""
     if isinstance(value, str) and value == "ekf":
         return "ekf"
+    if isinstance(value, str) and value == "imm":
+        b = sc.target_behaviour
+        if b is None or isinstance(b, tuple) or not hasattr(b, "transition"):
+            raise ValueError(
+                "estimator='imm' needs one target_behaviour with a mode set for every target "
+                f"(activetrack.Maneuvering or StopAndGo), got target_behaviour={b!r}; "
+                "give an activetrack.IMMSpec instead"
+            )
+        value = IMMSpec.from_behaviour(b)
     if not isinstance(value, IMMSpec):
         raise ValueError(f"{_WHAT}, got {value!r}")
     dims = [m.dim for m in sc.target_models]

@@ -179,9 +179,9 @@ class Scenario:
         target_behaviour: how the true targets move: None (their filter's own model, eq.
             2), an :class:`activetrack.TargetBehaviour` for every target, or a tuple of K
             (:mod:`activetrack.world.behaviours`); the filter keeps its model.
-        estimator: ``"ekf"`` (each target's EKF on its motion model) or an
-            :class:`activetrack.IMMSpec` (an IMM filter's modes, of the targets' state and
-            ``dt``; :mod:`activetrack.world.imm_tracking`).
+        estimator: ``"ekf"`` (each target's EKF on its motion model), ``"imm"`` (the IMM
+            of ``target_behaviour``'s mode set) or an :class:`activetrack.IMMSpec` (an IMM's
+            modes, of the targets' state and ``dt``; :mod:`activetrack.world.imm_tracking`).
 
     One coupled limit: the first predicted position variance (from P0, the model and q)
     may be at most 1e10 times the smallest range variance, so that one update never
