@@ -63,6 +63,7 @@ from activetrack.solvers.analytic import (
     solve_single_sensor,
     solve_single_sensor_batch,
 )
+from activetrack.world.imm_tracking import IMMSpec
 from activetrack.world.prediction import Prediction
 from activetrack.world.presets import PRESETS
 from activetrack.world.problem import Planner, PlanningProblem
@@ -92,6 +93,7 @@ __all__ = [
     "ExtendedKalmanFilter",
     "GOSPAResult",
     "IMMFilter",
+    "IMMSpec",
     "Kinematics",
     "LinearMotionModel",
     "LogDetObjective",

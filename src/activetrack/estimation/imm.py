@@ -65,8 +65,10 @@ def mix(
     from the mode-conditioned ``x`` (..., r, n), ``P`` (..., r, n, n) with probabilities
     ``mu`` (..., r) (BLK eq. 11.6.6-11.6.7; leading axes: independent filters). A mode of
     predicted probability 0 keeps its own estimate."""
-    c = mu @ transition
     w = transition * mu[..., :, None]  # w[i, j] = Pi[i, j] mu_i
+    # (a sum, not mu @ transition: BLAS rounds a vector's product and a stack's apart, and
+    # a batch of filters must equal each filter alone bit for bit)
+    c = w.sum(axis=-2)
     pos = c[..., None, :] > 0.0
     w = np.where(pos, w / np.where(pos, c[..., None, :], 1.0), np.eye(mu.shape[-1]))
     x0 = np.einsum("...ij,...in->...jn", w, x)  # w[i, j] = mu_{i|j}: columns sum to 1

@@ -156,6 +156,10 @@ def accepted(name: str) -> str:
         f"{LENGTH_MAX:g} in magnitude",
         "kinematics": "None (a disk of radius vmax dt), an activetrack.Kinematics, or a tuple of M",
         "name": "a string",
+        "target_behaviour": "None (the filter's own model), an activetrack.TargetBehaviour, or a "
+        "tuple of K",
+        "estimator": "'ekf', 'imm' (the target_behaviour's mode set), or an "
+        "activetrack.IMMSpec (modes of the targets' state and dt, a row-stochastic transition)",
     }[name]
 
 

@@ -21,7 +21,7 @@ from activetrack.models.motion import LinearMotionModel, make_model
 from activetrack.models.objective import Objective
 from activetrack.models.sensor import SensorModel, as_sensor_model, record, slot_code
 from activetrack.validation import FloatArray, UnexpectedKeywordError
-from activetrack.world import behaviours
+from activetrack.world import behaviours, imm_tracking
 from activetrack.world._scenario_fields import (
     _PER_SENSOR,
     CHOICES,
@@ -179,6 +179,9 @@ class Scenario:
         target_behaviour: how the true targets move: None (their filter's own model, eq.
             2), an :class:`activetrack.TargetBehaviour` for every target, or a tuple of K
             (:mod:`activetrack.world.behaviours`); the filter keeps its model.
+        estimator: ``"ekf"`` (each target's EKF on its motion model), ``"imm"`` (the IMM
+            of ``target_behaviour``'s mode set) or an :class:`activetrack.IMMSpec` (an IMM's
+            modes, of the targets' state and ``dt``; :mod:`activetrack.world.imm_tracking`).
 
     One coupled limit: the first predicted position variance (from P0, the model and q)
     may be at most 1e10 times the smallest range variance, so that one update never
@@ -218,6 +221,7 @@ class Scenario:
     filter_iterations: int = 1
     kinematics: Any = None
     target_behaviour: Any = None
+    estimator: Any = "ekf"
     _cache: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -285,6 +289,7 @@ class Scenario:
                 put(key, _per_target_states(key, getattr(self, key), dims))
             put("P0", _per_target_p0(self.P0, dims))
         put("target_behaviour", behaviours.converted(self.target_behaviour, self))
+        put("estimator", imm_tracking.converted(self.estimator, self))
         self._check_information_ratio()
         if self.random_occluders:  # a layout can be drawn (the reset would fail otherwise)
             self.draw_occluders(np.random.default_rng(0))
@@ -531,6 +536,7 @@ class Scenario:
                       "radius": k.radius} for k in self.kinematics_models]  # fmt: skip
             if f.name == "target_behaviour":  # a record of which behaviours, not their code
                 v = behaviours.record(v)
+            v = imm_tracking.record(v) if f.name == "estimator" else v
             out[f.name] = v.name if isinstance(v, LinearMotionModel) else v
         return out
 

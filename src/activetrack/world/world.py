@@ -72,6 +72,7 @@ from activetrack.world._selection import CopySelection
 from activetrack.world._sizes import WORLD_BYTES_MAX, world_bytes
 from activetrack.world._streams import RandomStreams
 from activetrack.world.behaviours import TargetMotion
+from activetrack.world.imm_tracking import IMMTracking
 from activetrack.world.scenarios import Scenario, make_scenario
 
 #: Steps of noise a copy draws per generator call in a world of several copies.
@@ -95,7 +96,10 @@ class StepResult(NamedTuple):
     truncated: Any
 
 
-class World(CopySelection, RandomStreams, WorldReaders, OccludedMoves, TargetMotion, MotionState):
+class World(  # (the mixins: world/_selection.py, _streams.py, ..., imm_tracking.py)
+    CopySelection, RandomStreams, WorldReaders, OccludedMoves, TargetMotion, MotionState,
+    IMMTracking,
+):  # fmt: skip
     """``num_copies`` independent tracking episodes of one scenario, stepped together.
 
     Args:
@@ -193,10 +197,11 @@ class World(CopySelection, RandomStreams, WorldReaders, OccludedMoves, TargetMot
         self._limited = not caps.unlimited_sensing
         # One target, known sensor positions, every sensor measures, no occluders: the whole
         # step is one compiled call (activetrack.world._loop_kernels.advance_rows).
-        self._fused = caps.fused_step
+        ekf = sc.estimator == "ekf"  # else an IMM: stage by stage (world/imm_tracking.py)
+        self._fused = caps.fused_step and ekf
         # One target, every sensor measures, the EKF of eq. (11): the advance is one call per
         # step (activetrack.world.tracking.advance_target), else stage by stage.
-        self._per_target = caps.per_target_update
+        self._per_target = caps.per_target_update and ekf
         # A sensor whose kinematics is not a built-in Disk: every move asks its kinematics.
         self._team = None if caps.disk_kinematics else TeamMotion(sc.kinematics_models)
         if N > 1:  # the step's normals are (copies, n_noise) then; one copy's are (n_noise,)
@@ -281,6 +286,7 @@ class World(CopySelection, RandomStreams, WorldReaders, OccludedMoves, TargetMot
         #: Per-target state: x_true, x_hat, P, x_pred, P_pred of each target.
         self._t: list[dict[str, Any]] = targets
         self._init_behaviours()  # the true targets' behaviours (activetrack.world.behaviours)
+        self._init_imm()  # an IMM estimator's state (activetrack.world.imm_tracking)
 
     # Reset ------------------------------------------------------------------------------
     def reset(
@@ -376,6 +382,7 @@ class World(CopySelection, RandomStreams, WorldReaders, OccludedMoves, TargetMot
             for key, value in new.items():
                 self._s[key][sel] = value
         self._reset_behaviours(rows)  # (spawned generators: the copies' streams do not move)
+        self._reset_imm(sel)
         self._noise_left[sel] = 0
         if self._noise is not None:
             self._draw_noise(rows)
@@ -585,6 +592,9 @@ class World(CopySelection, RandomStreams, WorldReaders, OccludedMoves, TargetMot
                 x_true = moved_t[k]
                 z = z_all[..., k, :, :]
                 seen = None if detected is None else detected[..., k, :]
+                if self._imm is not None:
+                    results.append((x_true, *self._imm_step(k, z, fixes, seen, sel, calc)))
+                    continue
                 x_post, P_post = tracking.filter_update(p, x_pred, P_pred, z, fixes, seen)
             results.append((x_true, x_post, P_post, *predict(x_post, P_post, tp.Phi, tp.Q)))
         return sensors, fixes, projected, detected, results
