@@ -319,7 +319,19 @@ def test_arguments_on_the_page_are_accepted_and_their_ranges_enforced(env_id: st
     from activetrack.world.scenarios import Scenario, make_scenario
 
     rows = _table(_section(_page(env_id), "Arguments"))
-    defaults = {row[0].strip("`"): ast.literal_eval(row[2].strip("`")) for row in rows}
+    preset = make_scenario(ALL_IDS[env_id])
+
+    def default(name: str, shown: str) -> object:
+        """The default the page shows: a literal, or an object (a behaviour, a model) shown
+        by its repr, which must be the preset's own."""
+        try:
+            return ast.literal_eval(shown)
+        except (ValueError, SyntaxError):
+            value = getattr(preset, name)
+            assert shown == repr(value), (name, shown)
+            return value
+
+    defaults = {row[0].strip("`"): default(row[0].strip("`"), row[2].strip("`")) for row in rows}
     fields = {f.name for f in dataclasses.fields(Scenario) if f.init}
     assert set(defaults) == fields | {"scenario", "render_mode", "max_cycles"}
     # Every argument with its default, alone and all together: the id's environment.
@@ -330,10 +342,10 @@ def test_arguments_on_the_page_are_accepted_and_their_ranges_enforced(env_id: st
     env.close()
     # Outside the range shown: refused, naming the argument.
     tried = 0
-    for name, _, default, accepted in rows:
-        if not isinstance(ast.literal_eval(default.strip("`")), (int, float, type(None))):
-            continue  # a vector or a name: its entries' range is checked by the core's tests
+    for name, _, _, accepted in rows:
         name = name.strip("`")
+        if not isinstance(defaults[name], (int, float, type(None))):
+            continue  # a vector, a name or an object: checked by the core's tests
         for value in _out_of_range(accepted):
             with pytest.raises(ValueError, match=name):
                 gymnasium.make(env_id, **{name: value})

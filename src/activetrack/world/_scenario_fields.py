@@ -155,6 +155,8 @@ def accepted(name: str) -> str:
         "vertices in all (random rectangles' included), coordinates at most "
         f"{LENGTH_MAX:g} in magnitude",
         "kinematics": "None (a disk of radius vmax dt), an activetrack.Kinematics, or a tuple of M",
+        "target_behaviour": "None (the filter's own motion model), an activetrack.TargetBehaviour "
+        "for every target, or a tuple of K (one per target)",
         "name": "a string",
         "target_behaviour": "None (the filter's own model), an activetrack.TargetBehaviour, or a "
         "tuple of K",
