@@ -158,8 +158,6 @@ def accepted(name: str) -> str:
         "target_behaviour": "None (the filter's own motion model), an activetrack.TargetBehaviour "
         "for every target, or a tuple of K (one per target)",
         "name": "a string",
-        "target_behaviour": "None (the filter's own model), an activetrack.TargetBehaviour, or a "
-        "tuple of K",
         "estimator": "'ekf', 'imm' (the target_behaviour's mode set), or an "
         "activetrack.IMMSpec (modes of the targets' state and dt, a row-stochastic transition)",
     }[name]
