@@ -24,6 +24,7 @@ import importlib.metadata as _metadata
 
 from activetrack import _aliases, _registry
 from activetrack.estimation.ekf import ExtendedKalmanFilter
+from activetrack.estimation.fusion import covariance_intersection
 from activetrack.estimation.imm import IMMFilter
 from activetrack.kinematics.base import Kinematics
 from activetrack.kinematics.disk import Disk
@@ -36,6 +37,12 @@ from activetrack.models.behaviour import (
     Maneuvering,
     StopAndGo,
     TargetBehaviour,
+)
+from activetrack.models.communication import (
+    CommunicationModel,
+    DeliveryQueue,
+    FullCommunication,
+    RangeLimited,
 )
 from activetrack.models.motion import (
     LinearMotionModel,
@@ -83,6 +90,11 @@ __all__ = [
     "WORST_TRACE",
     "BatchSolution",
     "BearingOnly",
+    "CommunicationModel",
+    "DeliveryQueue",
+    "FullCommunication",
+    "RangeLimited",
+    "covariance_intersection",
     "Disk",
     "Evasive",
     "FilterModel",

@@ -1,0 +1,338 @@
+"""Communication between the robots: who receives whom each step (issue 37).
+
+The paper motivates its decentralized method by "limitations on the robots' processing and
+communication resources"; real teams talk over radios of limited range that drop packets
+and deliver them late. This module is the communication model as a concept of its own,
+chosen per scenario (not yet wired into the world):
+
+- :class:`CommunicationModel`, the public base: :meth:`~CommunicationModel.links` returns
+  the step's *link matrix* ``L`` (bool, (..., M, M)) from the sensors' true positions:
+  ``L[..., i, j]`` is True iff robot ``i`` receives what robot ``j`` sends this step
+  (row: receiver, column: sender); the diagonal is always True (a robot has its own
+  measurement). A packet sent at step ``t`` over a link is delivered at step
+  ``t + delay`` (:attr:`~CommunicationModel.delay`, whole steps; :class:`DeliveryQueue`).
+- :class:`FullCommunication` (today's central team: every link, no delay; it consumes no
+  random numbers, so a scenario using it keeps its random streams bit for bit).
+- :class:`RangeLimited`: a link within ``range`` (closed disk), optionally only with line
+  of sight through the occluders (the segment between the two robots not
+  :func:`activetrack.models.occluders.blocked`); each packet (each ordered pair
+  ``i != j``) then dropped independently with probability ``drop``; delivered ``delay``
+  steps later.
+
+And the pieces a decentralized team builds on: :func:`components` (the connected groups
+of a link matrix, for distributed planning inside each group), :class:`DeliveryQueue`
+(messages released ``delay`` steps after they were sent, in order of their send step, so
+a receiver's filter processes measurements in time order) and :func:`measurement_senders`
+/ :func:`measurement_mask` (whose measurements each robot's filter uses this step).
+"""
+
+from __future__ import annotations
+
+import abc
+import heapq
+import itertools
+import math
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from activetrack.models.occluders import Occluders, blocked
+from activetrack.validation import (
+    ComparedByValue,
+    FloatArray,
+    as_finite,
+    check_bool,
+    check_int,
+    check_trailing_shape,
+)
+
+__all__ = [
+    "CommunicationModel", "DeliveryQueue", "FullCommunication", "RangeLimited", "components",
+    "measurement_mask", "measurement_senders",
+]  # fmt: skip
+
+
+def _positions(positions: ArrayLike) -> FloatArray:
+    """Return the sensors' positions checked: finite float64 (..., M, 2) with M >= 1."""
+    p = check_trailing_shape("positions", as_finite("positions", positions), (2,))
+    if p.ndim < 2 or p.shape[-2] < 1:
+        raise ValueError(f"positions must have shape (..., M, 2) with M >= 1, got {p.shape}")
+    return p
+
+
+def _generator(rng: Any) -> np.random.Generator:
+    if not isinstance(rng, np.random.Generator):
+        raise ValueError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
+    return rng
+
+
+def _link_matrix(name: str, links: ArrayLike) -> np.ndarray:
+    """Return ``links`` checked: a bool array (..., M, M), M >= 1."""
+    arr = np.asarray(links)
+    if arr.dtype != np.bool_:
+        raise ValueError(f"{name} must be a bool array (..., M, M), got dtype {arr.dtype}")
+    if arr.ndim < 2 or arr.shape[-1] != arr.shape[-2] or arr.shape[-1] < 1:
+        raise ValueError(f"{name} must have shape (..., M, M) with M >= 1, got {arr.shape}")
+    return arr
+
+
+class CommunicationModel(ComparedByValue, abc.ABC):
+    """Who receives whom each step, and how late (module docstring).
+
+    A subclass implements :meth:`_links` (unchecked: positions already validated) and may
+    set ``delay`` (an int >= 0, whole steps; 0 by default). :meth:`links` validates its
+    input and forces the diagonal True. Equality is by value (:class:`ComparedByValue`).
+    """
+
+    #: Steps between sending and delivery (0: the same step).
+    delay: int = 0
+
+    @property
+    def name(self) -> str:
+        """Return the model's name (scenario records, messages): its class name."""
+        return type(self).__name__
+
+    def links(
+        self,
+        positions: ArrayLike,
+        rng: np.random.Generator,
+        occluders: Occluders | None = None,
+    ) -> np.ndarray:
+        """Return the step's link matrix, bool (..., M, M): ``[..., i, j]`` True iff robot
+        ``i`` receives what robot ``j`` sends this step (delivered :attr:`delay` steps
+        later); the diagonal is True.
+
+        ``positions`` (..., M, 2) the sensors' true positions, ``rng`` the episode's
+        stream (what a model draws is its own documented rule), ``occluders`` the layout
+        (a batched set: the first leading axis of ``positions`` is its layout axis).
+        """
+        p = _positions(positions)
+        rng = _generator(rng)
+        if occluders is not None and not isinstance(occluders, Occluders):
+            raise ValueError(
+                f"occluders must be an Occluders or None, got {type(occluders).__name__}"
+            )
+        out = np.array(self._links(p, rng, occluders), dtype=bool)
+        m = p.shape[-2]
+        out[..., np.arange(m), np.arange(m)] = True
+        return out
+
+    @abc.abstractmethod
+    def _links(
+        self, positions: FloatArray, rng: np.random.Generator, occluders: Occluders | None
+    ) -> np.ndarray:
+        """Return the link matrix (..., M, M) of checked ``positions`` (diagonal: any)."""
+
+    def check(self, n_steps: int) -> None:
+        """Raise ``ValueError`` naming ``delay`` unless a packet sent at the first step of an
+        episode of ``n_steps`` steps is delivered within it (``delay < n_steps``): for the
+        scenario to refuse a model its episodes cannot use."""
+        n = check_int("n_steps", n_steps, 1)
+        if self.delay >= n:
+            raise ValueError(
+                f"delay must be < the episode's n_steps = {n} (a packet would never be "
+                f"delivered), got {self.delay}"
+            )
+
+
+class FullCommunication(CommunicationModel):
+    """Every robot receives every robot, at once (today's central team). Draws nothing."""
+
+    def _links(self, positions, rng, occluders):
+        m = positions.shape[-2]
+        return np.ones(positions.shape[:-2] + (m, m), bool)
+
+    def __repr__(self) -> str:
+        return "FullCommunication()"
+
+
+class RangeLimited(CommunicationModel):
+    """A radio of limited range that drops and delays packets.
+
+    ``range`` (>= 0, ``math.inf`` allowed): robots ``i`` and ``j`` are in contact iff
+    ``|p_i - p_j| <= range`` and, with ``line_of_sight`` and occluders, the segment
+    ``[p_i, p_j]`` is not blocked (a symmetric relation: the segment is tested once, for
+    ``i < j``). ``drop`` in [0, 1]: each packet (each ordered pair ``i != j`` in contact)
+    is lost independently with that probability. ``delay`` (int >= 0): packets arrive that
+    many whole steps later.
+
+    Random numbers: with ``drop > 0`` one ``rng.random((..., M, M))`` per step (entry
+    ``[i, j]``: the packet from ``j`` to ``i`` is lost iff it is ``< drop``; the
+    diagonal's are drawn and unused), so the number of draws does not depend on the
+    positions; with ``drop == 0`` none.
+    """
+
+    def __init__(
+        self, range: float, drop: float = 0.0, delay: int = 0, line_of_sight: bool = False
+    ) -> None:
+        r = _real("range", range)
+        if not r >= 0.0:
+            raise ValueError(f"range must be >= 0 (math.inf allowed), got {range!r}")
+        d = _real("drop", drop)
+        if not 0.0 <= d <= 1.0:
+            raise ValueError(f"drop must be a probability in [0, 1], got {drop!r}")
+        self.range = r
+        self.drop = d
+        self.delay = check_int("delay", delay, 0)
+        self.line_of_sight = check_bool("line_of_sight", line_of_sight)
+
+    def __repr__(self) -> str:
+        return (
+            f"RangeLimited(range={self.range!r}, drop={self.drop!r}, delay={self.delay!r}, "
+            f"line_of_sight={self.line_of_sight!r})"
+        )
+
+    def in_contact(self, positions: FloatArray, occluders: Occluders | None) -> np.ndarray:
+        """Return the symmetric contact matrix (..., M, M) before drops (unchecked input):
+        within ``range`` and, if asked, in line of sight; diagonal True."""
+        diff = positions[..., :, None, :] - positions[..., None, :, :]
+        near = np.hypot(diff[..., 0], diff[..., 1]) <= self.range
+        if self.line_of_sight and occluders is not None and occluders.n_edges:
+            m = positions.shape[-2]
+            a = positions[..., :, None, :]
+            b = positions[..., None, :, :]
+            seen = ~blocked(a, b, occluders)  # (..., M, M); only i < j is read
+            upper = np.triu(np.ones((m, m), bool), 1)
+            seen = seen & upper
+            seen = seen | np.swapaxes(seen, -1, -2)
+            near = near & seen
+        m = positions.shape[-2]
+        near[..., np.arange(m), np.arange(m)] = True
+        return near
+
+    def _links(self, positions, rng, occluders):
+        out = self.in_contact(positions, occluders)
+        if self.drop > 0.0:
+            out &= ~(rng.random(out.shape) < self.drop)
+        return out
+
+
+def _real(name: str, value: Any) -> float:
+    """Return ``value`` as a float (a real number, not NaN; inf allowed) or raise."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(
+        value, (int, float, np.integer, np.floating)
+    ):
+        raise ValueError(f"{name} must be a real number, got {value!r}")
+    v = float(value)
+    if math.isnan(v):
+        raise ValueError(f"{name} must not be NaN, got {value!r}")
+    return v
+
+
+def components(links: ArrayLike, connection: str = "weak") -> tuple[np.ndarray, np.ndarray]:
+    """Return ``(n, labels)``: the connected groups of link matrices ``links`` (..., M, M).
+
+    ``n`` (...) the number of groups, ``labels`` (..., M) int the group of each robot,
+    numbered ``0 .. n - 1`` in order of their lowest robot index (robot 0 is in group 0).
+    ``connection`` is scipy's: ``"weak"`` (a link in either direction joins two robots)
+    or ``"strong"`` (each must reach the other along received links). Computed by
+    :func:`scipy.sparse.csgraph.connected_components` on the block-diagonal graph of all
+    the leading axes at once.
+    """
+    from scipy.sparse import block_diag, csr_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    if connection not in ("weak", "strong"):
+        raise ValueError(f"connection must be one of ['weak', 'strong'], got {connection!r}")
+    arr = _link_matrix("links", links)
+    lead, m = arr.shape[:-2], arr.shape[-1]
+    flat = arr.reshape(-1, m, m)
+    b = flat.shape[0]
+    if b == 0:
+        return np.zeros(lead, np.intp), np.zeros(lead + (m,), np.intp)
+    graph = block_diag([csr_matrix(g) for g in flat], format="csr")
+    _, glob = connected_components(graph, directed=True, connection=connection)
+    glob = glob.reshape(b, m)
+    # Canonical numbering: each robot's group is named by its lowest member ...
+    lowest = np.full(int(glob.max()) + 1, np.iinfo(np.intp).max, np.intp)
+    np.minimum.at(lowest, glob.ravel(), np.tile(np.arange(m), b))
+    low = lowest[glob]  # (b, m)
+    # ... then numbered by the rank of that member among the groups' lowest members.
+    root = low == np.arange(m)
+    rank = np.cumsum(root, axis=1) - 1
+    labels = np.take_along_axis(rank, low, axis=1)
+    return root.sum(axis=1).reshape(lead), labels.reshape(lead + (m,))
+
+
+def measurement_mask(links: ArrayLike) -> np.ndarray:
+    """Return whose measurements each robot uses this step, bool (..., M, M): ``[..., i, j]``
+    True iff robot ``i``'s filter updates with robot ``j``'s measurement; its own
+    (the diagonal) always.
+
+    With no delay this is the step's link matrix: robot ``i`` applies, in one update, the
+    measurements of the senders ``j`` of row ``i`` (the measurement-sharing filter; with
+    :class:`FullCommunication` every row is all True and each robot's update is today's
+    central one). With a delay, a robot updates with its own measurement at once and with
+    its neighbours' when :class:`DeliveryQueue` releases them (retrodiction, documented
+    where the filters are wired).
+    """
+    arr = _link_matrix("links", links).copy()
+    m = arr.shape[-1]
+    arr[..., np.arange(m), np.arange(m)] = True
+    return arr
+
+
+def measurement_senders(links: ArrayLike) -> list[np.ndarray]:
+    """Return, for each robot ``i`` of one step's link matrix (M, M), the sorted int array of
+    the robots whose measurements it uses this step (:func:`measurement_mask`'s row ``i``;
+    ``i`` itself always included)."""
+    arr = measurement_mask(links)
+    if arr.ndim != 2:
+        raise ValueError(f"links must have shape (M, M) (one step), got {arr.shape}")
+    return [np.flatnonzero(row) for row in arr]
+
+
+class DeliveryQueue:
+    """Messages in flight between ``n_robots`` robots, released ``delay`` steps after sent.
+
+    :meth:`send` posts, at a step, each sender's payload (any object) to every receiver of
+    its column of the link matrix (not to itself: its own data it has at once);
+    :meth:`deliver` returns what each receiver gets at a step: the messages due by then,
+    as ``(send_step, sender, payload)`` tuples sorted by send step, then sender (so a
+    receiver's filter processes measurements in time order), each delivered once.
+    """
+
+    def __init__(self, n_robots: int, delay: int = 0) -> None:
+        self.n_robots = check_int("n_robots", n_robots, 1)
+        self.delay = check_int("delay", delay, 0)
+        self._heap: list[tuple[int, int, int, int, int, Any]] = []
+        self._order = itertools.count()  # ties (same step, receiver, sender): posting order
+
+    def __len__(self) -> int:
+        """Return the number of messages not yet delivered."""
+        return len(self._heap)
+
+    def send(
+        self, step: int, links: ArrayLike, payloads: Sequence[Any], delay: int | None = None
+    ) -> None:
+        """Post, at ``step``, ``payloads[j]`` from each robot ``j`` to each ``i != j`` with
+        ``links[i, j]`` (an (M, M) bool link matrix), due at ``step + delay`` (this
+        queue's delay by default)."""
+        step = check_int("step", step, 0)
+        d = self.delay if delay is None else check_int("delay", delay, 0)
+        arr = _link_matrix("links", links)
+        m = self.n_robots
+        if arr.shape != (m, m):
+            raise ValueError(f"links must have shape ({m}, {m}), got {arr.shape}")
+        if len(payloads) != m:
+            raise ValueError(
+                f"payloads must hold {m} entries (one per sender), got {len(payloads)}"
+            )
+        for i, j in zip(*np.nonzero(arr), strict=True):
+            if i != j:
+                entry = (step + d, step, int(j), int(i), next(self._order), payloads[j])
+                heapq.heappush(self._heap, entry)
+
+    def deliver(self, step: int) -> list[list[tuple[int, int, Any]]]:
+        """Return, for each receiver, its messages due at or before ``step`` (removed from
+        the queue): ``(send_step, sender, payload)`` sorted by send step, then sender."""
+        step = check_int("step", step, 0)
+        out: list[list[tuple[int, int, Any]]] = [[] for _ in range(self.n_robots)]
+        due = []
+        while self._heap and self._heap[0][0] <= step:
+            due.append(heapq.heappop(self._heap))
+        for _, sent, sender, receiver, _n, payload in sorted(due, key=lambda e: (e[1], e[2], e[4])):
+            out[receiver].append((sent, sender, payload))
+        return out

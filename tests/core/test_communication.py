@@ -1,0 +1,308 @@
+"""The communication model (issue 37) against independent computations: pairwise loops,
+an independent segment-rectangle clipping for line of sight, binomial bands for the drops,
+breadth-first search for the groups, a brute-force schedule for the delivery queue."""
+
+import math
+import pickle
+from collections import deque
+
+import numpy as np
+import pytest
+from scipy import stats
+
+import activetrack
+from activetrack.models.communication import (
+    CommunicationModel,
+    DeliveryQueue,
+    FullCommunication,
+    RangeLimited,
+    components,
+    measurement_mask,
+    measurement_senders,
+)
+from activetrack.models.occluders import Occluders
+
+RECTS = [(4.0, 6.0, 12.0, 9.0), (14.0, 2.0, 17.0, 16.0)]  # (xmin, ymin, xmax, ymax)
+
+
+def rect_polygon(r):
+    x0, y0, x1, y1 = r
+    return [(x0, y0), (x1, y0), (x1, y1), (x0, y1)]
+
+
+def segment_in_open_rect(a, b, r):
+    """Return whether a sub-segment of positive length of [a, b] lies in the open rectangle
+    ``r``: Liang-Barsky clipping of the parameter interval, written out here."""
+    x0, y0, x1, y1 = r
+    lo, hi = 0.0, 1.0
+    d = np.asarray(b, float) - np.asarray(a, float)
+    for p, q in ((-d[0], a[0] - x0), (d[0], x1 - a[0]), (-d[1], a[1] - y0), (d[1], y1 - a[1])):
+        if p == 0.0:
+            if q <= 0.0:
+                return False
+        else:
+            t = q / p
+            if p < 0.0:
+                lo = max(lo, t)
+            else:
+                hi = min(hi, t)
+    return hi - lo > 1e-9
+
+
+def outside_points(rng, n, rects):
+    """Return ``n`` random points in [0, 20]^2 outside every rectangle (with a margin)."""
+    out = []
+    while len(out) < n:
+        p = rng.uniform(0.0, 20.0, 2)
+        if all(not (x0 - 0.1 < p[0] < x1 + 0.1 and y0 - 0.1 < p[1] < y1 + 0.1)
+               for x0, y0, x1, y1 in rects):  # fmt: skip
+            out.append(p)
+    return np.array(out)
+
+
+def brute_links(p, rng_range, rects=None):
+    m = len(p)
+    out = np.zeros((m, m), bool)
+    for i in range(m):
+        for j in range(m):
+            d = math.sqrt((p[i, 0] - p[j, 0]) ** 2 + (p[i, 1] - p[j, 1]) ** 2)
+            ok = i == j or d <= rng_range
+            if ok and rects and i != j:
+                ok = not any(segment_in_open_rect(p[i], p[j], r) for r in rects)
+            out[i, j] = ok
+    return out
+
+
+@pytest.mark.parametrize("radius", [0.0, 3.0, 7.5, 30.0, math.inf])
+def test_range_links_match_a_pairwise_loop_batched(radius):
+    rng = np.random.default_rng(3)
+    p = rng.uniform(0.0, 20.0, (4, 9, 2))
+    got = RangeLimited(radius).links(p, np.random.default_rng(0))
+    assert got.shape == (4, 9, 9) and got.dtype == bool
+    for b in range(4):
+        np.testing.assert_array_equal(got[b], brute_links(p[b], radius))
+
+
+def test_line_of_sight_links_match_an_independent_clipping_test():
+    rng = np.random.default_rng(5)
+    occ = Occluders.from_polygons([rect_polygon(r) for r in RECTS])
+    model = RangeLimited(12.0, line_of_sight=True)
+    n_blocked = 0
+    for _ in range(10):
+        p = outside_points(rng, 8, RECTS)
+        got = model.links(p, np.random.default_rng(0), occ)
+        want = brute_links(p, 12.0, RECTS)
+        np.testing.assert_array_equal(got, want)
+        n_blocked += int(np.sum(brute_links(p, 12.0) & ~want))
+    assert n_blocked > 20  # the occluders did cut links: the comparison is not vacuous
+    # Without line_of_sight the occluders are ignored.
+    np.testing.assert_array_equal(RangeLimited(12.0).links(p, np.random.default_rng(0), occ),
+                                  brute_links(p, 12.0))  # fmt: skip
+
+
+def test_line_of_sight_with_one_layout_per_copy():
+    rng = np.random.default_rng(6)
+    layouts = [[RECTS[0]], [(8.0, 1.0, 11.0, 19.0)]]
+    occ = Occluders.stack([Occluders.from_polygons([rect_polygon(r) for r in lay])
+                           for lay in layouts])  # fmt: skip
+    p = np.stack([outside_points(rng, 7, lay) for lay in layouts])
+    got = RangeLimited(25.0, line_of_sight=True).links(p, np.random.default_rng(0), occ)
+    for b, lay in enumerate(layouts):
+        np.testing.assert_array_equal(got[b], brute_links(p[b], 25.0, lay))
+
+
+def drop_band(n, p, alpha=1e-6):
+    """Return the two-sided (1 - alpha) binomial interval of a count of n trials of p."""
+    return stats.binom.interval(1.0 - alpha, n, p)
+
+
+def test_drop_frequency_within_its_binomial_band_and_a_ten_percent_error_fails_it():
+    drop, m, steps = 0.2, 10, 400
+    p = np.random.default_rng(1).uniform(0, 1, (m, 2))  # all within range 5
+    n = steps * m * (m - 1)  # packets (ordered pairs i != j)
+
+    def lost(model, seed):
+        rng = np.random.default_rng(seed)
+        links = np.stack([model.links(p, rng) for _ in range(steps)])
+        off = ~np.eye(m, dtype=bool)
+        return int(np.sum(~links[:, off])), links
+
+    lo, hi = drop_band(n, drop)
+    k, links = lost(RangeLimited(5.0, drop=drop), 11)
+    assert lo <= k <= hi
+    # A model dropping 10% more often (0.22) falls outside the band for 0.2.
+    k_bad, _ = lost(RangeLimited(5.0, drop=1.1 * drop), 11)
+    assert not lo <= k_bad <= hi
+    # Each direction independently: both packets of a pair lost with probability drop^2.
+    iu = np.triu_indices(m, 1)
+    both = int(np.sum(~links[:, iu[0], iu[1]] & ~links[:, iu[1], iu[0]]))
+    lo2, hi2 = drop_band(steps * len(iu[0]), drop**2)
+    assert lo2 <= both <= hi2
+    # Out of range, nothing arrives whatever the draws.
+    far = RangeLimited(0.5, drop=drop).links(np.array([[0.0, 0.0], [1.0, 0.0]]),
+                                             np.random.default_rng(0))  # fmt: skip
+    np.testing.assert_array_equal(far, np.eye(2, dtype=bool))
+
+
+def test_seeded_reproducibility_and_the_documented_draws():
+    p = np.random.default_rng(2).uniform(0, 10, (3, 6, 2))
+    model = RangeLimited(8.0, drop=0.5, delay=2)
+    a = model.links(p, np.random.default_rng(42))
+    b = model.links(p, np.random.default_rng(42))
+    c = model.links(p, np.random.default_rng(43))
+    np.testing.assert_array_equal(a, b)
+    assert not np.array_equal(a, c)
+    # Exactly one rng.random((..., M, M)): a twin stream advanced by that is left in the
+    # same state, and its draws give the links.
+    r1, r2 = np.random.default_rng(7), np.random.default_rng(7)
+    got = model.links(p, r1)
+    u = r2.random((3, 6, 6))
+    assert r1.bit_generator.state == r2.bit_generator.state
+    want = np.stack([brute_links(q, 8.0) for q in p]) & ~(u < 0.5)
+    want[:, np.arange(6), np.arange(6)] = True
+    np.testing.assert_array_equal(got, want)
+
+
+@pytest.mark.parametrize("model", [FullCommunication(), RangeLimited(3.0),
+                                   RangeLimited(3.0, line_of_sight=True)])  # fmt: skip
+def test_models_without_drops_consume_no_randomness(model):
+    rng = np.random.default_rng(9)
+    before = rng.bit_generator.state
+    occ = Occluders.from_polygons([rect_polygon(RECTS[0])])
+    links = model.links(outside_points(np.random.default_rng(1), 5, RECTS[:1]), rng, occ)
+    assert rng.bit_generator.state == before
+    if isinstance(model, FullCommunication):
+        assert links.all() and links.shape == (5, 5)
+
+
+def test_validation_names_the_field():
+    for kw, field in [({"range": -1.0}, "range"), ({"range": math.nan}, "range"),
+                      ({"range": "10"}, "range"), ({"range": 1.0, "drop": -0.01}, "drop"),
+                      ({"range": 1.0, "drop": 1.5}, "drop"),
+                      ({"range": 1.0, "drop": math.nan}, "drop"),
+                      ({"range": 1.0, "delay": -1}, "delay"),
+                      ({"range": 1.0, "delay": 1.5}, "delay"),
+                      ({"range": 1.0, "line_of_sight": "yes"}, "line_of_sight")]:  # fmt: skip
+        with pytest.raises(ValueError, match=field):
+            RangeLimited(**kw)
+    with pytest.raises(TypeError, match="unexpected keyword"):
+        RangeLimited(1.0, dropout=0.1)
+    RangeLimited(0.0, drop=1.0, delay=0)  # the closed ends are allowed
+    RangeLimited(math.inf, drop=0.0)
+    model = RangeLimited(1.0, delay=5)
+    model.check(6)
+    with pytest.raises(ValueError, match="delay"):
+        model.check(5)
+    with pytest.raises(ValueError, match="n_steps"):
+        model.check(0)
+    FullCommunication().check(1)
+    with pytest.raises(ValueError, match="positions"):
+        model.links(np.array([[0.0, np.nan]]), np.random.default_rng(0))
+    with pytest.raises(ValueError, match="positions"):
+        model.links(np.zeros((3, 3)), np.random.default_rng(0))
+    with pytest.raises(ValueError, match="rng"):
+        model.links(np.zeros((3, 2)), 0)
+
+
+def test_compared_by_value_and_pickled_and_exported():
+    assert RangeLimited(10, drop=0.2) == RangeLimited(10.0, drop=0.2)
+    assert RangeLimited(10, drop=0.2) != RangeLimited(10, drop=0.3)
+    assert RangeLimited(10) != FullCommunication() and FullCommunication() == FullCommunication()
+    m = RangeLimited(4.0, drop=0.1, delay=2, line_of_sight=True)
+    assert pickle.loads(pickle.dumps(m)) == m and "delay=2" in repr(m)
+    for name in ["CommunicationModel", "FullCommunication", "RangeLimited", "DeliveryQueue"]:
+        assert name in activetrack.__all__ and hasattr(activetrack, name)
+    assert issubclass(RangeLimited, CommunicationModel)
+
+
+def bfs_groups(links, strong):
+    """Return canonical labels by breadth-first search: weak (links either way) or strong
+    (mutual reachability along received links), groups numbered by lowest member."""
+    m = len(links)
+
+    def reach(adj, s):
+        seen, todo = {s}, deque([s])
+        while todo:
+            u = todo.popleft()
+            for v in range(m):
+                if adj[u][v] and v not in seen:
+                    seen.add(v)
+                    todo.append(v)
+        return seen
+
+    if strong:
+        fwd = [reach(links, s) for s in range(m)]
+        same = [[j in fwd[i] and i in fwd[j] for j in range(m)] for i in range(m)]
+    else:
+        sym = links | links.T
+        r = [reach(sym, s) for s in range(m)]
+        same = [[j in r[i] for j in range(m)] for i in range(m)]
+    labels, next_label = [-1] * m, 0
+    for i in range(m):
+        if labels[i] < 0:
+            for j in range(m):
+                if same[i][j]:
+                    labels[j] = next_label
+            next_label += 1
+    return next_label, labels
+
+
+@pytest.mark.parametrize("connection", ["weak", "strong"])
+def test_components_match_breadth_first_search(connection):
+    rng = np.random.default_rng(8)
+    links = rng.random((5, 3, 12, 12)) < 0.08
+    n, labels = components(links, connection=connection)
+    assert n.shape == (5, 3) and labels.shape == (5, 3, 12)
+    counts = set()
+    for idx in np.ndindex(5, 3):
+        want_n, want = bfs_groups(links[idx], connection == "strong")
+        assert n[idx] == want_n
+        np.testing.assert_array_equal(labels[idx], want)
+        counts.add(want_n)
+    assert len(counts) > 2  # varied cases
+    with pytest.raises(ValueError, match="connection"):
+        components(links, connection="both")
+    with pytest.raises(ValueError, match="links"):
+        components(np.ones((3, 4), bool))
+
+
+def test_measurement_senders_own_always_and_the_rows():
+    rng = np.random.default_rng(4)
+    links = rng.random((7, 7)) < 0.4
+    got = measurement_senders(links)
+    for i in range(7):
+        want = [j for j in range(7) if links[i, j] or j == i]
+        assert got[i].tolist() == want
+    mask = measurement_mask(links[None])
+    assert mask.shape == (1, 7, 7) and mask[0, np.arange(7), np.arange(7)].all()
+    full = FullCommunication().links(np.zeros((4, 2)), np.random.default_rng(0))
+    assert [s.tolist() for s in measurement_senders(full)] == [list(range(4))] * 4
+
+
+def test_delivery_queue_releases_after_the_delay_in_send_order():
+    rng = np.random.default_rng(12)
+    m, steps = 5, 30
+    queue = DeliveryQueue(m, delay=3)
+    sent = []  # (due, send_step, sender, receiver, payload): the brute-force schedule
+    for t in range(steps):
+        links = rng.random((m, m)) < 0.5
+        # A varying per-send delay too: later sends can come due before earlier ones.
+        d = 3 if t % 4 else int(rng.integers(0, 6))
+        payloads = [f"z{t}.{j}" for j in range(m)]
+        queue.send(t, links, payloads, delay=d)
+        sent += [(t + d, t, j, i, payloads[j]) for i in range(m) for j in range(m)
+                 if links[i, j] and i != j]  # fmt: skip
+        got = queue.deliver(t)
+        for i in range(m):
+            want = sorted((s, j, z) for due, s, j, r, z in sent if r == i and due == t)
+            assert got[i] == want
+    assert len(queue) == sum(due >= steps for due, *_ in sent)
+    # Nothing sent at the last steps is lost: delivering later releases it, once.
+    late = queue.deliver(steps + 10)
+    assert sum(map(len, late)) == sum(due >= steps for due, *_ in sent) and len(queue) == 0
+    with pytest.raises(ValueError, match="links"):
+        queue.send(0, np.ones((4, 4), bool), ["a"] * 4)
+    with pytest.raises(ValueError, match="payloads"):
+        queue.send(0, np.ones((m, m), bool), ["a"])
+    with pytest.raises(ValueError, match="delay"):
+        DeliveryQueue(3, delay=-1)
