@@ -81,10 +81,11 @@ def covariance_intersection(
     ``means`` (n, d) and ``covariances`` (n, d, d) SPD, with the weights minimizing the
     fused covariance's trace (``criterion="trace"``) or log-determinant (``"logdet"``).
 
-    One estimate is returned unchanged (weight 1). The weights are found to scipy's
-    default tolerances (``xatol`` ``1e-10`` on a weight for two estimates, SLSQP's
-    ``ftol`` ``1e-12`` for more); the fused covariance is consistent for any weights on
-    the simplex, so the tolerance affects only how small it is.
+    One estimate is returned unchanged (weight 1). The weights are found to about ``1e-8``
+    for two estimates (Brent's bounded method: ``xatol`` ``1e-10`` plus ``sqrt(eps)``
+    times the weight), to SLSQP's ``ftol`` ``1e-12`` on the criterion for more; the fused
+    covariance is consistent for any weights on the simplex, so the tolerance affects only
+    how small it is, never its consistency.
     """
     if criterion not in CRITERIA:
         raise ValueError(f"criterion must be one of {list(CRITERIA)}, got {criterion!r}")
