@@ -5,6 +5,7 @@ import itertools
 
 import numpy as np
 import pytest
+from scipy import stats
 
 import activetrack
 from activetrack.estimation.fusion import covariance_intersection, information_fusion
@@ -166,6 +167,18 @@ def test_never_over_confident_by_monte_carlo():
     m_kf, s_kf = nees(kf.covariance, np.ones(n))
     assert m_ci <= d + 4 * s_ci
     assert m_kf > d + 4 * s_kf  # over-confident, ~d * 2 / 1.9
+
+    # Where CI is tight: two copies of the same estimate (fully correlated errors). Its
+    # covariance is then exactly P_1 and the NEES sum over the samples is chi-square with
+    # d * samples degrees of freedom: the mean NEES lies in that distribution's two-sided
+    # band, about d (1 +- 0.025), so a covariance 10% too small (NEES ~ 1.1 d) fails.
+    covs = np.stack([joint[:2, :2]] * 2)
+    e = np.repeat(rng.multivariate_normal(np.zeros(d), covs[0], size=samples)[:, None], 2, 1)
+    res = covariance_intersection(np.zeros((n, d)), covs)
+    lo, hi = np.array(stats.chi2.interval(1 - 1e-6, d * samples)) / samples
+    m_tight, _ = nees(res.covariance, res.weights)
+    assert lo <= m_tight <= hi
+    assert not lo <= 1.1 * m_tight <= hi
 
 
 def test_more_conservative_than_the_kalman_fusion_of_independent_estimates():
