@@ -105,10 +105,20 @@ def test_line_of_sight_with_one_layout_per_copy():
     layouts = [[RECTS[0]], [(8.0, 1.0, 11.0, 19.0)]]
     occ = Occluders.stack([Occluders.from_polygons([rect_polygon(r) for r in lay])
                            for lay in layouts])  # fmt: skip
-    p = np.stack([outside_points(rng, 7, lay) for lay in layouts])
-    got = RangeLimited(25.0, line_of_sight=True).links(p, np.random.default_rng(0), occ)
+    # Leading axes (layout, copy of the layout, robots): the first is the layout axis.
+    p = np.stack([[outside_points(rng, 7, lay) for _ in range(3)] for lay in layouts])
+    model = RangeLimited(25.0, line_of_sight=True)
+    got = model.links(p, np.random.default_rng(0), occ)
+    assert got.shape == (2, 3, 7, 7)
     for b, lay in enumerate(layouts):
-        np.testing.assert_array_equal(got[b], brute_links(p[b], 25.0, lay))
+        for c in range(3):
+            np.testing.assert_array_equal(got[b, c], brute_links(p[b, c], 25.0, lay))
+    # One layout shared by every copy.
+    shared = Occluders.from_polygons([rect_polygon(r) for r in RECTS])
+    p = np.stack([outside_points(rng, 6, RECTS) for _ in range(4)])
+    got = model.links(p, np.random.default_rng(0), shared)
+    for b in range(4):
+        np.testing.assert_array_equal(got[b], brute_links(p[b], 25.0, RECTS))
 
 
 def drop_band(n, p, alpha=1e-6):
