@@ -15,7 +15,8 @@ chosen per scenario (not yet wired into the world):
   random numbers, so a scenario using it keeps its random streams bit for bit).
 - :class:`RangeLimited`: a link within ``range`` (closed disk), optionally only with line
   of sight through the occluders (the segment between the two robots not
-  :func:`activetrack.models.occluders.blocked`); each packet (each ordered pair
+  :func:`activetrack.models.occluders.blocked`, tested by
+  :func:`~activetrack.models.occluders.line_of_sight`); each packet (each ordered pair
   ``i != j``) then dropped independently with probability ``drop``; delivered ``delay``
   steps later.
 
@@ -38,7 +39,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from activetrack.models.occluders import Occluders, blocked
+from activetrack.models.occluders import Occluders, line_of_sight
 from activetrack.validation import (
     ComparedByValue,
     FloatArray,
@@ -190,14 +191,12 @@ class RangeLimited(CommunicationModel):
         diff = positions[..., :, None, :] - positions[..., None, :, :]
         near = np.hypot(diff[..., 0], diff[..., 1]) <= self.range
         if self.line_of_sight and occluders is not None and occluders.n_edges:
+            # Each segment once (i < j) and only within range: line_of_sight's ``where``
+            # leaves the other pairs untested (False), then the relation is mirrored.
             m = positions.shape[-2]
-            a = positions[..., :, None, :]
-            b = positions[..., None, :, :]
-            seen = ~blocked(a, b, occluders)  # (..., M, M); only i < j is read
-            upper = np.triu(np.ones((m, m), bool), 1)
-            seen = seen & upper
-            seen = seen | np.swapaxes(seen, -1, -2)
-            near = near & seen
+            ask = near & np.triu(np.ones((m, m), bool), 1)
+            seen = line_of_sight(positions, positions, occluders, where=ask)
+            near = seen | np.swapaxes(seen, -1, -2)
         m = positions.shape[-2]
         near[..., np.arange(m), np.arange(m)] = True
         return near
