@@ -316,3 +316,44 @@ def test_delivery_queue_releases_after_the_delay_in_send_order():
         queue.send(0, np.ones((m, m), bool), ["a"])
     with pytest.raises(ValueError, match="delay"):
         DeliveryQueue(3, delay=-1)
+
+
+def test_measurement_sharing_is_how_each_robots_filter_updates():
+    # The per-robot filters' rule (to be wired into the world): robot r's EKF update uses
+    # the measurements of row r of measurement_mask, as the EKF's ``mask`` over sensors,
+    # all robots at once along a leading robot axis (the world's
+    # ``detected`` mask combines with it by ``&``). Checked against the update of only
+    # those sensors' measurements (sliced: an independent path of the EKF), and, with
+    # full communication, against today's central update.
+    from activetrack.estimation import ekf
+
+    rng = np.random.default_rng(13)
+    m = 7
+    x = np.array([1.0, 2.0, 0.3, -0.2])
+    A = rng.standard_normal((4, 4))
+    P = A @ A.T + np.eye(4)
+    sensors = rng.uniform(-10, 10, (m, 2))
+    sd2, st2 = rng.uniform(0.5, 2.0, m), rng.uniform(0.01, 0.05, m)
+    z = np.stack([np.hypot(*(x[:2] - sensors).T), np.arctan2(*(x[:2] - sensors).T[::-1])], -1)
+    z = z + rng.standard_normal((m, 2)) * 0.1
+
+    def per_robot(mask):
+        rep = (m,) + (1,) * 2
+        return ekf.update(np.tile(x, (m, 1)), np.tile(P, (m, 1, 1)), np.tile(z, rep),
+                          np.tile(sensors, rep), np.tile(sd2, (m, 1)), np.tile(st2, (m, 1)),
+                          0.0, mask)  # fmt: skip
+
+    links = RangeLimited(9.0, drop=0.3).links(sensors, rng)
+    heard = links.sum(axis=1)
+    assert (heard < m).any() and (heard > 1).any()  # partial sharing: not vacuous
+    xs, Ps = per_robot(measurement_mask(links))
+    for r, s in enumerate(measurement_senders(links)):
+        xr, Pr = ekf.update(x, P, z[s], sensors[s], sd2[s], st2[s])
+        np.testing.assert_allclose(xs[r], xr, rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(Ps[r], Pr, rtol=1e-12, atol=1e-14)
+    full = FullCommunication().links(sensors, rng)
+    xs, Ps = per_robot(measurement_mask(full))
+    xc, Pc = ekf.update(x, P, z, sensors, sd2, st2)
+    for r in range(m):  # bit for bit: the masked kernel with every sensor is today's
+        np.testing.assert_array_equal(xs[r], xc)
+        np.testing.assert_array_equal(Ps[r], Pc)
