@@ -8,7 +8,11 @@ the sensors' kinematics (eq. 13-16; :class:`Kinematics`, the base of a new one, 
 and a turning limit, and :class:`DoubleIntegrator`, bounded acceleration and speed), the
 EKF (eq. 3, 11), the covariance objective (eq. 12, 17-19;
 :class:`Objective`, the base of a new one), the analytic single-sensor optimum (Section
-IV-A), the planning problem and scenario presets.
+IV-A), the planning problem and scenario presets. For decentralized teams (the paper's
+motivation: limited communication): the communication model (:class:`CommunicationModel`,
+the base of a new one; :class:`FullCommunication`, today's, and :class:`RangeLimited`, a
+radio's range, drops, delay and line of sight; :class:`DeliveryQueue` for delayed
+messages) and :func:`covariance_intersection`, fusing estimates of unknown correlation.
 The layers ``activetrack.envs``, ``activetrack.baselines`` and ``activetrack.train`` build
 on it, in that order.
 

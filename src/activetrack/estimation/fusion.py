@@ -6,7 +6,7 @@ communication resources") cannot know how correlated their errors are: they may 
 the same measurements, or each other's earlier estimates. The Kalman (information) fusion
 ``P^{-1} = sum_i P_i^{-1}`` then double counts and is over-confident. Covariance
 intersection (Julier & Uhlmann, "A non-divergent estimation algorithm in the presence of
-unknown correlations", ACC 1997) fuses ``n`` estimates ``(x_i, P_i)`` as
+unknown correlations", ACC 1997) fuses ``n`` estimates ``(x_i, P_i)`` as::
 
     P^{-1} = sum_i w_i P_i^{-1},    P^{-1} x = sum_i w_i P_i^{-1} x_i,
 
