@@ -188,8 +188,10 @@ class RangeLimited(CommunicationModel):
     def in_contact(self, positions: FloatArray, occluders: Occluders | None) -> np.ndarray:
         """Return the symmetric contact matrix (..., M, M) before drops (unchecked input):
         within ``range`` and, if asked, in line of sight; diagonal True."""
-        diff = positions[..., :, None, :] - positions[..., None, :, :]
-        near = np.hypot(diff[..., 0], diff[..., 1]) <= self.range
+        x, y = positions[..., 0], positions[..., 1]
+        dx = x[..., :, None] - x[..., None, :]
+        dy = y[..., :, None] - y[..., None, :]
+        near = np.sqrt(dx * dx + dy * dy) <= self.range  # symmetric: (-d)^2 == d^2
         if self.line_of_sight and occluders is not None and occluders.n_edges:
             # Each segment once (i < j) and only within range: line_of_sight's ``where``
             # leaves the other pairs untested (False), then the relation is mirrored.
@@ -228,9 +230,10 @@ def components(links: ArrayLike, connection: str = "weak") -> tuple[np.ndarray, 
     ``connection`` is scipy's: ``"weak"`` (a link in either direction joins two robots)
     or ``"strong"`` (each must reach the other along received links). Computed by
     :func:`scipy.sparse.csgraph.connected_components` on the block-diagonal graph of all
-    the leading axes at once.
+    the leading axes at once (an edge ``i -> j`` for ``links[..., i, j]``: for strong
+    groups the direction does not matter, the reversed graph has the same ones).
     """
-    from scipy.sparse import block_diag, csr_matrix
+    from scipy.sparse import csr_matrix
     from scipy.sparse.csgraph import connected_components
 
     if connection not in ("weak", "strong"):
@@ -241,7 +244,9 @@ def components(links: ArrayLike, connection: str = "weak") -> tuple[np.ndarray, 
     b = flat.shape[0]
     if b == 0:
         return np.zeros(lead, np.intp), np.zeros(lead + (m,), np.intp)
-    graph = block_diag([csr_matrix(g) for g in flat], format="csr")
+    # One graph of b * m nodes, copy c's robots at c * m + (0 .. m - 1): block diagonal.
+    c, i, j = np.nonzero(flat)
+    graph = csr_matrix((np.ones(len(c), np.int8), (c * m + i, c * m + j)), shape=(b * m, b * m))
     _, glob = connected_components(graph, directed=True, connection=connection)
     glob = glob.reshape(b, m)
     # Canonical numbering: each robot's group is named by its lowest member ...
