@@ -162,15 +162,29 @@ def test_seeded_reproducibility_and_the_documented_draws():
     c = model.links(p, np.random.default_rng(43))
     np.testing.assert_array_equal(a, b)
     assert not np.array_equal(a, c)
-    # Exactly one rng.random((..., M, M)): a twin stream advanced by that is left in the
-    # same state, and its draws give the links.
+    # Exactly one rng.standard_normal((..., M * M)): a twin stream advanced by that is left
+    # in the same state, and its draws give the links (drop 0.5: lost iff the normal < 0).
     r1, r2 = np.random.default_rng(7), np.random.default_rng(7)
     got = model.links(p, r1)
-    u = r2.random((3, 6, 6))
+    u = r2.standard_normal((3, 36))
     assert r1.bit_generator.state == r2.bit_generator.state
-    want = np.stack([brute_links(q, 8.0) for q in p]) & ~(u < 0.5)
+    want = np.stack([brute_links(q, 8.0) for q in p]) & ~(u.reshape(3, 6, 6) < 0.0)
     want[:, np.arange(6), np.arange(6)] = True
     np.testing.assert_array_equal(got, want)
+    # The same from the draws given (the world's noise block), and the draws checked.
+    assert model.n_draws(6) == 36 and FullCommunication().n_draws(6) == 0
+    np.testing.assert_array_equal(model.links_from_draws(p, u), want)
+    with pytest.raises(ValueError, match="draws"):
+        model.links_from_draws(p, u[:, :35])
+    with pytest.raises(ValueError, match="draws"):
+        model.links_from_draws(p, None)
+    with pytest.raises(ValueError, match="draws"):
+        RangeLimited(8.0).links_from_draws(p, u)
+    np.testing.assert_array_equal(RangeLimited(8.0).links_from_draws(p, None),
+                                  np.stack([brute_links(q, 8.0) for q in p]))  # fmt: skip
+    # drop = 1 loses every packet, drop = 0 none.
+    none = RangeLimited(100.0, drop=1.0).links(p, np.random.default_rng(0))
+    np.testing.assert_array_equal(none, np.broadcast_to(np.eye(6, dtype=bool), (3, 6, 6)))
 
 
 @pytest.mark.parametrize("model", [FullCommunication(), RangeLimited(3.0),

@@ -82,9 +82,13 @@ def _link_matrix(name: str, links: ArrayLike) -> np.ndarray:
 class CommunicationModel(ComparedByValue, abc.ABC):
     """Who receives whom each step, and how late (module docstring).
 
-    A subclass implements :meth:`_links` (unchecked: positions already validated) and may
-    set ``delay`` (an int >= 0, whole steps; 0 by default). :meth:`links` validates its
-    input and forces the diagonal True. Equality is by value (:class:`ComparedByValue`).
+    A subclass implements :meth:`_links` (unchecked: positions and draws already
+    validated), may set ``delay`` (an int >= 0, whole steps; 0 by default) and, if it is
+    random, :meth:`n_draws`. Its randomness is standard normals, as the world's step noise
+    (one block per copy and step, :mod:`activetrack.world._streams`): :meth:`links` draws
+    them from a generator, :meth:`links_from_draws` takes them from the caller. Both
+    validate their input and force the diagonal True. Equality is by value
+    (:class:`ComparedByValue`).
     """
 
     #: Steps between sending and delivery (0: the same step).
@@ -94,6 +98,10 @@ class CommunicationModel(ComparedByValue, abc.ABC):
     def name(self) -> str:
         """Return the model's name (scenario records, messages): its class name."""
         return type(self).__name__
+
+    def n_draws(self, n_robots: int) -> int:
+        """Return how many standard normals one step of ``n_robots`` robots uses (0: none)."""
+        return 0
 
     def links(
         self,
@@ -106,25 +114,54 @@ class CommunicationModel(ComparedByValue, abc.ABC):
         later); the diagonal is True.
 
         ``positions`` (..., M, 2) the sensors' true positions, ``rng`` the episode's
-        stream (what a model draws is its own documented rule), ``occluders`` the layout
-        (a batched set: the first leading axis of ``positions`` is its layout axis).
+        stream: one ``rng.standard_normal((..., n_draws(M)))`` if :meth:`n_draws` is not
+        0, nothing otherwise; ``occluders`` the layout (a batched set: the first leading
+        axis of ``positions`` is its layout axis).
         """
         p = _positions(positions)
         rng = _generator(rng)
+        n = self.n_draws(p.shape[-2])
+        draws = rng.standard_normal(p.shape[:-2] + (n,)) if n else None
+        return self._checked_links(p, draws, occluders)
+
+    def links_from_draws(
+        self, positions: ArrayLike, draws: ArrayLike | None, occluders: Occluders | None = None
+    ) -> np.ndarray:
+        """Return :meth:`links` with the standard normals ``draws`` (..., n_draws(M)) given
+        (None when :meth:`n_draws` is 0): for a caller that draws a step's noise in one
+        block (the world)."""
+        p = _positions(positions)
+        n = self.n_draws(p.shape[-2])
+        if n == 0:
+            if draws is not None:
+                raise ValueError(f"draws must be None: {self.name} draws nothing, got an array")
+        else:
+            draws = as_finite("draws", draws)
+            if draws.shape != p.shape[:-2] + (n,):
+                raise ValueError(
+                    f"draws must have shape {p.shape[:-2] + (n,)} (positions' leading axes, "
+                    f"n_draws), got {draws.shape}"
+                )
+        return self._checked_links(p, draws, occluders)
+
+    def _checked_links(
+        self, p: FloatArray, draws: FloatArray | None, occluders: Occluders | None
+    ) -> np.ndarray:
         if occluders is not None and not isinstance(occluders, Occluders):
             raise ValueError(
                 f"occluders must be an Occluders or None, got {type(occluders).__name__}"
             )
-        out = np.array(self._links(p, rng, occluders), dtype=bool)
+        out = np.array(self._links(p, draws, occluders), dtype=bool)
         m = p.shape[-2]
         out[..., np.arange(m), np.arange(m)] = True
         return out
 
     @abc.abstractmethod
     def _links(
-        self, positions: FloatArray, rng: np.random.Generator, occluders: Occluders | None
+        self, positions: FloatArray, draws: FloatArray | None, occluders: Occluders | None
     ) -> np.ndarray:
-        """Return the link matrix (..., M, M) of checked ``positions`` (diagonal: any)."""
+        """Return the link matrix (..., M, M) of checked ``positions`` and ``draws``
+        (..., n_draws(M)) or None (the diagonal may be anything)."""
 
     def check(self, n_steps: int) -> None:
         """Raise ``ValueError`` naming ``delay`` unless a packet sent at the first step of an
@@ -141,7 +178,7 @@ class CommunicationModel(ComparedByValue, abc.ABC):
 class FullCommunication(CommunicationModel):
     """Every robot receives every robot, at once (today's central team). Draws nothing."""
 
-    def _links(self, positions, rng, occluders):
+    def _links(self, positions, draws, occluders):
         m = positions.shape[-2]
         return np.ones(positions.shape[:-2] + (m, m), bool)
 
@@ -159,10 +196,11 @@ class RangeLimited(CommunicationModel):
     is lost independently with that probability. ``delay`` (int >= 0): packets arrive that
     many whole steps later.
 
-    Random numbers: with ``drop > 0`` one ``rng.random((..., M, M))`` per step (entry
-    ``[i, j]``: the packet from ``j`` to ``i`` is lost iff it is ``< drop``; the
-    diagonal's are drawn and unused), so the number of draws does not depend on the
-    positions; with ``drop == 0`` none.
+    Random numbers: with ``drop > 0``, ``M * M`` standard normals per step
+    (:meth:`n_draws`), read row-major as (M, M): entry ``[i, j]`` below
+    ``Phi^{-1}(drop)`` loses the packet from ``j`` to ``i`` (probability ``drop``; the
+    world's rule for its detection draws); the diagonal's are drawn and unused, so the
+    number of draws does not depend on the positions. With ``drop == 0`` none.
     """
 
     def __init__(
@@ -203,10 +241,17 @@ class RangeLimited(CommunicationModel):
         near[..., np.arange(m), np.arange(m)] = True
         return near
 
-    def _links(self, positions, rng, occluders):
+    def n_draws(self, n_robots: int) -> int:
+        """Return ``n_robots ** 2`` with drops, else 0 (the class docstring)."""
+        return n_robots * n_robots if self.drop > 0.0 else 0
+
+    def _links(self, positions, draws, occluders):
         out = self.in_contact(positions, occluders)
-        if self.drop > 0.0:
-            out &= ~(rng.random(out.shape) < self.drop)
+        if draws is not None:
+            from scipy.special import ndtri  # (only with drops)
+
+            # Phi^{-1}(1) = inf: every packet is lost (normal draws are finite).
+            out &= ~(draws.reshape(out.shape) < ndtri(self.drop))
         return out
 
 
