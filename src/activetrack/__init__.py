@@ -11,8 +11,9 @@ EKF (eq. 3, 11), the covariance objective (eq. 12, 17-19;
 IV-A), the planning problem and scenario presets. For decentralized teams (the paper's
 motivation: limited communication): the communication model (:class:`CommunicationModel`,
 the base of a new one; :class:`FullCommunication`, today's, and :class:`RangeLimited`, a
-radio's range, drops, delay and line of sight; :class:`DeliveryQueue` for delayed
-messages) and :func:`covariance_intersection`, fusing estimates of unknown correlation.
+radio's range, drops, delay and line of sight; :class:`DeliveryQueue` and,
+batched, :class:`DelayLine` for delayed messages) and :func:`covariance_intersection`,
+fusing estimates of unknown correlation.
 The layers ``activetrack.envs``, ``activetrack.baselines`` and ``activetrack.train`` build
 on it, in that order.
 
@@ -44,6 +45,7 @@ from activetrack.models.behaviour import (
 )
 from activetrack.models.communication import (
     CommunicationModel,
+    DelayLine,
     DeliveryQueue,
     FullCommunication,
     RangeLimited,
@@ -95,6 +97,7 @@ __all__ = [
     "BatchSolution",
     "BearingOnly",
     "CommunicationModel",
+    "DelayLine",
     "DeliveryQueue",
     "FullCommunication",
     "RangeLimited",

@@ -13,6 +13,7 @@ from scipy import stats
 import activetrack
 from activetrack.models.communication import (
     CommunicationModel,
+    DelayLine,
     DeliveryQueue,
     FullCommunication,
     RangeLimited,
@@ -234,7 +235,13 @@ def test_compared_by_value_and_pickled_and_exported():
     assert RangeLimited(10) != FullCommunication() and FullCommunication() == FullCommunication()
     m = RangeLimited(4.0, drop=0.1, delay=2, line_of_sight=True)
     assert pickle.loads(pickle.dumps(m)) == m and "delay=2" in repr(m)
-    for name in ["CommunicationModel", "FullCommunication", "RangeLimited", "DeliveryQueue"]:
+    for name in [
+        "CommunicationModel",
+        "FullCommunication",
+        "RangeLimited",
+        "DeliveryQueue",
+        "DelayLine",
+    ]:
         assert name in activetrack.__all__ and hasattr(activetrack, name)
     assert issubclass(RangeLimited, CommunicationModel)
 
@@ -371,3 +378,41 @@ def test_measurement_sharing_is_how_each_robots_filter_updates():
     for r in range(m):  # bit for bit: the masked kernel with every sensor is today's
         np.testing.assert_array_equal(xs[r], xc)
         np.testing.assert_array_equal(Ps[r], Pc)
+
+
+@pytest.mark.parametrize("delay", [0, 1, 3])
+def test_delay_line_returns_each_copys_own_pushes_delay_steps_late(delay):
+    # Against a per-copy Python history since the copy's last reset; copies step in random
+    # subsets (a world's live copies) and reset at random times.
+    rng = np.random.default_rng(20 + delay)
+    n, m = 4, 3
+    line = DelayLine(n, delay)
+    history = [[] for _ in range(n)]
+    n_valid = 0
+    for _ in range(60):
+        if rng.random() < 0.1:
+            gone = rng.random(n) < 0.5
+            line.reset(gone)
+            for i in np.flatnonzero(gone):
+                history[i] = []
+        rows = np.flatnonzero(rng.random(n) < 0.7)
+        links = rng.random((n, m, m)) < 0.5
+        z = rng.standard_normal((n, m, 2))
+        (got_links, got_z), valid = line.push((links, z), rows)
+        for i in range(n):
+            if i not in rows:
+                assert not valid[i]
+                continue
+            h = history[i]
+            h.append((links[i].copy(), z[i].copy()))
+            ok = len(h) > delay
+            assert valid[i] == ok
+            if ok:
+                np.testing.assert_array_equal(got_links[i], h[-1 - delay][0])
+                np.testing.assert_array_equal(got_z[i], h[-1 - delay][1])
+                n_valid += 1
+    assert n_valid > 60  # not vacuous
+    with pytest.raises(ValueError, match="arrays"):
+        line.push((np.zeros((n + 1, 2)),))
+    with pytest.raises(ValueError, match="delay"):
+        DelayLine(2, -1)

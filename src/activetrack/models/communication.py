@@ -50,7 +50,8 @@ from activetrack.validation import (
 )
 
 __all__ = [
-    "CommunicationModel", "DeliveryQueue", "FullCommunication", "RangeLimited", "components",
+    "CommunicationModel", "DelayLine", "DeliveryQueue", "FullCommunication", "RangeLimited",
+    "components",
     "measurement_mask", "measurement_senders",
 ]  # fmt: skip
 
@@ -385,3 +386,77 @@ class DeliveryQueue:
         for _, sent, sender, receiver, _n, payload in sorted(due, key=lambda e: (e[1], e[2], e[4])):
             out[receiver].append((sent, sender, payload))
         return out
+
+
+class DelayLine:
+    """A fixed delay of whole steps for batched arrays: what a constant ``delay`` delivers.
+
+    The vectorized counterpart of :class:`DeliveryQueue` for a world of ``N`` copies (a
+    heap of Python messages per copy would cost ``N M^2`` pushes a step): each step the
+    caller pushes the stepped copies' arrays (leading axis ``N``: their link matrices,
+    measurements, detections...) and gets back, for each of them, what it pushed ``delay``
+    of its own pushes earlier, with a mask ``valid`` (N,): True for a stepped copy that has
+    pushed more than ``delay`` times since its :meth:`reset` (its delayed rows are of the
+    current episode), False otherwise (those rows are zeros or stale: to be ignored).
+    ``delay == 0`` returns what was pushed. Each copy keeps its own count, so copies that
+    step at different times (a world's ``live`` subsets) or reset at different times are
+    delayed exactly by their own steps.
+    """
+
+    def __init__(self, num_copies: int, delay: int) -> None:
+        self.num_copies = check_int("num_copies", num_copies, 1)
+        self.delay = check_int("delay", delay, 0)
+        self._count = np.zeros(self.num_copies, np.int64)  # pushes since each copy's reset
+        self._buffer: tuple[np.ndarray, ...] | None = None  # each (delay, N, ...)
+
+    def _rows(self, rows: ArrayLike | None) -> np.ndarray:
+        """Return the copies ``rows`` (None: all; int indices or a bool mask) as a bool mask."""
+        mask = np.zeros(self.num_copies, bool)
+        try:
+            mask[slice(None) if rows is None else np.asarray(rows)] = True
+        except IndexError as exc:
+            raise ValueError(f"rows must index the {self.num_copies} copies: {exc}") from None
+        return mask
+
+    def reset(self, rows: ArrayLike | None = None) -> None:
+        """Start a new episode for the copies ``rows`` (int indices or a bool mask; None:
+        all): nothing they pushed before is returned as valid."""
+        self._count[self._rows(rows)] = 0
+
+    def push(
+        self, arrays: Sequence[ArrayLike], rows: ArrayLike | None = None
+    ) -> tuple[tuple[np.ndarray, ...], np.ndarray]:
+        """Return ``(delayed, valid)`` and store ``arrays`` for the copies ``rows`` (None:
+        all): ``delayed`` the arrays (N, ...) with, in each row of ``rows``, what that copy
+        pushed ``delay`` of its pushes ago, ``valid`` (N,) bool (class docstring; False
+        outside ``rows``). ``arrays`` each have the leading axis N (only the rows of
+        ``rows`` are read) and the same shapes at every push."""
+        arrs = tuple(np.asarray(a) for a in arrays)
+        for k, a in enumerate(arrs):
+            if a.ndim < 1 or a.shape[0] != self.num_copies:
+                raise ValueError(
+                    f"arrays[{k}] must have a leading axis of {self.num_copies} copies, "
+                    f"got shape {a.shape}"
+                )
+        sel = self._rows(rows)
+        if self.delay == 0:
+            return tuple(np.where(_column(sel, a), a, 0) for a in arrs), sel.copy()
+        if self._buffer is None:
+            self._buffer = tuple(np.zeros((self.delay,) + a.shape, a.dtype) for a in arrs)
+        if [a.shape for a in arrs] != [b.shape[1:] for b in self._buffer]:
+            raise ValueError("arrays must have the same shapes (and number) at every push")
+        idx = np.flatnonzero(sel)
+        slot = self._count[idx] % self.delay
+        out = tuple(np.zeros_like(a) for a in arrs)
+        for o, b, a in zip(out, self._buffer, arrs, strict=True):
+            o[idx] = b[slot, idx]
+            b[slot, idx] = a[idx]
+        valid = np.zeros(self.num_copies, bool)
+        valid[idx] = self._count[idx] >= self.delay
+        self._count[idx] += 1
+        return out, valid
+
+
+def _column(mask: np.ndarray, a: np.ndarray) -> np.ndarray:
+    """Return the (N,) ``mask`` shaped to broadcast against ``a`` (N, ...)."""
+    return mask.reshape(mask.shape + (1,) * (a.ndim - 1))
