@@ -416,3 +416,32 @@ def test_delay_line_returns_each_copys_own_pushes_delay_steps_late(delay):
         line.push((np.zeros((n + 1, 2)),))
     with pytest.raises(ValueError, match="delay"):
         DelayLine(2, -1)
+
+
+def test_a_users_model_subclasses_the_base():
+    # A fixed ring topology that loses each packet with the user's own rule: the base
+    # validates, draws n_draws normals per step and sets the diagonal.
+    class Ring(CommunicationModel):
+        def n_draws(self, n_robots):
+            return n_robots
+
+        def _links(self, positions, draws, occluders):
+            m = positions.shape[-2]
+            ring = np.zeros(positions.shape[:-2] + (m, m), bool)
+            i = np.arange(m)
+            ring[..., i, (i + 1) % m] = draws > 0.0  # robot i hears i + 1 if its draw > 0
+            return ring
+
+    with pytest.raises(TypeError):
+        CommunicationModel()
+    p = np.zeros((2, 5, 2))
+    r1, r2 = np.random.default_rng(3), np.random.default_rng(3)
+    got = Ring().links(p, r1)
+    u = r2.standard_normal((2, 5))
+    assert r1.bit_generator.state == r2.bit_generator.state
+    for b in range(2):
+        want = np.eye(5, dtype=bool)
+        for i in range(5):
+            want[i, (i + 1) % 5] |= u[b, i] > 0.0
+        np.testing.assert_array_equal(got[b], want)
+    assert Ring() == Ring() and Ring().name == "Ring" and Ring().delay == 0
