@@ -8,7 +8,12 @@ the sensors' kinematics (eq. 13-16; :class:`Kinematics`, the base of a new one, 
 and a turning limit, and :class:`DoubleIntegrator`, bounded acceleration and speed), the
 EKF (eq. 3, 11), the covariance objective (eq. 12, 17-19;
 :class:`Objective`, the base of a new one), the analytic single-sensor optimum (Section
-IV-A), the planning problem and scenario presets.
+IV-A), the planning problem and scenario presets. For decentralized teams (the paper's
+motivation: limited communication): the communication model (:class:`CommunicationModel`,
+the base of a new one; :class:`FullCommunication`, today's, and :class:`RangeLimited`, a
+radio's range, drops, delay and line of sight; :class:`DeliveryQueue` and,
+batched, :class:`DelayLine` for delayed messages) and :func:`covariance_intersection`,
+fusing estimates of unknown correlation.
 The layers ``activetrack.envs``, ``activetrack.baselines`` and ``activetrack.train`` build
 on it, in that order.
 
@@ -24,6 +29,7 @@ import importlib.metadata as _metadata
 
 from activetrack import _aliases, _registry
 from activetrack.estimation.ekf import ExtendedKalmanFilter
+from activetrack.estimation.fusion import covariance_intersection
 from activetrack.estimation.imm import IMMFilter
 from activetrack.kinematics.base import Kinematics
 from activetrack.kinematics.disk import Disk
@@ -36,6 +42,13 @@ from activetrack.models.behaviour import (
     Maneuvering,
     StopAndGo,
     TargetBehaviour,
+)
+from activetrack.models.communication import (
+    CommunicationModel,
+    DelayLine,
+    DeliveryQueue,
+    FullCommunication,
+    RangeLimited,
 )
 from activetrack.models.motion import (
     LinearMotionModel,
@@ -84,6 +97,12 @@ __all__ = [
     "WORST_TRACE",
     "BatchSolution",
     "BearingOnly",
+    "CommunicationModel",
+    "DelayLine",
+    "DeliveryQueue",
+    "FullCommunication",
+    "RangeLimited",
+    "covariance_intersection",
     "Disk",
     "Evasive",
     "FilterModel",
