@@ -15,7 +15,9 @@ pytestmark = pytest.mark.skipif(
     reason="BenchMARL is not installed (the [marl] extra: pip install --no-deps benchmarl==1.5.2)",
 )
 
+# MAPPO and IPPO on the paper and a multi-target task; MASAC: one off-policy algorithm.
 CASES = [(a, t) for a in ("mappo", "ippo") for t in ("PAPER", "TWO_TARGETS")]
+CASES += [("masac", "PAPER")]
 
 
 def _actor_params(experiment):
