@@ -124,3 +124,27 @@ def test_unknown_algorithm_and_budgets_are_rejected(tmp_path):
     assert {t.get_task().config["scenario"] for t in ActiveTrackingTask} == set(ALL_IDS.values())
     paper = ActiveTrackingTask.PAPER.get_task()
     assert paper.max_steps(None) == make_scenario("paper").n_steps
+
+
+def test_evaluate_without_benchmarl_names_the_marl_extra(tmp_path):
+    """A .pt policy file in an install without BenchMARL: the error names the [marl]
+    extra, not the [rl] one (which the install has)."""
+    import subprocess
+    import sys
+
+    run = tmp_path / "run"
+    (run / "checkpoints").mkdir(parents=True)
+    (run / "config.pkl").write_bytes(b"")
+    checkpoint = run / "checkpoints" / "checkpoint_400.pt"
+    checkpoint.write_bytes(b"")
+    code = (
+        "import sys; sys.modules['benchmarl'] = None\n"  # import benchmarl fails
+        "from activetrack.baselines.policy_specs import resolve_policy\n"
+        "try:\n"
+        f"    resolve_policy({str(checkpoint)!r})\n"
+        "except ImportError as exc:\n"
+        "    print(exc)\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert "benchmarl_task:load_policy cannot be imported" in out.stdout, out
+    assert "[marl]" in out.stdout and "activetrack[rl]" not in out.stdout, out.stdout
