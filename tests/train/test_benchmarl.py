@@ -103,6 +103,7 @@ def test_unknown_algorithm_and_budgets_are_rejected(tmp_path):
         algorithm_config,
         experiment_config,
         load_policy,
+        make_experiment,
     )
 
     with pytest.raises(ValueError, match="algorithm must be one of"):
@@ -113,6 +114,8 @@ def test_unknown_algorithm_and_budgets_are_rejected(tmp_path):
         experiment_config(tmp_path, max_frames=300, frames_per_batch=200)
     with pytest.raises(ValueError, match="save_folder"):
         experiment_config(tmp_path / "missing")
+    with pytest.raises(ValueError, match="threads"):
+        make_experiment(ActiveTrackingTask.PAPER.get_task(), "mappo", threads=0)
     bad = tmp_path / "checkpoint_1.pt"
     bad.write_bytes(b"")
     with pytest.raises(ValueError, match="not a BenchMARL checkpoint"):
