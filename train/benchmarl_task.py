@@ -28,6 +28,8 @@ before importing BenchMARL.
 from __future__ import annotations
 
 import copy
+import shutil
+import tempfile
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -325,7 +327,15 @@ def load_policy(path: str | Path) -> BenchmarlPolicy:
             f"{path}: not a BenchMARL checkpoint (no config.pkl two folders up, "
             "<run>/checkpoints/checkpoint_N.pt)"
         )
-    experiment = Experiment.reload_from_file(str(path))
+    # BenchMARL's reload rewrites config.pkl in the run's folder (with the restore path in
+    # it): reload from a copy so that loading never changes the user's run.
+    with tempfile.TemporaryDirectory() as folder:
+        run = Path(folder) / path.parent.parent.name
+        (run / "checkpoints").mkdir(parents=True)
+        shutil.copyfile(path.parent.parent / "config.pkl", run / "config.pkl")
+        shutil.copyfile(path, run / "checkpoints" / path.name)
+        checkpoint = str(run / "checkpoints" / path.name)
+        experiment = Experiment.reload_from_file(checkpoint, {"save_folder": folder})
     return BenchmarlPolicy(experiment, name=path.parent.parent.name)
 
 

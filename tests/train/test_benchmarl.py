@@ -66,7 +66,12 @@ def test_benchmarl_trains_checkpoints_and_evaluates(algorithm, task_name, tmp_pa
 
     # The checkpoint holds the trained actor: its parameters are the ones after training,
     # which training moved away from the initial ones.
+    run_files = {p: p.read_bytes() for p in (runs / experiment.name).rglob("*") if p.is_file()}
     policy = load_policy(checkpoint)
+    # Loading leaves the run as it was (BenchMARL's reload rewrites config.pkl in place).
+    after = {p: p.read_bytes() for p in (runs / experiment.name).rglob("*") if p.is_file()}
+    assert after == run_files
+    assert sorted(p.name for p in runs.iterdir()) == [experiment.name]
     loaded = _actor_params(policy.experiment)
     assert loaded.keys() == trained.keys()
     for k in trained:
