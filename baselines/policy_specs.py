@@ -93,7 +93,8 @@ def policy_loader(path: Path) -> Any:
     try:
         return entry.load()
     except ImportError as exc:
-        ours = entry.value.startswith("activetrack.train")
+        # Our loaders' own errors that already say what to install keep their word.
+        ours = entry.value.startswith("activetrack.train") and "pip install" not in str(exc)
         hint = "; the train layer needs the [rl] extra: pip install 'activetrack[rl]'"
         raise ImportError(
             f"{path}: its loader {entry.value} cannot be imported ({exc}){hint if ours else ''}"
