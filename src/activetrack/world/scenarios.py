@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from activetrack.kinematics import team
+from activetrack.kinematics import separation, team
 from activetrack.models.motion import LinearMotionModel, make_model
 from activetrack.models.objective import Objective
 from activetrack.models.sensor import SensorModel, as_sensor_model, record, slot_code
@@ -179,6 +179,9 @@ class Scenario:
         target_behaviour: how the true targets move: None (their filter's own model, eq.
             2), an :class:`activetrack.TargetBehaviour` for every target, or a tuple of K
             (:mod:`activetrack.world.behaviours`); the filter keeps its model.
+        d_sep: the team rule of a minimum separation (:mod:`activetrack.kinematics.separation`):
+            0 (none, the paper), a distance [0, 1e9] every pair keeps, or M radii (a pair
+            keeps ``d_i + d_j``); the world enforces it, and it must fit the start disk.
 
     One coupled limit: the first predicted position variance (from P0, the model and q)
     may be at most 1e10 times the smallest range variance, so that one update never
@@ -218,6 +221,7 @@ class Scenario:
     filter_iterations: int = 1
     kinematics: Any = None
     target_behaviour: Any = None
+    d_sep: float | tuple[float, ...] = 0.0
     _cache: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -286,6 +290,8 @@ class Scenario:
             put("P0", _per_target_p0(self.P0, dims))
         put("target_behaviour", behaviours.converted(self.target_behaviour, self))
         self._check_information_ratio()
+        put("d_sep", separation.converted(self.d_sep, m))
+        separation.check_scenario(self)
         if self.random_occluders:  # a layout can be drawn (the reset would fail otherwise)
             self.draw_occluders(np.random.default_rng(0))
 
@@ -544,7 +550,8 @@ def _same(a: object, b: object) -> bool:
 
 
 #: The per-sensor fields :func:`make_scenario` repeats for a new team size.
-_TEAM_FIELDS = (*_PER_SENSOR, "sensor_model", "pose_cov", "max_range", "p_detect", "kinematics")
+_TEAM_FIELDS = (*_PER_SENSOR, "sensor_model", "pose_cov", "max_range", "p_detect", "kinematics",
+                "d_sep")  # fmt: skip
 
 
 def _per_sensor_tuple(key: str, value: object) -> bool:
