@@ -195,6 +195,26 @@ class Separation:
         """Return sensor i's feasible candidate nearest to ``w`` and False; or, when none
         is feasible (boxed in), the candidate that keeps the separation and lies deepest
         out of the ``rho`` disks, and True (module docstring)."""
+        c, ok, clear = self.candidates(o, w, obst, dij, targets, r, rho)
+        g = c - w
+        far = np.hypot(g[:, 0], g[:, 1])
+        inside = ok & (clear >= 0.0)
+        if np.any(inside):
+            return c[inside][int(np.argmin(far[inside]))], False
+        # Boxed in: the candidate keeping the separation deepest out of the rho disks.
+        best = np.flatnonzero(ok)
+        if not best.size:
+            return o.copy(), True
+        return c[best[int(np.argmax(clear[best]))]], True
+
+    def candidates(
+        self, o: FloatArray, w: FloatArray, obst: FloatArray, dij: FloatArray,
+        targets: FloatArray, r: float, rho: float,
+    ) -> tuple[FloatArray, np.ndarray, FloatArray]:  # fmt: skip
+        """Return the rule's candidates (C, 2) for a sensor at ``o`` wanting ``w`` (module
+        docstring), whether each is within the reach ``r`` with a path clear of the
+        ``obst``acles (J, 2) by ``dij`` (J,), and each one's clearance of the ``rho``
+        disks of ``targets`` (K, 2) (inf when ``rho`` is 0; feasible: also >= 0)."""
         cands = [self._contact(o, w, obst, dij)[None], o + r * self._grid]
         if rho > 0.0:
             ring = (targets[:, None, :] + rho * (1.0 + _CONTACT) * self._dirs).reshape(-1, 2)
@@ -208,16 +228,7 @@ class Separation:
         if rho > 0.0:
             f = c[:, None, :] - targets[None]
             clear = np.min(np.hypot(f[..., 0], f[..., 1]), axis=-1) - rho
-        g = c - w
-        far = np.hypot(g[:, 0], g[:, 1])
-        inside = ok & (clear >= 0.0)
-        if np.any(inside):
-            return c[inside][int(np.argmin(far[inside]))], False
-        # Boxed in: the candidate keeping the separation deepest out of the rho disks.
-        best = np.flatnonzero(ok)
-        if not best.size:
-            return o.copy(), True
-        return c[best[int(np.argmax(clear[best]))]], True
+        return c, ok, clear
 
     @staticmethod
     def _contact(o: FloatArray, w: FloatArray, obst: FloatArray, dij: FloatArray) -> FloatArray:
