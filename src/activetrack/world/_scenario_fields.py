@@ -156,6 +156,8 @@ def accepted(name: str) -> str:
         f"{LENGTH_MAX:g} in magnitude",
         "kinematics": "None (a disk of radius vmax dt), an activetrack.Kinematics, or a tuple of M",
         "name": "a string",
+        "target_behaviour": "None (the filter's own model), an activetrack.TargetBehaviour, "
+        "or a tuple of K",
         "d_sep": "0 (none), a distance in [0, 1e9] every pair keeps, or M radii in [0, 1e9] "
         "(a pair keeps d_i + d_j); it must fit the start disk",
     }[name]
