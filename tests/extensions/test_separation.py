@@ -143,7 +143,7 @@ def test_world_keeps_separation(policy):
 
 
 def test_world_with_gsr_plans_keeps_separation():
-    from baselines.gsr import GSR  # noqa: PLC0415 (baselines above the core)
+    from activetrack.baselines.gsr import GSR  # noqa: PLC0415 (baselines above the core)
 
     gsr = GSR()
     world = World("paper", 4, **CROWDED)
