@@ -301,6 +301,7 @@ class TrackingParallelEnv(ParallelEnv):
 
     def _infos(self, agents: list[str], exceeded: bool) -> dict[str, dict[str, Any]]:
         k, trace, err, proj, nproj = self.world.copy_info(0)
+        sep = self.world.separation_info(0)  # (empty without d_sep)
         return {
             a: {
                 "step": k,
@@ -309,6 +310,7 @@ class TrackingParallelEnv(ParallelEnv):
                 "projected": proj[i],
                 "n_projected": nproj[i],
                 "max_trace_exceeded": exceeded,
+                **sep,
             }
             for i, a in enumerate(agents)
         }

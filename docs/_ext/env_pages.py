@@ -217,7 +217,7 @@ def figures_table(data: dict[str, Any]) -> list[str]:
             _g(r["median_trace"]),
             f"{r['rmse']:.3f}",
             "-" if r["nees"] is None else f"{r['nees']:.2f}",
-            _g(r["ms_per_step"], 3),
+            _g(r["cpu_ms_per_decision"], 3),
             f"{r['mean_return']:.2f}",
             f"{r['ratio_to_gsr']:.3f} [{rlo:.3f}, {rhi:.3f}]",
         ]

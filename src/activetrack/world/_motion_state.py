@@ -22,6 +22,13 @@ entries zero-padded), and:
   which end with each sensor's :meth:`~activetrack.Kinematics.features` (the heading as
   ``(cos, sin)``, the velocity over the top speed; :mod:`activetrack.world.observation`).
 
+With a minimum separation (``d_sep > 0``) the moves then go through the team rule
+(:class:`activetrack.kinematics.separation.Separation`); the world keeps per copy the
+step's ``collisions`` (pairs of wanted points closer than their distance, before the
+rule), their episode count ``n_collisions``, the sensors the rule kept in place for want
+of a feasible point (``n_stuck``) and the smallest pairwise distance after the step
+``min_separation`` (:meth:`MotionState.separation_info`, in the environments' infos).
+
 A world whose sensors all have ``state_dim = 2`` (the paper's disks, any kinematics of
 the position alone) has no ``motion`` field and runs exactly as before.
 """
@@ -32,7 +39,11 @@ from typing import Any
 
 import numpy as np
 
+from activetrack.kinematics.separation import min_separation, separated_starts
 from activetrack.validation import FloatArray
+
+#: The state fields of the team rule of a minimum separation.
+SEPARATION_FIELDS = ("collisions", "n_collisions", "n_stuck", "min_separation")
 
 
 class MotionState:
@@ -46,6 +57,9 @@ class MotionState:
         self._motion_next: FloatArray | None = None
         if self._n_motion:
             state["motion"] = np.zeros((self.n_sensors, self._n_motion))
+        self._sep_next: tuple | None = None
+        if self._sep is not None:
+            state.update(collisions=0, n_collisions=0, n_stuck=0, min_separation=np.inf)
 
     def _motion_start(self, new: dict[str, Any], sensors: FloatArray) -> None:
         """Put the reset copies' initial ``motion`` into ``new``, from the true start
@@ -53,6 +67,23 @@ class MotionState:
         if self._n_motion:
             toward = np.mean([x[:2] for x in self._x0_hats], axis=0)
             new["motion"] = self._team.initial(sensors, toward)[..., 2:]
+        if self._sep is not None:
+            low = min_separation(sensors)
+            new.update(collisions=0, n_collisions=0, n_stuck=0,
+                       min_separation=float(low) if np.ndim(low) == 0 else low)  # fmt: skip
+
+    def _separated_starts(self, sensors: FloatArray, rows: np.ndarray, one: bool) -> FloatArray:
+        """Return the start positions ``sensors`` ((M, 2) for ``one`` copy, else (R, M, 2)
+        of the copies ``rows``) with each sensor too close to an earlier one drawn again
+        from its copy's generator (:func:`activetrack.kinematics.separation.separated_starts`)."""
+        out = np.array(sensors)
+        for j, i in enumerate(rows.tolist()):
+            rng = self.rng(i)
+            row = out if one else out[j]
+            row[...] = separated_starts(
+                row, self._sep.d, lambda rng=rng: self._start_positions(rng.random(2))
+            )
+        return out
 
     def _move_sensors(
         self, move: Any, moves: FloatArray, sensors: FloatArray, fixes: FloatArray,
@@ -90,6 +121,9 @@ class MotionState:
                     nxt[..., :2] = moved
         if self._n_motion:
             self._motion_next = nxt[..., 2:]
+        if self._sep is not None:  # the team rule, sensor after sensor (known poses)
+            moved, collisions, stuck = self._sep.resolve(fixes, moved, where, p.r, p.rho)
+            self._sep_next = (collisions, np.count_nonzero(stuck, -1), min_separation(moved))
         return moved, projected
 
     def _motion_store(self, new: dict[str, Any], sel: Any, partial: bool) -> None:
@@ -97,6 +131,24 @@ class MotionState:
         if self._n_motion:
             nxt = self._motion_next
             new["motion"] = nxt[sel] if partial else nxt
+        if self._sep is not None:
+            coll, stuck, low = (v[sel] if partial else v for v in self._sep_next)
+            st = self._s
+            n_coll, n_stuck = (st["n_collisions"], st["n_stuck"]) if self._one else (
+                st["n_collisions"][sel], st["n_stuck"][sel])  # fmt: skip
+            if self._one:
+                coll, stuck, low = int(coll), int(stuck), float(low)
+            new.update(collisions=coll, n_collisions=n_coll + coll, n_stuck=n_stuck + stuck,
+                       min_separation=low)  # fmt: skip
+
+    def separation_info(self, index: int) -> dict[str, Any]:
+        """Return copy ``index``'s :data:`SEPARATION_FIELDS` as Python numbers (an empty
+        dict without ``d_sep``): what an environment's infos add."""
+        if self._sep is None:
+            return {}
+        get = self._s.__getitem__ if self._one else (lambda key: self._s[key][index])
+        return {key: get(key).item() if hasattr(get(key), "item") else get(key)
+                for key in SEPARATION_FIELDS}  # fmt: skip
 
     def sensor_states(self, index: int | None = None) -> FloatArray:
         """Return the sensors' states (N, M, S), or (M, S) for copy ``index``: the position

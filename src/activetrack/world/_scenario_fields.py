@@ -160,6 +160,8 @@ def accepted(name: str) -> str:
         "name": "a string",
         "estimator": "'ekf', 'imm' (the target_behaviour's mode set), or an "
         "activetrack.IMMSpec (modes of the targets' state and dt, a row-stochastic transition)",
+        "d_sep": "0 (none), a distance in [0, 1e9] every pair keeps, or M radii in [0, 1e9] "
+        "(a pair keeps d_i + d_j); it must fit the start disk",
     }[name]
 
 

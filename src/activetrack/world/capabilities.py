@@ -18,6 +18,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
+
 from activetrack.kinematics.team import all_disks
 
 
@@ -70,6 +72,8 @@ class Capabilities:
         filter_targets: no ``target_behaviour``: every true target moves by its filter's
             own model (eq. 2), in the compiled step; else the world moves each by its
             behaviour (:mod:`activetrack.world.behaviours`), stage by stage.
+        no_separation: ``d_sep`` is 0: no team rule; else the world's moves go through
+            :class:`activetrack.kinematics.separation.Separation`, stage by stage.
     """
 
     one_target: bool
@@ -83,6 +87,7 @@ class Capabilities:
     disk_kinematics: bool = True
     builtin_sensors: bool = True
     filter_targets: bool = True
+    no_separation: bool = True
 
     @classmethod
     def of(cls, sc: Any) -> Capabilities:
@@ -100,6 +105,7 @@ class Capabilities:
             disk_kinematics=sc.kinematics is None or all_disks(sc.kinematics_models),
             builtin_sensors=all(m.builtin for m in sc.sensor_objects),
             filter_targets=sc.target_behaviour is None,
+            no_separation=not any(np.atleast_1d(sc.d_sep)),
         )
 
     @property
@@ -145,5 +151,5 @@ class Capabilities:
         :attr:`per_target_update` with known poses, built-in sensor models and disks."""
         return (
             self.per_target_update and self.known_poses and self.builtin_sensors
-            and self.disk_kinematics
+            and self.disk_kinematics and self.no_separation
         )  # fmt: skip

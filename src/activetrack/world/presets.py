@@ -17,7 +17,7 @@ from activetrack.models.behaviour import Evasive, Maneuvering
 EXTENSIONS = (
     "n_targets", "sensor_model", "pose_cov", "account_pose", "objective", "max_range",
     "p_detect", "occluders", "random_occluders", "occluder_bounds", "occluder_size",
-    "filter_iterations", "kinematics", "target_behaviour", "estimator",
+    "filter_iterations", "kinematics", "target_behaviour", "estimator", "d_sep",
 )  # fmt: skip
 
 #: The beyond-the-paper tasks start the filter consistent: the true state is drawn from

@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from activetrack.kinematics import team
+from activetrack.kinematics import separation, team
 from activetrack.models.motion import LinearMotionModel, make_model
 from activetrack.models.objective import Objective
 from activetrack.models.sensor import SensorModel, as_sensor_model, record, slot_code
@@ -182,6 +182,9 @@ class Scenario:
         estimator: ``"ekf"`` (each target's EKF on its motion model), ``"imm"`` (the IMM
             of ``target_behaviour``'s mode set) or an :class:`activetrack.IMMSpec` (an IMM's
             modes, of the targets' state and ``dt``; :mod:`activetrack.world.imm_tracking`).
+        d_sep: the team rule of a minimum separation (:mod:`activetrack.kinematics.separation`):
+            0 (none, the paper), a distance [0, 1e9] every pair keeps, or M radii (a pair
+            keeps ``d_i + d_j``); the world enforces it, and it must fit the start disk.
 
     One coupled limit: the first predicted position variance (from P0, the model and q)
     may be at most 1e10 times the smallest range variance, so that one update never
@@ -222,6 +225,7 @@ class Scenario:
     kinematics: Any = None
     target_behaviour: Any = None
     estimator: Any = "ekf"
+    d_sep: float | tuple[float, ...] = 0.0
     _cache: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -291,6 +295,8 @@ class Scenario:
         put("target_behaviour", behaviours.converted(self.target_behaviour, self))
         put("estimator", imm_tracking.converted(self.estimator, self))
         self._check_information_ratio()
+        put("d_sep", separation.converted(self.d_sep, m))
+        separation.check_scenario(self)
         if self.random_occluders:  # a layout can be drawn (the reset would fail otherwise)
             self.draw_occluders(np.random.default_rng(0))
 
@@ -550,7 +556,8 @@ def _same(a: object, b: object) -> bool:
 
 
 #: The per-sensor fields :func:`make_scenario` repeats for a new team size.
-_TEAM_FIELDS = (*_PER_SENSOR, "sensor_model", "pose_cov", "max_range", "p_detect", "kinematics")
+_TEAM_FIELDS = (*_PER_SENSOR, "sensor_model", "pose_cov", "max_range", "p_detect", "kinematics",
+                "d_sep")  # fmt: skip
 
 
 def _per_sensor_tuple(key: str, value: object) -> bool:

@@ -60,6 +60,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from activetrack.kinematics import sensor_motion
+from activetrack.kinematics.separation import Separation, pair_distances
 from activetrack.kinematics.team import TeamMotion
 from activetrack.models.motion import predict, psd_factor
 from activetrack.models.objective import TRACE, as_objective, combined
@@ -204,6 +205,8 @@ class World(  # (the mixins: world/_selection.py, _streams.py, ..., imm_tracking
         self._per_target = caps.per_target_update and ekf
         # A sensor whose kinematics is not a built-in Disk: every move asks its kinematics.
         self._team = None if caps.disk_kinematics else TeamMotion(sc.kinematics_models)
+        # A minimum separation between sensors: every move goes through its rule (d_sep > 0).
+        self._sep = None if caps.no_separation else Separation(pair_distances(sc.d_sep, m))
         if N > 1:  # the step's normals are (copies, n_noise) then; one copy's are (n_noise,)
             self._noise_slices = [
                 ((slice(None), a), (slice(None), b)) for a, b in self._noise_slices
@@ -330,6 +333,8 @@ class World(  # (the mixins: world/_selection.py, _streams.py, ..., imm_tracking
             g = None if g is None else [gk[0] for gk in g]
             e = None if e is None else e[0]
         sensors = self._start_positions(u)
+        if self._sep is not None:  # each sensor drawn again while too close to another
+            sensors = self._separated_starts(sensors, rows, one=isinstance(sel, int))
         if self._random_layouts:  # each episode's own layout, drawn after the other draws
             layouts = self.scenario.draw_occluder_batch([self.rng(i) for i in rows.tolist()])
             self._occ = layouts[0] if self._one else self._occ.replaced(rows, layouts)
