@@ -197,6 +197,7 @@ def run_tasks(
     """
     import ray
 
+    ours = not ray.is_initialized()  # the session starts Ray, and its shutdown ends the tasks
     with session(workers, address):
         remote = ray.remote(max_retries=max_retries)(fn)
         index = {remote.remote(*job): i for i, job in enumerate(jobs)}
@@ -213,8 +214,12 @@ def run_tasks(
                     if on_done is not None:
                         on_done(i)
         except BaseException:
-            for ref in pending:
-                ray.cancel(ref)
+            # Ray of our own: its shutdown ends the tasks. ``ray.cancel`` would race with a
+            # task that is completing, which Ray's core worker can fail on with a native
+            # abort ("Tried to complete task that was not pending"), seen on SIGTERM.
+            if not ours:
+                for ref in pending:
+                    ray.cancel(ref)
             raise
     missing = sorted(set(range(len(jobs))) - set(results))
     if missing:

@@ -18,7 +18,7 @@ from activetrack.world.scenarios import PRESETS, make_scenario
 FLAGS = (
     "one_target", "range_bearing", "known_poses", "pose_free_filter", "unlimited_sensing",
     "no_occluders", "single_update", "trace_objective", "disk_kinematics", "builtin_sensors",
-    "filter_targets",
+    "filter_targets", "no_separation",
 )  # fmt: skip
 
 
@@ -120,6 +120,7 @@ def expected(fields: dict) -> dict[str, bool]:
         "disk_kinematics": all(type(k) is Disk for k in fields.get("kinematics", ())),
         "builtin_sensors": all(isinstance(m, str) for m in models),
         "filter_targets": fields.get("target_behaviour") is None,
+        "no_separation": not np.any(fields.get("d_sep", 0.0)),
     }
     return {
         **f,
@@ -149,6 +150,7 @@ def expected(fields: dict) -> dict[str, bool]:
                 "disk_kinematics",
                 "builtin_sensors",
                 "filter_targets",
+                "no_separation",
             )
         ),  # fmt: skip
     }
