@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from activetrack.baselines import gsr_kinematic
+from activetrack.baselines import gsr_command, gsr_kinematic
 from activetrack.estimation import generic
 from activetrack.kinematics import feasible_set
 from activetrack.kinematics.team import all_disks
@@ -81,7 +81,13 @@ def relax(
     # changed[b, i]: sensor i's subproblem in copy b changed since its last solve (another
     # sensor moved); an unchanged subproblem would give the same answer, so it is skipped.
     changed = free.copy()
-    if custom:
+    if custom and gsr_command.supports(problem.kinematics):  # in command space
+        prepared = gsr_command.Prepared(
+            problem.kinematics, gsr_kinematic.states_of(problem, current), targets, rho,
+            _sensor_at(targets, w_d, w_t, pose, det, occ, team), problem.objective,
+            compiled=(w_d, w_t) if _built_in(problem, pose, det, occ, team) else None,
+        )  # fmt: skip
+    elif custom:
         one = _one_sensor(targets, w_d, w_t, pose, det, occ, team)
         prepared = gsr_kinematic.Prepared(problem, one, current, targets, rho)
     else:
@@ -267,6 +273,39 @@ def _one_sensor(targets, w_d, w_t, pose, det, occ, objects):
         own = None if objects is None else (objects[i],) * n
         out = _entries(pts[None], targets[[b]], w_d[row], w_t[row], cov, d, layout, own)
         return tuple(x[0].T for x in out)
+
+    return entries
+
+
+def _built_in(problem, pose, det, occ, team) -> bool:
+    """Return whether the information is the built-in models' ``J0`` and the objective the
+    trace (what :mod:`activetrack.baselines.gsr_command_kernel` computes)."""
+    from activetrack.models.objective import is_trace  # noqa: PLC0415
+
+    return (
+        is_trace(problem.objective)
+        and pose is None
+        and det is None
+        and occ is None
+        and (team is None)
+    )
+
+
+def _sensor_at(targets, w_d, w_t, pose, det, occ, objects):
+    """Return ``entries(pts, sub, i)``: sensor ``i``'s entries in copies ``sub`` at points
+    ``pts`` (S, P, 2) about every target, 3 x (S, P, K) (:func:`_entries` with the P points
+    as P copies of the sensor; ``objects`` the sensors' models of one's own, or None)."""
+
+    def entries(pts: FloatArray, sub: np.ndarray, i: int) -> tuple[FloatArray, ...]:
+        S, P = pts.shape[:2]
+        wd = np.broadcast_to(w_d[sub, i][:, None], (S, P))
+        wt = np.broadcast_to(w_t[sub, i][:, None], (S, P))
+        cov = None if pose is None else np.broadcast_to(pose[sub, i][:, None], (S, P, 2, 2))
+        d = None if det is None else tuple(np.broadcast_to(x[sub, i][:, None], (S, P)) for x in det)
+        layout = None if occ is None else occ[sub]
+        own = None if objects is None else (objects[i],) * P
+        out = _entries(pts, targets[sub], wd, wt, cov, d, layout, own)
+        return tuple(np.swapaxes(x, 1, 2) for x in out)
 
     return entries
 

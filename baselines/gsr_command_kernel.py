@@ -1,0 +1,150 @@
+"""Compiled kernel of GSR's command-space step (:mod:`activetrack.baselines.gsr_command`) for
+the built-in kinematics, the built-in sensor models and the trace objective.
+
+The same solve as :class:`activetrack.baselines.gsr_command.Prepared` (grid, the previous
+solution, the adaptive pattern search; the same constants), one copy after the other, with
+the kinematics' :meth:`~activetrack.Kinematics.apply` written out:
+
+- ``DISK`` (params ``radius``): ``position + radius a``, an action longer than 1 scaled onto
+  the unit circle (:meth:`activetrack.kinematics.disk.Disk.apply`);
+- ``UNICYCLE`` (params ``v_min, v_max, w_max, dt``): the exact arc of
+  :meth:`activetrack.kinematics.unicycle.Unicycle.advance`.
+
+The information is ``J0`` of eq. (17) with the weights ``(w_d, w_theta)`` (any built-in
+model: a component a model does not measure has weight 0), the objective the sum over the
+K targets of ``tr(Y^{-1})``. Constraints beyond the ``rho`` disks (the team rule ``d_sep``,
+:mod:`activetrack.baselines.gsr_separation`) are given as *capsules* ``(ax, ay, bx, by,
+r)``: a point must keep ``r`` from the segment ``a -> b`` (a disk when ``a = b``), and
+*sweeps* ``(cx, cy, r)``: the segment from the sensor's position to the point must keep
+``r`` from ``c``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from activetrack._jit import kernel
+
+DISK = 0
+UNICYCLE = 1
+
+
+@kernel
+def point(code, prm, st, u0, u1):
+    """Return the point ``(x, y)`` the command ``(u0, u1)`` (clipped to [-1, 1]^2) reaches
+    from the state ``st``."""
+    a0 = min(max(u0, -1.0), 1.0)
+    a1 = min(max(u1, -1.0), 1.0)
+    if code == DISK:
+        n = math.hypot(a0, a1)
+        if n > 1.0:
+            a0 /= n
+            a1 /= n
+        return st[0] + prm[0] * a0, st[1] + prm[0] * a1
+    v = prm[0] + 0.5 * (a0 + 1.0) * (prm[1] - prm[0])
+    phi = 0.5 * a1 * prm[2] * prm[3]
+    s = 1.0 if phi == 0.0 else math.sin(phi) / phi
+    chord = v * prm[3] * s
+    ang = st[2] + phi
+    return st[0] + chord * math.cos(ang), st[1] + chord * math.sin(ang)
+
+
+@kernel
+def seg_dist(ax, ay, bx, by, cx, cy):
+    """Return the distance from ``c`` to the segment ``a -> b``."""
+    ux, uy = bx - ax, by - ay
+    den = ux * ux + uy * uy
+    t = 0.0
+    if den > 0.0:
+        t = min(max(((cx - ax) * ux + (cy - ay) * uy) / den, 0.0), 1.0)
+    return math.hypot(cx - ax - t * ux, cy - ay - t * uy)
+
+
+@kernel
+def value(px, py, st, tg, rho, wd, wt, base, caps, sweeps):
+    """Return the objective with the sensor at ``(px, py)``, ``inf`` when infeasible."""
+    for k in range(tg.shape[0]):
+        if math.hypot(px - tg[k, 0], py - tg[k, 1]) < rho:
+            return np.inf
+    for j in range(caps.shape[0]):
+        if seg_dist(caps[j, 0], caps[j, 1], caps[j, 2], caps[j, 3], px, py) < caps[j, 4]:
+            return np.inf
+    for j in range(sweeps.shape[0]):
+        if seg_dist(st[0], st[1], px, py, sweeps[j, 0], sweeps[j, 1]) < sweeps[j, 2]:
+            return np.inf
+    total = 0.0
+    for k in range(tg.shape[0]):
+        rx, ry = px - tg[k, 0], py - tg[k, 1]
+        n2 = rx * rx + ry * ry
+        a, b, c = base[k, 0], base[k, 1], base[k, 2]
+        if n2 > 0.0:
+            n = math.sqrt(n2)
+            ux, uy = rx / n, ry / n
+            wv = wt / n2
+            a += wd * ux * ux + wv * uy * uy
+            b += (wd - wv) * ux * uy
+            c += wd * uy * uy + wv * ux * ux
+        det = a * c - b * b
+        if not det > 0.0:
+            return np.inf
+        total += (a + c) / det
+    if not math.isfinite(total):
+        return np.inf
+    return total
+
+
+@kernel
+def solve_rows(
+    code, prm, states, tg, rho, wd, wt, base, caps, sweeps, prev, grid, n, stop, rounds,
+    out_u, out_p, out_v,
+):  # fmt: skip
+    """Solve each copy's subproblem (rows of ``states`` (S, sd), ``tg`` (S, K, 2), ``rho``,
+    ``wd``, ``wt`` (S,), ``base`` (S, K, 3), ``caps`` (S, J, 5), ``sweeps`` (S, J2, 3), the
+    previous commands ``prev`` (S, 2), NaN: none) into ``out_u``, ``out_p`` (S, 2) and
+    ``out_v`` (S,) (``inf``: nothing feasible)."""
+    for s in range(states.shape[0]):
+        st = states[s]
+        bu0, bu1, bp0, bp1, bv = 0.0, 0.0, st[0], st[1], np.inf
+        for i0 in range(grid):
+            for i1 in range(grid):
+                u0 = -1.0 + 2.0 * i0 / (grid - 1)
+                u1 = -1.0 + 2.0 * i1 / (grid - 1)
+                x, y = point(code, prm, st, u0, u1)
+                v = value(x, y, st, tg[s], rho[s], wd[s], wt[s], base[s], caps[s], sweeps[s])
+                if v < bv:
+                    bu0, bu1, bp0, bp1, bv = u0, u1, x, y, v
+        if math.isfinite(prev[s, 0]):
+            x, y = point(code, prm, st, prev[s, 0], prev[s, 1])
+            v = value(x, y, st, tg[s], rho[s], wd[s], wt[s], base[s], caps[s], sweeps[s])
+            if v < bv:
+                bu0, bu1, bp0, bp1, bv = prev[s, 0], prev[s, 1], x, y, v
+        h = 2.0 / (grid - 1)
+        if math.isfinite(bv):
+            for _ in range(rounds):
+                if h < stop:
+                    break
+                c0, c1 = bu0, bu1
+                moved, edge = False, False
+                for k0 in range(-n, n + 1):
+                    for k1 in range(-n, n + 1):
+                        if k0 == 0 and k1 == 0:
+                            continue
+                        u0 = min(max(c0 + h * k0, -1.0), 1.0)
+                        u1 = min(max(c1 + h * k1, -1.0), 1.0)
+                        x, y = point(code, prm, st, u0, u1)
+                        v = value(
+                            x, y, st, tg[s], rho[s], wd[s], wt[s], base[s], caps[s], sweeps[s]
+                        )
+                        if v < bv:
+                            bu0, bu1, bp0, bp1, bv = u0, u1, x, y, v
+                            moved = True
+                            edge = max(abs(k0), abs(k1)) == n
+                if moved and edge:
+                    h = min(2.0 * h, 2.0)
+                else:
+                    h = h / (n + 1)
+        out_u[s, 0], out_u[s, 1] = bu0, bu1
+        out_p[s, 0], out_p[s, 1] = bp0, bp1
+        out_v[s] = bv
