@@ -45,6 +45,8 @@ STENCIL = 5
 STOP = 1e-9
 #: At most this many refinement rounds per solve.
 ROUNDS = 60
+#: A point moved out of a disk lands this much (relative) outside it (rounding).
+_EDGE = 1e-14
 
 
 def supports(kinematics) -> bool:
@@ -146,23 +148,54 @@ class Prepared:
         self.grid: dict[int, tuple] = {}
         self.last = np.full((B, M, 2), np.nan)  # each copy's last refined command, per sensor
 
-    def allowed(self, pts: FloatArray, sub: np.ndarray, i: int) -> np.ndarray | None:
-        """Return whether ``pts`` (S, P, 2) meet the constraints (None: there are none)."""
+    def _constraints(self, sub: np.ndarray, i: int) -> tuple[FloatArray, FloatArray]:
+        S = len(sub)
         if self.constraints is None:
-            return None
-        caps, sweeps = self.constraints(sub, i)
-        return keeps(pts, self.states[sub, i, :2], caps, sweeps)
+            return np.zeros((S, 0, 5)), np.zeros((S, 0, 3))
+        return self.constraints(sub, i)
 
     # Geometry --------------------------------------------------------------------------
     def _box(self, i: int) -> tuple[FloatArray, FloatArray]:
         kin = self.kin[i]
         return np.asarray(kin.action_low, np.float64), np.asarray(kin.action_high, np.float64)
 
-    def points(self, u: FloatArray, sub: np.ndarray, i: int) -> FloatArray:
-        """Return the points (S, P, 2) commands ``u`` (S, P, 2) reach from copies ``sub``."""
+    def locate(self, u: FloatArray, sub: np.ndarray, i: int, caps=None) -> tuple:
+        """Return ``(points (S, P, 2), feasible (S, P))`` of commands ``u`` (S, P, 2) from
+        copies ``sub``: each point moved radially out of a ``rho`` disk, and of a capsule of
+        ``caps`` (S, J, 5), it falls in (as :func:`gsr_command_kernel.locate`), and whether
+        it is then feasible (reachable, outside the disks and the capsules; the sweeps are
+        the caller's)."""
         kin = self.kin[i]
         state = self.states[sub, i, : kin.state_dim][:, None, :]
-        return np.asarray(kin.apply(u, state), np.float64)[..., :2]
+        pts = np.array(np.asarray(kin.apply(u, state), np.float64)[..., :2])
+        moved = np.zeros(pts.shape[:2], bool)
+        rho = self.rho[sub, i][:, None, None]
+        for k in range(self.targets.shape[1]):
+            t = self.targets[sub, k][:, None, :]
+            e = pts - t
+            d = np.hypot(e[..., 0], e[..., 1])[..., None]
+            inside = (d < rho) & (d > 0.0)
+            pts = np.where(inside, t + rho * (1.0 + _EDGE) / np.where(d > 0, d, 1.0) * e, pts)
+            moved |= inside[..., 0]
+        for j in range(0 if caps is None else caps.shape[1]):
+            a, b, r = caps[:, None, j, 0:2], caps[:, None, j, 2:4], caps[:, None, j, 4:5]
+            ab = b - a
+            den = np.sum(ab * ab, -1, keepdims=True)
+            t = np.clip(np.sum((pts - a) * ab, -1, keepdims=True) / np.where(den > 0, den, 1.0),
+                        0.0, 1.0)  # fmt: skip
+            c = a + t * ab
+            e = pts - c
+            d = np.hypot(e[..., 0], e[..., 1])[..., None]
+            inside = (d < r) & (d > 0.0)
+            pts = np.where(inside, c + r * (1.0 + _EDGE) / np.where(d > 0, d, 1.0) * e, pts)
+            moved |= inside[..., 0]
+        ok = _outside(pts, self.targets[sub], self.rho[sub, i])
+        if caps is not None and caps.shape[1]:
+            ok &= keeps(pts, self.states[sub, i, :2], caps, caps[:, :0, :3])
+        if np.any(moved):
+            reach = np.asarray(kin.reaches(pts, state), bool)
+            ok &= ~moved | reach
+        return pts, ok
 
     def _value(self, pts, ok, base, sub, i, ent=None):
         """Return the objective (S, P) at ``pts``, ``inf`` where not ``ok``."""
@@ -172,14 +205,17 @@ class Prepared:
         )
         return np.where(ok & np.isfinite(v), v, np.inf)
 
-    def _ok(self, pts: FloatArray, sub: np.ndarray, i: int) -> np.ndarray:
-        ok = _outside(pts, self.targets[sub], self.rho[sub, i])
-        extra = self.allowed(pts, sub, i)
-        return ok if extra is None else ok & extra
+    def _evaluate(self, u, sub, i, base, caps, sweeps):
+        """Return ``(values (S, P), points (S, P, 2))`` of commands ``u`` (S, P, 2)."""
+        pts, ok = self.locate(u, sub, i, caps)
+        if sweeps.shape[1]:
+            ok &= keeps(pts, self.states[sub, i, :2], caps[:, :0], sweeps)
+        return self._value(pts, ok, base, sub, i), pts
 
     def _grid(self, i: int) -> tuple[FloatArray, FloatArray, np.ndarray, tuple]:
-        """Return sensor ``i``'s grid: commands (P, 2), points (B, P, 2), outside the
-        ``rho`` disks (B, P), and the entries there 3 x (B, P, K) (cached per plan)."""
+        """Return sensor ``i``'s grid: commands (P, 2), points (B, P, 2) (moved out of the
+        ``rho`` disks), their feasibility (B, P), and the entries there 3 x (B, P, K)
+        (cached per plan)."""
         if i not in self.grid:
             lo, hi = self._box(i)
             t = np.linspace(0.0, 1.0, GRID)
@@ -187,9 +223,8 @@ class Prepared:
             u = lo + (hi - lo) * g
             allrows = np.arange(len(self.rho))
             U = np.broadcast_to(u, (len(allrows),) + u.shape)
-            pts = self.points(U, allrows, i)
-            outside = _outside(pts, self.targets, self.rho[:, i])
-            self.grid[i] = (u, pts, outside, self.entries(pts, allrows, i))
+            pts, ok = self.locate(U, allrows, i)
+            self.grid[i] = (u, pts, ok, self.entries(pts, allrows, i))
         return self.grid[i]
 
     # The solve -------------------------------------------------------------------------
@@ -198,12 +233,12 @@ class Prepared:
         the others' entries ``base`` (3 x (S, K)); ``inf`` where no command is feasible."""
         if self.codes[i] is not None:
             return self._solve_compiled(sub, i, base)
+        caps, sweeps = self._constraints(sub, i)
         u, pts, outside, ent = self._grid(i)
         gp = pts[sub]
         ok = outside[sub]
-        extra = self.allowed(gp, sub, i)
-        if extra is not None:
-            ok = ok & extra
+        if caps.shape[1] or sweeps.shape[1]:
+            ok = ok & keeps(gp, self.states[sub, i, :2], caps, sweeps)
         v = self._value(gp, ok, base, sub, i, tuple(e[sub] for e in ent))
         k = np.argmin(v, axis=1)
         rows = np.arange(len(sub))
@@ -214,13 +249,13 @@ class Prepared:
         prev = self.last[sub, i]
         have = np.isfinite(prev[:, 0])
         if np.any(have):
-            pp = self.points(prev[:, None, :], sub, i)
-            pv = self._value(pp, self._ok(pp, sub, i), base, sub, i)[:, 0]
+            pv, pp = self._evaluate(prev[:, None, :], sub, i, base, caps, sweeps)
+            pv = pv[:, 0]
             use = have & (pv < best_v)
             best_u = np.where(use[:, None], prev, best_u)
             best_v = np.where(use, pv, best_v)
             best_p = np.where(use[:, None], pp[:, 0], best_p)
-        x, fx, px = self._refine(best_u, best_v, best_p, sub, i, base)
+        x, fx, px = self._refine(best_u, best_v, best_p, sub, i, base, caps, sweeps)
         self.last[sub, i] = np.where(np.isfinite(fx)[:, None], x, np.nan)
         return px, fx
 
@@ -230,10 +265,7 @@ class Prepared:
 
         code, prm = self.codes[i]
         S = len(sub)
-        if self.constraints is None:
-            caps, sweeps = np.zeros((S, 0, 5)), np.zeros((S, 0, 3))
-        else:
-            caps, sweeps = self.constraints(sub, i)
+        caps, sweeps = self._constraints(sub, i)
         kin = self.kin[i]
         out_u, out_p, out_v = np.empty((S, 2)), np.empty((S, 2)), np.empty(S)
         ck.solve_rows(
@@ -248,7 +280,7 @@ class Prepared:
         self.last[sub, i] = np.where(np.isfinite(out_v)[:, None], out_u, np.nan)
         return out_p, out_v
 
-    def _refine(self, x, fx, px, sub, i, base):
+    def _refine(self, x, fx, px, sub, i, base, caps, sweeps):
         """Return the pattern search's ``(commands, values, points)`` from ``x`` (S, 2)."""
         lo, hi = self._box(i)
         half = 0.5 * (hi - lo)
@@ -266,8 +298,9 @@ class Prepared:
                 break
             cu = np.clip(x[rows, None, :] + (h[rows, None, None] * half) * offs, lo, hi)
             s = sub[rows]
-            cp = self.points(cu, s, i)
-            cv = self._value(cp, self._ok(cp, s, i), tuple(b[rows] for b in base), s, i)
+            cv, cp = self._evaluate(
+                cu, s, i, tuple(b[rows] for b in base), caps[rows], sweeps[rows]
+            )
             j = np.argmin(cv, axis=1)
             r = np.arange(rows.size)
             better = cv[r, j] < fx[rows]

@@ -10,6 +10,11 @@ the kinematics' :meth:`~activetrack.Kinematics.apply` written out:
 - ``UNICYCLE`` (params ``v_min, v_max, w_max, dt``): the exact arc of
   :meth:`activetrack.kinematics.unicycle.Unicycle.advance`.
 
+A command whose point falls inside a ``rho`` disk (or a capsule, below) stands for that
+point moved radially onto the disk's edge, when that is reachable: the search then moves
+along the constraints' boundaries, where optima often lie, instead of stalling at a
+curved edge in command space.
+
 The information is ``J0`` of eq. (17) with the weights ``(w_d, w_theta)`` (any built-in
 model: a component a model does not measure has weight 0), the objective the sum over the
 K targets of ``tr(Y^{-1})``. Constraints beyond the ``rho`` disks (the team rule ``d_sep``,
@@ -29,6 +34,8 @@ from activetrack._jit import kernel
 
 DISK = 0
 UNICYCLE = 1
+#: A point moved out of a disk lands this much (relative) outside it (rounding).
+_EDGE = 1e-14
 
 
 @kernel
@@ -63,17 +70,69 @@ def seg_dist(ax, ay, bx, by, cx, cy):
 
 
 @kernel
-def value(px, py, st, tg, rho, wd, wt, base, caps, sweeps):
-    """Return the objective with the sensor at ``(px, py)``, ``inf`` when infeasible."""
+def reaches(code, prm, st, px, py):
+    """Return whether ``(px, py)`` lies in the reach set of state ``st`` (no tolerance: a
+    point on the rounding's wrong side of the boundary is left out)."""
+    dx, dy = px - st[0], py - st[1]
+    d = math.hypot(dx, dy)
+    if code == DISK:
+        return d <= prm[0]
+    dt = prm[3]
+    if d == 0.0:
+        return prm[0] == 0.0
+    phi = math.atan2(dy, dx) - st[2]
+    phi = math.atan2(math.sin(phi), math.cos(phi))
+    if abs(phi) > 0.5 * prm[2] * dt:
+        return False
+    s = 1.0 if phi == 0.0 else math.sin(phi) / phi
+    return prm[0] * dt * s <= d <= prm[1] * dt * s
+
+
+@kernel
+def locate(code, prm, st, u0, u1, tg, rho, caps, sweeps):
+    """Return ``(feasible, x, y)``: the point of command ``(u0, u1)``, moved radially out of
+    a ``rho`` disk or a capsule it falls in (onto its edge: the search then reaches the
+    constraints' boundaries, where optima lie), and whether that point is feasible."""
+    x, y = point(code, prm, st, u0, u1)
+    moved = False
     for k in range(tg.shape[0]):
-        if math.hypot(px - tg[k, 0], py - tg[k, 1]) < rho:
-            return np.inf
+        ex, ey = x - tg[k, 0], y - tg[k, 1]
+        d = math.hypot(ex, ey)
+        if d < rho and d > 0.0:
+            f = rho * (1.0 + _EDGE) / d
+            x, y = tg[k, 0] + f * ex, tg[k, 1] + f * ey
+            moved = True
     for j in range(caps.shape[0]):
-        if seg_dist(caps[j, 0], caps[j, 1], caps[j, 2], caps[j, 3], px, py) < caps[j, 4]:
-            return np.inf
+        ax, ay, bx, by, r = caps[j, 0], caps[j, 1], caps[j, 2], caps[j, 3], caps[j, 4]
+        ux, uy = bx - ax, by - ay
+        den = ux * ux + uy * uy
+        t = 0.0
+        if den > 0.0:
+            t = min(max(((x - ax) * ux + (y - ay) * uy) / den, 0.0), 1.0)
+        cx, cy = ax + t * ux, ay + t * uy
+        d = math.hypot(x - cx, y - cy)
+        if d < r and d > 0.0:
+            f = r * (1.0 + _EDGE) / d
+            x, y = cx + f * (x - cx), cy + f * (y - cy)
+            moved = True
+    for k in range(tg.shape[0]):
+        if math.hypot(x - tg[k, 0], y - tg[k, 1]) < rho:
+            return False, x, y
+    for j in range(caps.shape[0]):
+        if seg_dist(caps[j, 0], caps[j, 1], caps[j, 2], caps[j, 3], x, y) < caps[j, 4]:
+            return False, x, y
     for j in range(sweeps.shape[0]):
-        if seg_dist(st[0], st[1], px, py, sweeps[j, 0], sweeps[j, 1]) < sweeps[j, 2]:
-            return np.inf
+        if seg_dist(st[0], st[1], x, y, sweeps[j, 0], sweeps[j, 1]) < sweeps[j, 2]:
+            return False, x, y
+    if moved and not reaches(code, prm, st, x, y):
+        return False, x, y
+    return True, x, y
+
+
+@kernel
+def value(px, py, tg, wd, wt, base):
+    """Return the objective (the sum over the targets of ``tr(Y^{-1})``) with the sensor at
+    ``(px, py)``; ``inf`` where it is not finite."""
     total = 0.0
     for k in range(tg.shape[0]):
         rx, ry = px - tg[k, 0], py - tg[k, 1]
@@ -96,6 +155,16 @@ def value(px, py, st, tg, rho, wd, wt, base, caps, sweeps):
 
 
 @kernel
+def evaluate(code, prm, st, u0, u1, tg, rho, wd, wt, base, caps, sweeps):
+    """Return ``(value, x, y)`` of command ``(u0, u1)`` (:func:`locate`, :func:`value`;
+    ``inf`` when infeasible)."""
+    ok, x, y = locate(code, prm, st, u0, u1, tg, rho, caps, sweeps)
+    if not ok:
+        return np.inf, x, y
+    return value(x, y, tg, wd, wt, base), x, y
+
+
+@kernel
 def solve_rows(
     code, prm, states, tg, rho, wd, wt, base, caps, sweeps, prev, grid, n, stop, rounds,
     out_u, out_p, out_v,
@@ -111,13 +180,16 @@ def solve_rows(
             for i1 in range(grid):
                 u0 = -1.0 + 2.0 * i0 / (grid - 1)
                 u1 = -1.0 + 2.0 * i1 / (grid - 1)
-                x, y = point(code, prm, st, u0, u1)
-                v = value(x, y, st, tg[s], rho[s], wd[s], wt[s], base[s], caps[s], sweeps[s])
+                v, x, y = evaluate(
+                    code, prm, st, u0, u1, tg[s], rho[s], wd[s], wt[s], base[s], caps[s], sweeps[s]
+                )
                 if v < bv:
                     bu0, bu1, bp0, bp1, bv = u0, u1, x, y, v
         if math.isfinite(prev[s, 0]):
-            x, y = point(code, prm, st, prev[s, 0], prev[s, 1])
-            v = value(x, y, st, tg[s], rho[s], wd[s], wt[s], base[s], caps[s], sweeps[s])
+            v, x, y = evaluate(
+                code, prm, st, prev[s, 0], prev[s, 1], tg[s], rho[s], wd[s], wt[s], base[s],
+                caps[s], sweeps[s],
+            )  # fmt: skip
             if v < bv:
                 bu0, bu1, bp0, bp1, bv = prev[s, 0], prev[s, 1], x, y, v
         h = 2.0 / (grid - 1)
@@ -133,10 +205,10 @@ def solve_rows(
                             continue
                         u0 = min(max(c0 + h * k0, -1.0), 1.0)
                         u1 = min(max(c1 + h * k1, -1.0), 1.0)
-                        x, y = point(code, prm, st, u0, u1)
-                        v = value(
-                            x, y, st, tg[s], rho[s], wd[s], wt[s], base[s], caps[s], sweeps[s]
-                        )
+                        v, x, y = evaluate(
+                            code, prm, st, u0, u1, tg[s], rho[s], wd[s], wt[s], base[s],
+                            caps[s], sweeps[s],
+                        )  # fmt: skip
                         if v < bv:
                             bu0, bu1, bp0, bp1, bv = u0, u1, x, y, v
                             moved = True
