@@ -40,7 +40,7 @@ import numpy as np
 
 from activetrack._jit import as_rows
 from activetrack.baselines import gsr_kernel as gk
-from activetrack.baselines import gsr_restarts
+from activetrack.baselines import gsr_restarts, gsr_separation
 from activetrack.baselines._common import raise_for_status, sensor_modes, sensor_modes_of
 from activetrack.models.objective import is_trace, sensor_information
 from activetrack.solvers._scalar import NO_ROOTS, ROOTS_SIZE, ROOTS_TAG, solve_point
@@ -171,7 +171,7 @@ class GSR:
     def plan_with_info(self, problem: PlanningProblem) -> GSRResult | GSRBatchResult:
         """Return GSR's solution with its statistics: a :class:`GSRResult` for a single
         problem, a :class:`GSRBatchResult` for a batched one."""
-        if not problem.is_paper:
+        if not problem.is_paper or gsr_separation.pair_matrix(problem) is not None:
             result = self._plan_numeric(problem)
             self.last_result = result
             return result

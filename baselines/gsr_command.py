@@ -103,8 +103,12 @@ def compiled_kinematics(kin) -> tuple[int, FloatArray] | None:
 
     if tuple(kin.action_low) != (-1.0, -1.0) or tuple(kin.action_high) != (1.0, 1.0):
         return None
+    from activetrack.baselines.gsr_separation import RadiusDisk  # noqa: PLC0415
+
     if type(kin) is Disk:
         return ck.DISK, np.array([kin.radius], np.float64)
+    if type(kin) is RadiusDisk:
+        return ck.RADIUS_DISK, np.zeros(1)
     if type(kin) is Unicycle:
         return ck.UNICYCLE, np.array([kin.v_min, kin.v_max, kin.w_max, kin._dt()], np.float64)
     return None

@@ -7,6 +7,8 @@ the kinematics' :meth:`~activetrack.Kinematics.apply` written out:
 
 - ``DISK`` (params ``radius``): ``position + radius a``, an action longer than 1 scaled onto
   the unit circle (:meth:`activetrack.kinematics.disk.Disk.apply`);
+- ``RADIUS_DISK`` (no params): the same with the radius in the state ``(x, y, r)``
+  (:class:`activetrack.baselines.gsr_separation.RadiusDisk`);
 - ``UNICYCLE`` (params ``v_min, v_max, w_max, dt``): the exact arc of
   :meth:`activetrack.kinematics.unicycle.Unicycle.advance`.
 
@@ -34,6 +36,7 @@ from activetrack._jit import kernel
 
 DISK = 0
 UNICYCLE = 1
+RADIUS_DISK = 2
 #: A point moved out of a disk lands this much (relative) outside it (rounding).
 _EDGE = 1e-14
 
@@ -44,12 +47,13 @@ def point(code, prm, st, u0, u1):
     from the state ``st``."""
     a0 = min(max(u0, -1.0), 1.0)
     a1 = min(max(u1, -1.0), 1.0)
-    if code == DISK:
+    if code == DISK or code == RADIUS_DISK:
         n = math.hypot(a0, a1)
         if n > 1.0:
             a0 /= n
             a1 /= n
-        return st[0] + prm[0] * a0, st[1] + prm[0] * a1
+        r = prm[0] if code == DISK else st[2]
+        return st[0] + r * a0, st[1] + r * a1
     v = prm[0] + 0.5 * (a0 + 1.0) * (prm[1] - prm[0])
     phi = 0.5 * a1 * prm[2] * prm[3]
     s = 1.0 if phi == 0.0 else math.sin(phi) / phi
@@ -77,6 +81,8 @@ def reaches(code, prm, st, px, py):
     d = math.hypot(dx, dy)
     if code == DISK:
         return d <= prm[0]
+    if code == RADIUS_DISK:
+        return d <= st[2]
     dt = prm[3]
     if d == 0.0:
         return prm[0] == 0.0

@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from activetrack.baselines import gsr_command, gsr_kinematic
+from activetrack.baselines import gsr_command, gsr_kinematic, gsr_separation
 from activetrack.estimation import generic
 from activetrack.kinematics import feasible_set
 from activetrack.kinematics.team import all_disks
@@ -81,10 +81,17 @@ def relax(
     # changed[b, i]: sensor i's subproblem in copy b changed since its last solve (another
     # sensor moved); an unchanged subproblem would give the same answer, so it is skipped.
     changed = free.copy()
-    if custom and gsr_command.supports(problem.kinematics):  # in command space
+    # The team rule d_sep: each subproblem keeps the pair conditions with the others' plans.
+    sep = gsr_separation.pair_matrix(problem)
+    if (custom and gsr_command.supports(problem.kinematics)) or (sep is not None and not custom):
+        kin, states = problem.kinematics, gsr_kinematic.states_of(problem, current)
+        if not custom:  # disks: each copy's own radius in the state
+            kin = (gsr_separation.RadiusDisk(),) * M
+            states = np.concatenate([current, r[..., None]], -1)
         prepared = gsr_command.Prepared(
-            problem.kinematics, gsr_kinematic.states_of(problem, current), targets, rho,
-            _sensor_at(targets, w_d, w_t, pose, det, occ, team), problem.objective,
+            kin, states, targets, rho, _sensor_at(targets, w_d, w_t, pose, det, occ, team),
+            problem.objective,
+            constraints=None if sep is None else gsr_separation.constraints(sep, current, s),
             compiled=(w_d, w_t) if _built_in(problem, pose, det, occ, team) else None,
         )  # fmt: skip
     elif custom:
@@ -135,7 +142,7 @@ def relax(
         nonneg = problem.objective.nonnegative
         scale = before if nonneg else np.maximum(np.abs(before), 1.0)
         active[rows] = (gain > tol * scale) & changed[rows].any(axis=1)
-    if det is not None and (occ is not None or np.any(np.isfinite(det[1]))):
+    if sep is None and det is not None and (occ is not None or np.any(np.isfinite(det[1]))):
         s, value = _approach(problem, s, value, current, r, targets, rho, det, (w_d, w_t, pose),
                              occ)  # fmt: skip
     return s.reshape(*shape, M, 2), value.reshape(shape), sweeps.reshape(shape), warm.reshape(shape)
