@@ -125,6 +125,9 @@ class GBES:
         last_result: the :class:`GBESResult` of the latest :meth:`plan` call.
     """
 
+    #: Keeps the team rule ``d_sep`` itself (:mod:`activetrack.baselines.gsr_separation`).
+    keeps_d_sep = True
+
     spacing: float = math.pi / 200.0
     max_combinations: float = 5e8
     block: int = 16

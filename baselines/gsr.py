@@ -143,6 +143,9 @@ class GSR:
             (batch) of the latest :meth:`plan` call.
     """
 
+    #: Keeps the team rule ``d_sep`` itself (:mod:`activetrack.baselines.gsr_separation`).
+    keeps_d_sep = True
+
     tol: float = 1e-9
     max_sweeps: int = 100
     restarts: bool = False

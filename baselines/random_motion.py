@@ -99,6 +99,9 @@ class RandomMotion:
     (see the module docstring).
     """
 
+    #: Keeps the team rule ``d_sep`` itself (:mod:`activetrack.baselines.gsr_separation`).
+    keeps_d_sep = True
+
     def plan(self, problem: PlanningProblem, rng: np.random.Generator) -> FloatArray:
         """Return random feasible next absolute positions, ``batch_shape + (M, 2)``.
 

@@ -112,3 +112,27 @@ def test_gsr_under_d_sep_is_optimal_per_subproblem():
                     checked += 1
         world.step(plan)
     assert checked == 24
+
+
+class _Blind:
+    """A planner that ignores the rule (GSR on the problem without ``d_sep``)."""
+
+    def plan(self, problem, rng=None):
+        return GSR().plan(dataclasses.replace(problem, d_sep=None))
+
+
+def test_policies_keep_d_sep_for_planners_that_do_not():
+    from activetrack.baselines.policies import GSRPolicy, PlannerPolicy
+
+    world = crowded_world(2)
+    blind, gsr = PlannerPolicy(_Blind(), seed=0), GSRPolicy(seed=0)
+    broke = 0
+    for _ in range(10):
+        problem = world.planning_problem()
+        raw = _Blind().plan(problem)
+        for plan in (blind.plan(problem), gsr.plan(problem)):
+            for b in range(2):
+                assert paths_keep(problem.sensors[b], plan[b], D_SEP)
+        broke += sum(not paths_keep(problem.sensors[b], raw[b], D_SEP) for b in range(2))
+        world.step(gsr.plan(problem))
+    assert broke > 0  # the wrapped planner's own plans broke the rule
