@@ -23,9 +23,10 @@ Constraints beyond the ``rho`` disks (the team rule ``d_sep``,
 infeasible point is never returned (a copy with none gets ``inf``, and GSR keeps the
 sensor where it was). The result is never worse than the best grid point.
 
-The built-in kinematics (disk, unicycle) with the built-in sensor models and the trace
-objective run the same solve compiled (:mod:`activetrack.baselines.gsr_command_kernel`);
-any other kinematics with a 2-D action box runs it in NumPy, every copy in each call.
+The built-in kinematics (disk, unicycle, double integrator) with the built-in sensor
+models and the trace objective run the same solve compiled
+(:mod:`activetrack.baselines.gsr_command_kernel`); any other kinematics with a 2-D action
+box runs it in NumPy, every copy in each call.
 """
 
 from __future__ import annotations
@@ -99,6 +100,7 @@ def compiled_kinematics(kin) -> tuple[int, FloatArray] | None:
     built-in kinematics with the action box [-1, 1]^2, else None."""
     from activetrack.baselines import gsr_command_kernel as ck  # noqa: PLC0415
     from activetrack.kinematics.disk import Disk  # noqa: PLC0415
+    from activetrack.kinematics.double_integrator import DoubleIntegrator  # noqa: PLC0415
     from activetrack.kinematics.unicycle import Unicycle  # noqa: PLC0415
 
     if tuple(kin.action_low) != (-1.0, -1.0) or tuple(kin.action_high) != (1.0, 1.0):
@@ -109,6 +111,8 @@ def compiled_kinematics(kin) -> tuple[int, FloatArray] | None:
         return ck.DISK, np.array([kin.radius], np.float64)
     if type(kin) is RadiusDisk:
         return ck.RADIUS_DISK, np.zeros(1)
+    if type(kin) is DoubleIntegrator:
+        return ck.DOUBLE_INTEGRATOR, np.array([kin.a_max, kin.v_max, kin._dt()], np.float64)
     if type(kin) is Unicycle:
         return ck.UNICYCLE, np.array([kin.v_min, kin.v_max, kin.w_max, kin._dt()], np.float64)
     return None

@@ -9,6 +9,10 @@ the kinematics' :meth:`~activetrack.Kinematics.apply` written out:
   the unit circle (:meth:`activetrack.kinematics.disk.Disk.apply`);
 - ``RADIUS_DISK`` (no params): the same with the radius in the state ``(x, y, r)``
   (:class:`activetrack.baselines.gsr_separation.RadiusDisk`);
+- ``DOUBLE_INTEGRATOR`` (params ``a_max, v_max, dt``): the acceleration ``a_max u / max(1,
+  |u|)`` then the nearest point of the two disks' intersection
+  (:meth:`activetrack.kinematics.double_integrator.DoubleIntegrator.apply`, its ``clip``
+  with the same tolerance; the query lies in the acceleration disk);
 - ``UNICYCLE`` (params ``v_min, v_max, w_max, dt``): the exact arc of
   :meth:`activetrack.kinematics.unicycle.Unicycle.advance`.
 
@@ -37,6 +41,7 @@ from activetrack._jit import kernel
 DISK = 0
 UNICYCLE = 1
 RADIUS_DISK = 2
+DOUBLE_INTEGRATOR = 3
 #: A point moved out of a disk lands this much (relative) outside it (rounding).
 _EDGE = 1e-14
 
@@ -54,12 +59,42 @@ def point(code, prm, st, u0, u1):
             a1 /= n
         r = prm[0] if code == DISK else st[2]
         return st[0] + r * a0, st[1] + r * a1
+    if code == DOUBLE_INTEGRATOR:
+        return _double_integrator(prm, st, a0, a1)
     v = prm[0] + 0.5 * (a0 + 1.0) * (prm[1] - prm[0])
     phi = 0.5 * a1 * prm[2] * prm[3]
     s = 1.0 if phi == 0.0 else math.sin(phi) / phi
     chord = v * prm[3] * s
     ang = st[2] + phi
     return st[0] + chord * math.cos(ang), st[1] + chord * math.sin(ang)
+
+
+@kernel
+def _double_integrator(prm, st, a0, a1):
+    """Return :meth:`DoubleIntegrator.apply` of ``(a0, a1)`` from ``st`` (x, y, vx, vy)."""
+    dt = prm[2]
+    n = max(1.0, math.hypot(a0, a1))
+    ra, rv = 0.5 * prm[0] * dt * dt, 0.5 * prm[1] * dt
+    cax, cay = st[0] + st[2] * dt, st[1] + st[3] * dt
+    cvx, cvy = st[0] + 0.5 * dt * st[2], st[1] + 0.5 * dt * st[3]
+    qx, qy = cax + ra * a0 / n, cay + ra * a1 / n
+    tol = 4e-12 * (prm[1] * dt + max(abs(st[0]), abs(st[1])))
+    dv = math.hypot(qx - cvx, qy - cvy)
+    if dv <= rv + tol:
+        return qx, qy
+    ox, oy = cvx + (qx - cvx) * (rv / dv), cvy + (qy - cvy) * (rv / dv)
+    if math.hypot(ox - cax, oy - cay) <= ra + tol:
+        return ox, oy
+    ex, ey = cvx - cax, cvy - cay
+    d = math.hypot(ex, ey)
+    ux, uy = (ex / d, ey / d) if d > 0.0 else (1.0, 0.0)
+    x = (d * d + ra * ra - rv * rv) / (2.0 * (d if d > 0.0 else 1.0))
+    h = math.sqrt(max(ra * ra - x * x, 0.0))
+    mx, my = cax + x * ux, cay + x * uy
+    k1x, k1y, k2x, k2y = mx - h * uy, my + h * ux, mx + h * uy, my - h * ux
+    if math.hypot(k1x - qx, k1y - qy) <= math.hypot(k2x - qx, k2y - qy):
+        return k1x, k1y
+    return k2x, k2y
 
 
 @kernel
@@ -83,6 +118,11 @@ def reaches(code, prm, st, px, py):
         return d <= prm[0]
     if code == RADIUS_DISK:
         return d <= st[2]
+    if code == DOUBLE_INTEGRATOR:
+        dt = prm[2]
+        ea = math.hypot(px - st[0] - st[2] * dt, py - st[1] - st[3] * dt)
+        ev = math.hypot(px - st[0] - 0.5 * dt * st[2], py - st[1] - 0.5 * dt * st[3])
+        return ea <= 0.5 * prm[0] * dt * dt and ev <= 0.5 * prm[1] * dt
     dt = prm[3]
     if d == 0.0:
         return prm[0] == 0.0

@@ -101,3 +101,30 @@ def test_a_batch_plans_each_copy_as_alone(name):
         plan = GSR().plan(problem)
         for b in range(3):
             np.testing.assert_array_equal(plan[b], GSR().plan(problem[b]))
+
+
+@pytest.mark.parametrize("name", list(ROBOTS) + ["disk"])
+def test_compiled_points_are_the_kinematics_apply(name):
+    from activetrack import Disk
+    from activetrack.baselines import gsr_command_kernel as ck
+
+    kin = Disk(1.5) if name == "disk" else ROBOTS[name].bind(0.1)
+    code, prm = gsr_command.compiled_kinematics(kin)
+    rng = np.random.default_rng(2)
+    states = rng.normal(0, 5, (50, kin.state_dim))
+    if name == "double_integrator":  # velocities within the speed bound
+        v = states[:, 2:]
+        states[:, 2:] = v / np.maximum(1, np.hypot(*v.T) / kin.v_max)[:, None]
+    if name != "disk" and kin.state_dim == 3:
+        states[:, 2] = rng.uniform(-np.pi, np.pi, 50)
+    u = rng.uniform(-1.0, 1.0, (50, 40, 2))  # the action box the solver searches
+    want = np.asarray(kin.apply(u, states[:, None, :]))
+    got = np.array([[ck.point(code, prm, states[s], *u[s, q]) for q in range(40)]
+                    for s in range(50)])  # fmt: skip
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-12 * (1 + np.abs(want).max()))
+    # and the compiled membership test agrees with the kinematics' on those points
+    for s in range(50):
+        for q in range(0, 40, 7):
+            assert ck.reaches(code, prm, states[s], *want[s, q]) <= bool(
+                kin.reaches(want[s, q], states[s])
+            )
