@@ -118,6 +118,36 @@ def compiled_kinematics(kin) -> tuple[int, FloatArray] | None:
     return None
 
 
+def warm_start(
+    kinematics, states: FloatArray, current: FloatArray, targets: FloatArray, rho: FloatArray
+) -> FloatArray:
+    """Return GSR's warm start (B, M, 2): each sensor's current position where that is
+    feasible (reachable, outside every ``rho`` disk); else the point of the command that
+    :meth:`~activetrack.Kinematics.command` gives for it (clipped to the box), moved out of
+    a ``rho`` disk it falls in, when that is feasible (a fixed-wing's current position is
+    never reachable: this avoids a projection per sensor and step); else the kinematics'
+    :meth:`~activetrack.Kinematics.project` (the nearest feasible point)."""
+    s = np.array(current, np.float64)
+    B = len(s)
+    rows = np.arange(B)
+    for i, kin in enumerate(kinematics):
+        st = states[:, i, : kin.state_dim]
+        ok = np.asarray(kin.reaches(s[:, i], st), bool)
+        ok &= _outside(s[:, i, None], targets, rho[:, i])[:, 0]
+        bad = rows[~ok]
+        if bad.size == 0:
+            continue
+        lo = np.asarray(kin.action_low, np.float64)
+        hi = np.asarray(kin.action_high, np.float64)
+        u = np.clip(np.asarray(kin.command(s[bad, i], st[bad]), np.float64), lo, hi)
+        one = Prepared(kinematics, states[bad], targets[bad], rho[bad], None, None)
+        pts, good = one.locate(u[:, None, :], np.arange(bad.size), i)
+        s[bad, i] = np.where(good[:, :1], pts[:, 0], s[bad, i])
+        for b in bad[~good[:, 0]]:
+            s[b, i] = kin.project(s[b, i], st[b], targets[b], rho[b, i])
+    return s
+
+
 class Prepared:
     """Every copy's sensor steps in command space, with the interface of
     :class:`activetrack.baselines.gsr_numeric._Prepared` (``solve(sub, i, base)``).

@@ -65,7 +65,11 @@ def relax(
     if occ is not None and occ.batched and len(shape) > 1:  # a layout per flattened copy
         occ = occ[np.repeat(np.arange(shape[0]), B // shape[0])]
     custom = problem.kinematics is not None and not all_disks(problem.kinematics)
-    if custom:  # a kinematics of its own: its own feasible sets (baselines.gsr_kinematic)
+    if custom and gsr_command.supports(problem.kinematics):  # warm start in command space
+        s = gsr_command.warm_start(
+            problem.kinematics, gsr_kinematic.states_of(problem, current), current, targets, rho
+        )
+    elif custom:  # a kinematics of its own: its own feasible sets (baselines.gsr_kinematic)
         s = gsr_kinematic.warm_start(problem, current, targets, rho)
     else:
         s = _warm_start(current, r, targets, rho)
