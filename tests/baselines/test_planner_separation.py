@@ -136,3 +136,28 @@ def test_policies_keep_d_sep_for_planners_that_do_not():
         broke += sum(not paths_keep(problem.sensors[b], raw[b], D_SEP) for b in range(2))
         world.step(gsr.plan(problem))
     assert broke > 0  # the wrapped planner's own plans broke the rule
+
+
+@pytest.mark.parametrize("name", ["gsr", "gbes", "rm", "lookahead", "blind"])
+def test_experts_in_the_environment_never_collide(name):
+    """The world counts the pairs of wanted points closer than ``d_sep`` (``collisions``,
+    before its rule mends them): an expert's plans give none (a planner blind to the rule,
+    run without a policy, gives some: the episode is crowded enough to tell)."""
+    from activetrack import envs
+    from activetrack.baselines.policy_specs import resolve_policy
+
+    sc = make_scenario("paper", d_sep=D_SEP, n_sensors=3, sensor_radius=5.0, n_steps=8,
+                       sensor_center=(4.0, 0.0))  # fmt: skip
+    env = envs.parallel_env(scenario=sc)
+    expert = _Blind() if name == "blind" else resolve_policy(name)
+    _, infos = env.reset(seed=21)
+    lowest = np.inf
+    while env.agents:
+        _, _, _, _, infos = env.step_positions(expert.plan(env.planning_problem()))
+        info = infos[env.possible_agents[0]]
+        lowest = min(lowest, info["min_separation"])
+    assert lowest >= D_SEP  # the world's rule, whoever plans
+    if name == "blind":
+        assert info["n_collisions"] > 0
+    else:
+        assert info["n_collisions"] == 0
