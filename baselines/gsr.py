@@ -212,12 +212,16 @@ class GSR:
 
     def _plan_numeric(self, problem: PlanningProblem) -> GSRResult | GSRBatchResult:
         """GSR beyond the paper's problem: numerical single-sensor steps
-        (:mod:`activetrack.baselines.gsr_numeric`)."""
+        (:mod:`activetrack.baselines.gsr_numeric`); a kinematics of its own, and the team
+        rule ``d_sep`` (each subproblem keeps the pair conditions with the others' plans,
+        :mod:`activetrack.baselines.gsr_separation`), in command space
+        (:mod:`activetrack.baselines.gsr_command`)."""
         if self.restarts:
             raise ValueError(
                 "restarts=True runs the paper's exact solver from several starts; this problem "
-                "(several targets, other sensor models, uncertain poses or another objective) "
-                "is planned with numerical single-sensor steps, without restarts"
+                "(several targets, other sensor models, uncertain poses, another objective, "
+                "a kinematics of its own or the team rule d_sep) is planned with numerical "
+                "single-sensor steps, without restarts"
             )
         from activetrack.baselines import gsr_numeric  # noqa: PLC0415 (beyond the paper)
 

@@ -21,6 +21,13 @@ absolute terms for an objective that may be negative, the log-determinant), when
 sensor is left to re-solve, or after ``max_sweeps``. A batch is relaxed in one vectorized
 sweep over the copies (copies that have stopped are carried).
 
+A sensor that moves by a kinematics of its own with a 2-D action box (a unicycle, a double
+integrator) is solved over its commands (:mod:`activetrack.baselines.gsr_command`). With the
+team rule ``d_sep`` (``problem.d_sep``) every sensor's subproblem also keeps the world's
+pair conditions with the others' current plans
+(:mod:`activetrack.baselines.gsr_separation`), so the disk is then solved in command space
+too, and the lost sensors' approach below is not taken (it would ignore the rule).
+
 The sweeps change only the base of a sensor's subproblem, so its candidates and its
 information there are prepared once per plan (:func:`activetrack.solvers.numeric.prepare`),
 and a re-solve refines from where the sensor's last solve ended
