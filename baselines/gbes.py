@@ -61,6 +61,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from activetrack.baselines import gsr_separation, separated
 from activetrack.baselines._common import kinematic_boundaries, own_kinematics, sensor_modes
 from activetrack.kinematics import geometry
 from activetrack.kinematics.feasible_set import boundary_arcs
@@ -123,6 +124,9 @@ class GBES:
         batch_elements: configurations evaluated per vectorized batch (memory bound).
         last_result: the :class:`GBESResult` of the latest :meth:`plan` call.
     """
+
+    #: Keeps the team rule ``d_sep`` itself (:mod:`activetrack.baselines.gsr_separation`).
+    keeps_d_sep = True
 
     spacing: float = math.pi / 200.0
     max_combinations: float = 5e8
@@ -359,12 +363,20 @@ class GBES:
         if own_kinematics(problem):  # the grid points themselves (absolute, feasible)
             grids = fit._kinematic_grids(problem, absolute=True)
             cands = [g - problem.targets[0] for g in grids]
-            idx, n_eval = _grid_search(problem, cands, *args)
-            positions = np.stack([grids[i][k] for i, k in enumerate(idx)])
         else:
             cands = fit.candidates(problem)
-            idx, n_eval = _grid_search(problem, cands, *args)
-            positions = np.stack([cands[i][k] for i, k in enumerate(idx)]) + problem.targets[0]
+            grids = [c + problem.targets[0] for c in cands]
+        # The team rule d_sep: only combinations whose pairs keep it (gsr_separation).
+        d = gsr_separation.pair_matrix(problem)
+        pairs = None if d is None else gsr_separation.pair_masks(d, problem.sensors, grids)
+        idx, n_eval = _grid_search(problem, cands, *args, pairs=pairs)
+        if idx is None:  # no combination keeps the rule: the best one, repaired
+            idx, _ = _grid_search(problem, cands, *args)
+            positions = separated.separate(
+                problem, np.stack([grids[i][k] for i, k in enumerate(idx)]), problem.d_sep
+            )
+        else:
+            positions = np.stack([grids[i][k] for i, k in enumerate(idx)])
         result = GBESResult(
             positions, float(problem.score(positions)), total, n_eval, float(fit.spacing)
         )
@@ -395,8 +407,11 @@ def _grid_search(
     block: int = 16,
     batch_elements: int = 1 << 17,
     prune: bool = True,
-) -> tuple[tuple[int, ...], int]:
-    """Return :func:`grid_optimum` as each sensor's index into its candidates."""
+    pairs: list | None = None,
+) -> tuple[tuple[int, ...] | None, int]:
+    """Return :func:`grid_optimum` as each sensor's index into its candidates; with
+    ``pairs`` (:func:`activetrack.baselines.gsr_separation.pair_masks`) only among the
+    combinations they allow (None when there is none)."""
     if prune and not problem.objective.convex:
         raise ValueError(
             f"GBES's branch and bound needs an objective convex in each target's information "
@@ -420,6 +435,7 @@ def _grid_search(
             search = _BlockSearch(feats, prior[0], block, batch_elements, problem.objective)
         else:
             search = _TargetsSearch(feats, prior, block, batch_elements, problem.objective)
+    search.pairs = pairs or []
     return search.run(prune)
 
 
@@ -499,6 +515,7 @@ class _BlockSearch:
         self.best = math.inf
         self.best_idx: tuple[int, ...] | None = None
         self.n_eval = 0
+        self.pairs: list = []  # the team rule's allowed pairs (_grid_search)
 
     def run(self, prune: bool) -> tuple[tuple[int, ...], int]:
         """Return the optimal candidate index of every sensor and the evaluation count."""
@@ -563,6 +580,15 @@ class _BlockSearch:
                 term = self.blocks[i][e][idx[i]].reshape(shape)
                 tot[e] = term + self.prior[e] if tot[e] is None else tot[e] + term
         val = self._value(tot)
+        if self.pairs:  # combinations that break the team rule d_sep are out
+            cand = [
+                np.minimum(idx[i][:, None] * b + np.arange(b), k - 1).reshape(
+                    [len(flat)] + [b if j == i else 1 for j in range(m)]
+                )
+                for i, (b, k) in enumerate(zip(self.bsize, self.sizes, strict=True))
+            ]
+            for a, b, ok in self.pairs:
+                val = np.where(ok[cand[a], cand[b]], val, np.inf)
         self.n_eval += val.size
         k = int(np.argmin(val))
         v = float(val.flat[k])

@@ -40,7 +40,7 @@ import numpy as np
 
 from activetrack._jit import as_rows
 from activetrack.baselines import gsr_kernel as gk
-from activetrack.baselines import gsr_restarts
+from activetrack.baselines import gsr_restarts, gsr_separation
 from activetrack.baselines._common import raise_for_status, sensor_modes, sensor_modes_of
 from activetrack.models.objective import is_trace, sensor_information
 from activetrack.solvers._scalar import NO_ROOTS, ROOTS_SIZE, ROOTS_TAG, solve_point
@@ -143,6 +143,9 @@ class GSR:
             (batch) of the latest :meth:`plan` call.
     """
 
+    #: Keeps the team rule ``d_sep`` itself (:mod:`activetrack.baselines.gsr_separation`).
+    keeps_d_sep = True
+
     tol: float = 1e-9
     max_sweeps: int = 100
     restarts: bool = False
@@ -171,7 +174,7 @@ class GSR:
     def plan_with_info(self, problem: PlanningProblem) -> GSRResult | GSRBatchResult:
         """Return GSR's solution with its statistics: a :class:`GSRResult` for a single
         problem, a :class:`GSRBatchResult` for a batched one."""
-        if not problem.is_paper:
+        if not problem.is_paper or gsr_separation.pair_matrix(problem) is not None:
             result = self._plan_numeric(problem)
             self.last_result = result
             return result
@@ -209,12 +212,16 @@ class GSR:
 
     def _plan_numeric(self, problem: PlanningProblem) -> GSRResult | GSRBatchResult:
         """GSR beyond the paper's problem: numerical single-sensor steps
-        (:mod:`activetrack.baselines.gsr_numeric`)."""
+        (:mod:`activetrack.baselines.gsr_numeric`); a kinematics of its own, and the team
+        rule ``d_sep`` (each subproblem keeps the pair conditions with the others' plans,
+        :mod:`activetrack.baselines.gsr_separation`), in command space
+        (:mod:`activetrack.baselines.gsr_command`)."""
         if self.restarts:
             raise ValueError(
                 "restarts=True runs the paper's exact solver from several starts; this problem "
-                "(several targets, other sensor models, uncertain poses or another objective) "
-                "is planned with numerical single-sensor steps, without restarts"
+                "(several targets, other sensor models, uncertain poses, another objective, "
+                "a kinematics of its own or the team rule d_sep) is planned with numerical "
+                "single-sensor steps, without restarts"
             )
         from activetrack.baselines import gsr_numeric  # noqa: PLC0415 (beyond the paper)
 

@@ -1,4 +1,8 @@
-"""GSR's numerical single-sensor step for any kinematics (``PlanningProblem.kinematics``).
+"""GSR's numerical single-sensor step for a kinematics whose action is not a 2-D box.
+
+A kinematics with a 2-D action box (every built-in one) is solved in command space
+(:mod:`activetrack.baselines.gsr_command`: faster, and at least as good); this module is
+the fallback for the others (``PlanningProblem.kinematics``).
 
 The disk's step (:mod:`activetrack.solvers.numeric`) knows the feasible set's circles. A
 sensor whose :class:`activetrack.Kinematics` is not a built-in disk is solved from what
@@ -14,8 +18,8 @@ its kinematics says about its feasible set ``F`` (its reach set minus the ``rho`
    down to ``1e-9`` of the radius.
 
 The result is feasible (every evaluated point comes from the kinematics' boundary, its
-membership test or its projection) and never worse than the best candidate. It is slower
-than the disk's step (a loop over copies in Python), which the built-in disk keeps.
+membership test or its projection) and never worse than the best candidate. It is slow
+(a loop over copies in Python; about 0.4 s per step for a unicycle team of 3).
 """
 
 from __future__ import annotations

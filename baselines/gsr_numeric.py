@@ -21,6 +21,13 @@ absolute terms for an objective that may be negative, the log-determinant), when
 sensor is left to re-solve, or after ``max_sweeps``. A batch is relaxed in one vectorized
 sweep over the copies (copies that have stopped are carried).
 
+A sensor that moves by a kinematics of its own with a 2-D action box (a unicycle, a double
+integrator) is solved over its commands (:mod:`activetrack.baselines.gsr_command`). With the
+team rule ``d_sep`` (``problem.d_sep``) every sensor's subproblem also keeps the world's
+pair conditions with the others' current plans
+(:mod:`activetrack.baselines.gsr_separation`), so the disk is then solved in command space
+too, and the lost sensors' approach below is not taken (it would ignore the rule).
+
 The sweeps change only the base of a sensor's subproblem, so its candidates and its
 information there are prepared once per plan (:func:`activetrack.solvers.numeric.prepare`),
 and a re-solve refines from where the sensor's last solve ended
@@ -31,7 +38,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from activetrack.baselines import gsr_kinematic
+from activetrack.baselines import gsr_command, gsr_kinematic, gsr_separation
 from activetrack.estimation import generic
 from activetrack.kinematics import feasible_set
 from activetrack.kinematics.team import all_disks
@@ -65,7 +72,11 @@ def relax(
     if occ is not None and occ.batched and len(shape) > 1:  # a layout per flattened copy
         occ = occ[np.repeat(np.arange(shape[0]), B // shape[0])]
     custom = problem.kinematics is not None and not all_disks(problem.kinematics)
-    if custom:  # a kinematics of its own: its own feasible sets (baselines.gsr_kinematic)
+    if custom and gsr_command.supports(problem.kinematics):  # warm start in command space
+        s = gsr_command.warm_start(
+            problem.kinematics, gsr_kinematic.states_of(problem, current), current, targets, rho
+        )
+    elif custom:  # a kinematics of its own: its own feasible sets (baselines.gsr_kinematic)
         s = gsr_kinematic.warm_start(problem, current, targets, rho)
     else:
         s = _warm_start(current, r, targets, rho)
@@ -81,7 +92,20 @@ def relax(
     # changed[b, i]: sensor i's subproblem in copy b changed since its last solve (another
     # sensor moved); an unchanged subproblem would give the same answer, so it is skipped.
     changed = free.copy()
-    if custom:
+    # The team rule d_sep: each subproblem keeps the pair conditions with the others' plans.
+    sep = gsr_separation.pair_matrix(problem)
+    if (custom and gsr_command.supports(problem.kinematics)) or (sep is not None and not custom):
+        kin, states = problem.kinematics, gsr_kinematic.states_of(problem, current)
+        if not custom:  # disks: each copy's own radius in the state
+            kin = (gsr_separation.RadiusDisk(),) * M
+            states = np.concatenate([current, r[..., None]], -1)
+        prepared = gsr_command.Prepared(
+            kin, states, targets, rho, _sensor_at(targets, w_d, w_t, pose, det, occ, team),
+            problem.objective,
+            constraints=None if sep is None else gsr_separation.constraints(sep, current, s),
+            compiled=(w_d, w_t) if _built_in(problem, pose, det, occ, team) else None,
+        )  # fmt: skip
+    elif custom:
         one = _one_sensor(targets, w_d, w_t, pose, det, occ, team)
         prepared = gsr_kinematic.Prepared(problem, one, current, targets, rho)
     else:
@@ -129,7 +153,7 @@ def relax(
         nonneg = problem.objective.nonnegative
         scale = before if nonneg else np.maximum(np.abs(before), 1.0)
         active[rows] = (gain > tol * scale) & changed[rows].any(axis=1)
-    if det is not None and (occ is not None or np.any(np.isfinite(det[1]))):
+    if sep is None and det is not None and (occ is not None or np.any(np.isfinite(det[1]))):
         s, value = _approach(problem, s, value, current, r, targets, rho, det, (w_d, w_t, pose),
                              occ)  # fmt: skip
     return s.reshape(*shape, M, 2), value.reshape(shape), sweeps.reshape(shape), warm.reshape(shape)
@@ -267,6 +291,39 @@ def _one_sensor(targets, w_d, w_t, pose, det, occ, objects):
         own = None if objects is None else (objects[i],) * n
         out = _entries(pts[None], targets[[b]], w_d[row], w_t[row], cov, d, layout, own)
         return tuple(x[0].T for x in out)
+
+    return entries
+
+
+def _built_in(problem, pose, det, occ, team) -> bool:
+    """Return whether the information is the built-in models' ``J0`` and the objective the
+    trace (what :mod:`activetrack.baselines.gsr_command_kernel` computes)."""
+    from activetrack.models.objective import is_trace  # noqa: PLC0415
+
+    return (
+        is_trace(problem.objective)
+        and pose is None
+        and det is None
+        and occ is None
+        and (team is None)
+    )
+
+
+def _sensor_at(targets, w_d, w_t, pose, det, occ, objects):
+    """Return ``entries(pts, sub, i)``: sensor ``i``'s entries in copies ``sub`` at points
+    ``pts`` (S, P, 2) about every target, 3 x (S, P, K) (:func:`_entries` with the P points
+    as P copies of the sensor; ``objects`` the sensors' models of one's own, or None)."""
+
+    def entries(pts: FloatArray, sub: np.ndarray, i: int) -> tuple[FloatArray, ...]:
+        S, P = pts.shape[:2]
+        wd = np.broadcast_to(w_d[sub, i][:, None], (S, P))
+        wt = np.broadcast_to(w_t[sub, i][:, None], (S, P))
+        cov = None if pose is None else np.broadcast_to(pose[sub, i][:, None], (S, P, 2, 2))
+        d = None if det is None else tuple(np.broadcast_to(x[sub, i][:, None], (S, P)) for x in det)
+        layout = None if occ is None else occ[sub]
+        own = None if objects is None else (objects[i],) * P
+        out = _entries(pts, targets[sub], wd, wt, cov, d, layout, own)
+        return tuple(np.swapaxes(x, 1, 2) for x in out)
 
     return entries
 

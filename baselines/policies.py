@@ -24,6 +24,12 @@ Example::
 
 Users who need the actions behind an expert's positions (imitation labels) get them from
 :func:`activetrack.kinematics.sensor_motion.actions_to_reach`.
+
+The team rule ``d_sep`` (a problem's ``d_sep``): GSR, GBES and RM keep it in their own
+search (:mod:`activetrack.baselines.gsr_separation`); the plan of any other planner (one
+without ``keeps_d_sep = True``, e.g. the look-ahead) goes through
+:func:`activetrack.baselines.separated.separate` first, so every expert's plan is one the
+world executes as given.
 """
 
 from __future__ import annotations
@@ -61,6 +67,11 @@ class PlannerPolicy:
                 f"planner {self.planner!r} returned shape {nxt.shape}, "
                 f"expected {problem.sensors.shape}"
             )
+        if not getattr(self.planner, "keeps_d_sep", False):
+            from activetrack.baselines import gsr_separation, separated  # noqa: PLC0415
+
+            if gsr_separation.pair_matrix(problem) is not None:
+                nxt = separated.separate(problem, nxt, problem.d_sep)
         return nxt
 
     __call__ = plan

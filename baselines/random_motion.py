@@ -21,6 +21,13 @@ as the disk's sensors do with K > 1 targets: its kinematics'
 :meth:`~activetrack.Kinematics.boundary` at ``radius / 1024``, each point weighted by the
 arc it stands for (:func:`arc_weights`). Its sensors whose feasible set is empty go to
 their kinematics' :meth:`~activetrack.Kinematics.project` (the world's rule).
+
+With the team rule ``d_sep`` (``problem.d_sep``) the draws are filtered, sensor by sensor in
+agent order (:func:`separate_draws`): a drawn point whose straight path would come within
+``d_ij`` of another sensor (the ones before it at their drawn points, the ones after it
+where they stand: the world's rule, :mod:`activetrack.baselines.gsr_separation`) is drawn
+again, with one more uniform, among the points of the boundary of its feasible set whose
+paths keep the rule (:data:`SEP_POINTS` per circle); with none, the sensor stays.
 """
 
 from __future__ import annotations
@@ -28,6 +35,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
+from activetrack.baselines import gsr_separation
 from activetrack.baselines._common import (
     kinematic_boundaries,
     modes_and_arcs,
@@ -35,8 +43,53 @@ from activetrack.baselines._common import (
     sensor_modes,
 )
 from activetrack.kinematics import geometry
+from activetrack.kinematics.separation import segment_distance
 from activetrack.validation import FloatArray
 from activetrack.world.problem import PlanningProblem
+
+#: Points per circle of the candidates a redraw under ``d_sep`` picks from.
+SEP_POINTS = 256
+
+
+def separate_draws(
+    problem: PlanningProblem, plan: FloatArray, d: FloatArray, rng: np.random.Generator
+) -> FloatArray:
+    """Return ``plan`` (``batch + (M, 2)``) with the draws that break the team rule drawn
+    again (module docstring), for the pair distances ``d`` (M, M)."""
+    out = np.array(plan, np.float64)
+    dm = d * (1.0 + gsr_separation.MARGIN)
+    sensors = np.asarray(problem.sensors, np.float64)
+    states = sensors if problem.sensor_states is None else problem.sensor_states
+    rho_all = np.broadcast_to(problem.rho, sensors.shape[:-1])
+    r_all = np.broadcast_to(problem.r, sensors.shape[:-1])
+    ang = 2.0 * np.pi * np.arange(SEP_POINTS) / SEP_POINTS
+    ring = np.stack([np.cos(ang), np.sin(ang)], -1)
+    m = sensors.shape[-2]
+    for b in np.ndindex(sensors.shape[:-2]):
+        old, targets = sensors[b], problem.targets[b]
+        for i in range(m):
+            js = np.array([j for j in range(m) if j != i and d[i, j] > 0.0], dtype=np.int64)
+            obst = np.where((js < i)[:, None], out[b][js], old[js])
+            if np.all(segment_distance(old[i], out[b + (i,)], obst) >= dm[i, js]):
+                continue
+            rho = float(rho_all[b + (i,)])
+            if problem.kinematics is not None:
+                kin = problem.kinematics[i]
+                st = states[b + (i,)][: kin.state_dim]
+                cand = kin.boundary(st, targets, rho, max(float(kin.radius), 1e-300) / SEP_POINTS)
+                cand = cand[kin.feasible(cand, st, targets, rho)]
+            else:
+                r = float(r_all[b + (i,)])
+                cand = [old[i] + r * ring] + [t + rho * (1.0 + 1e-12) * ring for t in targets]
+                cand = np.concatenate(cand)
+                e = cand - old[i]
+                cand = cand[np.hypot(e[:, 0], e[:, 1]) <= r]
+                f = cand[:, None, :] - targets[None]
+                cand = cand[np.all(np.hypot(f[..., 0], f[..., 1]) >= rho, axis=-1)]
+            seg = segment_distance(old[i], cand[:, None, :], obst[None])  # (C, J)
+            cand = cand[np.all(seg >= dm[i, js], axis=-1)]
+            out[b + (i,)] = cand[rng.integers(len(cand))] if len(cand) else old[i]
+    return out
 
 
 class RandomMotion:
@@ -46,12 +99,21 @@ class RandomMotion:
     (see the module docstring).
     """
 
+    #: Keeps the team rule ``d_sep`` itself (:mod:`activetrack.baselines.gsr_separation`).
+    keeps_d_sep = True
+
     def plan(self, problem: PlanningProblem, rng: np.random.Generator) -> FloatArray:
         """Return random feasible next absolute positions, ``batch_shape + (M, 2)``.
 
         Draws exactly one uniform per free sensor from ``rng``, in copy order (row-major
-        over the batch axes), then sensor order.
+        over the batch axes), then sensor order (with ``d_sep``, then one more per redraw).
         """
+        plan = self._draw(problem, rng)
+        d = gsr_separation.pair_matrix(problem)
+        return plan if d is None else separate_draws(problem, plan, d, rng)
+
+    def _draw(self, problem: PlanningProblem, rng: np.random.Generator) -> FloatArray:
+        """Return the draws without the team rule (:meth:`plan`)."""
         targets = problem.targets
         if own_kinematics(problem):  # each sensor's kinematics draws on its boundary of F
             _, out, boundary_of = kinematic_boundaries(problem)

@@ -17,6 +17,11 @@ own mending of a move (:func:`activetrack.kinematics.sensor_motion.move_to`: rea
 
 The wrapped planner keeps its own objective and arithmetic; the pass only moves the
 sensors it must, so a plan that already keeps the separation is returned unchanged.
+
+GSR, GBES and RM keep the rule in their own search when the problem carries ``d_sep``
+(:mod:`activetrack.baselines.gsr_separation`), so they need no wrapper; the experts
+(:class:`activetrack.baselines.policies.PlannerPolicy`) pass the plans of every other
+planner (the look-ahead) through :func:`separate`.
 """
 
 from __future__ import annotations

@@ -65,6 +65,7 @@ KERNEL_MODULES = (
     "activetrack.models._occluder_kernels",
     "activetrack.world._observation_kernels",
     "activetrack.baselines.gsr_kernel",
+    "activetrack.baselines.gsr_command_kernel",
 )
 _PACKAGE = "activetrack"
 # When the kernel modules were imported (they all import this module first): a kernel

@@ -118,6 +118,8 @@ class WorldReaders:
             extra["kinematics"] = self._team.team
             if self._n_motion:  # a heading, a velocity: the kinematics see the whole state
                 extra["sensor_states"] = self.sensor_states(index)
+        if self._sep is not None:  # the team rule d_sep: the planners keep it too
+            extra["d_sep"] = self.scenario.d_sep
         if p.sensor_objects is not None:  # a model of one's own: the planners ask the models
             extra["sensor_objects"] = p.sensor_objects
         if self._limited:  # the planners count each sensor's information at its expected value

@@ -35,7 +35,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from activetrack.estimation import generic
-from activetrack.kinematics import team
+from activetrack.kinematics import separation, team
 from activetrack.linalg2 import inv2
 from activetrack.models import sensor_models
 from activetrack.models.objective import TRACE, Objective, is_trace, total_information
@@ -144,6 +144,8 @@ class PlanningProblem:
             the batch; ``r`` is then each one's radius), or None: the disks of radius ``r``.
         sensor_states: the sensors' states (..., M, S) when a kinematics carries more than the
             position (:func:`activetrack.kinematics.team.checked_states`), or None.
+        d_sep: the team rule's minimum separation (the scenario's field, shared by the batch:
+            :mod:`activetrack.kinematics.separation`), or None: no rule.
     """
 
     prior_cov: FloatArray
@@ -164,6 +166,7 @@ class PlanningProblem:
     sensor_objects: tuple | None = None
     kinematics: tuple | None = None
     sensor_states: FloatArray | None = None
+    d_sep: Any = None
 
     def __post_init__(self) -> None:
         if self.sensor_objects is not None:
@@ -281,6 +284,8 @@ class PlanningProblem:
                 )
         if self.kinematics is not None:
             object.__setattr__(self, "kinematics", team.converted(tuple(self.kinematics), m))
+        if self.d_sep is not None:
+            object.__setattr__(self, "d_sep", separation.converted(self.d_sep, m))
         if self.sensor_states is not None:
             states = team.checked_states(self.sensor_states, sensors, self.kinematics)
             values["sensor_states"], batch_of["sensor_states"] = states, states.shape[:-2]
@@ -347,6 +352,7 @@ class PlanningProblem:
         sensor_objects: tuple | None = None,
         kinematics: tuple | None = None,
         sensor_states: ArrayLike | None = None,
+        d_sep: Any = None,
     ) -> PlanningProblem:
         """Return the problem at ``prediction`` (``prior_cov`` and ``target`` its position
         blocks); the other arguments are the fields of the same names."""
@@ -354,6 +360,7 @@ class PlanningProblem:
             None, None, sensors, r, rho, sigma_d2, sigma_theta2, objective, prediction,
             models, pose_cov, p_detect=p_detect, max_range=max_range, occluders=occluders,
             sensor_objects=sensor_objects, kinematics=kinematics, sensor_states=sensor_states,
+            d_sep=d_sep,
         )  # fmt: skip
 
     @classmethod
@@ -389,7 +396,8 @@ class PlanningProblem:
             occ = type(occ).stack([p.occluders for p in problems])
         arrays: dict[str, Any] = {"multi_target": multi, "occluders": occ}
         for f in fields(cls):
-            if f.name in ("objective", "prediction", "multi_target", "occluders", "kinematics"):
+            if f.name in ("objective", "prediction", "multi_target", "occluders", "kinematics",
+                          "d_sep"):  # fmt: skip
                 continue
             if f.name == "sensor_objects":
                 if any(p.sensor_objects != problems[0].sensor_objects for p in problems):
@@ -413,10 +421,11 @@ class PlanningProblem:
                 raise ValueError("problems must all carry a prediction, or none")
             per_target = [stacked([q[k] for q in all_preds]) for k in range(len(all_preds[0]))]
             prediction = tuple(per_target) if multi else per_target[0]
-        kin = problems[0].kinematics
-        if any(p.kinematics != kin for p in problems):
-            raise ValueError("problems must all have the same kinematics")
-        return cls(**arrays, objective=objective, prediction=prediction, kinematics=kin)
+        kin, d_sep = problems[0].kinematics, problems[0].d_sep
+        if any(p.kinematics != kin or p.d_sep != d_sep for p in problems):
+            raise ValueError("problems must all have the same kinematics and d_sep")
+        return cls(**arrays, objective=objective, prediction=prediction, kinematics=kin,
+                   d_sep=d_sep)  # fmt: skip
 
     def __getitem__(self, index: Any) -> PlanningProblem:
         """Return the problem(s) at ``index`` of the batch axes (``problem[i]``: copy ``i``)."""
@@ -433,9 +442,13 @@ class PlanningProblem:
                     value = indexed(value, index)
             elif f.name == "occluders" and value is not None:  # the layouts of the first axis
                 value = value[index[0] if isinstance(index, tuple) else index]
-            elif f.name not in ("objective", "multi_target", "sensor_objects", "kinematics") and (
-                value is not None
-            ):
+            elif f.name not in (
+                "objective",
+                "multi_target",
+                "sensor_objects",
+                "kinematics",
+                "d_sep",
+            ) and (value is not None):
                 value = np.array(value[index])
                 value.setflags(write=False)
             values[f.name] = value
