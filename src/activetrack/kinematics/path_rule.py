@@ -1,0 +1,239 @@
+"""The world's team rules along the paths sensors actually travel: :class:`PathRule`.
+
+The paper's disks, with known positions and no occluders, keep the separation ``d_sep`` by
+:class:`activetrack.kinematics.separation.Separation` (straight moves, closed forms). Every
+other team goes through this rule, the same rule along each sensor's own path
+(:mod:`activetrack.kinematics.paths`: a unicycle's arc, a double integrator's parabola, a
+disk's segment): any :class:`~activetrack.Kinematics`, with occluders, with uncertain
+position fixes (``pose_cov``), and with occluders alone (``d_sep = 0``) for a kinematics
+whose moves are not straight.
+
+**The rule (sequential moves in agent order, along the actual paths).** After the usual
+move (each sensor's kinematics clips its wanted point and moves it out of the ``rho``
+disks) gives each sensor a wanted end point ``w_i`` (reachable, so with a command and a
+path), the sensors move one after the other, 0 to M-1. When sensor i moves, sensors
+0..i-1 stand at their new positions and i+1..M-1 at their old ones. A reachable point
+``p`` is *feasible* for i when the path i travels to it (:func:`~activetrack.kinematics.
+paths.path`, checked between its samples too: :func:`~activetrack.kinematics.paths.slack`,
+:func:`~activetrack.kinematics.paths.hull_segments`):
+
+- keeps ``d_ij`` from every other sensor where it stands (so no two sensors are closer
+  than ``d_ij`` after the step, and none passes through another within it);
+- neither enters nor crosses an occluder (:func:`activetrack.models.occluders.blocked` of
+  the path's pieces);
+- ends at least ``rho`` from every predicted target.
+
+Sensor i goes to ``w_i`` (with the state of its own move) when it is feasible; else to
+the feasible candidate nearest to ``w_i`` (the first in this order on ties) among: its
+position when the kinematics can stay (a disk, a unicycle with ``v_min = 0``), the points
+``o_i + f (w_i - o_i)`` for ``f = 1/32 .. 31/32`` clipped to the reach set (for a
+unicycle: the same turn at a lower speed), the end points of a 15 x 15 grid of the agent's
+action box (:meth:`~activetrack.Kinematics.apply`), and those of 64 points on each ``rho``
+circle the sensor reaches. Every candidate is a point the kinematics reaches; the sensor's
+state after the step is :meth:`~activetrack.Kinematics.advance` of the
+:meth:`~activetrack.Kinematics.command` reaching it (its position exactly the point), so
+heading and velocity stay those of a move the robot can make. When no candidate is
+feasible it takes the candidate that keeps the separation and the occluders and lies
+deepest out of the ``rho`` disks, and counts as ``stuck``.
+
+**Staying is always safe.** Every sensor's path was checked against the old positions of
+the sensors after it, and a team starts separated, outside the occluders; so standing
+still keeps every rule but ``rho``. A kinematics that can stay has its position among the
+candidates. **A robot that cannot stop** (a unicycle with ``v_min > 0``, a fixed wing; a
+double integrator moving faster than it can brake in one step), with no candidate that
+keeps the separation and the occluders, is *held* where it is: its position does not
+change and its state beyond the position is kept, except a double integrator's velocity,
+set to zero (an emergency stop beyond its limits: the one move that always keeps the team
+safe), and it counts as ``stuck``. Every step is thus deterministic.
+
+**Uncertain positions (``pose_cov``).** The separation and the occluders are physical:
+the rule acts on the TRUE positions. The agent's move is a displacement from where it
+believes it is (its fix); the true sensor makes the same displacement (the same path,
+shifted), and the rule checks that true path against the other sensors' true positions
+and the occluders. The ``rho`` disks are about the predicted targets, in the frame the
+sensor plans in: the end point's believed position (true plus the fix's error) keeps
+``rho``. A move the rule changes changes the believed position by the same displacement.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from activetrack.kinematics.base import TOL
+from activetrack.kinematics.double_integrator import DoubleIntegrator
+from activetrack.kinematics.paths import N_PATH, hull_segments, path, point_distances
+from activetrack.validation import FloatArray
+
+#: The fallback candidates: fractions of the wanted move, the action grid per axis, and
+#: the points per ``rho`` circle.
+N_FRACTIONS = 32
+N_GRID = 15
+N_RING = 64
+_RING_OUT = 1e-9
+_CHUNK = 32  # candidates checked at a time  # the rho circles' points aim this (relative) outside
+
+
+def restate(kin: Any, points: FloatArray, state: FloatArray) -> FloatArray:
+    """Return the state (..., ``state_dim``) after ``kin`` moves from ``state`` to the
+    reachable ``points`` (..., 2): ``advance(command(points))``, the position exactly
+    ``points``."""
+    st = np.asarray(state, np.float64)
+    q = np.asarray(points, np.float64)
+    out = np.array(np.broadcast_to(st, np.broadcast_shapes(st.shape, q.shape[:-1] + st.shape[-1:])))
+    if kin.state_dim > 2:
+        out[...] = kin.advance(kin.command(q, st), st)
+    out[..., :2] = q
+    return out
+
+
+def held(kin: Any, state: FloatArray) -> FloatArray:
+    """Return the state of a sensor held where it is (module docstring): ``state`` with a
+    double integrator's velocity zero."""
+    out = np.array(state, np.float64)
+    if isinstance(kin, DoubleIntegrator):
+        out[..., 2:4] = 0.0
+    return out
+
+
+class PathRule:
+    """The world's rule (module docstring) for a team of kinematics ``team`` (M) and pair
+    distances ``d`` (M, M) (zeros: the occluders alone)."""
+
+    def __init__(self, team: tuple[Any, ...], d: FloatArray, n: int = N_PATH) -> None:
+        self.team = tuple(team)
+        m = len(self.team)
+        self.d = np.zeros((m, m)) if d is None else np.asarray(d, np.float64)
+        self.n = n
+        self._others = [np.array([j for j in range(m) if j != i], dtype=np.int64) for i in range(m)]
+        self._frac = np.arange(1, N_FRACTIONS)[:, None] / N_FRACTIONS
+        ang = 2.0 * np.pi * np.arange(N_RING) / N_RING
+        self._dirs = np.stack([np.cos(ang), np.sin(ang)], -1)
+        self._grids = []
+        for kin in self.team:
+            lo, hi = np.asarray(kin.action_low, float), np.asarray(kin.action_high, float)
+            axes = (np.linspace(lo[k], hi[k], N_GRID) for k in range(2))
+            g0, g1 = np.meshgrid(*axes)
+            self._grids.append(np.stack([g0.ravel(), g1.ravel()], -1))
+
+    def resolve(
+        self, old: FloatArray, want: FloatArray, states: FloatArray, nxt: FloatArray,
+        targets: FloatArray, rho: FloatArray, shift: FloatArray | None = None, occ: Any = None,
+    ) -> tuple[FloatArray, FloatArray, FloatArray, np.ndarray, np.ndarray]:  # fmt: skip
+        """Return ``(new, next_states, collisions, stuck, changed)`` of copies (B) of the
+        team: from the TRUE positions ``old`` (B, M, 2) and states ``states`` (B, M, S),
+        the wanted reachable end points ``want`` (B, M, 2) (true frame) and the states
+        ``nxt`` (B, M, S) after them, the predicted targets ``targets`` (B, K, 2) (believed
+        frame), ``rho`` (M,), the fixes' errors ``shift`` (B, M, 2) (believed minus true;
+        None: known positions) and the occluders ``occ`` (None: none; batched: one layout
+        per copy): the positions (true frame) and states after the rule, the pairs of
+        ``want`` closer than ``d`` (B,), the sensors that found no feasible point (B, M)
+        and those the rule moved elsewhere than ``want`` (B, M)."""
+        from activetrack.kinematics.separation import violations  # noqa: PLC0415
+
+        old, want = np.asarray(old, np.float64), np.asarray(want, np.float64)
+        states = np.asarray(states, np.float64)
+        targets = np.asarray(targets, np.float64)
+        b_n, m = want.shape[:2]
+        collisions = violations(want, self.d)
+        new, nxt = old.copy(), np.array(nxt, np.float64)
+        stuck = np.zeros((b_n, m), bool)
+        changed = np.zeros((b_n, m), bool)
+        rho = np.broadcast_to(np.asarray(rho, np.float64), (m,))
+        for i, kin in enumerate(self.team):
+            js = self._others[i]
+            st = states[:, i, : kin.state_dim]
+            obst = np.where((js < i)[None, :, None], new[:, js], old[:, js])
+            tg = targets if shift is None else targets - shift[:, i, None, :]
+            sep, clear_occ, clear = self._check(
+                kin, st, want[:, i, None], obst, self.d[i, js], tg, float(rho[i]), occ
+            )
+            ok = (sep & clear_occ & (clear >= 0.0))[:, 0]
+            new[ok, i] = want[ok, i]
+            for b in np.flatnonzero(~ok):  # (the few moves that break a rule)
+                occ_b = occ[int(b)] if occ is not None and occ.batched else occ
+                pt, state, stuck[b, i] = self._fallback(
+                    kin, i, st[b], want[b, i], obst[b], self.d[i, js], tg[b], float(rho[i]), occ_b
+                )
+                new[b, i] = pt
+                nxt[b, i, : kin.state_dim] = state
+                changed[b, i] = True
+        return new, nxt, collisions, stuck, changed
+
+    def _check(
+        self, kin: Any, st: FloatArray, pts: FloatArray, obst: FloatArray, dij: FloatArray,
+        tg: FloatArray, rho: float, occ: Any,
+    ) -> tuple[np.ndarray, np.ndarray, FloatArray]:  # fmt: skip
+        """Return ``(separated, clear of occluders, rho clearance)`` (B, C) of the moves of
+        a sensor of states ``st`` (B, S) to the reachable ``pts`` (B, C, 2): its path keeps
+        ``dij`` (J,) from ``obst`` (B, J, 2); meets no occluder; and the end point's
+        distance to the nearest of ``tg`` (B, K, 2) less ``rho`` (with the tolerance; inf
+        without ``rho``)."""
+        sts = st[:, None, :]
+        keep = dij > 0.0
+        sep = np.ones(pts.shape[:-1], bool)
+        if np.any(keep):
+            samples = path(kin, pts, sts, self.n)  # (B, C, n + 1, 2)
+            dist = point_distances(samples, obst[:, None, keep])  # (B, C, J')
+            sep = np.all(dist >= dij[keep], axis=-1)
+        clear_occ = np.ones(pts.shape[:-1], bool)
+        if occ is not None:
+            from activetrack.models import occluders  # noqa: PLC0415
+
+            a, b = hull_segments(kin, pts, sts, self.n)  # (B, C, 3n, 2)
+            clear_occ = ~np.any(occluders.blocked(a, b, occ), axis=-1)
+        clear = np.full(pts.shape[:-1], np.inf)
+        if rho > 0.0:
+            e = pts[:, :, None, :] - tg[:, None, :, :]
+            clear = np.min(np.hypot(e[..., 0], e[..., 1]), axis=-1) - rho * (1.0 - TOL)
+        return sep, clear_occ, clear
+
+    def _fallback(
+        self, kin: Any, i: int, st: FloatArray, w: FloatArray, obst: FloatArray,
+        dij: FloatArray, tg: FloatArray, rho: float, occ: Any,
+    ) -> tuple[FloatArray, FloatArray, bool]:  # fmt: skip
+        """Return ``(point, state, stuck)`` of sensor ``i`` of state ``st`` (S,) wanting
+        ``w`` (2,): the feasible candidate nearest ``w``; else the safe one deepest out
+        of the ``rho`` disks; else held (module docstring)."""
+        o = st[:2]
+        cands = []
+        if kin.reaches(o, st):
+            cands.append(o[None])
+        cands.append(_clipped(kin, o + self._frac * (w - o), st))
+        grid = self._grids[i]
+        cands.append(kin.apply(grid, np.broadcast_to(st, (len(grid), len(st)))))
+        if rho > 0.0:  # (the reachable ones: the grid covers the reach set's edge)
+            ring = (tg[:, None, :] + rho * (1.0 + _RING_OUT) * self._dirs).reshape(-1, 2)
+            cands.append(ring[kin.reaches(ring, np.broadcast_to(st, (len(ring), len(st))))])
+        c = np.concatenate(cands)
+        c = c[np.all(np.isfinite(c), axis=-1)]
+        # Nearest first (a stable sort keeps the order on ties), in chunks: the first
+        # feasible one is the answer; with none, every candidate's clearance is needed.
+        c = c[np.argsort(np.hypot(*(c - w).T), kind="stable")]
+        safe, clear = np.zeros(len(c), bool), np.full(len(c), -np.inf)
+        for lo in range(0, len(c), _CHUNK):
+            part = c[None, lo : lo + _CHUNK]
+            sep, clear_occ, cl = (
+                x[0] for x in self._check(kin, st[None], part, obst[None], dij, tg[None], rho, occ)
+            )
+            safe[lo : lo + _CHUNK], clear[lo : lo + _CHUNK] = sep & clear_occ, cl
+            feasible = safe[lo : lo + _CHUNK] & (cl >= 0.0)
+            if np.any(feasible):
+                pt = c[lo + int(np.argmax(feasible))]
+                return pt, restate(kin, pt, st), False
+        if np.any(safe):
+            idx = np.flatnonzero(safe)
+            pt = c[idx[int(np.argmax(clear[idx]))]]
+            return pt, restate(kin, pt, st), True
+        return o.copy(), held(kin, st), True
+
+
+def _clipped(kin: Any, points: FloatArray, st: FloatArray) -> FloatArray:
+    """Return ``points`` (C, 2), each one ``kin`` does not reach from ``st`` clipped."""
+    full = np.broadcast_to(st, (len(points), len(st)))
+    out = np.array(points)
+    far = ~kin.reaches(points, full)
+    if np.any(far):
+        out[far] = kin.clip(points[far], full[far])
+    return out
