@@ -26,9 +26,9 @@ paths.path`, checked between its samples too: :func:`~activetrack.kinematics.pat
 Sensor i goes to ``w_i`` (with the state of its own move) when it is feasible; else to
 the feasible candidate nearest to ``w_i`` (the first in this order on ties) among: its
 position when the kinematics can stay (a disk, a unicycle with ``v_min = 0``), the points
-``o_i + f (w_i - o_i)`` for ``f = 1/32 .. 31/32`` clipped to the reach set (for a
-unicycle: the same turn at a lower speed), the end points of a 15 x 15 grid of the agent's
-action box (:meth:`~activetrack.Kinematics.apply`), and those of 64 points on each ``rho``
+``o_i + f (w_i - o_i)`` for ``f = 1/16 .. 15/16`` clipped to the reach set (for a
+unicycle: the same turn at a lower speed), the end points of a 9 x 9 grid of the agent's
+action box (:meth:`~activetrack.Kinematics.apply`), and those of 32 points on each ``rho``
 circle the sensor reaches. Every candidate is a point the kinematics reaches; the sensor's
 state after the step is :meth:`~activetrack.Kinematics.advance` of the
 :meth:`~activetrack.Kinematics.command` reaching it (its position exactly the point), so
@@ -63,16 +63,16 @@ import numpy as np
 
 from activetrack.kinematics.base import TOL
 from activetrack.kinematics.double_integrator import DoubleIntegrator
-from activetrack.kinematics.paths import N_PATH, hull_segments, path, point_distances
+from activetrack.kinematics.paths import N_PATH, hull_of, path, point_distances
 from activetrack.validation import FloatArray
 
 #: The fallback candidates: fractions of the wanted move, the action grid per axis, and
 #: the points per ``rho`` circle.
-N_FRACTIONS = 32
-N_GRID = 15
-N_RING = 64
-_RING_OUT = 1e-9
-_CHUNK = 32  # candidates checked at a time  # the rho circles' points aim this (relative) outside
+N_FRACTIONS = 16
+N_GRID = 9
+N_RING = 32
+_RING_OUT = 1e-9  # the rho circles' points aim this (relative) outside
+_CHUNK = 16  # the nearest candidates checked first
 
 
 def restate(kin: Any, points: FloatArray, state: FloatArray) -> FloatArray:
@@ -165,28 +165,35 @@ class PathRule:
         self, kin: Any, st: FloatArray, pts: FloatArray, obst: FloatArray, dij: FloatArray,
         tg: FloatArray, rho: float, occ: Any,
     ) -> tuple[np.ndarray, np.ndarray, FloatArray]:  # fmt: skip
-        """Return ``(separated, clear of occluders, rho clearance)`` (B, C) of the moves of
-        a sensor of states ``st`` (B, S) to the reachable ``pts`` (B, C, 2): its path keeps
-        ``dij`` (J,) from ``obst`` (B, J, 2); meets no occluder; and the end point's
-        distance to the nearest of ``tg`` (B, K, 2) less ``rho`` (with the tolerance; inf
-        without ``rho``)."""
+        """Return ``(separated, clear of occluders (where separated), rho clearance)``
+        (B, C) of the moves of a sensor of states ``st`` (B, S) to the reachable ``pts``
+        (B, C, 2): its path keeps ``dij`` (J,) from ``obst`` (B, J, 2); meets no occluder;
+        and the end point's distance to the nearest of ``tg`` (B, K, 2) less ``rho`` (with
+        the tolerance; inf without ``rho``)."""
         sts = st[:, None, :]
         keep = dij > 0.0
-        sep = np.ones(pts.shape[:-1], bool)
-        if np.any(keep):
-            samples = path(kin, pts, sts, self.n)  # (B, C, n + 1, 2)
-            dist = point_distances(samples, obst[:, None, keep])  # (B, C, J')
-            sep = np.all(dist >= dij[keep], axis=-1)
-        clear_occ = np.ones(pts.shape[:-1], bool)
-        if occ is not None:
-            from activetrack.models import occluders  # noqa: PLC0415
-
-            a, b = hull_segments(kin, pts, sts, self.n)  # (B, C, 3n, 2)
-            clear_occ = ~np.any(occluders.blocked(a, b, occ), axis=-1)
-        clear = np.full(pts.shape[:-1], np.inf)
+        shape = pts.shape[:-1]
+        clear = np.full(shape, np.inf)
         if rho > 0.0:
             e = pts[:, :, None, :] - tg[:, None, :, :]
             clear = np.min(np.hypot(e[..., 0], e[..., 1]), axis=-1) - rho * (1.0 - TOL)
+        if not np.any(keep) and occ is None:
+            return np.ones(shape, bool), np.ones(shape, bool), clear
+        fine = path(kin, pts, sts, 2 * self.n)  # (B, C, 2n + 1, 2)
+        sep = np.ones(shape, bool)
+        if np.any(keep):
+            dist = point_distances(fine[..., ::2, :], obst[:, None, keep])  # (B, C, J')
+            sep = np.all(dist >= dij[keep], axis=-1)
+        clear_occ = np.ones(shape, bool)
+        if occ is not None:
+            from activetrack.models import occluders  # noqa: PLC0415
+
+            a, b = hull_of(fine)  # (B, C, 3n, 2)
+            if occ.batched:  # (the layout axis: every copy)
+                clear_occ = ~np.any(occluders.blocked(a, b, occ), axis=-1)
+            else:  # the separated moves alone
+                clear_occ = np.zeros(shape, bool)
+                clear_occ[sep] = ~np.any(occluders.blocked(a[sep], b[sep], occ), axis=-1)
         return sep, clear_occ, clear
 
     def _fallback(
@@ -212,13 +219,13 @@ class PathRule:
         # feasible one is the answer; with none, every candidate's clearance is needed.
         c = c[np.argsort(np.hypot(*(c - w).T), kind="stable")]
         safe, clear = np.zeros(len(c), bool), np.full(len(c), -np.inf)
-        for lo in range(0, len(c), _CHUNK):
-            part = c[None, lo : lo + _CHUNK]
+        for lo, hi in ((0, _CHUNK), (_CHUNK, len(c))):
+            part = c[None, lo:hi]
             sep, clear_occ, cl = (
                 x[0] for x in self._check(kin, st[None], part, obst[None], dij, tg[None], rho, occ)
             )
-            safe[lo : lo + _CHUNK], clear[lo : lo + _CHUNK] = sep & clear_occ, cl
-            feasible = safe[lo : lo + _CHUNK] & (cl >= 0.0)
+            safe[lo:hi], clear[lo:hi] = sep & clear_occ, cl
+            feasible = safe[lo:hi] & (cl >= 0.0)
             if np.any(feasible):
                 pt = c[lo + int(np.argmax(feasible))]
                 return pt, restate(kin, pt, st), False

@@ -90,7 +90,12 @@ def slack(samples: FloatArray) -> FloatArray:
 def hull_segments(kin: Any, points: FloatArray, state: FloatArray, n: int = N_PATH):
     """Return ``(a, b)`` (..., 3 n, 2): segments whose union with no occluder crossing
     them means the path (:func:`path`) meets no occluder (module docstring)."""
-    fine = path(kin, points, state, 2 * n)
+    return hull_of(path(kin, points, state, 2 * n))
+
+
+def hull_of(fine: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Return :func:`hull_segments` from the path sampled at ``2 n + 1`` instants (the
+    pieces' ends at the even ones, their midpoints at the odd ones)."""
     p, m = fine[..., ::2, :], fine[..., 1::2, :]
     c = 2.0 * m - 0.5 * (p[..., :-1, :] + p[..., 1:, :])
     a = np.concatenate([p[..., :-1, :], p[..., :-1, :], c], -2)

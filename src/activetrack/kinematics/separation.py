@@ -23,6 +23,11 @@ candidate that keeps the separation and lies deepest out of the ``rho`` disks (i
 position is one), and counts as ``stuck``. Every step is thus deterministic, and after it
 no two sensors are closer than their ``d_ij``; a sensor inside a ``rho`` disk after a
 step is one the world reports stuck.
+
+This closed form is the rule of the paper's disks with known positions and no occluders.
+Every other team (a unicycle, a double integrator, any kinematics; occluders; position
+fixes with noise) keeps the same rule along each sensor's actual path, on the true
+positions: :mod:`activetrack.kinematics.path_rule`.
 """
 
 from __future__ import annotations

@@ -14,16 +14,20 @@ entries zero-padded), and:
   states made of the position fixes and ``motion``: the new state is
   :meth:`~activetrack.Kinematics.advance` of the agent's action, or of the
   :meth:`~activetrack.Kinematics.command` of the point the sensor went to when the move was
-  clipped, projected out of a ``rho`` disk or asked as an absolute position; a move an
-  occluder stopped short keeps the occluder rule's position, and its state beyond the
-  position is that of the command reaching the nearest reachable point to it;
+  clipped, projected out of a ``rho`` disk or asked as an absolute position; among
+  occluders, a move whose path (the arc, the parabola) meets one goes to another point
+  the sensor reaches, by the rule of :mod:`activetrack.kinematics.path_rule` (its state
+  that of the command reaching it);
 - **readers**: :meth:`MotionState.sensor_states` (positions and ``motion`` together), the
   planning problem's ``sensor_states``, and the agents' observations and the global state,
   which end with each sensor's :meth:`~activetrack.Kinematics.features` (the heading as
   ``(cos, sin)``, the velocity over the top speed; :mod:`activetrack.world.observation`).
 
-With a minimum separation (``d_sep > 0``) the moves then go through the team rule
-(:class:`activetrack.kinematics.separation.Separation`); the world keeps per copy the
+With a minimum separation (``d_sep > 0``) the moves then go through the team rule: the
+disks' closed form (:class:`activetrack.kinematics.separation.Separation`) with known
+positions and no occluders, else the same rule along each sensor's actual path, on the
+TRUE positions (:class:`activetrack.kinematics.path_rule.PathRule`: any kinematics,
+occluders, ``pose_cov``); the world keeps per copy the
 step's ``collisions`` (pairs of wanted points closer than their distance, before the
 rule), their episode count ``n_collisions``, the sensors the rule kept in place for want
 of a feasible point (``n_stuck``) and the smallest pairwise distance after the step
