@@ -147,6 +147,7 @@ class Checker:
         self.rho = np.broadcast_to(world.params.rho, (self.m,))
         self.rects = _rectangles(world)
         self.steps = self.stuck = self.changed = self.trapped = self.collisions = 0
+        self.timed = 0
 
     def step(self, act, absolute=False):
         w = self.world
@@ -183,6 +184,11 @@ class Checker:
         eye = np.where(np.eye(m, dtype=bool), np.inf, 0.0)
         near = np.min(np.hypot(f[..., 0], f[..., 1]), axis=2) + eye
         assert np.all(near >= self.d * (1 - RTOL)), np.min(near - self.d)
+        # Counted, not asserted (the rule is sequential): pairs whose paths come within
+        # d_ij at the same instant of the step.
+        g = paths[:, :, None] - paths[:, None]  # (N, M, M, S, 2)
+        same = np.min(np.hypot(g[..., 0], g[..., 1]), axis=-1) + eye
+        self.timed += int(np.count_nonzero(np.triu(same < self.d * (1 - RTOL), 1)))
         # Never inside a building, anywhere along the path (point in rectangle).
         for x0, y0, x1, y1 in self.rects:
             eps = 1e-9 * max(1.0, abs(x0), abs(x1), abs(y0), abs(y1))

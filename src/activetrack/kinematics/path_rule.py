@@ -42,9 +42,11 @@ still keeps every rule but ``rho``. A kinematics that can stay has its position 
 candidates. **A robot that cannot stop** (a unicycle with ``v_min > 0``, a fixed wing; a
 double integrator moving faster than it can brake in one step), with no candidate that
 keeps the separation and the occluders, is *held* where it is: its position does not
-change and its state beyond the position is kept, except a double integrator's velocity,
-set to zero (an emergency stop beyond its limits: the one move that always keeps the team
-safe), and it counts as ``stuck``. Every step is thus deterministic.
+change (an emergency stop beyond its limits, for a fixed wing a loiter too tight to
+matter at this scale: the one move that always keeps the team safe); a unicycle's heading
+turns as its wanted move turns (so a robot facing a wall or a neighbour can come to face
+a way out), a double integrator's velocity is set to zero, any other state beyond the
+position is kept; it counts as ``stuck``. Every step is thus deterministic.
 
 **Uncertain positions (``pose_cov``).** The separation and the occluders are physical:
 the rule acts on the TRUE positions. The agent's move is a displacement from where it
@@ -64,6 +66,7 @@ import numpy as np
 from activetrack.kinematics.base import TOL
 from activetrack.kinematics.double_integrator import DoubleIntegrator
 from activetrack.kinematics.paths import N_PATH, hull_of, path, point_distances
+from activetrack.kinematics.unicycle import Unicycle
 from activetrack.validation import FloatArray
 
 #: The fallback candidates: fractions of the wanted move, the action grid per axis, and
@@ -88,12 +91,15 @@ def restate(kin: Any, points: FloatArray, state: FloatArray) -> FloatArray:
     return out
 
 
-def held(kin: Any, state: FloatArray) -> FloatArray:
+def held(kin: Any, state: FloatArray, wanted: FloatArray) -> FloatArray:
     """Return the state of a sensor held where it is (module docstring): ``state`` with a
-    double integrator's velocity zero."""
+    double integrator's velocity zero, and a unicycle's heading that of its ``wanted``
+    move's state (it turns as asked, so it can come to face a way out)."""
     out = np.array(state, np.float64)
     if isinstance(kin, DoubleIntegrator):
         out[..., 2:4] = 0.0
+    elif isinstance(kin, Unicycle):
+        out[..., 2] = np.asarray(wanted, np.float64)[..., 2]
     return out
 
 
@@ -156,6 +162,8 @@ class PathRule:
                 pt, state, stuck[b, i] = self._fallback(
                     kin, i, st[b], want[b, i], obst[b], self.d[i, js], tg[b], float(rho[i]), occ_b
                 )
+                if stuck[b, i] and state is None:  # held (module docstring)
+                    state = held(kin, st[b], nxt[b, i, : kin.state_dim])
                 new[b, i] = pt
                 nxt[b, i, : kin.state_dim] = state
                 changed[b, i] = True
@@ -202,7 +210,7 @@ class PathRule:
     ) -> tuple[FloatArray, FloatArray, bool]:  # fmt: skip
         """Return ``(point, state, stuck)`` of sensor ``i`` of state ``st`` (S,) wanting
         ``w`` (2,): the feasible candidate nearest ``w``; else the safe one deepest out
-        of the ``rho`` disks; else held (module docstring)."""
+        of the ``rho`` disks; else its position and None (held: module docstring)."""
         o = st[:2]
         cands = []
         if kin.reaches(o, st):
@@ -233,7 +241,7 @@ class PathRule:
             idx = np.flatnonzero(safe)
             pt = c[idx[int(np.argmax(clear[idx]))]]
             return pt, restate(kin, pt, st), True
-        return o.copy(), held(kin, st), True
+        return o.copy(), None, True
 
 
 def _clipped(kin: Any, points: FloatArray, st: FloatArray) -> FloatArray:
