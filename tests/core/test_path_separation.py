@@ -258,7 +258,59 @@ def test_ten_thousand_random_steps_keep_the_team_rules(name, kw, copies, steps):
     ids=["pose_cov", "double_integrator", "fixed_wing", "unicycle_pose_occluder"],
 )
 def test_every_kinematics_with_pose_noise_and_occluders(kw):
-    _random_run(make_scenario("paper", **kw), 40, 50, seed=1)
+    _random_run(make_scenario("paper", **kw), 20, 50, seed=1)
+
+
+@pytest.mark.parametrize("kin", [Unicycle(0.0, 10.0, 8.0, 0.1), DoubleIntegrator(30.0, 10.0, 0.1)])
+def test_sampled_paths_and_their_bounds(kin):
+    """The rule's sampled path against RK4 of the command, and the bound between samples
+    (and the occluder hull) against a dense sampling of the same motion."""
+    from activetrack.kinematics.paths import hull_segments, path, slack  # noqa: PLC0415
+    from activetrack.kinematics.separation import segment_distance  # noqa: PLC0415
+
+    rng = np.random.default_rng(3)
+    m = 200
+    st = np.zeros((m, kin.state_dim))
+    st[:, :2] = rng.uniform(-5, 5, (m, 2))
+    if isinstance(kin, Unicycle):
+        st[:, 2] = rng.uniform(-np.pi, np.pi, m)
+    else:
+        st[:, 2:4] = rng.uniform(-1, 1, (m, 2)) * 5.0
+    ends = kin.apply(rng.uniform(-1, 1, (m, 2)), st)
+    nxt = kin.advance(kin.command(ends, st), st)
+    if isinstance(kin, DoubleIntegrator):
+        nxt[:, :2] = ends
+        nxt[:, 2:] = 2.0 * (ends - st[:, :2]) / kin.dt - st[:, 2:]
+    else:
+        nxt[:, :2] = ends
+    dense, ok = _driven(kin, kin.dt, st, nxt)  # RK4, 200 steps
+    assert np.all(ok)
+    coarse = path(kin, ends, st, 8)
+    np.testing.assert_allclose(coarse, dense[:, ::25], atol=1e-9)
+    # Every dense point lies within the slack of the coarse polyline (at its own piece).
+    a, b = coarse[:, :-1], coarse[:, 1:]
+    piece = np.minimum(np.arange(N_SAMPLES + 1) // 25, 7)
+    gap = segment_distance(a[:, piece], b[:, piece], dense)
+    sl = slack(coarse)
+    assert np.all(gap <= sl[:, None] + 1e-12) and np.max(gap / sl[:, None]) > 0.5
+    # ...and inside the triangle of its piece's hull segments (its three sides' union).
+    ha, hb = hull_segments(kin, ends, st, 8)  # (m, 24, 2): chords, then the two sides
+    c = hb[:, 8:16]  # the control points
+    tri = np.stack([a[:, piece], b[:, piece], c[:, piece]], -2)  # (m, S, 3, 2)
+
+    def cross(o, p, q):
+        return (p[..., 0] - o[..., 0]) * (q[..., 1] - o[..., 1]) - (p[..., 1] - o[..., 1]) * (
+            q[..., 0] - o[..., 0]
+        )
+
+    s1 = cross(tri[..., 0, :], tri[..., 1, :], dense)
+    s2 = cross(tri[..., 1, :], tri[..., 2, :], dense)
+    s3 = cross(tri[..., 2, :], tri[..., 0, :], dense)
+    tol = 1e-9
+    inside = ((s1 >= -tol) & (s2 >= -tol) & (s3 >= -tol)) | (
+        (s1 <= tol) & (s2 <= tol) & (s3 <= tol)
+    )
+    assert np.all(inside)
 
 
 def test_urban_fixed_wing_and_double_integrator():
