@@ -23,6 +23,10 @@ paths.path`, checked between its samples too: :func:`~activetrack.kinematics.pat
   the path's pieces);
 - ends at least ``rho`` from every predicted target.
 
+(As the disks' rule, this is the sequential reading of the step: each path is checked
+against the others' positions where they stand, not against their own paths at the same
+instant; sensors that moved truly simultaneously could pass closer within a step.)
+
 Sensor i goes to ``w_i`` (with the state of its own move) when it is feasible; else to
 the feasible candidate nearest to ``w_i`` (the first in this order on ties) among: its
 position when the kinematics can stay (a disk, a unicycle with ``v_min = 0``), the points
