@@ -79,7 +79,6 @@ N_FRACTIONS = 16
 N_GRID = 9
 N_RING = 32
 _RING_OUT = 1e-9  # the rho circles' points aim this (relative) outside
-_CHUNK = 16  # the nearest candidates checked first
 
 
 def restate(kin: Any, points: FloatArray, state: FloatArray) -> FloatArray:
@@ -161,16 +160,16 @@ class PathRule:
             )
             ok = (sep & clear_occ & (clear >= 0.0))[:, 0]
             new[ok, i] = want[ok, i]
-            for b in np.flatnonzero(~ok):  # (the few moves that break a rule)
-                occ_b = occ[int(b)] if occ is not None and occ.batched else occ
-                pt, state, stuck[b, i] = self._fallback(
-                    kin, i, st[b], want[b, i], obst[b], self.d[i, js], tg[b], float(rho[i]), occ_b
-                )
-                if stuck[b, i] and state is None:  # held (module docstring)
-                    state = held(kin, st[b], nxt[b, i, : kin.state_dim])
-                new[b, i] = pt
-                nxt[b, i, : kin.state_dim] = state
-                changed[b, i] = True
+            bad = np.flatnonzero(~ok)  # (the few moves that break a rule)
+            if bad.size:
+                occ_b = occ[bad] if occ is not None and occ.batched else occ
+                pt, state, stuck[bad, i] = self._fallback(
+                    kin, i, st[bad], want[bad, i], obst[bad], self.d[i, js], tg[bad],
+                    float(rho[i]), occ_b, nxt[bad, i, : kin.state_dim],
+                )  # fmt: skip
+                new[bad, i] = pt
+                nxt[bad, i, : kin.state_dim] = state
+                changed[bad, i] = True
         return new, nxt, collisions, stuck, changed
 
     def _check(
@@ -210,49 +209,53 @@ class PathRule:
 
     def _fallback(
         self, kin: Any, i: int, st: FloatArray, w: FloatArray, obst: FloatArray,
-        dij: FloatArray, tg: FloatArray, rho: float, occ: Any,
-    ) -> tuple[FloatArray, FloatArray, bool]:  # fmt: skip
-        """Return ``(point, state, stuck)`` of sensor ``i`` of state ``st`` (S,) wanting
-        ``w`` (2,): the feasible candidate nearest ``w``; else the safe one deepest out
-        of the ``rho`` disks; else its position and None (held: module docstring)."""
-        o = st[:2]
-        cands = []
-        if kin.reaches(o, st):
-            cands.append(o[None])
-        cands.append(_clipped(kin, o + self._frac * (w - o), st))
+        dij: FloatArray, tg: FloatArray, rho: float, occ: Any, wanted: FloatArray,
+    ) -> tuple[FloatArray, FloatArray, np.ndarray]:  # fmt: skip
+        """Return ``(points, states, stuck)`` (F, 2), (F, S), (F,) of sensor ``i`` in the
+        copies (F) of states ``st`` (F, S) wanting ``w`` (F, 2) (the wanted move's state
+        ``wanted``): the feasible candidate nearest ``w``; else the safe one deepest out
+        of the ``rho`` disks; else held (module docstring)."""
+        f_n, sd = st.shape
+        o = st[:, :2]
+        frac = o[:, None] + self._frac * (w - o)[:, None]  # (F, 15, 2)
         grid = self._grids[i]
-        cands.append(kin.apply(grid, np.broadcast_to(st, (len(grid), len(st)))))
-        if rho > 0.0:  # (the reachable ones: the grid covers the reach set's edge)
-            ring = (tg[:, None, :] + rho * (1.0 + _RING_OUT) * self._dirs).reshape(-1, 2)
-            cands.append(ring[kin.reaches(ring, np.broadcast_to(st, (len(ring), len(st))))])
-        c = np.concatenate(cands)
-        c = c[np.all(np.isfinite(c), axis=-1)]
-        # Nearest first (a stable sort keeps the order on ties), in chunks: the first
-        # feasible one is the answer; with none, every candidate's clearance is needed.
-        c = c[np.argsort(np.hypot(*(c - w).T), kind="stable")]
-        safe, clear = np.zeros(len(c), bool), np.full(len(c), -np.inf)
-        for lo, hi in ((0, _CHUNK), (_CHUNK, len(c))):
-            part = c[None, lo:hi]
-            sep, clear_occ, cl = (
-                x[0] for x in self._check(kin, st[None], part, obst[None], dij, tg[None], rho, occ)
-            )
-            safe[lo:hi], clear[lo:hi] = sep & clear_occ, cl
-            feasible = safe[lo:hi] & (cl >= 0.0)
-            if np.any(feasible):
-                pt = c[lo + int(np.argmax(feasible))]
-                return pt, restate(kin, pt, st), False
-        if np.any(safe):
-            idx = np.flatnonzero(safe)
-            pt = c[idx[int(np.argmax(clear[idx]))]]
-            return pt, restate(kin, pt, st), True
-        return o.copy(), None, True
-
-
-def _clipped(kin: Any, points: FloatArray, st: FloatArray) -> FloatArray:
-    """Return ``points`` (C, 2), each one ``kin`` does not reach from ``st`` clipped."""
-    full = np.broadcast_to(st, (len(points), len(st)))
-    out = np.array(points)
-    far = ~kin.reaches(points, full)
-    if np.any(far):
-        out[far] = kin.clip(points[far], full[far])
-    return out
+        parts = [
+            o[:, None],
+            frac,
+            kin.apply(grid, np.broadcast_to(st[:, None], (f_n, len(grid), sd))),
+        ]
+        if rho > 0.0:
+            ring = (tg[:, :, None, :] + rho * (1.0 + _RING_OUT) * self._dirs).reshape(f_n, -1, 2)
+            parts.append(ring)
+        c = np.concatenate(parts, 1)  # (F, C, 2)
+        full = np.broadcast_to(st[:, None], c.shape[:-1] + (sd,))
+        reach = kin.reaches(c, full)
+        n_frac = frac.shape[1]
+        far = ~reach[:, 1 : 1 + n_frac]  # the fractions beyond the reach: clipped
+        if np.any(far):
+            fr = c[:, 1 : 1 + n_frac]
+            fr[far] = kin.clip(fr[far], full[:, 1 : 1 + n_frac][far])
+            c[:, 1 : 1 + n_frac] = fr
+        # Valid: the position when the kinematics can stay, the fractions and the grid
+        # (points it reaches by construction), the rho circles' points it reaches.
+        valid = np.ones(c.shape[:-1], bool)
+        valid[:, 0] = reach[:, 0]
+        if rho > 0.0:
+            valid[:, 1 + n_frac + len(grid) :] = reach[:, 1 + n_frac + len(grid) :]
+        valid &= np.all(np.isfinite(c), axis=-1)
+        c = np.where(valid[..., None], c, o[:, None])  # (placeholders, never chosen)
+        sep, clear_occ, clear = self._check(kin, st, c, obst, dij, tg, rho, occ)
+        safe = valid & sep & clear_occ
+        feasible = safe & (clear >= 0.0)
+        far_w = np.where(feasible, np.hypot(*np.moveaxis(c - w[:, None], -1, 0)), np.inf)
+        best = np.argmin(far_w, axis=1)  # (the first on ties: the order above)
+        deep = np.argmax(np.where(safe, clear, -np.inf), axis=1)
+        found, any_safe = np.any(feasible, axis=1), np.any(safe, axis=1)
+        pick = np.where(found, best, deep)
+        rows = np.arange(f_n)
+        pts = np.where((found | any_safe)[:, None], c[rows, pick], o)
+        states = restate(kin, pts, st)
+        hold = ~(found | any_safe)
+        if np.any(hold):
+            states[hold] = held(kin, st[hold], wanted[hold])
+        return pts, states, ~found
