@@ -156,6 +156,7 @@ class Checker:
         pred = w.get("x_pred").copy()[..., :2]
         pred = pred[:, None] if k == 1 else pred  # (N, K, 2)
         stuck0 = w.get("n_stuck").copy()
+        self.layouts = w.occluders()  # (the step's; a reset may draw new ones)
         (w.step if absolute else w.step_actions)(act)
         after = _states(w)
         self.collisions += int(np.sum(w.get("collisions")))
@@ -195,6 +196,10 @@ class Checker:
             px, py = paths[..., 0], paths[..., 1]
             inside = (px > x0 + eps) & (px < x1 - eps) & (py > y0 + eps) & (py < y1 - eps)
             assert not np.any(inside)
+        if self.world.scenario.random_occluders:  # each copy's own layout: its point test
+            from activetrack.models.occluders import inside  # noqa: PLC0415
+
+            assert not np.any(inside(paths, self.layouts))
         # rho, in the frame the sensor plans in (its fix plus the displacement).
         believed = fixes + (new - old)
         g = believed[:, :, None] - pred[:, None]
@@ -311,6 +316,12 @@ def test_sampled_paths_and_their_bounds(kin):
         (s1 <= tol) & (s2 <= tol) & (s3 <= tol)
     )
     assert np.all(inside)
+
+
+def test_random_layouts_each_copy_its_own():
+    sc = make_scenario("urban_random", **URBAN_UNICYCLE)
+    _, chk = _random_run(sc, 8, 20, seed=4)
+    assert chk.collisions > 0
 
 
 def test_urban_fixed_wing_and_double_integrator():
