@@ -23,6 +23,11 @@ candidate that keeps the separation and lies deepest out of the ``rho`` disks (i
 position is one), and counts as ``stuck``. Every step is thus deterministic, and after it
 no two sensors are closer than their ``d_ij``; a sensor inside a ``rho`` disk after a
 step is one the world reports stuck.
+
+This closed form is the rule of the paper's disks with known positions and no occluders.
+Every other team (a unicycle, a double integrator, any kinematics; occluders; position
+fixes with noise) keeps the same rule along each sensor's actual path, on the true
+positions: :mod:`activetrack.kinematics.path_rule`.
 """
 
 from __future__ import annotations
@@ -76,22 +81,11 @@ def pair_distances(d_sep: Any, m: int) -> FloatArray:
 def check_scenario(sc: Any) -> None:
     """Raise ValueError naming ``d_sep`` when scenario ``sc`` cannot enforce its ``d_sep``:
     the team's start disk (radius ``sensor_radius``) too small for it
-    (:data:`START_DENSITY_MAX`), or a setting the rule does not cover yet (kinematics other
-    than the disk, position fixes with noise, occluders)."""
+    (:data:`START_DENSITY_MAX`). Every kinematics, occluders and position fixes with
+    noise are covered (:mod:`activetrack.kinematics.path_rule`)."""
     d_sep, m, sensor_radius = sc.d_sep, sc.n_sensors, sc.sensor_radius
     if m < 2 or not np.any(pair_distances(d_sep, m)):
         return
-    from activetrack.kinematics.team import all_disks  # noqa: PLC0415 (team imports this)
-
-    features = {
-        "kinematics other than Disk": sc.kinematics is not None
-        and not all_disks(sc.kinematics_models),
-        "pose_cov": sc.pose_covariances is not None,
-        "occluders": sc.has_occluders,
-    }
-    for what, present in features.items():
-        if present:
-            raise ValueError(f"d_sep > 0 is not supported with {what} (yet); use d_sep=0")
     d = pair_distances(d_sep, m)
     half = np.max(d, axis=1) / 2.0  # each sensor's own disk: half its largest distance
     density = float(np.sum(half**2) / (sensor_radius + np.max(half)) ** 2)

@@ -14,16 +14,20 @@ entries zero-padded), and:
   states made of the position fixes and ``motion``: the new state is
   :meth:`~activetrack.Kinematics.advance` of the agent's action, or of the
   :meth:`~activetrack.Kinematics.command` of the point the sensor went to when the move was
-  clipped, projected out of a ``rho`` disk or asked as an absolute position; a move an
-  occluder stopped short keeps the occluder rule's position, and its state beyond the
-  position is that of the command reaching the nearest reachable point to it;
+  clipped, projected out of a ``rho`` disk or asked as an absolute position; among
+  occluders, a move whose path (the arc, the parabola) meets one goes to another point
+  the sensor reaches, by the rule of :mod:`activetrack.kinematics.path_rule` (its state
+  that of the command reaching it);
 - **readers**: :meth:`MotionState.sensor_states` (positions and ``motion`` together), the
   planning problem's ``sensor_states``, and the agents' observations and the global state,
   which end with each sensor's :meth:`~activetrack.Kinematics.features` (the heading as
   ``(cos, sin)``, the velocity over the top speed; :mod:`activetrack.world.observation`).
 
-With a minimum separation (``d_sep > 0``) the moves then go through the team rule
-(:class:`activetrack.kinematics.separation.Separation`); the world keeps per copy the
+With a minimum separation (``d_sep > 0``) the moves then go through the team rule: the
+disks' closed form (:class:`activetrack.kinematics.separation.Separation`) with known
+positions and no occluders, else the same rule along each sensor's actual path, on the
+TRUE positions (:class:`activetrack.kinematics.path_rule.PathRule`: any kinematics,
+occluders, ``pose_cov``); the world keeps per copy the
 step's ``collisions`` (pairs of wanted points closer than their distance, before the
 rule), their episode count ``n_collisions``, the sensors the rule kept in place for want
 of a feasible point (``n_stuck``) and the smallest pairwise distance after the step
@@ -42,6 +46,22 @@ import numpy as np
 from activetrack.kinematics.separation import min_separation, separated_starts
 from activetrack.validation import FloatArray
 
+
+def rule_of(sc: Any, team: Any, sep: Any, occ: Any, pose: bool) -> Any:
+    """Return the world's :class:`activetrack.kinematics.path_rule.PathRule`, or None when
+    the moves need none: no separation and no occluders, the disks' own rules (known
+    positions, no occluders: :class:`~activetrack.kinematics.separation.Separation`;
+    occluders alone: straight moves), or another kinematics without either."""
+    disks = team is None
+    if sep is None and (disks or occ is None):
+        return None
+    if sep is not None and disks and occ is None and not pose:
+        return None
+    from activetrack.kinematics.path_rule import PathRule  # noqa: PLC0415
+
+    return PathRule(sc.kinematics_models, None if sep is None else sep.d)
+
+
 #: The state fields of the team rule of a minimum separation.
 SEPARATION_FIELDS = ("collisions", "n_collisions", "n_stuck", "min_separation")
 
@@ -58,6 +78,7 @@ class MotionState:
         if self._n_motion:
             state["motion"] = np.zeros((self.n_sensors, self._n_motion))
         self._sep_next: tuple | None = None
+        self._rule = rule_of(self.scenario, self._team, self._sep, self._occ, self._pose)
         if self._sep is not None:
             state.update(collisions=0, n_collisions=0, n_stuck=0, min_separation=np.inf)
 
@@ -75,15 +96,33 @@ class MotionState:
     def _separated_starts(self, sensors: FloatArray, rows: np.ndarray, one: bool) -> FloatArray:
         """Return the start positions ``sensors`` ((M, 2) for ``one`` copy, else (R, M, 2)
         of the copies ``rows``) with each sensor too close to an earlier one drawn again
-        from its copy's generator (:func:`activetrack.kinematics.separation.separated_starts`)."""
+        from its copy's generator (:func:`activetrack.kinematics.separation.separated_starts`),
+        outside the occluders."""
         out = np.array(sensors)
         for j, i in enumerate(rows.tolist()):
             rng = self.rng(i)
             row = out if one else out[j]
-            row[...] = separated_starts(
-                row, self._sep.d, lambda rng=rng: self._start_positions(rng.random(2))
-            )
+            occ = self._occ
+            if occ is not None and not one and occ.batched:
+                occ = occ[i]
+
+            def redraw(rng=rng, occ=occ):
+                return self._free_start(rng, occ)
+
+            row[...] = separated_starts(row, self._sep.d, redraw)
         return out
+
+    def _free_start(self, rng: np.random.Generator, occ: Any) -> FloatArray:
+        """Return a fresh start (2,) drawn from ``rng``, outside the occluders ``occ``."""
+        for _ in range(1000):
+            pt = self._start_positions(rng.random(2))
+            if occ is None:
+                return pt
+            from activetrack.models import occluders  # noqa: PLC0415
+
+            if not occluders.inside(pt, occ):
+                return pt
+        raise ValueError("occluders cover the sensors' start disk: no start outside them found")
 
     def _move_sensors(
         self, move: Any, moves: FloatArray, sensors: FloatArray, fixes: FloatArray,
@@ -91,9 +130,10 @@ class MotionState:
     ) -> tuple[FloatArray, np.ndarray]:  # fmt: skip
         """Return ``(moved, projected)``: the sensors' next believed positions from the
         proposed ``moves`` (the disk's compiled ``move``, or the team's), then kept out of
-        the occluders; the next ``motion`` of the copies ``calc`` is kept for
-        :meth:`_motion_store`."""
+        the occluders and apart (the team rules); the next ``motion`` of the copies
+        ``calc`` is kept for :meth:`_motion_store`."""
         p = self.params
+        nxt = states = None
         if self._team is None:
             moved, projected = move(moves, fixes, where, p.r, p.rho)
         elif not self._n_motion:
@@ -105,26 +145,53 @@ class MotionState:
             moved, projected, nxt = self._team.move(
                 move is sensor_motion.move_to, moves, states, where, p.rho
             )
-        if self._occ is not None:  # no move ends in or passes through an occluder
-            free = moved
+        if self._occ is not None and self._team is None:  # disks: straight moves, exact
             moved, projected = self._around_occluders(sensors, fixes, moved, projected)
-            if self._n_motion:
-                stopped = np.any(moved != free, axis=-1)
-                if np.any(stopped):  # the state of the nearest reachable point
-                    near = moved.copy()
-                    for idx in zip(*np.nonzero(stopped), strict=True):
-                        kin = self._team.team[idx[-1]]
-                        st = states[idx][: kin.state_dim]
-                        near[idx] = kin.clip(moved[idx], st)
-                    redo = self._team.restate(near, states)
-                    nxt[stopped] = redo[stopped]
-                    nxt[..., :2] = moved
-        if self._n_motion:
-            self._motion_next = nxt[..., 2:]
-        if self._sep is not None:  # the team rule, sensor after sensor (known poses)
+        if self._rule is not None:  # along the actual paths (path_rule)
+            moved, projected, nxt = self._by_path_rule(
+                moved, projected, sensors, fixes, states, nxt, where
+            )
+        elif self._sep is not None:  # the disks' rule, sensor after sensor (known poses)
             moved, collisions, stuck = self._sep.resolve(fixes, moved, where, p.r, p.rho)
             self._sep_next = (collisions, np.count_nonzero(stuck, -1), min_separation(moved))
+        if self._n_motion:
+            self._motion_next = nxt[..., 2:]
         return moved, projected
+
+    def _by_path_rule(
+        self, moved: FloatArray, projected: np.ndarray, sensors: FloatArray,
+        fixes: FloatArray, states: FloatArray | None, nxt: FloatArray | None,
+        where: FloatArray,
+    ) -> tuple[FloatArray, np.ndarray, FloatArray | None]:  # fmt: skip
+        """Return ``(moved, projected, next states)`` after
+        :class:`activetrack.kinematics.path_rule.PathRule` (the TRUE positions
+        ``sensors`` apart and out of the occluders; the fixes' errors carried along)."""
+        one = moved.ndim == 2
+        lift = (lambda a: a[None]) if one else (lambda a: a)  # noqa: E731
+        shift = lift(fixes - sensors) if self._pose else None
+        want = lift(moved) if shift is None else lift(moved) - shift
+        true = lift(np.array(sensors, np.float64))
+        if states is None:
+            st, nx = true, want.copy()
+        else:
+            st = lift(np.array(states))
+            st[..., :2] = true
+            nx = lift(nxt)
+        tg = lift(where[..., None, :] if where.ndim == moved.ndim - 1 else where)
+        new, nx, coll, stuck, changed = self._rule.resolve(
+            true, want, st, nx, tg, self.params.rho, shift, self._occ
+        )
+        if self._sep is not None:
+            low = min_separation(new)
+            self._sep_next = tuple(
+                v[0] if one else v for v in (coll, np.count_nonzero(stuck, -1), low)
+            )
+        out = new
+        if one:
+            out, changed, nx = out[0], changed[0], nx[0]
+        if self._pose:  # back to the believed frame (the fix plus the displacement)
+            out = fixes + (out - sensors)
+        return out, projected | changed, None if states is None else nx
 
     def _motion_store(self, new: dict[str, Any], sel: Any, partial: bool) -> None:
         """Put the stepped copies' next ``motion`` into the step's results ``new``."""

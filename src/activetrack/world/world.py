@@ -333,13 +333,13 @@ class World(  # (the mixins: world/_selection.py, _streams.py, ..., imm_tracking
             g = None if g is None else [gk[0] for gk in g]
             e = None if e is None else e[0]
         sensors = self._start_positions(u)
-        if self._sep is not None:  # each sensor drawn again while too close to another
-            sensors = self._separated_starts(sensors, rows, one=isinstance(sel, int))
         if self._random_layouts:  # each episode's own layout, drawn after the other draws
             layouts = self.scenario.draw_occluder_batch([self.rng(i) for i in rows.tolist()])
             self._occ = layouts[0] if self._one else self._occ.replaced(rows, layouts)
         if self._occ is not None:  # no sensor starts inside an occluder: draw again
             sensors = self._outside_occluders(sensors, rows, one=isinstance(sel, int))
+        if self._sep is not None:  # each sensor drawn again while too close to another
+            sensors = self._separated_starts(sensors, rows, one=isinstance(sel, int))
         batch = u.shape[:-2]
         trace = 0.0
         score = []
