@@ -329,19 +329,13 @@ def test_urban_fixed_wing_and_double_integrator():
         _random_run(make_scenario("urban", kinematics=kin, d_sep=1.5), 20, 60, seed=2)
 
 
-_LOOKAHEAD_BROKEN = pytest.mark.skip(
-    reason="the look-ahead's GSR rollout passes positions without headings to a unicycle "
-    "(IndexError in Unicycle._polar, baselines/lookahead.py): the planners' side of issue 36"
-)
-
-
 @pytest.mark.parametrize(
     "planner, name, kw",
     [
         ("gsr", "paper", CROWDED),
         ("lookahead", "paper", CROWDED),
         ("gsr", "urban", URBAN_UNICYCLE),
-        pytest.param("lookahead", "urban", URBAN_UNICYCLE, marks=_LOOKAHEAD_BROKEN),
+        ("lookahead", "urban", URBAN_UNICYCLE),
     ],
 )
 def test_planned_steps_keep_the_team_rules(planner, name, kw):
