@@ -68,7 +68,7 @@ PRESET_FLAGS = {
     "evader": {**dict.fromkeys(FLAGS, True), "filter_targets": False},
     "unicycle": {**dict.fromkeys(FLAGS, True), "disk_kinematics": False},
     "fixed_wing": {**dict.fromkeys(FLAGS, True), "disk_kinematics": False},
-    "crowded": {**dict.fromkeys(FLAGS, True), "no_separation": False},
+    "crowded": {**dict.fromkeys(FLAGS, True), "no_separation": False, "single_update": False},
     "urban_unicycle": {
         **dict.fromkeys(FLAGS, True),
         "unlimited_sensing": False,
@@ -96,8 +96,8 @@ PRESET_PATHS = {  # (paper_model, paper_problem, paper_observation, fused_step)
     # unicycles: the team's own moves (the paper's sensors and observation layout)
     "unicycle": (False, False, True, False),
     "fixed_wing": (False, False, True, False),
-    # the paper's sensors and disks; the team rule d_sep: stage by stage
-    "crowded": (True, True, True, False),
+    # the paper's sensors and disks; the iterated EKF and the team rule d_sep: stage by stage
+    "crowded": (False, True, True, False),
     "urban_unicycle": (False, False, False, False),
 }
 
