@@ -28,7 +28,7 @@ ROBOTS = {
     "activetrack/Unicycle-v0": ("unicycle", (0.0, 10.0, np.pi), 0.0),
     "activetrack/FixedWing-v0": ("fixed_wing", (4.0, 10.0, 2.0 * np.pi / 3.0), 0.0),
     "activetrack/Crowded-v0": ("crowded", None, 2.0),
-    "activetrack/UrbanUnicycle-v0": ("urban_unicycle", (0.0, 10.0, np.pi), 2.0),
+    "activetrack/UrbanUnicycle-v0": ("urban_unicycle", (0.0, 10.0, np.pi), 1.5),
 }
 IDS = sorted(ROBOTS)
 #: Rounding allowance of the geometry (positions of tens of meters, float64).

@@ -73,9 +73,12 @@ UNICYCLE = Unicycle(v_min=0.0, v_max=10.0, w_max=np.pi)
 #: m/s) and turn at most 2 pi / 3 rad/s, so they loiter on circles of radius at least
 #: v_min / w_max = 1.9 m (4.8 m at the top speed), about the target's rho = 2 m.
 FIXED_WING = Unicycle(v_min=4.0, v_max=10.0, w_max=2.0 * np.pi / 3.0)
-#: The team rule of the crowded and urban unicycle tasks: every two sensors at least 2 m
-#: apart (the target's rho).
+#: The team rule of the crowded task: every two sensors at least 2 m apart (the target's
+#: rho).
 D_SEP = 2.0
+#: The urban unicycle task's: 1.5 m (its team's start disk, of radius 4 m, holds nine
+#: sensors that far apart: their separation disks cover 0.22 of it).
+D_SEP_URBAN = 1.5
 
 #: The named presets, name -> the Scenario fields that differ from the defaults (the
 #: paper's): ``paper``, ``homogeneous`` and the :data:`TASKS`.
@@ -204,13 +207,13 @@ PRESETS: dict[str, dict[str, Any]] = {
         "d_sep": D_SEP,
     },
     # The urban task's blocks, team, target and sensing with unicycle robots (UNICYCLE)
-    # kept D_SEP = 2 m apart.
+    # kept D_SEP_URBAN = 1.5 m apart.
     "urban_unicycle": {
         **_URBAN,
         "name": "urban_unicycle",
         "occluders": _BLOCKS,
         "kinematics": UNICYCLE,
-        "d_sep": D_SEP,
+        "d_sep": D_SEP_URBAN,
     },
 }
 
