@@ -23,6 +23,16 @@ The environment records one :class:`Snapshot` per time step in an :class:`Episod
   :class:`activetrack.DoubleIntegrator`), a thick line in the sensor's colour from its
   position along its heading, :data:`HEADING_LENGTH` ``rho_i`` long (a velocity: that
   length times the speed over the top speed);
+* with such a kinematics, the path each sensor drove over the last step (a thick, faint
+  line in its colour, :data:`PATH_POINTS` segments): a unicycle's arc, a double
+  integrator's parabola, evaluated by the kinematics itself
+  (:func:`step_path`: the :meth:`~activetrack.Kinematics.command` that reaches the new
+  position from the old state, applied over fractions of the step); the trail joins the
+  positions by straight segments;
+* with a minimum separation (``d_sep > 0``), each sensor's separation disk: a thin dashed
+  circle in its colour of radius ``d_sep / 2`` (one distance for every pair) or its own
+  radius ``d_i`` (per-sensor radii, a pair keeping ``d_i + d_j``), so two sensors keep
+  the rule exactly when their disks do not overlap (:func:`separation_radii`);
 * the step and the posterior trace ``tr P(k|k)_11`` (summed over the targets) above.
 
 With limited sensing (issue 13: occluders, a finite ``max_range`` or ``p_detect < 1``;
@@ -103,6 +113,37 @@ MISSED_COLOR = "#a0a0a0"
 HEADING_LENGTH = 0.5
 #: Line style of the sensing range circles: sparse dots (the rho circles are dense ``:``).
 RANGE_STYLE = (0, (1, 3))
+#: Segments of a drawn path of the last step (:func:`step_path`).
+PATH_POINTS = 16
+#: Line style of the separation disks.
+SEPARATION_STYLE = (0, (4, 2))
+
+
+def separation_radii(d_sep: Any, m: int) -> FloatArray | None:
+    """Return each sensor's separation disk radius (M,) for the scenario field ``d_sep``:
+    ``d_sep / 2`` for one distance, the radii themselves for M radii; None when all are
+    0 (no separation). Two sensors keep the rule exactly when their disks do not overlap."""
+    d = np.asarray(d_sep, dtype=np.float64)
+    radii = np.full(m, 0.5 * float(d)) if d.ndim == 0 else np.array(d)
+    if radii.shape != (m,) or not np.all(np.isfinite(radii) & (radii >= 0.0)):
+        raise ValueError(f"d_sep must be one distance or {m} radii, finite and >= 0, got {d_sep!r}")
+    return radii if np.any(radii > 0.0) else None
+
+
+def step_path(kin: Any, state: FloatArray, point: FloatArray, n: int = PATH_POINTS) -> FloatArray:
+    """Return the path (n + 1, 2) a sensor of kinematics ``kin`` (an
+    :class:`activetrack.Kinematics` with a ``dt``) drives in one step from ``state`` to
+    the reachable ``point``: the positions after fractions ``j / n`` of the step, j = 0..n,
+    of the command :meth:`~activetrack.Kinematics.command` gives (held over the step, as
+    the world does), each :meth:`~activetrack.Kinematics.apply` of the kinematics bound to
+    that fraction of ``dt`` (a unicycle's exact arc, a double integrator's parabola)."""
+    state = np.asarray(state, np.float64)
+    action = kin.command(np.asarray(point, np.float64), state)
+    out = np.empty((n + 1, 2))
+    out[0] = state[:2]
+    for j in range(1, n + 1):
+        out[j] = kin.bind(kin.dt * j / n).apply(action, state)
+    return out
 
 
 @dataclass(frozen=True)
@@ -123,6 +164,9 @@ class Snapshot:
     # A kinematics with a state beyond the position: each sensor's observed features (M, F),
     # a unicycle's heading (cos, sin), a double integrator's velocity over its top speed.
     motion: FloatArray | None = None
+    # Each sensor's path over the step that led here (M, PATH_POINTS + 1, 2), rows of NaN
+    # for a sensor without one (:func:`step_path`); None: no paths (the reset, the disk).
+    path: FloatArray | None = None
 
     @property
     def n_targets(self) -> int:
@@ -149,14 +193,17 @@ class EpisodeHistory:
     frames: list[Snapshot] = field(default_factory=list)
     # The last occluder set converted (an immutable Occluders is converted once).
     _occ: tuple[Any, tuple[FloatArray, ...]] = field(default=(None, ()), repr=False)
+    # The sensors' states (M, S) at the last step recorded from a world (the paths' start).
+    _states: FloatArray | None = field(default=None, repr=False)
 
     def clear(self) -> None:
         """Forget the episode."""
         self.frames.clear()
+        self._states = None
 
     def append(
         self, k, x_true, x_est, P, sensors, center, fixes=None, *,
-        detected=None, occluders=None, max_range=None, motion=None,
+        detected=None, occluders=None, max_range=None, motion=None, path=None,
     ) -> None:  # fmt: skip
         """Record time step ``k`` (the position parts are copied).
 
@@ -169,7 +216,8 @@ class EpisodeHistory:
         polygons (None: none); ``max_range`` (M,) the sensing ranges, > 0, inf for
         unlimited (None: all unlimited). ``motion`` (M, F), F >= 2: each sensor's heading
         ``(cos, sin)`` or velocity over its top speed, drawn as a short line from the sensor
-        (:meth:`activetrack.Kinematics.features`; None: nothing drawn).
+        (:meth:`activetrack.Kinematics.features`; None: nothing drawn). ``path`` (M, P, 2),
+        P >= 2: each sensor's path over the step (a row of NaN: none; None: no paths).
         """
         targets = np.array([v[:2] for v in _per_target(x_true, 1)], dtype=np.float64)
         estimates = np.array([v[:2] for v in _per_target(x_est, 1)], dtype=np.float64)
@@ -203,9 +251,18 @@ class EpisodeHistory:
             motion = np.array(motion, dtype=np.float64)
             if motion.ndim != 2 or motion.shape[0] != shape[1] or motion.shape[1] < 2:
                 raise ValueError(f"motion must have shape ({shape[1]}, F >= 2), got {motion.shape}")
+        if path is not None:
+            path = np.array(path, dtype=np.float64)
+            if (
+                path.ndim != 3
+                or path.shape[0] != shape[1]
+                or path.shape[1] < 2
+                or path.shape[2] != 2
+            ):
+                raise ValueError(f"path must have shape ({shape[1]}, P >= 2, 2), got {path.shape}")
         self.frames.append(
             Snapshot(int(k), targets, estimates, covs, sensors, centers, fixes, detected,
-                     self._polygons(occluders), max_range, motion)
+                     self._polygons(occluders), max_range, motion, path)
         )  # fmt: skip
 
     def _polygons(self, occluders: Any) -> tuple[FloatArray, ...]:
@@ -233,7 +290,9 @@ class EpisodeHistory:
         reset, before any move). The fixes are recorded when the poses are uncertain; with
         limited sensing (``world.scenario.limited_sensing``) the step's detections
         (``world.get("detected", copy)``), the world's occluders and sensing ranges; with a
-        kinematics that carries a heading or a velocity its features (``motion``).
+        kinematics that carries a heading or a velocity its features (``motion``) and, after a
+        step, each sensor's path over it from the states recorded last (:func:`step_path`,
+        in the frame of the position fixes the world moves).
         """
         g, i = world.get, copy
         K = world.n_targets
@@ -252,7 +311,26 @@ class EpisodeHistory:
             occluders=world.occluders(i) if limited else None,
             max_range=p.max_range if limited else None,
             motion=_headings(world, i),
+            path=self._paths(world, i, centers is not None),
         )
+
+    def _paths(self, world: Any, copy: int, stepped: bool) -> FloatArray | None:
+        """Return the sensors' paths over the step just taken (M, PATH_POINTS + 1, 2) (NaN
+        for a kinematics without a state beyond the position or a ``dt``), or None (no
+        sensor has a path, or no step since the last record); remember the states."""
+        kins = world.scenario.kinematics_models
+        drawn = [k.state_dim > 2 and getattr(k, "dt", None) is not None for k in kins]
+        if not any(drawn):
+            return None
+        states = np.array(world.sensor_states(copy))
+        before, self._states = self._states, states
+        if not stepped or before is None:
+            return None
+        out = np.full((len(kins), PATH_POINTS + 1, 2), np.nan)
+        for i, kin in enumerate(kins):
+            if drawn[i]:
+                out[i] = step_path(kin, before[i, : kin.state_dim], states[i, :2])
+        return out
 
 
 def _headings(world: Any, copy: int) -> FloatArray | None:
@@ -321,6 +399,8 @@ class TrackingRenderer:
             bearing.
         pose_cov: per-sensor pose covariances (M, 2, 2) (``Scenario.pose_covariances``),
             drawn as 2-sigma ellipses around the recorded fixes; None: poses are known.
+        separation: per-sensor separation disk radii (M,) (:func:`separation_radii`),
+            drawn around the sensors; None: no separation.
     """
 
     def __init__(
@@ -331,6 +411,7 @@ class TrackingRenderer:
         *,
         models: Any = None,
         pose_cov: Any = None,
+        separation: Any = None,
     ) -> None:
         self.rho = np.asarray(rho, dtype=np.float64)
         if self.rho.ndim != 1:
@@ -373,12 +454,18 @@ class TrackingRenderer:
                 raise ValueError(f"pose_cov must be finite with shape ({m}, 2, 2), got {cov.shape}")
             self.pose_cov = cov
             self._pose_rings = POSE_SIGMAS * np.einsum("mij,jk->mki", _psd_root(cov), _UNIT)
+        self.separation = None
+        if separation is not None:
+            sep = np.asarray(separation, dtype=np.float64)
+            if sep.shape != (m,) or not np.all(np.isfinite(sep) & (sep >= 0.0)):
+                raise ValueError(f"separation must be {m} finite radii >= 0, got {separation!r}")
+            self.separation = sep
         self._fig: Any = None
         self._canvas: Any = None
         self._art: dict[str, Any] = {}
         self._human = False
         self._warned = False
-        self._layout: tuple[int, bool, tuple[bool, bool, bool]] = (1, False, _OPEN)
+        self._layout: tuple[int, bool, tuple[bool, bool, bool], bool] = (1, False, _OPEN, False)
         # Per frame: (snapshot, its K 3-sigma ellipses).
         self._ellipses: list[tuple[Snapshot, list[FloatArray]]] = []
 
@@ -389,9 +476,11 @@ class TrackingRenderer:
         n_targets: int = 1,
         fixes: bool = False,
         sensing: tuple[bool, bool, bool] = _OPEN,
+        paths: bool = False,
     ) -> None:
         """Make the figure and its artists for ``n_targets`` targets (and the fixes);
-        ``sensing``: whether occluders, sensing ranges and detections are drawn."""
+        ``sensing``: whether occluders, sensing ranges and detections are drawn; ``paths``:
+        whether the sensors carry a state beyond the position (headings, paths)."""
         from matplotlib.collections import LineCollection, PolyCollection
 
         figsize = (self.size[0] / self.dpi, self.size[1] / self.dpi)
@@ -457,14 +546,21 @@ class TrackingRenderer:
         for t in targets:
             ax.add_collection(t["ellipses"])
         targets[0]["ellipses"].set_label("3-sigma bounds")
-        art.update(targets=targets, trails=[], heads=[], rho=[], headings=[])
+        art.update(targets=targets, trails=[], heads=[], rho=[], headings=[], paths=[],
+                   separation=[])  # fmt: skip
         for c, (marker, _) in zip(colors, self._marks, strict=True):
             art["trails"].append(ax.plot([], [], "-", color=c, lw=1.0)[0])
             art["heads"].append(ax.plot([], [], marker, color=c, ms=5)[0])
             art["headings"].append(ax.plot([], [], "-", color=c, lw=1.6)[0])
             art["rho"].append(ax.plot([], [], ":", color=c, lw=0.8)[0])
+            art["paths"].append(ax.plot([], [], "-", color=c, lw=3.0, alpha=0.45)[0])
+            art["separation"].append(ax.plot([], [], ls=SEPARATION_STYLE, color=c, lw=0.6)[0])
         art["trails"][0].set_label("sensor trails")
         art["rho"][0].set_label("rho circles")
+        if paths:  # (legend entries only where drawn: the paper's frames are unchanged)
+            art["paths"][0].set_label("last step's paths")
+        if self.separation is not None:
+            art["separation"][0].set_label("separation disks")
         if np.any(self.models):  # a legend entry per model present (not for the paper's team)
             for marker, label in dict.fromkeys(sorted(self._marks, key=_mark_order)):
                 ax.plot([], [], marker, ls="none", color="0.35", ms=5, label=label)
@@ -486,7 +582,8 @@ class TrackingRenderer:
         self._dynamic = [
             *art["range"], *([art["missed"]] if detections else []), *art["sight"],
             *(t["ellipses"] for t in targets), *(t["true"] for t in targets),
-            *(t["est"] for t in targets), *art["trails"], *art["rho"],
+            *(t["est"] for t in targets), *art["trails"], *art["rho"], *art["separation"],
+            *art["paths"],
             *([art["pose"]] if art["pose"] is not None else []),
             *(a for t in targets for a in (t["now_ellipse"], t["true_now"], t["est_now"])),
             *art["heads"], *art["headings"], *art["fixes"], art["title"],
@@ -497,7 +594,7 @@ class TrackingRenderer:
             for a in self._dynamic:
                 a.set_animated(True)
         self._fig, self._canvas, self._art, self._human = fig, canvas, art, human
-        self._layout = (n_targets, fixes, sensing)
+        self._layout = (n_targets, fixes, sensing, paths)
         self._ax = ax
         self._view: tuple[FloatArray, float] | None = None
         self._background = None
@@ -543,6 +640,16 @@ class TrackingRenderer:
                 continue
             tip = last.sensors[i] + HEADING_LENGTH * self.rho[i] * last.motion[i, :2]
             line.set_data([last.sensors[i, 0], tip[0]], [last.sensors[i, 1], tip[1]])
+        for i, line in enumerate(art["paths"]):  # the last step's path (NaN rows: none)
+            path = np.empty((0, 2)) if last.path is None else last.path[i]
+            line.set_data(path[:, 0], path[:, 1])
+        for i, line in enumerate(art["separation"]):
+            ring = (
+                np.empty((0, 2))
+                if self.separation is None or self.separation[i] == 0.0
+                else last.sensors[i] + self.separation[i] * _UNIT.T
+            )
+            line.set_data(ring[:, 0], ring[:, 1])
         extra = []
         if art["fixes"]:
             fixes = last.sensors if last.fixes is None else last.fixes
@@ -619,9 +726,11 @@ class TrackingRenderer:
         )
         return [polys for _, polys in cache]
 
-    def _layout_of(self, history: EpisodeHistory) -> tuple[int, bool, tuple[bool, bool, bool]]:
-        """Return the (targets, fixes drawn, (occluders, ranges, detections drawn)) the
-        history needs."""
+    def _layout_of(
+        self, history: EpisodeHistory
+    ) -> tuple[int, bool, tuple[bool, bool, bool], bool]:
+        """Return the (targets, fixes drawn, (occluders, ranges, detections drawn), paths
+        drawn) the history needs."""
         last = history.frames[-1]
         if last.sensors.shape[0] != self.rho.shape[0]:
             raise ValueError(
@@ -630,7 +739,8 @@ class TrackingRenderer:
             )
         ranged = last.max_range is not None and bool(np.any(np.isfinite(last.max_range)))
         sensing = (bool(last.occluders), ranged, last.detected is not None)
-        return last.n_targets, last.fixes is not None or self.pose_cov is not None, sensing
+        fixes = last.fixes is not None or self.pose_cov is not None
+        return last.n_targets, fixes, sensing, last.motion is not None
 
     # Public ------------------------------------------------------------------------
     def rgb_array(self, history: EpisodeHistory) -> np.ndarray:
@@ -730,7 +840,10 @@ class EpisodeRecorder:
         if self._renderer is None:
             sc = self.world.scenario
             self._renderer = TrackingRenderer(
-                self.world.params.rho, models=sc.sensor_objects, pose_cov=sc.pose_covariances
+                self.world.params.rho,
+                models=sc.sensor_objects,
+                pose_cov=sc.pose_covariances,
+                separation=separation_radii(sc.d_sep, sc.n_sensors),
             )
         if self.mode == "rgb_array":
             return self._renderer.rgb_array(self.history)

@@ -90,8 +90,11 @@ class TrackingParallelEnv(ParallelEnv):
         drawn from ``N(x0_hat, P0)`` (``"gaussian"``, every task beyond the paper); the
         filter starts at ``x0_hat, P0`` and is predicted once, so the first observation
         carries ``x_hat(1|0), P(1|0)``. The sensors start uniformly (by area) in the disk
-        of radius ``sensor_radius`` about ``sensor_center``; with ``random_occluders`` the
-        episode's rectangles are drawn too.
+        of radius ``sensor_radius`` about ``sensor_center`` (with ``d_sep > 0``, one that
+        starts closer than its distance to an earlier one is drawn again); a robot with a
+        heading (:class:`activetrack.Unicycle`: the ``unicycle`` tasks) starts facing the
+        centroid of the targets' ``x0_hat``. With ``random_occluders`` the episode's
+        rectangles are drawn too.
 
     Rewards:
         Every agent gets the team's reward each step: ``-reward_scale`` times the
@@ -110,14 +113,19 @@ class TrackingParallelEnv(ParallelEnv):
 
     Spaces: every agent acts in ``Box(-1, 1, (2,), float32)`` (float64 accepted): its
     displacement as a fraction of its reach ``r_i``; longer vectors are scaled onto the
-    unit disk (a scenario's own ``kinematics`` gives its bounds and meaning instead). It
-    observes ``Box(float32, (5 + 6M,))`` (:mod:`activetrack.world.observation`).
-    :meth:`state` is the ``6 + 6M`` global state for centralized critics.
+    unit disk (a scenario's own ``kinematics`` gives its bounds and meaning instead: a
+    unicycle's action is its forward speed and turn rate, each scaled from [-1, 1] onto
+    ``[v_min, v_max]`` and ``[-w_max, w_max]`` and held over the step). It observes
+    ``Box(float32, (5 + 6M,))`` (:mod:`activetrack.world.observation`; a unicycle's
+    observation ends with its heading ``(cos, sin)``). :meth:`state` is the ``6 + 6M``
+    global state for centralized critics (then every agent's heading).
 
     Infos (per agent, plain Python values): ``step`` k, ``trace`` the posterior
     ``tr P(k|k)_11`` (m^2), ``position_error`` ``||p_T - p_hat_T(k|k)||`` (m, privileged),
     ``projected`` whether this agent's move was pushed out of its ``rho`` disk this step,
-    ``n_projected`` how often in the episode, ``max_trace_exceeded`` the termination flag.
+    ``n_projected`` how often in the episode, ``max_trace_exceeded`` the termination flag;
+    with ``d_sep > 0`` the team rule's ``collisions``, ``n_collisions``, ``n_stuck`` and
+    ``min_separation`` (:mod:`activetrack.world._motion_state`).
 
     For experts: :meth:`planning_problem` (the raw problem of eq. 15-17) and
     :meth:`step_positions` (step with absolute next positions). :meth:`observe` returns the

@@ -117,3 +117,40 @@ def test_the_commit_pattern():
         "abc1234def56789abc1234def56789abc1234def5678"  # 44 digits: longer than a commit
     )
     assert commits_named(ordinary) == []
+
+
+def test_the_readme_task_table_is_every_id_with_its_robots_and_observation():
+    # Each row against the environment made from its id: the preset, the kinematics (a
+    # unicycle's speed range as its Unicycle's), and the observation's size per agent.
+    pettingzoo = pytest.importorskip("pettingzoo")
+    import activetrack  # noqa: F401  (registers the ids)
+    from activetrack import Unicycle
+    from activetrack._registry import ALL_IDS
+
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    section = readme.split("## The tasks", 1)[1].split("\n## ", 1)[0]
+    rows = [
+        [c.strip() for c in line.strip("|").split("|")]
+        for line in section.splitlines()
+        if line.startswith("| `activetrack/")
+    ]
+    assert sorted(r[0].strip("`") for r in rows) == sorted(ALL_IDS)
+    for env_id, preset, _, robots, obs in rows:
+        env_id = env_id.strip("`")
+        env = pettingzoo.make("parallel", env_id)
+        try:
+            sc = env.unwrapped.scenario if hasattr(env, "unwrapped") else env.scenario
+            assert preset.strip("`") == sc.name == ALL_IDS[env_id]
+            agent = env.possible_agents[0]
+            assert int(obs.split()[0]) == env.observation_space(agent).shape[0], env_id
+            kinds = {type(k) for k in sc.kinematics_models}
+            if sc.kinematics is None:
+                assert robots == "disk", env_id
+                continue
+            assert kinds == {Unicycle} and robots.startswith("unicycle"), env_id
+            speeds = re.search(r"v in \[(\S+), (\S+)\] m/s", robots)
+            if speeds:  # (else "as" another row)
+                k = sc.kinematics_models[0]
+                assert (float(speeds[1]), float(speeds[2])) == (k.v_min, k.v_max), env_id
+        finally:
+            env.close()

@@ -40,6 +40,10 @@ TASK_IDS = {
     "activetrack/UrbanRandom-v0": "urban_random",
     "activetrack/Maneuvering-v0": "maneuvering",
     "activetrack/Evader-v0": "evader",
+    "activetrack/Unicycle-v0": "unicycle",
+    "activetrack/FixedWing-v0": "fixed_wing",
+    "activetrack/Crowded-v0": "crowded",
+    "activetrack/UrbanUnicycle-v0": "urban_unicycle",
 }
 #: Every registered id and its preset (``ActiveTracking-v0`` is the paper).
 ALL_IDS = {ENV_ID: "paper", **TASK_IDS}

@@ -66,6 +66,17 @@ PRESET_FLAGS = {
     },  # fmt: skip
     "maneuvering": {**dict.fromkeys(FLAGS, True), "filter_targets": False},
     "evader": {**dict.fromkeys(FLAGS, True), "filter_targets": False},
+    "unicycle": {**dict.fromkeys(FLAGS, True), "disk_kinematics": False},
+    "fixed_wing": {**dict.fromkeys(FLAGS, True), "disk_kinematics": False},
+    "crowded": {**dict.fromkeys(FLAGS, True), "no_separation": False, "single_update": False},
+    "urban_unicycle": {
+        **dict.fromkeys(FLAGS, True),
+        "unlimited_sensing": False,
+        "no_occluders": False,
+        "single_update": False,
+        "disk_kinematics": False,
+        "no_separation": False,
+    },  # fmt: skip
 }
 
 # Which paths each preset takes, as docs/architecture.md and the presets describe them.
@@ -82,6 +93,12 @@ PRESET_PATHS = {  # (paper_model, paper_problem, paper_observation, fused_step)
     # the paper's measurement setup; the targets' behaviours: stage by stage
     "maneuvering": (True, True, True, False),
     "evader": (True, True, True, False),
+    # unicycles: the team's own moves (the paper's sensors and observation layout)
+    "unicycle": (False, False, True, False),
+    "fixed_wing": (False, False, True, False),
+    # the paper's sensors and disks; the iterated EKF and the team rule d_sep: stage by stage
+    "crowded": (False, True, True, False),
+    "urban_unicycle": (False, False, False, False),
 }
 
 

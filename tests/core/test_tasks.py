@@ -33,8 +33,10 @@ def test_every_task_is_a_valid_scenario_with_its_layout():
         rays = observation.RAYS if sc.has_occluders else 0  # each agent's own in its view
         if sc.capabilities.paper_observation:  # (the paper's sensors: the paper's layout)
             d, rays = 5 + 6 * M, 0
-        assert obs.shape == (M, d + rays), name
-        assert w.state(0).shape == (d + M * rays + 1,)
+        # A kinematics with a heading (the unicycle tasks): each agent's (cos, sin) last.
+        f = 0 if sc.kinematics is None else max(k.n_features for k in sc.kinematics_models)
+        assert obs.shape == (M, d + rays + f), name
+        assert w.state(0).shape == (d + M * rays + M * f + 1,)
         low, high = w.layout.bounds()
         assert np.all(obs >= low) and np.all(obs <= high)
     from activetrack.world.scenarios import EXTENSIONS
@@ -190,9 +192,11 @@ def _nees_runs(
 
 @pytest.mark.slow
 @pytest.mark.parametrize(
-    "name",  # (a target that maneuvers or evades makes the filter inconsistent: by design)
+    "name",  # (a target that maneuvers or evades makes the filter inconsistent: by design,
+    # as does the paper's fixed true start away from the prior mean: the unicycle tasks)
     [t for t in TASKS if not make_scenario(t).limited_sensing
-     and make_scenario(t).capabilities.filter_targets],
+     and make_scenario(t).capabilities.filter_targets
+     and make_scenario(t).target_init == "gaussian"],
 )  # fmt: skip
 def test_filter_is_consistent_on_every_task(name):
     # The mean over 200 runs of each run's time-averaged position NEES (per target) lies

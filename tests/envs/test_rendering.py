@@ -767,3 +767,99 @@ def test_record_video_refuses_an_episode_whose_frames_exceed_its_memory_bound(tm
     # Within the bound, the same long scenario records the steps asked for.
     record_video(tmp_path / "short.gif", scenario="urban", n_steps=20000, seed=0, max_steps=3)
     assert iio.imread(tmp_path / "short.gif", index=None).shape[0] == 4
+
+
+# The robots' paths and separation disks (issue 36) ----------------------------------------
+def _unicycle_ode_path(p0, theta0, p1, theta1, dt, n):
+    """The positions at t = j dt / n, j = 0..n, of a unicycle holding one command from
+    (p0, theta0) to (p1, theta1), by scipy's integration of x' = v cos(theta), y' = v
+    sin(theta), theta' = w, with (v, w) read off the two states by geometry: w =
+    dtheta / dt, and v = chord / (dt sinc(w dt / 2)) (an arc of angle dtheta subtends
+    the chord 2 R sin(dtheta / 2))."""
+    from scipy.integrate import solve_ivp
+
+    dtheta = (theta1 - theta0 + np.pi) % (2.0 * np.pi) - np.pi
+    half = 0.5 * dtheta
+    chord = float(np.hypot(*(np.asarray(p1) - p0)))
+    v = chord / (dt * (np.sin(half) / half if half != 0.0 else 1.0))
+    w = dtheta / dt
+    sol = solve_ivp(
+        lambda t, s: [v * np.cos(s[2]), v * np.sin(s[2]), w],
+        (0.0, dt), [p0[0], p0[1], theta0], t_eval=np.linspace(0.0, dt, n + 1),
+        rtol=1e-12, atol=1e-13, method="DOP853",
+    )  # fmt: skip
+    return sol.y[:2].T
+
+
+@pytest.mark.parametrize("scenario", ["unicycle", "fixed_wing"])
+def test_the_last_step_path_is_the_arc_each_unicycle_drove(scenario):
+    from activetrack.envs.rendering import PATH_POINTS
+
+    env = parallel_env(scenario=scenario, render_mode="rgb_array")
+    env.reset(seed=2)
+    w, dt = env.world, env.scenario.dt
+    rng = np.random.default_rng(2)
+    env.render()
+    paths = env._recorder._renderer._art["paths"]
+    assert all(len(line.get_xdata()) == 0 for line in paths)  # no step yet: no path
+    turned = 0
+    for _ in range(12):
+        before = w.sensor_states(0).copy()  # (M, 3): x, y, heading
+        env.step({a: rng.uniform(-1.0, 1.0, 2) for a in env.agents})
+        env.render()
+        after = w.sensor_states(0)
+        for i, line in enumerate(env._recorder._renderer._art["paths"]):
+            drawn = line.get_xydata()
+            assert drawn.shape == (PATH_POINTS + 1, 2)
+            np.testing.assert_allclose(drawn[0], before[i, :2], rtol=0, atol=1e-12)
+            np.testing.assert_allclose(drawn[-1], after[i, :2], rtol=0, atol=1e-9)
+            ode = _unicycle_ode_path(before[i, :2], before[i, 2], after[i, :2], after[i, 2], dt,
+                                     PATH_POINTS)  # fmt: skip
+            np.testing.assert_allclose(drawn, ode, rtol=0, atol=1e-9)
+            # An arc, not the chord: the midpoint is off the straight segment when it turned.
+            mid = drawn[PATH_POINTS // 2] - 0.5 * (drawn[0] + drawn[-1])
+            turned += float(np.hypot(*mid)) > 1e-3
+    assert turned >= 10  # (random turn rates: most steps turn)
+    # In the legend, the paths; no separation disks (d_sep = 0).
+    labels = [t.get_text() for t in env._recorder._renderer._ax.get_legend().get_texts()]
+    assert "last step's paths" in labels and "separation disks" not in labels
+    env.close()
+
+
+@pytest.mark.parametrize("d_sep", [2.0, (0.5, 1.0, 0.5, 1.0, 0.5, 1.0, 0.5, 1.0)])
+def test_separation_disks_surround_each_sensor_with_half_its_distance(d_sep):
+    env = parallel_env(scenario="crowded", d_sep=d_sep, render_mode="rgb_array")
+    env.reset(seed=1)
+    rng = np.random.default_rng(1)
+    for _ in range(3):
+        env.step({a: rng.uniform(-1.0, 1.0, 2) for a in env.agents})
+    env.render()
+    sensors = env.world.get("sensors", 0)
+    # Each sensor's own radius: half the one distance, or its radius d_i (pairs keep d_i + d_j).
+    radii = np.full(8, d_sep / 2) if np.ndim(d_sep) == 0 else np.asarray(d_sep)
+    rings = env._recorder._renderer._art["separation"]
+    for i, line in enumerate(rings):
+        ring = line.get_xydata()
+        assert len(ring) >= 33 and np.allclose(ring[0], ring[-1], rtol=0, atol=1e-12)  # closed
+        dist = np.hypot(*(ring - sensors[i]).T)
+        np.testing.assert_allclose(dist, radii[i], rtol=1e-12)
+        assert line.get_color() == f"C{i}"
+    # The world kept the rule, so no two disks overlap.
+    e = sensors[:, None] - sensors[None]
+    gap = np.hypot(e[..., 0], e[..., 1]) - (radii[:, None] + radii[None])
+    assert np.all(gap[np.triu_indices(8, 1)] >= -1e-9)
+    # No paths for the disk (the trails are its straight steps).
+    assert all(len(line.get_xdata()) == 0 for line in env._recorder._renderer._art["paths"])
+    labels = [t.get_text() for t in env._recorder._renderer._ax.get_legend().get_texts()]
+    assert "separation disks" in labels and "last step's paths" not in labels
+    env.close()
+
+
+def test_the_paper_draws_no_paths_or_separation_disks():
+    env = parallel_env(scenario="paper", render_mode="rgb_array")
+    env.reset(seed=0)
+    env.step({a: np.array([0.5, 0.5]) for a in env.agents})
+    env.render()
+    art = env._recorder._renderer._art
+    assert all(len(line.get_xdata()) == 0 for line in [*art["paths"], *art["separation"]])
+    env.close()

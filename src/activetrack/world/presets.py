@@ -1,6 +1,7 @@
 """The named scenario presets: the paper's setup (Section V), M identical sensors, and the
 tasks beyond the paper (several targets, sensor models, uncertain poses, limited sensing,
-targets that maneuver or evade).
+targets that maneuver or evade, robots with a heading and a turning limit, teams that
+keep a minimum separation).
 
 Each preset is a dict of :class:`activetrack.world.scenarios.Scenario` fields that differ
 from the defaults (the paper's); :func:`activetrack.world.scenarios.make_scenario` builds it.
@@ -10,6 +11,9 @@ from __future__ import annotations
 
 from typing import Any
 
+import numpy as np
+
+from activetrack.kinematics.unicycle import Unicycle
 from activetrack.models.behaviour import Evasive, Maneuvering
 
 #: The fields added beyond the paper's setup (several targets, sensor models, poses,
@@ -61,6 +65,20 @@ MANEUVERING = Maneuvering(
 #: The evader task's target: it runs straight from the nearest sensor at the sensors' speed
 #: (vmax = 10 m/s), always.
 EVADER = Evasive(speed=10.0, dt=0.1)
+
+#: The unicycle task's robots: the paper's top speed (10 m/s), able to stop and turn in
+#: place (v_min = 0), turning at most pi rad/s (half a turn a second, 18 degrees a step).
+UNICYCLE = Unicycle(v_min=0.0, v_max=10.0, w_max=np.pi)
+#: The fixed-wing task's robots: they cannot stop (at least 4 m/s, at most the paper's 10
+#: m/s) and turn at most 2 pi / 3 rad/s, so they loiter on circles of radius at least
+#: v_min / w_max = 1.9 m (4.8 m at the top speed), about the target's rho = 2 m.
+FIXED_WING = Unicycle(v_min=4.0, v_max=10.0, w_max=2.0 * np.pi / 3.0)
+#: The team rule of the crowded task: every two sensors at least 2 m apart (the target's
+#: rho).
+D_SEP = 2.0
+#: The urban unicycle task's: 1.5 m (its team's start disk, of radius 4 m, holds nine
+#: sensors that far apart: their separation disks cover 0.22 of it).
+D_SEP_URBAN = 1.5
 
 #: The named presets, name -> the Scenario fields that differ from the defaults (the
 #: paper's): ``paper``, ``homogeneous`` and the :data:`TASKS`.
@@ -164,10 +182,44 @@ PRESETS: dict[str, dict[str, Any]] = {
         "x0_hat": (0.0, 0.0, -8.0, 6.0),
         "target_behaviour": EVADER,
     },
+    # The paper's setting (its team of three, target and noise) with unicycle robots
+    # (UNICYCLE): a heading, the paper's top speed, a turning limit of pi rad/s.
+    "unicycle": {"name": "unicycle", "kinematics": UNICYCLE},
+    # The paper's setting with robots that cannot stop and must loiter (FIXED_WING).
+    "fixed_wing": {"name": "fixed_wing", "kinematics": FIXED_WING},
+    # Eight range-and-bearing sensors with sharper bearings (2 m^2, 0.05 rad^2: the
+    # information of a bearing grows as the distance shrinks, so they close in) around the
+    # paper's target slowed to 5 m/s, every two at least D_SEP = 2 m apart (the world
+    # enforces it; at rho = 2 m from the target at most six fit); they start in a disk of
+    # radius 6 m about (8, 0) (their 1 m separation disks cover 0.16 of it). The iterated
+    # EKF: close in, eq. (11)'s single linearization leaves the mean NEES above its band.
+    "crowded": {
+        **_TASK,
+        "name": "crowded",
+        "n_sensors": 8,
+        "sigma_d2": 2.0,
+        "sigma_theta2": 0.05,
+        "x0": (0.0, 0.0, -4.0, 3.0),
+        "x0_hat": (0.0, 0.0, -4.0, 3.0),
+        "sensor_center": (8.0, 0.0),
+        "sensor_radius": 6.0,
+        "filter_iterations": 10,
+        "d_sep": D_SEP,
+    },
+    # The urban task's blocks, team, target and sensing with unicycle robots (UNICYCLE)
+    # kept D_SEP_URBAN = 1.5 m apart.
+    "urban_unicycle": {
+        **_URBAN,
+        "name": "urban_unicycle",
+        "occluders": _BLOCKS,
+        "kinematics": UNICYCLE,
+        "d_sep": D_SEP_URBAN,
+    },
 }
 
 #: The named tasks beyond the paper (presets with registered environment ids).
 TASKS = (
     "two_targets", "range_only", "bearing_only", "mixed", "uncertain_poses", "urban",
-    "urban_random", "maneuvering", "evader",
+    "urban_random", "maneuvering", "evader", "unicycle", "fixed_wing", "crowded",
+    "urban_unicycle",
 )  # fmt: skip
