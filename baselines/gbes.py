@@ -493,6 +493,10 @@ class _BlockSearch:
         self.objective = objective
         self.sizes = [len(f) for f in feats]
         self.bsize = [min(block, k) for k in self.sizes]
+        # One block combination is evaluated whole (block^M configurations): with many
+        # sensors, blocks shrink (largest first) until one fits the batch's memory bound.
+        while math.prod(self.bsize) > max(batch, 1) and max(self.bsize) > 1:
+            self.bsize[self.bsize.index(max(self.bsize))] -= 1
         self.nblocks = [-(-k // b) for k, b in zip(self.sizes, self.bsize, strict=True)]
         self.blocks = []  # per sensor 3 x (n_blocks, block) entries, last block padded by repeats
         self.means = []  # per sensor (n_blocks, 3): the blocks' mean information
@@ -532,7 +536,8 @@ class _BlockSearch:
             seeds.append(flat[np.argmin(lb)])
             if lo == 0 and len(flat) == self.n_block_combos:
                 cached = (flat, lb)
-        self._evaluate(np.asarray(seeds))
+        for start in range(0, len(seeds), self.batch):  # within the memory bound
+            self._evaluate(np.asarray(seeds[start : start + self.batch]))
         # Pass 2: evaluate, in order of increasing bound, what the bound cannot exclude.
         for lo in range(0, self.n_block_combos, self.chunk):
             flat, lb = cached if cached is not None else self._bounds(lo)

@@ -178,3 +178,24 @@ def test_gbes_plans_a_batch_copy_by_copy():
     out = GBES(spacing=0.1).plan(PlanningProblem.stack(singles))
     for b, p in enumerate(singles):
         np.testing.assert_array_equal(out[b], GBES(spacing=0.1).plan(p))
+
+
+def test_blocks_shrink_to_the_memory_bound_and_stay_exact(monkeypatch):
+    """With more sensors than the batch fits (block^M configurations over
+    ``batch_elements``), every evaluated array stays within the bound and the optimum is
+    still the naive brute force's (8 GB were allocated for 8 sensors before the blocks
+    shrank)."""
+    sizes = []
+    real = _BlockSearch._evaluate
+
+    def recording(self, flat):
+        sizes.append(len(flat) * math.prod(self.bsize))
+        return real(self, flat)
+
+    monkeypatch.setattr(_BlockSearch, "_evaluate", recording)
+    rng = np.random.default_rng(11)
+    for _ in range(3):
+        p = random_problem(rng, 3)
+        res = GBES(spacing=0.35, block=8, batch_elements=20).search(p)
+        assert res.value == pytest.approx(_naive_optimum(p, 0.35), rel=1e-11)
+    assert sizes and max(sizes) <= 20
