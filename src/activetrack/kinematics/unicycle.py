@@ -49,7 +49,18 @@ def _sinc(phi: FloatArray) -> FloatArray:
     """Return ``sin(phi) / phi`` (1 at 0; no cancellation: a quotient, not a difference)."""
     phi = np.asarray(phi, np.float64)
     zero = phi == 0.0
+    if not zero.any():  # (the usual case: no np.where, which costs microseconds)
+        return np.sin(phi) / phi
     return np.where(zero, 1.0, np.sin(phi) / np.where(zero, 1.0, phi))
+
+
+def _last(*columns: FloatArray) -> FloatArray:
+    """Return ``columns`` (broadcast together) stacked on a new last axis (np.stack's
+    values, without its per-call cost)."""
+    out = np.empty(np.broadcast(*columns).shape + (len(columns),))
+    for j, c in enumerate(columns):
+        out[..., j] = c
+    return out
 
 
 class Unicycle(PiecewiseReach):
@@ -67,6 +78,9 @@ class Unicycle(PiecewiseReach):
     state_dim = 3
     n_features = 2
     n_pieces = 4
+    #: :meth:`apply` is :meth:`advance`'s position: a team's move integrates once
+    #: (:meth:`activetrack.kinematics.team.TeamMotion._move_shared`).
+    _apply_from_advance = True
 
     def __init__(self, v_min: float, v_max: float, w_max: float, dt: float | None = None):
         self.v_min = real_parameter("v_min", v_min, 0.0, SPEED_MAX)
@@ -107,7 +121,7 @@ class Unicycle(PiecewiseReach):
     # Commands and states ---------------------------------------------------------------
     def commands(self, actions: FloatArray) -> tuple[FloatArray, FloatArray]:
         """Return ``(v, w)`` (...) of normalized ``actions`` (..., 2) (clipped to [-1, 1])."""
-        a = np.clip(np.asarray(actions, np.float64), -1.0, 1.0)
+        a = np.minimum(np.maximum(np.asarray(actions, np.float64), -1.0), 1.0)  # (np.clip)
         v = self.v_min + 0.5 * (a[..., 0] + 1.0) * (self.v_max - self.v_min)
         return v, a[..., 1] * self.w_max
 
@@ -120,7 +134,7 @@ class Unicycle(PiecewiseReach):
         ang = state[..., 2] + phi
         x = state[..., 0] + chord * np.cos(ang)
         y = state[..., 1] + chord * np.sin(ang)
-        return np.stack(np.broadcast_arrays(x, y, _wrap(state[..., 2] + 2.0 * phi)), -1)
+        return _last(x, y, _wrap(state[..., 2] + 2.0 * phi))
 
     def advance(self, actions: FloatArray, state: FloatArray) -> FloatArray:
         """Return the state (..., 3) after the step ``actions`` ask for."""
@@ -165,7 +179,7 @@ class Unicycle(PiecewiseReach):
     def features(self, state: FloatArray) -> FloatArray:
         """Return the heading as ``(cos theta, sin theta)`` (..., 2)."""
         theta = np.asarray(state, np.float64)[..., 2]
-        return np.stack([np.cos(theta), np.sin(theta)], -1)
+        return _last(np.cos(theta), np.sin(theta))
 
     # The reach set ---------------------------------------------------------------------
     def reaches(self, points: FloatArray, position: FloatArray) -> np.ndarray:
