@@ -74,3 +74,32 @@ def test_fused_team_equals_stage_by_stage(kin, n, absolute, monkeypatch) -> None
             assert np.array_equal(x, y)
     projected = sum(int(np.sum(step[FIELDS.index("projected")])) for step in fused[::2])
     assert projected > 10  # the rule that pushes moves out of the rho disk was exercised
+
+
+def test_unicycle_team_step_is_advance_bit_for_bit() -> None:
+    """The compiled team step against the NumPy methods it replaces (``advance`` and the
+    ``rho`` test), on random states and actions with the edge cases: straight moves
+    (``w = 0``), clipped actions, headings at the wrap, a stop."""
+    rng = np.random.default_rng(7)
+    for kin in (activetrack.Unicycle(0.0, 10.0, np.pi, dt=0.1),
+                activetrack.Unicycle(2.5, 7.0, 9.0, dt=0.3)):  # fmt: skip
+        n, m, k = 4000, 3, 2
+        actions = rng.uniform(-1.5, 1.5, (n, m, 2))
+        actions[::7, :, 1] = 0.0  # straight
+        actions[::11, :, 0] = -1.0  # the least speed (a stop when v_min is 0)
+        states = np.concatenate(
+            [rng.uniform(-20, 20, (n, m, 2)), rng.uniform(-np.pi, np.pi, (n, m, 1))], -1
+        )
+        states[::5, :, 2] = np.pi  # headings at the wrap
+        states[1::5, :, 2] = -np.pi + 1e-15
+        targets = rng.uniform(-20, 20, (n, k, 2))
+        rho = rng.uniform(0.0, 15.0, (n, m))
+        nxt, inside = kin.team_step(actions, states, targets, rho)
+        want = kin.advance(actions, states)
+        assert np.array_equal(nxt, want)  # every bit
+        e = want[..., None, :2] - targets[:, None, :, :]
+        brute = np.array([[any(np.hypot(*e[b, i, j]) < rho[b, i] for j in range(k))
+                           for i in range(m)] for b in range(n)])  # fmt: skip
+        assert np.array_equal(inside, brute) and 0 < inside.sum() < inside.size
+        one, one_inside = kin.team_step(actions[3], states[3], targets[3], rho[3])
+        assert np.array_equal(one, want[3]) and np.array_equal(one_inside, brute[3])

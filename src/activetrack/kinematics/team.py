@@ -263,13 +263,20 @@ class TeamMotion:
     ) -> tuple[FloatArray, np.ndarray, FloatArray]:  # fmt: skip
         """:meth:`move` of the actions ``x`` (..., M, 2) when every sensor moves by ``kin``:
         the same rule, each stage one call for the whole team (``targets`` (..., K, 2),
-        ``rho`` (..., M)). A kinematics whose :meth:`~Kinematics.apply` is its
-        :meth:`~Kinematics.advance`'s position (``_apply_from_advance``) integrates once."""
+        ``rho`` (..., M)). A kinematics with a ``team_step`` (:meth:`activetrack.Unicycle.
+        team_step`) gives the advance and the ``rho`` test in one call."""
         p = state_of(kin, sensors)
         deep = kin.state_dim > 2
-        adv = kin.advance(x, p) if deep else None
-        want = adv[..., :2] if deep and getattr(kin, "_apply_from_advance", False) else (
-            kin.apply(x, p))  # fmt: skip
+        team_step = getattr(kin, "team_step", None)
+        if team_step is not None:  # (advance and the rho test in one compiled call)
+            adv, projected = team_step(x, p, targets, rho * (1.0 - TOL))
+            want = adv[..., :2]
+        else:
+            adv = kin.advance(x, p) if deep else None
+            want = kin.apply(x, p)
+            e = want[..., None, :] - targets[..., None, :, :]  # (..., M, K, 2)
+            dist = np.hypot(e[..., 0], e[..., 1])
+            projected = (dist < rho[..., None] * (1.0 - TOL)).any(-1)
         if not np.isfinite(want).all():  # a bug of the kinematics: said, not stored
             i = int(np.argwhere(~np.isfinite(want))[0][-2])
             raise ValueError(
@@ -277,9 +284,6 @@ class TeamMotion:
                 "inf from its apply on this step's positions"
             )
         out = np.array(want)
-        e = want[..., None, :] - targets[..., None, :, :]  # (..., M, K, 2)
-        dist = np.hypot(e[..., 0], e[..., 1])
-        projected = (dist < rho[..., None] * (1.0 - TOL)).any(-1)
         if kin.radius <= 0.0:  # (a sensor that cannot move stays, even inside)
             projected[...] = False
         some = projected.any()

@@ -78,9 +78,6 @@ class Unicycle(PiecewiseReach):
     state_dim = 3
     n_features = 2
     n_pieces = 4
-    #: :meth:`apply` is :meth:`advance`'s position: a team's move integrates once
-    #: (:meth:`activetrack.kinematics.team.TeamMotion._move_shared`).
-    _apply_from_advance = True
 
     def __init__(self, v_min: float, v_max: float, w_max: float, dt: float | None = None):
         self.v_min = real_parameter("v_min", v_min, 0.0, SPEED_MAX)
@@ -139,6 +136,37 @@ class Unicycle(PiecewiseReach):
     def advance(self, actions: FloatArray, state: FloatArray) -> FloatArray:
         """Return the state (..., 3) after the step ``actions`` ask for."""
         return self.integrate(*self.commands(actions), state)
+
+    def team_step(
+        self, actions: FloatArray, states: FloatArray, targets: FloatArray, rho_inside: FloatArray
+    ) -> tuple[FloatArray, np.ndarray]:
+        """Return ``(next_states, inside)``: :meth:`advance` of a team's ``actions`` (...,
+        M, 2) from its ``states`` (..., M, 3), bit for bit, and whether each new position
+        is closer than ``rho_inside`` (..., M) to one of ``targets`` (..., K, 2); one
+        compiled call (:func:`activetrack.kinematics._unicycle_kernels.team_step_rows`)."""
+        from activetrack.kinematics._unicycle_kernels import team_step_rows  # noqa: PLC0415
+
+        a, s = np.asarray(actions, np.float64), np.asarray(states, np.float64)
+        targets = np.asarray(targets, np.float64)
+        if type(self) is not Unicycle:  # a subclass may move otherwise: its own methods
+            nxt = self.advance(a, s)
+            e = nxt[..., None, :2] - targets[..., None, :, :]
+            dist = np.hypot(e[..., 0], e[..., 1])
+            return nxt, (dist < np.asarray(rho_inside)[..., None]).any(-1)
+        lead, m = a.shape[:-2], a.shape[-2]
+        rows = a.reshape(-1, m, 2)
+        n = rows.shape[0]
+        out, inside = np.empty((n, m, 3)), np.empty((n, m), dtype=bool)
+        team_step_rows(
+            np.ascontiguousarray(rows), np.ascontiguousarray(s.reshape(n, m, 3)),
+            self.v_min, self.v_max, self.w_max, self._dt(),
+            np.ascontiguousarray(np.broadcast_to(targets, lead + targets.shape[-2:]),
+                                 np.float64).reshape(n, -1, 2),
+            np.ascontiguousarray(np.broadcast_to(rho_inside, lead + (m,)),
+                                 np.float64).reshape(n, m),
+            out, inside,
+        )  # fmt: skip
+        return out.reshape(lead + (m, 3)), inside.reshape(lead + (m,))
 
     def apply(self, actions: FloatArray, position: FloatArray) -> FloatArray:
         """Return the position (..., 2) the step ``actions`` ask for reaches."""
