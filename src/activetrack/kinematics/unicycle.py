@@ -157,14 +157,16 @@ class Unicycle(PiecewiseReach):
         rows = a.reshape(-1, m, 2)
         n = rows.shape[0]
         out, inside = np.empty((n, m, 3)), np.empty((n, m), dtype=bool)
+        rho_inside = np.asarray(rho_inside, np.float64)
+        if targets.shape[:-2] != lead:  # (broadcasting costs microseconds: only if needed)
+            targets = np.broadcast_to(targets, lead + targets.shape[-2:])
+        if rho_inside.shape != lead + (m,):
+            rho_inside = np.broadcast_to(rho_inside, lead + (m,))
         team_step_rows(
             np.ascontiguousarray(rows), np.ascontiguousarray(s.reshape(n, m, 3)),
             self.v_min, self.v_max, self.w_max, self._dt(),
-            np.ascontiguousarray(np.broadcast_to(targets, lead + targets.shape[-2:]),
-                                 np.float64).reshape(n, -1, 2),
-            np.ascontiguousarray(np.broadcast_to(rho_inside, lead + (m,)),
-                                 np.float64).reshape(n, m),
-            out, inside,
+            np.ascontiguousarray(targets).reshape(n, -1, 2),
+            np.ascontiguousarray(rho_inside).reshape(n, m), out, inside,
         )  # fmt: skip
         return out.reshape(lead + (m, 3)), inside.reshape(lead + (m,))
 
