@@ -79,6 +79,14 @@ def _world_and_planners() -> None:
             world.step_actions(np.full((copies, world.n_sensors, 2), 0.5))
             world.observe()
             world.state()
+    from activetrack.kinematics.unicycle import Unicycle  # noqa: PLC0415
+    from activetrack.world.scenarios import make_scenario  # noqa: PLC0415
+
+    robots = make_scenario("paper", kinematics=Unicycle(0.0, 10.0, np.pi))  # its team step
+    for copies in (1, 2):
+        world = World(robots, copies)
+        world.reset(seeds=range(copies))
+        world.step_actions(np.full((copies, world.n_sensors, 2), 0.5))
     observation.observations(np.zeros((1, 5)), np.zeros((1, 2, 6)), observation.cyclic_order(2))
     world = World("paper", 2)
     world.reset(seeds=[0, 1])

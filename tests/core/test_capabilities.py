@@ -164,7 +164,6 @@ def expected(fields: dict) -> dict[str, bool]:
                 "known_poses",
                 "unlimited_sensing",
                 "single_update",
-                "disk_kinematics",
                 "builtin_sensors",
                 "filter_targets",
                 "no_separation",

@@ -140,6 +140,10 @@ class TeamMotion:
         #: S, the team's state size (the largest ``state_dim``), and F, the most features.
         self.state_dim = max(int(k.state_dim) for k in team)
         self.n_features = max(int(k.n_features) for k in team)
+        #: The one kinematics of every sensor (equal by value), else None: then a step's
+        #: moves and features are one call for the whole team (:meth:`_move_shared`), not
+        #: one per sensor (the same numbers: the methods work row by row).
+        self.shared = team[0] if all(k == team[0] for k in team) else None
 
     def states(self, positions: FloatArray, motion: FloatArray | None) -> FloatArray:
         """Return the team's states (..., M, S): ``positions`` (..., M, 2) then ``motion``
@@ -162,6 +166,9 @@ class TeamMotion:
     def features(self, states: FloatArray) -> FloatArray:
         """Return every sensor's :meth:`Kinematics.features` (..., M, F), zero-padded."""
         states = np.asarray(states, np.float64)
+        shared = self.shared
+        if shared is not None and shared.n_features == self.n_features:
+            return np.asarray(shared.features(state_of(shared, states)), np.float64)
         out = np.zeros(states.shape[:-1] + (self.n_features,))
         for i, kin in enumerate(self.team):
             if kin.n_features:
@@ -214,6 +221,8 @@ class TeamMotion:
         x, sensors = np.asarray(x, np.float64), np.asarray(sensors, np.float64)
         targets = where[..., None, :] if where.ndim == x.ndim - 1 else where  # (..., K, 2)
         rho = np.broadcast_to(np.asarray(rho, np.float64), x.shape[:-1])
+        if self.shared is not None and not absolute:
+            return self._move_shared(self.shared, x, sensors, targets, rho)
         out = np.empty(x.shape)
         nxt = np.zeros(x.shape[:-1] + (sensors.shape[-1],))
         projected = np.zeros(x.shape[:-1], dtype=bool)
@@ -231,9 +240,7 @@ class TeamMotion:
             inside = np.any(dist < rho[..., i, None] * (1.0 - TOL), axis=-1)
             # (a sensor that cannot move stays, even inside)
             inside &= kin.radius > 0.0
-            for idx in np.ndindex(inside.shape):  # (few: a move that ended inside)
-                if not inside[idx]:
-                    continue
+            for idx in map(tuple, np.argwhere(inside)):  # (few: a move that ended inside)
                 out[idx + (i,)] = kin.project(want[idx], p[idx], targets[idx], rho[idx + (i,)])
                 projected[idx + (i,)] = True
             if not np.all(np.isfinite(out[..., i, :])):
@@ -248,6 +255,54 @@ class TeamMotion:
                     cmd[redo] = kin.command(out[..., i, :][redo], p[redo])
                 nxt[..., i, : kin.state_dim] = kin.advance(cmd, p)
             nxt[..., i, :2] = out[..., i, :]
+        return out, projected, nxt
+
+    def _move_shared(
+        self, kin: Kinematics, x: FloatArray, sensors: FloatArray, targets: FloatArray,
+        rho: FloatArray,
+    ) -> tuple[FloatArray, np.ndarray, FloatArray]:  # fmt: skip
+        """:meth:`move` of the actions ``x`` (..., M, 2) when every sensor moves by ``kin``:
+        the same rule, each stage one call for the whole team (``targets`` (..., K, 2),
+        ``rho`` (..., M)). A kinematics with a ``team_step`` (:meth:`activetrack.Unicycle.
+        team_step`) gives the advance and the ``rho`` test in one call."""
+        p = state_of(kin, sensors)
+        deep = kin.state_dim > 2
+        team_step = getattr(kin, "team_step", None)
+        if team_step is not None:  # (advance and the rho test in one compiled call)
+            adv, projected = team_step(x, p, targets, rho * (1.0 - TOL))
+            want = adv[..., :2]
+        else:
+            adv = kin.advance(x, p) if deep else None
+            want = kin.apply(x, p)
+            e = want[..., None, :] - targets[..., None, :, :]  # (..., M, K, 2)
+            dist = np.hypot(e[..., 0], e[..., 1])
+            projected = (dist < rho[..., None] * (1.0 - TOL)).any(-1)
+        if not np.isfinite(want).all():  # a bug of the kinematics: said, not stored
+            i = int(np.argwhere(~np.isfinite(want))[0][-2])
+            raise ValueError(
+                f"kinematics[{i}] {kin.name!r} ({type(kin).__name__}) returned NaN or "
+                "inf from its apply on this step's positions"
+            )
+        out = np.array(want)
+        if kin.radius <= 0.0:  # (a sensor that cannot move stays, even inside)
+            projected[...] = False
+        some = projected.any()
+        for idx in map(tuple, np.argwhere(projected) if some else ()):  # (few)
+            out[idx] = kin.project(want[idx], p[idx], targets[idx[:-1]], rho[idx])
+        if some and not np.isfinite(out).all():
+            i = int(np.argwhere(~np.isfinite(out))[0][-2])
+            raise ValueError(
+                f"kinematics[{i}] {kin.name!r} ({type(kin).__name__}) returned NaN or "
+                "inf from its project (the move out of a rho disk) on this step"
+            )
+        nxt = np.zeros(x.shape[:-1] + (sensors.shape[-1],))
+        if deep:  # the rest of the state: the action's, or the point's
+            if some:
+                adv = np.array(adv)
+                pp = p[projected]
+                adv[projected] = kin.advance(kin.command(out[projected], pp), pp)
+            nxt[..., : kin.state_dim] = adv
+        nxt[..., :2] = out
         return out, projected, nxt
 
 

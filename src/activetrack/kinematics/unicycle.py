@@ -49,7 +49,18 @@ def _sinc(phi: FloatArray) -> FloatArray:
     """Return ``sin(phi) / phi`` (1 at 0; no cancellation: a quotient, not a difference)."""
     phi = np.asarray(phi, np.float64)
     zero = phi == 0.0
+    if not zero.any():  # (the usual case: no np.where, which costs microseconds)
+        return np.sin(phi) / phi
     return np.where(zero, 1.0, np.sin(phi) / np.where(zero, 1.0, phi))
+
+
+def _last(*columns: FloatArray) -> FloatArray:
+    """Return ``columns`` (broadcast together) stacked on a new last axis (np.stack's
+    values, without its per-call cost)."""
+    out = np.empty(np.broadcast(*columns).shape + (len(columns),))
+    for j, c in enumerate(columns):
+        out[..., j] = c
+    return out
 
 
 class Unicycle(PiecewiseReach):
@@ -107,7 +118,7 @@ class Unicycle(PiecewiseReach):
     # Commands and states ---------------------------------------------------------------
     def commands(self, actions: FloatArray) -> tuple[FloatArray, FloatArray]:
         """Return ``(v, w)`` (...) of normalized ``actions`` (..., 2) (clipped to [-1, 1])."""
-        a = np.clip(np.asarray(actions, np.float64), -1.0, 1.0)
+        a = np.minimum(np.maximum(np.asarray(actions, np.float64), -1.0), 1.0)  # (np.clip)
         v = self.v_min + 0.5 * (a[..., 0] + 1.0) * (self.v_max - self.v_min)
         return v, a[..., 1] * self.w_max
 
@@ -120,11 +131,44 @@ class Unicycle(PiecewiseReach):
         ang = state[..., 2] + phi
         x = state[..., 0] + chord * np.cos(ang)
         y = state[..., 1] + chord * np.sin(ang)
-        return np.stack(np.broadcast_arrays(x, y, _wrap(state[..., 2] + 2.0 * phi)), -1)
+        return _last(x, y, _wrap(state[..., 2] + 2.0 * phi))
 
     def advance(self, actions: FloatArray, state: FloatArray) -> FloatArray:
         """Return the state (..., 3) after the step ``actions`` ask for."""
         return self.integrate(*self.commands(actions), state)
+
+    def team_step(
+        self, actions: FloatArray, states: FloatArray, targets: FloatArray, rho_inside: FloatArray
+    ) -> tuple[FloatArray, np.ndarray]:
+        """Return ``(next_states, inside)``: :meth:`advance` of a team's ``actions`` (...,
+        M, 2) from its ``states`` (..., M, 3), bit for bit, and whether each new position
+        is closer than ``rho_inside`` (..., M) to one of ``targets`` (..., K, 2); one
+        compiled call (:func:`activetrack.kinematics._unicycle_kernels.team_step_rows`)."""
+        from activetrack.kinematics._unicycle_kernels import team_step_rows  # noqa: PLC0415
+
+        a, s = np.asarray(actions, np.float64), np.asarray(states, np.float64)
+        targets = np.asarray(targets, np.float64)
+        if type(self) is not Unicycle:  # a subclass may move otherwise: its own methods
+            nxt = self.advance(a, s)
+            e = nxt[..., None, :2] - targets[..., None, :, :]
+            dist = np.hypot(e[..., 0], e[..., 1])
+            return nxt, (dist < np.asarray(rho_inside)[..., None]).any(-1)
+        lead, m = a.shape[:-2], a.shape[-2]
+        rows = a.reshape(-1, m, 2)
+        n = rows.shape[0]
+        out, inside = np.empty((n, m, 3)), np.empty((n, m), dtype=bool)
+        rho_inside = np.asarray(rho_inside, np.float64)
+        if targets.shape[:-2] != lead:  # (broadcasting costs microseconds: only if needed)
+            targets = np.broadcast_to(targets, lead + targets.shape[-2:])
+        if rho_inside.shape != lead + (m,):
+            rho_inside = np.broadcast_to(rho_inside, lead + (m,))
+        team_step_rows(
+            np.ascontiguousarray(rows), np.ascontiguousarray(s.reshape(n, m, 3)),
+            self.v_min, self.v_max, self.w_max, self._dt(),
+            np.ascontiguousarray(targets).reshape(n, -1, 2),
+            np.ascontiguousarray(rho_inside).reshape(n, m), out, inside,
+        )  # fmt: skip
+        return out.reshape(lead + (m, 3)), inside.reshape(lead + (m,))
 
     def apply(self, actions: FloatArray, position: FloatArray) -> FloatArray:
         """Return the position (..., 2) the step ``actions`` ask for reaches."""
@@ -165,7 +209,7 @@ class Unicycle(PiecewiseReach):
     def features(self, state: FloatArray) -> FloatArray:
         """Return the heading as ``(cos theta, sin theta)`` (..., 2)."""
         theta = np.asarray(state, np.float64)[..., 2]
-        return np.stack([np.cos(theta), np.sin(theta)], -1)
+        return _last(np.cos(theta), np.sin(theta))
 
     # The reach set ---------------------------------------------------------------------
     def reaches(self, points: FloatArray, position: FloatArray) -> np.ndarray:

@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from activetrack._jit import as_rows
+from activetrack.kinematics import sensor_motion
 from activetrack.models.objective import combined
 from activetrack.world import _loop_kernels as loop_kernels
 from activetrack.world import _observation_kernels as observation_kernels
@@ -37,6 +38,8 @@ def prepare(w: World) -> None:
     t0 = p.targets[0]
     table = np.empty((m, loop_kernels.TABLE_COLUMNS))
     table[:, loop_kernels.R], table[:, loop_kernels.RHO] = p.r, p.rho
+    if w._team is not None:  # the team moves first (team_moves): the kernel keeps its points
+        table[:, loop_kernels.R], table[:, loop_kernels.RHO] = np.inf, 0.0
     table[:, loop_kernels.ORIENTATION] = p.orientation
     table[:, loop_kernels.STD_D : loop_kernels.STD_T + 1] = p.noise_std
     table[:, loop_kernels.USE_D : loop_kernels.USE_T + 1] = p.uses
@@ -47,6 +50,8 @@ def prepare(w: World) -> None:
     constants = np.ascontiguousarray(w._constants, np.float64)
     td = observation.EXT_TARGET_DIM * K if w._extended else observation.TARGET_DIM
     w._obs_args = (constants, float(w._dt), float(w.length_scale), w._extended)
+    # The kernel's observation: the layout without the kinematic features (with_motion).
+    w._fused_obs_shape = (m, w._obs_shape[1] - w.layout.motion)
     w._obs_work = (np.zeros((1, m), bool), np.empty(td),
                    np.empty((m, 2 + constants.shape[1])), w._order)  # fmt: skip
 
@@ -61,6 +66,9 @@ def step_one(w: World, absolute: bool, moves: Any, name: str) -> tuple[Any, Any,
         w._not_running(0)
     moves = w._moves_array(moves, name, 0)
     sensors, x_true, P_pred = st["sensors"], t["x_true"], t["P_pred"]
+    if w._team is not None:
+        moves, team_projected = team_moves(w, absolute, moves, sensors, t["x_pred"], ...)
+        absolute = True
     noise = w._noise_of(0, False)
     new_sensors, projected = np.empty(sensors.shape), np.empty(sensors.shape[0], bool)
     x_next_true, x_post, x_pred = (
@@ -69,15 +77,18 @@ def step_one(w: World, absolute: bool, moves: Any, name: str) -> tuple[Any, Any,
         np.empty(x_true.shape),
     )
     P_post, P_next = np.empty(P_pred.shape), np.empty(P_pred.shape)
-    obs = np.empty(w._obs_shape, np.float32)
+    obs = np.empty(w._fused_obs_shape, np.float32)
     trace, count = loop_kernels.advance_observe_row.dispatcher(  # (no wrapper call)
         moves, absolute, sensors, x_true, t["x_pred"], P_pred, noise, *w._fused_args,
         new_sensors, projected, x_next_true, x_post, P_post, x_pred, P_next,
         *w._fused_work, *w._obs_args, *w._obs_work, obs,
     )  # fmt: skip
-    w._obs_cache = obs
     t["x_true"], t["x_hat"], t["P"], t["x_pred"], t["P_pred"] = (
         x_next_true, x_post, P_post, x_pred, P_next)  # fmt: skip
+    if w._team is not None:  # the team's rule said which moves it projected
+        projected, count = team_projected, int(np.count_nonzero(team_projected))
+        obs = with_motion(w, obs, new_sensors, w._motion_next)
+    w._obs_cache = obs
     trace = np.float64(trace)
     score = trace if w._plain else combined(
         w.objective, np.stack([w.objective.of_covariance(P_post)], -1)
@@ -85,6 +96,8 @@ def step_one(w: World, absolute: bool, moves: Any, name: str) -> tuple[Any, Any,
     terminated = trace > w._max_trace
     new = {"sensors": new_sensors, "fixes": new_sensors, "projected": projected,
            "trace": trace, "score": score, "terminated": terminated}  # fmt: skip
+    if w._team is not None:
+        w._motion_store(new, 0, False)
     return -w._scale * score, terminated, store_one(w, new, count > 0)
 
 
@@ -112,6 +125,9 @@ def advance_fused(
     x_pred, P_pred = t["x_pred"][calc], t["P_pred"][calc]
     n, m = x_true.shape[-1], w.n_sensors
     batch = x_true.shape[:-1]
+    if w._team is not None:
+        moves, team_projected = team_moves(w, absolute, moves, sensors, x_pred, calc)
+        absolute = True
     out = (
         np.empty(sensors.shape), np.empty(sensors.shape[:-1], bool), np.empty(x_true.shape),
         np.empty(x_true.shape), np.empty(P_pred.shape), np.empty(x_true.shape),
@@ -123,7 +139,31 @@ def advance_fused(
         as_rows(P_pred, batch, (n, n)), as_rows(noise, batch, (w._n_noise,)),
         *w._fused_args, *out,
     )  # fmt: skip
-    return out[0], out[1], out[2:]
+    return out[0], out[1] if w._team is None else team_projected, out[2:]
+
+
+def team_moves(
+    w: World, absolute: bool, moves: FloatArray, sensors: FloatArray, x_pred: FloatArray,
+    calc: Any,
+) -> tuple[FloatArray, np.ndarray]:  # fmt: skip
+    """Return ``(positions, projected)`` of the sensors of a fused world ``w`` whose team
+    moves by its kinematics (``w._team``): the generic path's move
+    (``World._move_sensors``, which keeps the next ``motion``), from the sensors (known
+    positions) about the predicted target ``x_pred[..., :2]``. The compiled step then takes
+    the positions as they are (its table's reach infinite and ``rho`` zero: no clip, no
+    projection), so the step's numbers are the generic path's."""
+    move = sensor_motion.move_to if absolute else sensor_motion.apply_actions
+    positions, projected = w._move_sensors(move, moves, sensors, sensors, x_pred[..., :2], calc)
+    return np.ascontiguousarray(positions, np.float64), projected
+
+
+def with_motion(w: World, obs: np.ndarray, sensors: FloatArray, motion: FloatArray) -> np.ndarray:
+    """Return one copy's observation ``obs`` (M, D) with each agent's kinematic features
+    last (what ``World.observe`` appends on the generic path)."""
+    if not w._team.n_features:
+        return obs
+    features = w._team.features(w._team.states(sensors, motion))
+    return np.concatenate([obs, features.astype(np.float32)], -1)
 
 
 def observe_one(w: World) -> np.ndarray:
@@ -136,11 +176,14 @@ def observe_one(w: World) -> np.ndarray:
         return out
     t = w._t[0]
     x, P = t["x_pred"], t["P_pred"]
-    n, (m, d) = x.shape[0], w._obs_shape
+    n, (m, d) = x.shape[0], w._fused_obs_shape
     detected, target, sensor, order = w._obs_work
     out = np.empty((m, d), np.float32)
     observation_kernels.observe_rows.dispatcher(
         x.reshape(1, 1, n), P.reshape(1, 1, n, n), w._s["sensors"].reshape(1, m, 2),
         *w._obs_args, detected.reshape(1, 1, m), 0, order, out.reshape(1, m, d),
     )  # fmt: skip
+    if w._team is not None:
+        st = w._s
+        out = with_motion(w, out, st["sensors"], st.get("motion"))
     return out

@@ -148,8 +148,11 @@ class Capabilities:
     def fused_step(self) -> bool:
         """Whether a whole world step (move, advance, score, predict; with one copy also
         the observation) is one compiled call (:mod:`activetrack.world._loop_kernels`):
-        :attr:`per_target_update` with known poses, built-in sensor models and disks."""
+        :attr:`per_target_update` with known poses and built-in sensor models, no team
+        rule. A team that does not move by disks moves first, by its kinematics
+        (:func:`activetrack.world._fast.team_moves`), and the compiled call takes those
+        positions as they are: the same numbers as the stage-by-stage step."""
         return (
             self.per_target_update and self.known_poses and self.builtin_sensors
-            and self.disk_kinematics and self.no_separation
+            and self.no_separation
         )  # fmt: skip

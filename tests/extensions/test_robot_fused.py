@@ -1,0 +1,105 @@
+"""A team of robots on the fused step: the same numbers as the stage-by-stage step.
+
+A world whose sensors move by a kinematics of their own (unicycles, double integrators)
+but is otherwise the paper's case moves the team first and hands the positions to the
+compiled step (``world/_fast.py``, ``team_moves``). The reference here is the generic
+path, stage by stage (``World._advance``), taken by the same scenario with the fused step
+switched off: every field, observation and reward must agree bit for bit, over steps of
+actions and of absolute positions, single and batched, with many moves pushed out of the
+target's ``rho`` disk (the sensors start 3 m from a slow target whose ``rho`` is 2 m).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import activetrack
+from activetrack.world import World
+from activetrack.world.capabilities import Capabilities
+from activetrack.world.scenarios import make_scenario
+
+NEAR = dict(
+    sensor_center=(0.0, 0.0), sensor_radius=3.0, x0=(0.0, 0.0, -1.0, 1.0),
+    x0_hat=(0.0, 0.0, -1.0, 1.0),
+)  # fmt: skip
+FIELDS = ("sensors", "fixes", "projected", "motion", "x_true", "x_hat", "P", "x_pred",
+          "P_pred", "trace", "score", "terminated", "truncated", "k")  # fmt: skip
+
+
+def run(sc, n: int, absolute: bool, seed: int) -> list:
+    """Return every step's fields, observation and reward of a world of ``n`` copies of
+    ``sc`` driven by random actions (or random absolute positions near the sensors)."""
+    world = World(sc, n)
+    rng = np.random.default_rng(seed)
+    out = []
+    for episode in range(3):
+        world.reset(seeds=list(range(10 * episode, 10 * episode + n)))
+        while True:
+            ended = np.asarray(world.get("terminated"), bool) | np.asarray(
+                world.get("truncated"), bool
+            )
+            if ended.all():
+                break
+            shape = (3, 2) if n == 1 else (n, 3, 2)
+            live = None if n == 1 else ~ended
+            if absolute:
+                result = world.step(world.get("sensors") + rng.normal(0.0, 1.5, shape), live)
+            else:
+                result = world.step_actions(rng.uniform(-1.2, 1.2, shape), live)
+            out.append([np.array(world.get(f)) for f in FIELDS])
+            out.append([world.observe(), np.array(result.reward)])
+    return out
+
+
+@pytest.mark.parametrize("n", [1, 5])
+@pytest.mark.parametrize("absolute", [False, True])
+@pytest.mark.parametrize(
+    "kin",
+    [activetrack.Unicycle(0.0, 10.0, np.pi), activetrack.Unicycle(3.0, 10.0, 2.0),
+     activetrack.DoubleIntegrator(20.0, 10.0)],
+    ids=repr,
+)  # fmt: skip
+def test_fused_team_equals_stage_by_stage(kin, n, absolute, monkeypatch) -> None:
+    sc = make_scenario("paper", kinematics=kin, **NEAR)
+    assert World(sc, n)._fused
+    fused = run(sc, n, absolute, seed=1)
+    monkeypatch.setattr(Capabilities, "fused_step", property(lambda self: False))
+    assert not World(sc, n)._fused
+    staged = run(sc, n, absolute, seed=1)
+    assert len(fused) == len(staged) > 100
+    for a, b in zip(fused, staged, strict=True):
+        for x, y in zip(a, b, strict=True):
+            assert x.dtype == y.dtype and x.shape == y.shape
+            assert np.array_equal(x, y)
+    projected = sum(int(np.sum(step[FIELDS.index("projected")])) for step in fused[::2])
+    assert projected > 10  # the rule that pushes moves out of the rho disk was exercised
+
+
+def test_unicycle_team_step_is_advance_bit_for_bit() -> None:
+    """The compiled team step against the NumPy methods it replaces (``advance`` and the
+    ``rho`` test), on random states and actions with the edge cases: straight moves
+    (``w = 0``), clipped actions, headings at the wrap, a stop."""
+    rng = np.random.default_rng(7)
+    for kin in (activetrack.Unicycle(0.0, 10.0, np.pi, dt=0.1),
+                activetrack.Unicycle(2.5, 7.0, 9.0, dt=0.3)):  # fmt: skip
+        n, m, k = 4000, 3, 2
+        actions = rng.uniform(-1.5, 1.5, (n, m, 2))
+        actions[::7, :, 1] = 0.0  # straight
+        actions[::11, :, 0] = -1.0  # the least speed (a stop when v_min is 0)
+        states = np.concatenate(
+            [rng.uniform(-20, 20, (n, m, 2)), rng.uniform(-np.pi, np.pi, (n, m, 1))], -1
+        )
+        states[::5, :, 2] = np.pi  # headings at the wrap
+        states[1::5, :, 2] = -np.pi + 1e-15
+        targets = rng.uniform(-20, 20, (n, k, 2))
+        rho = rng.uniform(0.0, 15.0, (n, m))
+        nxt, inside = kin.team_step(actions, states, targets, rho)
+        want = kin.advance(actions, states)
+        assert np.array_equal(nxt, want)  # every bit
+        e = want[..., None, :2] - targets[:, None, :, :]
+        brute = np.array([[any(np.hypot(*e[b, i, j]) < rho[b, i] for j in range(k))
+                           for i in range(m)] for b in range(n)])  # fmt: skip
+        assert np.array_equal(inside, brute) and 0 < inside.sum() < inside.size
+        one, one_inside = kin.team_step(actions[3], states[3], targets[3], rho[3])
+        assert np.array_equal(one, want[3]) and np.array_equal(one_inside, brute[3])
