@@ -168,3 +168,53 @@ def test_experts_in_the_environment_never_collide(name):
         assert info["n_collisions"] > 0
     else:
         assert info["n_collisions"] == 0
+
+
+def _sampled_pair(oa, pa, ob, pb, d):
+    """Return whether sensors a < b moving straight from ``oa``, ``ob`` to ``pa``, ``pb``
+    keep ``d`` by the three conditions, on 401 samples of the paths, and the least margin
+    of the three (to skip the pairs too close to call by sampling)."""
+    t = np.linspace(0.0, 1.0, 401)[:, None]
+    path_a, path_b = oa + t * (pa - oa), ob + t * (pb - ob)
+    low = min(
+        np.min(np.hypot(*(path_a - ob).T)),
+        np.min(np.hypot(*(path_b - pa).T)),
+        np.min(np.hypot(*(path_a - path_b).T)),
+    )
+    static = min(np.min(np.hypot(*(path_a - ob).T)), np.min(np.hypot(*(path_b - pa).T)))
+    return low >= d, abs(low - d), static >= d
+
+
+def test_gbes_pair_masks_against_sampled_paths():
+    """GBES's filter (``pair_masks``) against the three conditions on sampled paths; some
+    pairs keep the two sequential conditions and fail the same instant alone."""
+    from activetrack.baselines.gsr_separation import pair_masks
+
+    rng = np.random.default_rng(8)
+    d = np.full((3, 3), 2.0)
+    np.fill_diagonal(d, 0.0)
+    only_same = 0
+    for _ in range(20):
+        old = rng.uniform(-2.5, 2.5, (3, 2))
+        cands = [old[i] + rng.uniform(-3, 3, (12, 2)) for i in range(3)]
+        for a, b, ok in pair_masks(d, old, cands):
+            for ka in range(12):
+                for kb in range(12):
+                    want, margin, static = _sampled_pair(
+                        old[a], cands[a][ka], old[b], cands[b][kb], 2.0
+                    )
+                    if margin > 1e-3:  # (a sampled path misses the exact minimum by less)
+                        assert ok[ka, kb] == want
+                    only_same += static and not want
+    assert only_same > 20
+
+
+def test_rm_redraws_keep_the_same_instant():
+    """RM's draws, many per problem, keep the three conditions on sampled paths."""
+    world = crowded_world(2)
+    problem = world.planning_problem()
+    rng = np.random.default_rng(4)
+    for _ in range(60):
+        plan = RandomMotion().plan(problem, rng)
+        for b in range(2):
+            assert paths_keep(problem.sensors[b], plan[b], D_SEP)
