@@ -116,11 +116,12 @@ def together(samples: FloatArray, paths: FloatArray, slacks: FloatArray, d: Floa
     ``d`` (J,) from the paths through ``paths`` (B, J, n + 1, 2) (sampled at the same
     instants; ``slacks`` (B, J) their :func:`~activetrack.kinematics.paths.slack`) at
     every same instant, between the samples too (module docstring), (B, C)."""
-    from activetrack.kinematics.separation import segment_distance  # noqa: PLC0415
-
     rel = samples[:, :, None] - paths[:, None]  # (B, C, J, n + 1, 2)
-    a, b = rel[..., :-1, :], rel[..., 1:, :]
-    low = np.min(segment_distance(a, b, np.zeros(a.shape)), axis=-1)  # (to the origin)
+    a, u = rel[..., :-1, :], rel[..., 1:, :] - rel[..., :-1, :]
+    den = np.sum(u * u, -1)
+    t = np.clip(-np.sum(a * u, -1) / np.where(den > 0.0, den, 1.0), 0.0, 1.0)
+    e = a + t[..., None] * u  # each piece's point nearest the origin
+    low = np.sqrt(np.min(np.sum(e * e, -1), axis=-1))
     low = low - slack(samples)[:, :, None] - slacks[:, None]
     return np.all(low >= d, axis=-1)
 
@@ -227,8 +228,12 @@ class PathRule:
         if np.any(keep):
             dist = point_distances(fine[..., ::2, :], obst[:, None, keep])  # (B, C, J')
             sep = np.all(dist >= dij[keep], axis=-1)
-        if moving is not None:
-            sep &= together(fine[..., ::2, :], *moving)
+        if moving is not None and np.any(sep):  # (the candidates still separated alone)
+            rows, cols = np.nonzero(sep)
+            paths_m, slacks_m, d_m = moving
+            sep[rows, cols] = together(
+                fine[rows, cols, None, ::2, :], paths_m[rows], slacks_m[rows], d_m
+            )[:, 0]
         clear_occ = np.ones(shape, bool)
         if occ is not None:
             from activetrack.models import occluders  # noqa: PLC0415
