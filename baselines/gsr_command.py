@@ -82,16 +82,16 @@ def _seg(a: FloatArray, b: FloatArray, c: FloatArray) -> FloatArray:
 def keeps(pts: FloatArray, origin: FloatArray, caps: FloatArray, sweeps: FloatArray) -> np.ndarray:
     """Return whether ``pts`` (S, P, 2) meet the constraints (module docstring of
     :mod:`activetrack.baselines.gsr_command_kernel`): each keeps ``r`` from every capsule
-    (S, J, 5), and the segment from ``origin`` (S, 2) to it keeps ``r`` from every sweep
-    point (S, J2, 3)."""
+    (S, J, 5), and the segment from ``origin`` (S, 2) to it (less the sweep's ``v``) keeps
+    ``r`` from every sweep point (S, J2, 5) ``(cx, cy, vx, vy, r)``."""
     ok = np.ones(pts.shape[:2], bool)
     if caps.shape[1]:
         d = _seg(caps[:, None, :, 0:2], caps[:, None, :, 2:4], pts[:, :, None, :])
         ok &= np.all(d >= caps[:, None, :, 4], axis=-1)
     if sweeps.shape[1]:
         o = np.broadcast_to(origin[:, None, None, :], pts.shape[:2] + (sweeps.shape[1], 2))
-        d = _seg(o, pts[:, :, None, :], sweeps[:, None, :, 0:2])
-        ok &= np.all(d >= sweeps[:, None, :, 2], axis=-1)
+        d = _seg(o, pts[:, :, None, :] - sweeps[:, None, :, 2:4], sweeps[:, None, :, 0:2])
+        ok &= np.all(d >= sweeps[:, None, :, 4], axis=-1)
     return ok
 
 
@@ -189,7 +189,7 @@ class Prepared:
     def _constraints(self, sub: np.ndarray, i: int) -> tuple[FloatArray, FloatArray]:
         S = len(sub)
         if self.constraints is None:
-            return np.zeros((S, 0, 5)), np.zeros((S, 0, 3))
+            return np.zeros((S, 0, 5)), np.zeros((S, 0, 5))
         return self.constraints(sub, i)
 
     # Geometry --------------------------------------------------------------------------
@@ -229,7 +229,7 @@ class Prepared:
             moved |= inside[..., 0]
         ok = _outside(pts, self.targets[sub], self.rho[sub, i])
         if caps is not None and caps.shape[1]:
-            ok &= keeps(pts, self.states[sub, i, :2], caps, caps[:, :0, :3])
+            ok &= keeps(pts, self.states[sub, i, :2], caps, caps[:, :0])
         if np.any(moved):
             reach = np.asarray(kin.reaches(pts, state), bool)
             ok &= ~moved | reach

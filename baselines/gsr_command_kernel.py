@@ -26,8 +26,9 @@ model: a component a model does not measure has weight 0), the objective the sum
 K targets of ``tr(Y^{-1})``. Constraints beyond the ``rho`` disks (the team rule ``d_sep``,
 :mod:`activetrack.baselines.gsr_separation`) are given as *capsules* ``(ax, ay, bx, by,
 r)``: a point must keep ``r`` from the segment ``a -> b`` (a disk when ``a = b``), and
-*sweeps* ``(cx, cy, r)``: the segment from the sensor's position to the point must keep
-``r`` from ``c``.
+*sweeps* ``(cx, cy, vx, vy, r)``: the segment from the sensor's position to the point less
+``v`` must keep ``r`` from ``c`` (``v = 0``: the sensor's own segment; else the relative
+motion against a sensor moving from ``c`` by ``v`` over the same step).
 """
 
 from __future__ import annotations
@@ -168,7 +169,8 @@ def locate(code, prm, st, u0, u1, tg, rho, caps, sweeps):
         if seg_dist(caps[j, 0], caps[j, 1], caps[j, 2], caps[j, 3], x, y) < caps[j, 4]:
             return False, x, y
     for j in range(sweeps.shape[0]):
-        if seg_dist(st[0], st[1], x, y, sweeps[j, 0], sweeps[j, 1]) < sweeps[j, 2]:
+        ex, ey = x - sweeps[j, 2], y - sweeps[j, 3]
+        if seg_dist(st[0], st[1], ex, ey, sweeps[j, 0], sweeps[j, 1]) < sweeps[j, 4]:
             return False, x, y
     if moved and not reaches(code, prm, st, x, y):
         return False, x, y

@@ -22,12 +22,13 @@ as the disk's sensors do with K > 1 targets: its kinematics'
 arc it stands for (:func:`arc_weights`). Its sensors whose feasible set is empty go to
 their kinematics' :meth:`~activetrack.Kinematics.project` (the world's rule).
 
-With the team rule ``d_sep`` (``problem.d_sep``) the draws are filtered, sensor by sensor in
-agent order (:func:`separate_draws`): a drawn point whose straight path would come within
-``d_ij`` of another sensor (the ones before it at their drawn points, the ones after it
-where they stand: the world's rule, :mod:`activetrack.baselines.gsr_separation`) is drawn
-again, with one more uniform, among the points of the boundary of its feasible set whose
-paths keep the rule (:data:`SEP_POINTS` per circle); with none, the sensor stays.
+With the team rule ``d_sep`` (``problem.d_sep``) the draws are filtered, sensor by
+sensor in agent order (:func:`separate_draws`): a drawn point whose straight path would
+come within ``d_ij`` of another sensor (the ones before it at their drawn points, the
+ones after it where they stand), or within ``d_ij`` of an earlier sensor's straight path
+at the same instant (the world's rule, :mod:`activetrack.baselines.gsr_separation`) is
+drawn again, with one more uniform, among the points of the boundary of its feasible set
+whose paths keep the rule (:data:`SEP_POINTS` per circle); with none, the sensor stays.
 """
 
 from __future__ import annotations
@@ -43,7 +44,7 @@ from activetrack.baselines._common import (
     sensor_modes,
 )
 from activetrack.kinematics import geometry
-from activetrack.kinematics.separation import segment_distance
+from activetrack.kinematics.separation import segment_distance, together
 from activetrack.validation import FloatArray
 from activetrack.world.problem import PlanningProblem
 
@@ -70,7 +71,10 @@ def separate_draws(
         for i in range(m):
             js = np.array([j for j in range(m) if j != i and d[i, j] > 0.0], dtype=np.int64)
             obst = np.where((js < i)[:, None], out[b][js], old[js])
-            if np.all(segment_distance(old[i], out[b + (i,)], obst) >= dm[i, js]):
+            early = js[js < i]
+            if np.all(segment_distance(old[i], out[b + (i,)], obst) >= dm[i, js]) and np.all(
+                together(old[i], out[b + (i,)], old[early], out[b][early]) >= dm[i, early]
+            ):
                 continue
             rho = float(rho_all[b + (i,)])
             if problem.kinematics is not None:
@@ -87,7 +91,8 @@ def separate_draws(
                 f = cand[:, None, :] - targets[None]
                 cand = cand[np.all(np.hypot(f[..., 0], f[..., 1]) >= rho, axis=-1)]
             seg = segment_distance(old[i], cand[:, None, :], obst[None])  # (C, J)
-            cand = cand[np.all(seg >= dm[i, js], axis=-1)]
+            same = together(old[i], cand[:, None, :], old[early], out[b][early])  # (C, J')
+            cand = cand[np.all(seg >= dm[i, js], axis=-1) & np.all(same >= dm[i, early], -1)]
             out[b + (i,)] = cand[rng.integers(len(cand))] if len(cand) else old[i]
     return out
 

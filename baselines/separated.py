@@ -5,8 +5,10 @@ keep the separation the world enforces
 (:class:`activetrack.kinematics.separation.Separation`): the plan is taken sensor by
 sensor in agent order, a Gauss-Seidel pass whose exclusion disks are the sensors already
 placed (their planned positions, sensors 0..i-1) and the others where they stand
-(i+1..M-1), the world's own order. A sensor whose planned move keeps the separation keeps
-it; one whose move would come within ``d_ij`` of an exclusion disk on the way takes,
+(i+1..M-1), the world's own order, and the sensors already placed moving along their
+planned segments at the same instants. A sensor whose planned move keeps the separation
+keeps it; one whose move would come within ``d_ij`` of an exclusion disk on the way, or of
+a sensor already placed at the same instant, takes,
 among the rule's candidates that are feasible (within reach, outside every ``rho`` disk,
 a path clear of the exclusion disks), the one of least objective with the other sensors
 at their planned points (sensors 0..i-1 already moved) — the sensor's subproblem solved
@@ -31,7 +33,12 @@ from typing import Any
 import numpy as np
 
 from activetrack.kinematics import sensor_motion
-from activetrack.kinematics.separation import Separation, pair_distances, segment_distance
+from activetrack.kinematics.separation import (
+    Separation,
+    pair_distances,
+    segment_distance,
+    together,
+)
 from activetrack.validation import FloatArray
 from activetrack.world.problem import PlanningProblem
 
@@ -80,15 +87,17 @@ def _one(problem: PlanningProblem, plan: FloatArray, rule: Separation) -> FloatA
     for i in range(len(old)):
         js = np.array([j for j in range(len(old)) if j != i])
         obst = np.where((js < i)[:, None], pos[js], old[js])
-        if np.all(segment_distance(old[i], pos[i], obst) >= d[i, js]):
+        if np.all(segment_distance(old[i], pos[i], obst) >= d[i, js]) and np.all(
+            together(old[i], pos[i], old[js], obst) >= d[i, js]
+        ):
             continue
         c, ok, clear = rule.candidates(
-            old[i], pos[i], obst, d[i, js], targets, float(r[i]), float(rho[i])
+            old[i], pos[i], obst, d[i, js], targets, float(r[i]), float(rho[i]), old[js]
         )
         ok &= clear >= 0.0
         if not np.any(ok):  # boxed in: what the world would do
             pos[i] = rule._fallback(old[i], pos[i], obst, d[i, js], targets, float(r[i]),
-                                    float(rho[i]))[0]  # fmt: skip
+                                    float(rho[i]), old[js])[0]  # fmt: skip
             continue
         trial = np.broadcast_to(pos, (int(ok.sum()), *pos.shape)).copy()
         trial[:, i] = c[ok]

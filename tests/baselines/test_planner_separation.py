@@ -2,8 +2,9 @@
 
 - Over closed-loop steps of a crowded team (``d_sep`` that binds: the planners without it
   would break it), every plan keeps every pair at least ``d_sep`` apart, and the straight
-  paths, sampled, in the world's agent order, never come closer; the world executes the
-  plans as given (its rule has nothing to mend).
+  paths, sampled, in the world's agent order and moving together (at the same instants),
+  never come closer; the world executes the plans as given (its rule has nothing to
+  mend).
 - GSR's plan under ``d_sep`` is optimal for each sensor's subproblem (the others at their
   planned points) against a brute force over a dense polar grid of the reach disk and the
   ``rho`` circle, filtered by the rule's conditions written out pair by pair.
@@ -30,7 +31,7 @@ PLANNERS = {"GSR": GSR, "GBES": GBES, "RM": RandomMotion}
 def paths_keep(old, plan, d):
     """Return whether the straight paths, sampled at 201 points, moved in agent order keep
     ``d`` (sensor b moves after a < b: a's path against b's old point, b's path against a's
-    new point)."""
+    new point) and moved together (a's and b's paths at the same instants)."""
     t = np.linspace(0.0, 1.0, 201)[:, None]
     m = len(plan)
     for a in range(m):
@@ -40,6 +41,7 @@ def paths_keep(old, plan, d):
             if (
                 np.min(np.hypot(*(path_a - old[b]).T)) < d
                 or np.min(np.hypot(*(path_b - plan[a]).T)) < d
+                or np.min(np.hypot(*(path_a - path_b).T)) < d  # together, the same instant
             ):
                 return False
     return True
@@ -87,6 +89,11 @@ def brute_force(problem, plan, i, d):
     ok = np.hypot(*(pts - o[i]).T) <= r
     ok &= np.hypot(*(pts - problem.target).T) >= rho
     for j in range(len(plan)):
+        if j != i:  # moving together: the relative path A + t B, t in [0, 1], keeps d
+            rel_a, rel_b = o[i] - o[j], (pts - o[i]) - (plan[j] - o[j])
+            den = np.sum(rel_b * rel_b, -1)
+            t = np.clip(-(rel_b @ rel_a) / np.where(den > 0, den, 1.0), 0.0, 1.0)
+            ok &= np.hypot(*(rel_a + t[:, None] * rel_b).T) >= d
         if j > i:  # i moves first: its path against j's old point; j's path against i's
             ok &= segment_distance(o[i], pts, o[j]) >= d
             ok &= segment_distance(o[j], plan[j], pts) >= d
@@ -161,3 +168,53 @@ def test_experts_in_the_environment_never_collide(name):
         assert info["n_collisions"] > 0
     else:
         assert info["n_collisions"] == 0
+
+
+def _sampled_pair(oa, pa, ob, pb, d):
+    """Return whether sensors a < b moving straight from ``oa``, ``ob`` to ``pa``, ``pb``
+    keep ``d`` by the three conditions, on 401 samples of the paths, and the least margin
+    of the three (to skip the pairs too close to call by sampling)."""
+    t = np.linspace(0.0, 1.0, 401)[:, None]
+    path_a, path_b = oa + t * (pa - oa), ob + t * (pb - ob)
+    low = min(
+        np.min(np.hypot(*(path_a - ob).T)),
+        np.min(np.hypot(*(path_b - pa).T)),
+        np.min(np.hypot(*(path_a - path_b).T)),
+    )
+    static = min(np.min(np.hypot(*(path_a - ob).T)), np.min(np.hypot(*(path_b - pa).T)))
+    return low >= d, abs(low - d), static >= d
+
+
+def test_gbes_pair_masks_against_sampled_paths():
+    """GBES's filter (``pair_masks``) against the three conditions on sampled paths; some
+    pairs keep the two sequential conditions and fail the same instant alone."""
+    from activetrack.baselines.gsr_separation import pair_masks
+
+    rng = np.random.default_rng(8)
+    d = np.full((3, 3), 2.0)
+    np.fill_diagonal(d, 0.0)
+    only_same = 0
+    for _ in range(20):
+        old = rng.uniform(-2.5, 2.5, (3, 2))
+        cands = [old[i] + rng.uniform(-3, 3, (12, 2)) for i in range(3)]
+        for a, b, ok in pair_masks(d, old, cands):
+            for ka in range(12):
+                for kb in range(12):
+                    want, margin, static = _sampled_pair(
+                        old[a], cands[a][ka], old[b], cands[b][kb], 2.0
+                    )
+                    if margin > 1e-3:  # (a sampled path misses the exact minimum by less)
+                        assert ok[ka, kb] == want
+                    only_same += static and not want
+    assert only_same > 20
+
+
+def test_rm_redraws_keep_the_same_instant():
+    """RM's draws, many per problem, keep the three conditions on sampled paths."""
+    world = crowded_world(2)
+    problem = world.planning_problem()
+    rng = np.random.default_rng(4)
+    for _ in range(60):
+        plan = RandomMotion().plan(problem, rng)
+        for b in range(2):
+            assert paths_keep(problem.sensors[b], plan[b], D_SEP)

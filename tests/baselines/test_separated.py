@@ -2,10 +2,11 @@
 
 On a crowded team (8 sensors, one target, ``d_sep = 1``) in a batched world, GSR, GBES,
 RM and the look-ahead wrapped by :class:`Separated` plan moves the world executes as
-planned (their plans keep the rule, checked by brute force: every pair at least ``d_sep``
-apart, every path sampled clear of the sensors where they stand, outside the ``rho``
-disk), so the world counts no collision; GSR's episodes are no worse than RM's; a plan
-that already keeps the separation is returned unchanged.
+planned (their plans keep the rule, checked by brute force: every pair at least
+``d_sep`` apart, every path sampled clear of the sensors where they stand and of the
+others' paths at the same instants, outside the ``rho`` disk), so the world counts no
+collision; GSR's episodes are no worse than RM's; a plan that already keeps the
+separation is returned unchanged.
 """
 
 from __future__ import annotations
@@ -62,6 +63,9 @@ def _episode(planner, n=3, steps=30, seed=0):
                     if j != i:
                         there = plans[c, j] if j < i else old[c, j]
                         assert np.min(_dist(path, there)) >= d[i, j] * (1 - 1e-9)
+                        # Moving together: j's path at the same instants.
+                        path_j = old[c, j] + S[:, None] * (plans[c, j] - old[c, j])
+                        assert np.min(_dist(path, path_j)) >= d[i, j] * (1 - 1e-9)
         traces.append(world.get("trace").copy())
     assert checked >= n * steps // 2  # (most steps are plans the world executes as given)
     return float(np.mean(traces))

@@ -95,7 +95,8 @@ def _driven(kin, dt, old, new):
     ok &= np.hypot(miss[..., 0], miss[..., 1]) <= 1e-7 * scale
     # A sensor held where it is (one that cannot stop, boxed in) does not move: its path
     # is its position (a break of its kinematics unless staying is a command of it).
-    held = np.all(new[..., :2] == old[..., :2], axis=-1)
+    # (A move back to where it started, a double integrator's parabola, is a command.)
+    held = np.all(new[..., :2] == old[..., :2], axis=-1) & ~ok
     path = np.where(held[..., None, None], old[..., None, :2], path)
     return path, ok
 
@@ -185,11 +186,12 @@ class Checker:
         eye = np.where(np.eye(m, dtype=bool), np.inf, 0.0)
         near = np.min(np.hypot(f[..., 0], f[..., 1]), axis=2) + eye
         assert np.all(near >= self.d * (1 - RTOL)), np.min(near - self.d)
-        # Counted, not asserted (the rule is sequential): pairs whose paths come within
-        # d_ij at the same instant of the step.
+        # The robots move together: every pair keeps d_ij at every same instant of the
+        # step (the paths sampled at the same 201 instants).
         g = paths[:, :, None] - paths[:, None]  # (N, M, M, S, 2)
         same = np.min(np.hypot(g[..., 0], g[..., 1]), axis=-1) + eye
         self.timed += int(np.count_nonzero(np.triu(same < self.d * (1 - RTOL), 1)))
+        assert self.timed == 0, np.min(same - self.d)
         # Never inside a building, anywhere along the path (point in rectangle).
         for x0, y0, x1, y1 in self.rects:
             eps = 1e-9 * max(1.0, abs(x0), abs(x1), abs(y0), abs(y1))

@@ -6,9 +6,10 @@
 - The world's rule, step by step on a crowded team (8 sensors around one target) with
   random actions and GSR's plans, in a batched world: no two sensors closer than their
   distance after a step, no path passing within it of a sensor where that sensor stands
-  when it moves (the segments sampled), no sensor inside the ``rho`` disk; the collision
-  counter equals a brute-force count of the wanted points' close pairs, and the reported
-  smallest distance a brute-force minimum.
+  when it moves, nor of another's path at the same instant (the segments sampled), no
+  sensor inside the ``rho`` disk; the collision counter equals a brute-force count of
+  the wanted points' close pairs, and the reported smallest distance a brute-force
+  minimum.
 - The fallback: a feasible wanted point is kept; otherwise the point taken is feasible by
   sampling and no farther from the wanted point than any sampled-feasible point of the
   rule's candidate grid.
@@ -58,6 +59,9 @@ def _check_step(old, new, pred, d, rho, stuck=False, want=None):
             assert _dist(new[i], new[j]) >= d[i, j] * (1 - RTOL)
             there = new[j] if j < i else old[j]  # where j stands when i moves
             assert np.min(_dist(path, there)) >= d[i, j] * (1 - RTOL)
+            # The robots move together: j's path at the same instants.
+            together = old[j] + S[:, None] * (new[j] - old[j])
+            assert np.min(_dist(path, together)) >= d[i, j] * (1 - RTOL)
 
 
 @pytest.mark.parametrize(
@@ -190,11 +194,13 @@ def test_fallback_against_brute_force():
         _check_step(old, new, tgt, d, rho, stuck)
         for i in range(m):
             there = np.array([new[j] if j < i else old[j] for j in range(m) if j != i])
+            moved = [old[j] + S[:, None] * (new[j] - old[j]) for j in range(i)]
 
-            def feasible(p, o=old[i], ri=r[i], rhoi=rho[i], t=tgt, there=there):
+            def feasible(p, o=old[i], ri=r[i], rhoi=rho[i], t=tgt, there=there, moved=moved):
                 path = o + S[:, None] * (p - o)  # brute force: a sampled path
                 return (_dist(p, o) <= ri * (1 + 1e-12) and _dist(p, t) >= rhoi
-                        and all(np.min(_dist(path, q)) >= 0.8 for q in there))  # fmt: skip
+                        and all(np.min(_dist(path, q)) >= 0.8 for q in there)
+                        and all(np.min(_dist(path, q)) >= 0.8 for q in moved))  # fmt: skip
 
             if feasible(want[i]):
                 np.testing.assert_array_equal(new[i], want[i])

@@ -23,9 +23,13 @@ paths.path`, checked between its samples too: :func:`~activetrack.kinematics.pat
   the path's pieces);
 - ends at least ``rho`` from every predicted target.
 
-(As the disks' rule, this is the sequential reading of the step: each path is checked
-against the others' positions where they stand, not against their own paths at the same
-instant; sensors that moved truly simultaneously could pass closer within a step.)
+- **the same instant**: keeps ``d_ij`` from every earlier sensor j < i along both
+  executed paths at every instant of the step (the robots move together): the relative
+  path ``p_i(t) - p_j(t)``, sampled at the same instants, keeps ``d_ij`` from the origin,
+  between the samples too (its deviation from the straight pieces is at most the sum of
+  the two paths' :func:`~activetrack.kinematics.paths.slack`); a sensor held where it is
+  has the constant path. (For a later sensor, still where it stands, this is the first
+  condition.)
 
 Sensor i goes to ``w_i`` (with the state of its own move) when it is feasible; else to
 the feasible candidate nearest to ``w_i`` (the first in this order on ties) among: its
@@ -41,16 +45,17 @@ feasible it takes the candidate that keeps the separation and the occluders and 
 deepest out of the ``rho`` disks, and counts as ``stuck``.
 
 **Staying is always safe.** Every sensor's path was checked against the old positions of
-the sensors after it, and a team starts separated, outside the occluders; so standing
-still keeps every rule but ``rho``. A kinematics that can stay has its position among the
-candidates. **A robot that cannot stop** (a unicycle with ``v_min > 0``, a fixed wing; a
-double integrator moving faster than it can brake in one step), with no candidate that
-keeps the separation and the occluders, is *held* where it is: its position does not
-change (an emergency stop beyond its limits, for a fixed wing a loiter too tight to
-matter at this scale: the one move that always keeps the team safe); a unicycle's heading
-turns as its wanted move turns (so a robot facing a wall or a neighbour can come to face
-a way out), a double integrator's velocity is set to zero, any other state beyond the
-position is kept; it counts as ``stuck``. Every step is thus deterministic.
+the sensors after it, at every instant, and a team starts separated, outside the
+occluders; so standing still keeps every rule but ``rho``. A kinematics that can stay
+has its position among the candidates. **A robot that cannot stop** (a unicycle with
+``v_min > 0``, a fixed wing; a double integrator moving faster than it can brake in one
+step), with no candidate that keeps the separation and the occluders, is *held* where it
+is: its position does not change (an emergency stop beyond its limits, for a fixed wing
+a loiter too tight to matter at this scale: the one move that always keeps the team
+safe); a unicycle's heading turns as its wanted move turns (so a robot facing a wall or
+a neighbour can come to face a way out), a double integrator's velocity is set to zero,
+any other state beyond the position is kept; it counts as ``stuck``. Every step is thus
+deterministic.
 
 **Uncertain positions (``pose_cov``).** The separation and the occluders are physical:
 the rule acts on the TRUE positions. The agent's move is a displacement from where it
@@ -69,7 +74,7 @@ import numpy as np
 
 from activetrack.kinematics.base import TOL
 from activetrack.kinematics.double_integrator import DoubleIntegrator
-from activetrack.kinematics.paths import N_PATH, hull_of, path, point_distances
+from activetrack.kinematics.paths import N_PATH, hull_of, path, point_distances, slack
 from activetrack.kinematics.unicycle import Unicycle
 from activetrack.validation import FloatArray
 
@@ -104,6 +109,21 @@ def held(kin: Any, state: FloatArray, wanted: FloatArray) -> FloatArray:
     elif isinstance(kin, Unicycle):
         out[..., 2] = np.asarray(wanted, np.float64)[..., 2]
     return out
+
+
+def together(samples: FloatArray, paths: FloatArray, slacks: FloatArray, d: FloatArray):
+    """Return whether the paths through ``samples`` (B, C, n + 1, 2) keep the distances
+    ``d`` (J,) from the paths through ``paths`` (B, J, n + 1, 2) (sampled at the same
+    instants; ``slacks`` (B, J) their :func:`~activetrack.kinematics.paths.slack`) at
+    every same instant, between the samples too (module docstring), (B, C)."""
+    rel = samples[:, :, None] - paths[:, None]  # (B, C, J, n + 1, 2)
+    a, u = rel[..., :-1, :], rel[..., 1:, :] - rel[..., :-1, :]
+    den = np.sum(u * u, -1)
+    t = np.clip(-np.sum(a * u, -1) / np.where(den > 0.0, den, 1.0), 0.0, 1.0)
+    e = a + t[..., None] * u  # each piece's point nearest the origin
+    low = np.sqrt(np.min(np.sum(e * e, -1), axis=-1))
+    low = low - slack(samples)[:, :, None] - slacks[:, None]
+    return np.all(low >= d, axis=-1)
 
 
 class PathRule:
@@ -150,37 +170,50 @@ class PathRule:
         stuck = np.zeros((b_n, m), bool)
         changed = np.zeros((b_n, m), bool)
         rho = np.broadcast_to(np.asarray(rho, np.float64), (m,))
+        # The executed paths (B, M, n + 1, 2) and their slacks (B, M), sensor after sensor.
+        ex = np.zeros((b_n, m, self.n + 1, 2))
+        ex_slack = np.zeros((b_n, m))
         for i, kin in enumerate(self.team):
             js = self._others[i]
             st = states[:, i, : kin.state_dim]
             obst = np.where((js < i)[None, :, None], new[:, js], old[:, js])
             tg = targets if shift is None else targets - shift[:, i, None, :]
+            early = np.flatnonzero(self.d[i, :i] > 0.0)
+            moving = (ex[:, early], ex_slack[:, early], self.d[i, early]) if early.size else None
             sep, clear_occ, clear = self._check(
-                kin, st, want[:, i, None], obst, self.d[i, js], tg, float(rho[i]), occ
+                kin, st, want[:, i, None], obst, self.d[i, js], tg, float(rho[i]), occ, moving
             )
             ok = (sep & clear_occ & (clear >= 0.0))[:, 0]
             new[ok, i] = want[ok, i]
             bad = np.flatnonzero(~ok)  # (the few moves that break a rule)
             if bad.size:
                 occ_b = occ[bad] if occ is not None and occ.batched else occ
-                pt, state, stuck[bad, i] = self._fallback(
+                mv = None if moving is None else tuple(v[bad] for v in moving[:2]) + moving[2:]
+                pt, state, stuck[bad, i], hold = self._fallback(
                     kin, i, st[bad], want[bad, i], obst[bad], self.d[i, js], tg[bad],
-                    float(rho[i]), occ_b, nxt[bad, i, : kin.state_dim],
+                    float(rho[i]), occ_b, nxt[bad, i, : kin.state_dim], mv,
                 )  # fmt: skip
                 new[bad, i] = pt
                 nxt[bad, i, : kin.state_dim] = state
                 changed[bad, i] = True
+            if np.any(self.d[i, i + 1 :] > 0.0):  # a later sensor checks against this path
+                ex[:, i] = path(kin, new[:, i], st, self.n)
+                if bad.size:  # held: the constant path
+                    ex[bad[hold], i] = st[bad[hold], None, :2]
+                ex_slack[:, i] = slack(ex[:, i])
         return new, nxt, collisions, stuck, changed
 
     def _check(
         self, kin: Any, st: FloatArray, pts: FloatArray, obst: FloatArray, dij: FloatArray,
-        tg: FloatArray, rho: float, occ: Any,
+        tg: FloatArray, rho: float, occ: Any, moving: Any = None,
     ) -> tuple[np.ndarray, np.ndarray, FloatArray]:  # fmt: skip
         """Return ``(separated, clear of occluders (where separated), rho clearance)``
         (B, C) of the moves of a sensor of states ``st`` (B, S) to the reachable ``pts``
         (B, C, 2): its path keeps ``dij`` (J,) from ``obst`` (B, J, 2); meets no occluder;
-        and the end point's distance to the nearest of ``tg`` (B, K, 2) less ``rho`` (with
-        the tolerance; inf without ``rho``)."""
+        and, given ``moving = (paths (B, J2, n + 1, 2), slacks (B, J2), distances (J2,))``
+        of the earlier sensors, keeps those distances from their paths at the same
+        instants; and the end point's distance to the nearest of ``tg`` (B, K, 2) less
+        ``rho`` (with the tolerance; inf without ``rho``)."""
         sts = st[:, None, :]
         keep = dij > 0.0
         shape = pts.shape[:-1]
@@ -195,6 +228,12 @@ class PathRule:
         if np.any(keep):
             dist = point_distances(fine[..., ::2, :], obst[:, None, keep])  # (B, C, J')
             sep = np.all(dist >= dij[keep], axis=-1)
+        if moving is not None and np.any(sep):  # (the candidates still separated alone)
+            rows, cols = np.nonzero(sep)
+            paths_m, slacks_m, d_m = moving
+            sep[rows, cols] = together(
+                fine[rows, cols, None, ::2, :], paths_m[rows], slacks_m[rows], d_m
+            )[:, 0]
         clear_occ = np.ones(shape, bool)
         if occ is not None:
             from activetrack.models import occluders  # noqa: PLC0415
@@ -210,11 +249,13 @@ class PathRule:
     def _fallback(
         self, kin: Any, i: int, st: FloatArray, w: FloatArray, obst: FloatArray,
         dij: FloatArray, tg: FloatArray, rho: float, occ: Any, wanted: FloatArray,
-    ) -> tuple[FloatArray, FloatArray, np.ndarray]:  # fmt: skip
-        """Return ``(points, states, stuck)`` (F, 2), (F, S), (F,) of sensor ``i`` in the
-        copies (F) of states ``st`` (F, S) wanting ``w`` (F, 2) (the wanted move's state
-        ``wanted``): the feasible candidate nearest ``w``; else the safe one deepest out
-        of the ``rho`` disks; else held (module docstring)."""
+        moving: Any = None,
+    ) -> tuple[FloatArray, FloatArray, np.ndarray, np.ndarray]:  # fmt: skip
+        """Return ``(points, states, stuck, held)`` (F, 2), (F, S), (F,), (F,) of sensor
+        ``i`` in the copies (F) of states ``st`` (F, S) wanting ``w`` (F, 2) (the wanted
+        move's state ``wanted``; the earlier sensors' paths ``moving``, see
+        :meth:`_check`): the feasible candidate nearest ``w``; else the safe one deepest
+        out of the ``rho`` disks; else held (module docstring)."""
         f_n, sd = st.shape
         o = st[:, :2]
         frac = o[:, None] + self._frac * (w - o)[:, None]  # (F, 15, 2)
@@ -244,7 +285,7 @@ class PathRule:
             valid[:, 1 + n_frac + len(grid) :] = reach[:, 1 + n_frac + len(grid) :]
         valid &= np.all(np.isfinite(c), axis=-1)
         c = np.where(valid[..., None], c, o[:, None])  # (placeholders, never chosen)
-        sep, clear_occ, clear = self._check(kin, st, c, obst, dij, tg, rho, occ)
+        sep, clear_occ, clear = self._check(kin, st, c, obst, dij, tg, rho, occ, moving)
         safe = valid & sep & clear_occ
         feasible = safe & (clear >= 0.0)
         far_w = np.where(feasible, np.hypot(*np.moveaxis(c - w[:, None], -1, 0)), np.inf)
@@ -258,4 +299,4 @@ class PathRule:
         hold = ~(found | any_safe)
         if np.any(hold):
             states[hold] = held(kin, st[hold], wanted[hold])
-        return pts, states, ~found
+        return pts, states, ~found, hold

@@ -10,14 +10,22 @@ disks) gives each sensor a wanted point ``w_i``, the sensors move one after the 
 0 to M-1. When sensor i moves, sensors 0..i-1 stand at their new positions and
 i+1..M-1 at their old ones; i's *obstacles* are the disks of radius ``d_ij`` about them.
 A point ``p`` is *feasible* for i when it lies within i's reach of its old position
-``o_i``, outside every ``rho`` disk, and the segment ``o_i -> p`` never comes within
-``d_ij`` of an obstacle (the sensors never pass through one another within the step).
-Sensor i goes to ``w_i`` when it is feasible; else to the feasible candidate nearest to
-``w_i`` (the first in a fixed order on ties) among: the point where the segment
-``o_i -> w_i`` first touches an obstacle; a polar grid of its reach disk (:data:`N_RADII`
-radii x :data:`N_ANGLES` angles); and :data:`N_ANGLES` points on each ``rho`` circle
-within reach. The old position ``o_i`` always keeps the separation (a team that starts
-separated stays separated), so the rule never fails it. When no candidate is
+``o_i``, outside every ``rho`` disk, the segment ``o_i -> p`` never comes within
+``d_ij`` of an obstacle, and (**the same instant**) it keeps ``d_ij`` from every earlier
+sensor j < i along both moves at every instant of the step: the robots move together,
+each along its segment at constant speed, so the relative position
+``(o_i - o_j) + t ((p - o_i) - (n_j - o_j))``, t in [0, 1], a segment, never comes within
+``d_ij`` of the origin (a closed form; for a later sensor, still at ``o_j``, this is the
+segment's own condition). So the sensors never pass through one another within the step,
+neither in the sequential reading nor moving simultaneously. Sensor i goes to ``w_i`` when
+it is feasible; else to the feasible candidate nearest to ``w_i`` (the first in a fixed
+order on ties) among: the point where the segment ``o_i -> w_i`` first touches an
+obstacle; the fractions ``o_i + k/32 (w_i - o_i)``, k = 31 .. 1 (the move cut short: the
+largest fraction on this grid that keeps every condition, when one does); a polar grid of
+its reach disk (:data:`N_RADII` radii x :data:`N_ANGLES` angles); and :data:`N_ANGLES`
+points on each ``rho`` circle within reach. The old position ``o_i`` always keeps the
+separation (a team that starts separated stays separated; every earlier sensor's segment
+was checked against ``o_i`` at every instant), so the rule never fails it. When no candidate is
 feasible (a sensor boxed in between a ``rho`` disk and its neighbours) it takes the
 candidate that keeps the separation and lies deepest out of the ``rho`` disks (its old
 position is one), and counts as ``stuck``. Every step is thus deterministic, and after it
@@ -42,6 +50,8 @@ from activetrack.validation import FloatArray, real_array
 #: position) and angles.
 N_RADII = 8
 N_ANGLES = 64
+#: The fractions of the wanted move among the fallback candidates: k / N_FRACTIONS.
+N_FRACTIONS = 32
 #: Largest accepted ratio of the team's separation disks' area (radius ``d_ij / 2`` each)
 #: to the start disk's (``sensor_radius`` plus that radius): random starts drawn one by
 #: one find room well below random sequential packing's jamming density (about 0.55).
@@ -124,6 +134,16 @@ def segment_distance(a: FloatArray, b: FloatArray, c: FloatArray) -> FloatArray:
     return np.hypot(e[..., 0], e[..., 1])
 
 
+def together(o: FloatArray, p: FloatArray, oj: FloatArray, pj: FloatArray) -> FloatArray:
+    """Return the smallest distance (...) between two sensors moving at the same time,
+    each straight at constant speed over the step, one from ``o`` to ``p``, the other from
+    ``oj`` to ``pj`` (..., 2): the distance from the origin to the segment of their
+    relative position ``(o - oj) -> (p - pj)``."""
+    a = np.asarray(o, np.float64) - oj
+    b = np.asarray(p, np.float64) - pj
+    return segment_distance(a, b, np.zeros(np.broadcast_shapes(a.shape, b.shape)))
+
+
 def min_separation(positions: FloatArray) -> FloatArray:
     """Return the smallest pairwise distance (...) of ``positions`` (..., M, 2) (inf: M=1)."""
     e = positions[..., :, None, :] - positions[..., None, :, :]
@@ -151,6 +171,7 @@ class Separation:
         fr = np.arange(N_RADII + 1) / N_RADII  # 0 (stay) .. 1 (the reach)
         self._grid = (fr[:, None, None] * self._dirs[None]).reshape(-1, 2)
         self._others = [np.array([j for j in range(m) if j != i]) for i in range(m)]
+        self._frac = np.arange(N_FRACTIONS - 1, 0, -1)[:, None] / N_FRACTIONS
 
     def resolve(
         self, old: FloatArray, want: FloatArray, targets: FloatArray, r: FloatArray,
@@ -175,21 +196,23 @@ class Separation:
             js = self._others[i]
             dij = self.d[i, js]
             ok = np.all(segment_distance(o[:, i, None], w[:, i, None], new[:, js]) >= dij, -1)
+            ok &= np.all(together(o[:, i, None], w[:, i, None], o[:, js], new[:, js]) >= dij, -1)
             new[ok, i] = w[ok, i]
             for b in np.flatnonzero(~ok):  # (the few moves that would come too close)
                 new[b, i], stuck[b, i] = self._fallback(
-                    o[b, i], w[b, i], new[b, js], dij, tg[b], float(r[i]), float(rho[i])
-                )
+                    o[b, i], w[b, i], new[b, js], dij, tg[b], float(r[i]), float(rho[i]),
+                    o[b, js],
+                )  # fmt: skip
         return new.reshape(want.shape), collisions, stuck.reshape(want.shape[:-1])
 
     def _fallback(
         self, o: FloatArray, w: FloatArray, obst: FloatArray, dij: FloatArray,
-        targets: FloatArray, r: float, rho: float,
+        targets: FloatArray, r: float, rho: float, start: FloatArray | None = None,
     ) -> tuple[FloatArray, bool]:  # fmt: skip
         """Return sensor i's feasible candidate nearest to ``w`` and False; or, when none
         is feasible (boxed in), the candidate that keeps the separation and lies deepest
         out of the ``rho`` disks, and True (module docstring)."""
-        c, ok, clear = self.candidates(o, w, obst, dij, targets, r, rho)
+        c, ok, clear = self.candidates(o, w, obst, dij, targets, r, rho, start)
         g = c - w
         far = np.hypot(g[:, 0], g[:, 1])
         inside = ok & (clear >= 0.0)
@@ -203,13 +226,16 @@ class Separation:
 
     def candidates(
         self, o: FloatArray, w: FloatArray, obst: FloatArray, dij: FloatArray,
-        targets: FloatArray, r: float, rho: float,
+        targets: FloatArray, r: float, rho: float, start: FloatArray | None = None,
     ) -> tuple[FloatArray, np.ndarray, FloatArray]:  # fmt: skip
         """Return the rule's candidates (C, 2) for a sensor at ``o`` wanting ``w`` (module
         docstring), whether each is within the reach ``r`` with a path clear of the
-        ``obst``acles (J, 2) by ``dij`` (J,), and each one's clearance of the ``rho``
-        disks of ``targets`` (K, 2) (inf when ``rho`` is 0; feasible: also >= 0)."""
-        cands = [self._contact(o, w, obst, dij)[None], o + r * self._grid]
+        ``obst``acles (J, 2) by ``dij`` (J,) (and, given the obstacles' positions at the
+        step's ``start`` (J, 2), clear of them moving straight to ``obst`` at the same
+        instants), and each one's clearance of the ``rho`` disks of ``targets`` (K, 2)
+        (inf when ``rho`` is 0; feasible: also >= 0)."""
+        fr = o + self._frac * (w - o)
+        cands = [self._contact(o, w, obst, dij)[None], fr, o + r * self._grid]
         if rho > 0.0:
             ring = (targets[:, None, :] + rho * (1.0 + _CONTACT) * self._dirs).reshape(-1, 2)
             cands.append(ring)
@@ -218,6 +244,8 @@ class Separation:
         ok = np.hypot(e[:, 0], e[:, 1]) <= r
         seg = segment_distance(o, c[:, None, :], obst[None])  # (C, J)
         ok &= np.all(seg >= dij, axis=-1)
+        if start is not None:
+            ok &= np.all(together(o, c[:, None, :], start[None], obst[None]) >= dij, axis=-1)
         clear = np.full(len(c), np.inf)
         if rho > 0.0:
             f = c[:, None, :] - targets[None]
