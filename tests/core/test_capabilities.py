@@ -93,9 +93,9 @@ PRESET_PATHS = {  # (paper_model, paper_problem, paper_observation, fused_step)
     # the paper's measurement setup; the targets' behaviours: stage by stage
     "maneuvering": (True, True, True, False),
     "evader": (True, True, True, False),
-    # unicycles: the team's own moves (the paper's sensors and observation layout)
-    "unicycle": (False, False, True, False),
-    "fixed_wing": (False, False, True, False),
+    # unicycles: the team moves first, by its kinematics, then the one compiled step
+    "unicycle": (False, False, True, True),
+    "fixed_wing": (False, False, True, True),
     # the paper's sensors and disks; the iterated EKF and the team rule d_sep: stage by stage
     "crowded": (False, True, True, False),
     "urban_unicycle": (False, False, False, False),
