@@ -237,6 +237,11 @@ class Unicycle(PiecewiseReach):
         near = self.nearest_on_boundary(q, state)
         return np.where(inside[..., None], q, near)
 
+    def point_pieces(self) -> tuple[int, ...]:
+        """Return ``(1,)`` when ``v_min`` is 0 (the arc at ``v_min`` is the position: a
+        chord of ``0 dt sinc(phi)``, exactly 0), else ``()``."""
+        return (1,) if self.v_min == 0.0 else ()
+
     def piece(self, k: np.ndarray, t: FloatArray, state: FloatArray) -> FloatArray:
         """Return pieces ``k`` of the reach set's boundary at ``t`` in [0, 1]: 0 the
         endpoints at ``v_max`` and 1 at ``v_min`` (turn rate ``-w_max .. w_max``), 2 and 3
