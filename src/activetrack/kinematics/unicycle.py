@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from activetrack.kinematics.base import TOL
 from activetrack.kinematics.pieces import PiecewiseReach, real_parameter
 from activetrack.validation import FloatArray
 
@@ -169,6 +170,35 @@ class Unicycle(PiecewiseReach):
             np.ascontiguousarray(rho_inside).reshape(n, m), out, inside,
         )  # fmt: skip
         return out.reshape(lead + (m, 3)), inside.reshape(lead + (m,))
+
+    def team_step_one(
+        self, actions: FloatArray, states: FloatArray, where: FloatArray, rho: FloatArray
+    ) -> tuple[FloatArray, np.ndarray, FloatArray] | None:
+        """Return ``(positions (M, 2), projected (M,), next_states (M, 3))`` of
+        :meth:`~activetrack.kinematics.team.TeamMotion.move` of one copy's ``actions``
+        (M, 2) from its ``states`` (M, 3) about the target(s) ``where`` (2,) or (K, 2)
+        (``rho`` (M,) or a number) when no new position is inside a ``rho`` disk and all
+        are finite (then nothing is projected: the positions are the step's), else None
+        (the caller's general rule). The numbers of :meth:`team_step`, one compiled call."""
+        from activetrack.kinematics._unicycle_kernels import team_step_rows  # noqa: PLC0415
+
+        m = actions.shape[0]
+        if type(self) is not Unicycle or states.shape != (m, 3):
+            return None
+        out, inside = np.empty((1, m, 3)), np.empty((1, m), dtype=bool)
+        rho_inside = np.empty((1, m))
+        rho_inside[0] = rho
+        rho_inside *= 1.0 - TOL  # (TeamMotion's test: closer than rho (1 - TOL))
+        team_step_rows(
+            np.ascontiguousarray(actions).reshape(1, m, 2),
+            np.ascontiguousarray(states).reshape(1, m, 3),
+            self.v_min, self.v_max, self.w_max, self._dt(),
+            np.ascontiguousarray(where, np.float64).reshape(1, -1, 2), rho_inside, out, inside,
+        )  # fmt: skip
+        nxt = out[0]
+        if inside.any() or not np.isfinite(nxt).all():
+            return None
+        return nxt[:, :2].copy(), inside[0], nxt
 
     def apply(self, actions: FloatArray, position: FloatArray) -> FloatArray:
         """Return the position (..., 2) the step ``actions`` ask for reaches."""
