@@ -103,3 +103,28 @@ def test_unicycle_team_step_is_advance_bit_for_bit() -> None:
         assert np.array_equal(inside, brute) and 0 < inside.sum() < inside.size
         one, one_inside = kin.team_step(actions[3], states[3], targets[3], rho[3])
         assert np.array_equal(one, want[3]) and np.array_equal(one_inside, brute[3])
+
+
+def test_one_copy_team_move_is_the_general_rule_bit_for_bit() -> None:
+    """A single copy's team move (:meth:`activetrack.Unicycle.team_step_one`, taken when no
+    move ends inside a ``rho`` disk) against the NumPy ``advance`` and against the general
+    rule on the same copy batched (one row), moves into a disk included."""
+    from activetrack.kinematics.team import TeamMotion
+
+    rng = np.random.default_rng(8)
+    kin = activetrack.Unicycle(0.0, 10.0, np.pi, dt=0.1)
+    team = TeamMotion((kin,) * 3)
+    kinds = set()
+    for trial in range(300):
+        x = rng.uniform(-1.2, 1.2, (3, 2))
+        states = np.concatenate([rng.uniform(-3, 3, (3, 2)), rng.uniform(-4, 4, (3, 1))], -1)
+        where = rng.uniform(-3, 3, (2,) if trial % 2 else (2, 2))
+        rho = rng.uniform(0.0, 2.0, 3)
+        pos, projected, nxt = team.move(False, x, states, where, rho)
+        ref = team.move(False, x[None], states[None], where[None], rho[None])
+        for got, want in zip((pos, projected, nxt), ref, strict=True):
+            assert got.shape == want.shape[1:] and np.array_equal(got, want[0])
+        if not projected.any():
+            assert np.array_equal(nxt, kin.advance(x, states))
+        kinds.add(bool(projected.any()))
+    assert kinds == {False, True}  # both the compiled step alone and the projection

@@ -242,6 +242,34 @@ def test_projection_is_never_farther_than_a_brute_force_search(name, case):
         assert (True, False) in branches
 
 
+def test_a_unicycle_that_can_stop_projects_as_the_full_search():
+    """The arc at ``v_min = 0`` is the position for every parameter (so ``project`` takes
+    it once): the same points, bit for bit, as the search that refines every sample."""
+
+    class Searched(Unicycle):  # every piece searched (the unshortened rule)
+        def point_pieces(self):
+            return ()
+
+    kin, full = Unicycle(0.0, 10.0, np.pi, dt=0.1), Searched(0.0, 10.0, np.pi, dt=0.1)
+    state = np.array([1.0, -2.0, 0.4])
+    t = np.linspace(0.0, 1.0, 1001)
+    assert np.all(kin.piece(np.array(1), t, state) == state[:2])
+    assert kin.point_pieces() == (1,) and Unicycle(1.0, 10.0, 1.0, dt=0.1).point_pieces() == ()
+    rng = np.random.default_rng(5)
+    corner = 0  # answers at the position that the nearest reachable point does not give
+    for _ in range(250):  # a disk reaching almost to the sensor, wanted points about it
+        targets = state[:2] + rng.uniform(-1.0, 1.0, (int(rng.integers(1, 3)), 2))
+        rho = float(np.hypot(*(targets[0] - state[:2])) * rng.uniform(0.9, 1.0))
+        q = state[:2] + rng.uniform(-0.3, 0.3, 2)
+        got = kin.project(q, state, targets, rho)
+        assert np.array_equal(got, full.project(q, state, targets, rho))
+        clipped = kin.clip(q, state)[None]
+        corner += bool(
+            np.all(got == state[:2]) and not kin.feasible(clipped, state, targets, rho)[0]
+        )
+    assert corner >= 3
+
+
 @pytest.mark.parametrize("name", list(KINEMATICS))
 def test_projection_of_an_empty_feasible_set_violates_least(name):
     kin, state, cloud_of, _ = KINEMATICS[name]

@@ -108,6 +108,12 @@ class PiecewiseReach(Kinematics):
         reach set of ``state`` (..., S) at the parameters ``t`` in [0, 1] (``k``, ``t`` and
         ``state``'s leading axes broadcast)."""
 
+    def point_pieces(self) -> tuple[int, ...]:
+        """Return the pieces ``k`` that are one point for every ``t`` and state (e.g. the
+        arc at a speed of zero), bit for bit: ``piece(k, t, state)`` the same at every
+        ``t``. None by default; :meth:`project` takes such a piece's point once."""
+        return ()
+
     def _tol(self, state: FloatArray) -> FloatArray:
         """Return the membership tests' absolute tolerance at ``state`` (...,): relative
         :data:`TOL` of the radius plus the position's size (the rounding of coordinates)."""
@@ -188,13 +194,28 @@ class PiecewiseReach(Kinematics):
         dq = np.sum((pts - q) ** 2, axis=-1)  # (P, T)
         big = dq.max(axis=-1, keepdims=True) + 1.0
         pad = np.concatenate([big, dq, big], -1)
-        kk, j = np.nonzero((dq <= pad[:, :-2]) & (dq <= pad[:, 2:]))  # every local minimum
+        local = (dq <= pad[:, :-2]) & (dq <= pad[:, 2:])  # every local minimum
+        dots = self.point_pieces()
+        # (a piece that is one point is a local minimum at every sample: its point once,
+        # not thousands of golden searches that all return it)
+        single = [k for k in dots if local[k].any()]
+        local[list(dots)] = False
+        kk, j = np.nonzero(local)
 
         def dist(s):
             return np.sum((self.piece(kk, s, state) - q) ** 2, axis=-1)
 
         s = golden(dist, t[np.maximum(j - 1, 0)], t[np.minimum(j + 1, len(t) - 1)])
-        cand.append(self.piece(kk, s, state))
+        found = self.piece(kk, s, state)
+        if single:  # in the order of the pieces, as if searched (ties: the first nearest)
+            found = np.concatenate(
+                [found[kk < k] for k in single[:1]]
+                + [
+                    np.concatenate([pts[k, :1], found[(kk > k) & (kk < nxt)]])
+                    for k, nxt in zip(single, single[1:] + [self.n_pieces], strict=True)
+                ]
+            )
+        cand.append(found)
         for tk in targets if rho > 0.0 else ():  # the crossings of the pieces and circle k
             g = np.hypot(*np.moveaxis(pts - tk, -1, 0)) - rho  # (P, T)
             kc, jc = np.nonzero(np.sign(g[:, :-1]) != np.sign(g[:, 1:]))

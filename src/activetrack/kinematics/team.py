@@ -144,6 +144,9 @@ class TeamMotion:
         #: moves and features are one call for the whole team (:meth:`_move_shared`), not
         #: one per sensor (the same numbers: the methods work row by row).
         self.shared = team[0] if all(k == team[0] for k in team) else None
+        #: The shared kinematics' one-copy step (:meth:`activetrack.Unicycle.team_step_one`)
+        #: or None: a single env's step without the batched path's reshaping.
+        self._step_one = getattr(self.shared, "team_step_one", None)
 
     def states(self, positions: FloatArray, motion: FloatArray | None) -> FloatArray:
         """Return the team's states (..., M, S): ``positions`` (..., M, 2) then ``motion``
@@ -219,6 +222,12 @@ class TeamMotion:
         team's states ``sensors`` (..., M, S) (positions when S is 2), the predicted
         target(s) ``where`` (..., 2) or (..., K, 2) and ``rho`` (..., M)."""
         x, sensors = np.asarray(x, np.float64), np.asarray(sensors, np.float64)
+        if self._step_one is not None and not absolute and x.ndim == 2:
+            # One copy, no move into a rho disk (the usual step): the compiled step alone.
+            # Else (or NaN) the general rule below, which gives the same numbers.
+            done = self._step_one(x, sensors, where, rho)
+            if done is not None:
+                return done
         targets = where[..., None, :] if where.ndim == x.ndim - 1 else where  # (..., K, 2)
         rho = np.broadcast_to(np.asarray(rho, np.float64), x.shape[:-1])
         if self.shared is not None and not absolute:

@@ -33,6 +33,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from activetrack.kinematics._unicycle_kernels import team_step_rows
+from activetrack.kinematics.base import TOL
 from activetrack.kinematics.pieces import PiecewiseReach, real_parameter
 from activetrack.validation import FloatArray
 
@@ -144,7 +146,6 @@ class Unicycle(PiecewiseReach):
         M, 2) from its ``states`` (..., M, 3), bit for bit, and whether each new position
         is closer than ``rho_inside`` (..., M) to one of ``targets`` (..., K, 2); one
         compiled call (:func:`activetrack.kinematics._unicycle_kernels.team_step_rows`)."""
-        from activetrack.kinematics._unicycle_kernels import team_step_rows  # noqa: PLC0415
 
         a, s = np.asarray(actions, np.float64), np.asarray(states, np.float64)
         targets = np.asarray(targets, np.float64)
@@ -169,6 +170,33 @@ class Unicycle(PiecewiseReach):
             np.ascontiguousarray(rho_inside).reshape(n, m), out, inside,
         )  # fmt: skip
         return out.reshape(lead + (m, 3)), inside.reshape(lead + (m,))
+
+    def team_step_one(
+        self, actions: FloatArray, states: FloatArray, where: FloatArray, rho: FloatArray
+    ) -> tuple[FloatArray, np.ndarray, FloatArray] | None:
+        """Return ``(positions (M, 2), projected (M,), next_states (M, 3))`` of
+        :meth:`~activetrack.kinematics.team.TeamMotion.move` of one copy's ``actions``
+        (M, 2) from its ``states`` (M, 3) about the target(s) ``where`` (2,) or (K, 2)
+        (``rho`` (M,) or a number) when no new position is inside a ``rho`` disk and all
+        are finite (then nothing is projected: the positions are the step's), else None
+        (the caller's general rule). The numbers of :meth:`team_step`, one compiled call."""
+        m = actions.shape[0]
+        if type(self) is not Unicycle or states.shape != (m, 3):
+            return None
+        out, inside = np.empty((1, m, 3)), np.empty((1, m), dtype=bool)
+        rho_inside = np.empty((1, m))
+        rho_inside[0] = rho
+        rho_inside *= 1.0 - TOL  # (TeamMotion's test: closer than rho (1 - TOL))
+        team_step_rows(
+            np.ascontiguousarray(actions).reshape(1, m, 2),
+            np.ascontiguousarray(states).reshape(1, m, 3),
+            self.v_min, self.v_max, self.w_max, self._dt(),
+            np.ascontiguousarray(where, np.float64).reshape(1, -1, 2), rho_inside, out, inside,
+        )  # fmt: skip
+        nxt = out[0]
+        if inside.any() or not np.isfinite(nxt).all():
+            return None
+        return nxt[:, :2].copy(), inside[0], nxt
 
     def apply(self, actions: FloatArray, position: FloatArray) -> FloatArray:
         """Return the position (..., 2) the step ``actions`` ask for reaches."""
@@ -208,7 +236,8 @@ class Unicycle(PiecewiseReach):
 
     def features(self, state: FloatArray) -> FloatArray:
         """Return the heading as ``(cos theta, sin theta)`` (..., 2)."""
-        theta = np.asarray(state, np.float64)[..., 2]
+        # (a contiguous copy: NumPy's cosine runs faster on it, the same numbers)
+        theta = np.ascontiguousarray(np.asarray(state, np.float64)[..., 2])
         return _last(np.cos(theta), np.sin(theta))
 
     # The reach set ---------------------------------------------------------------------
@@ -237,6 +266,11 @@ class Unicycle(PiecewiseReach):
         near = self.nearest_on_boundary(q, state)
         return np.where(inside[..., None], q, near)
 
+    def point_pieces(self) -> tuple[int, ...]:
+        """Return ``(1,)`` when ``v_min`` is 0 (the arc at ``v_min`` is the position: a
+        chord of ``0 dt sinc(phi)``, exactly 0), else ``()``."""
+        return (1,) if self.v_min == 0.0 else ()
+
     def piece(self, k: np.ndarray, t: FloatArray, state: FloatArray) -> FloatArray:
         """Return pieces ``k`` of the reach set's boundary at ``t`` in [0, 1]: 0 the
         endpoints at ``v_max`` and 1 at ``v_min`` (turn rate ``-w_max .. w_max``), 2 and 3
@@ -249,9 +283,7 @@ class Unicycle(PiecewiseReach):
         v = np.where(curve, np.where(k == 0, self.v_max, self.v_min), ramp)
         chord = v * self._dt() * _sinc(phi)
         ang = state[..., 2] + phi
-        return np.stack(
-            [state[..., 0] + chord * np.cos(ang), state[..., 1] + chord * np.sin(ang)], -1
-        )
+        return _last(state[..., 0] + chord * np.cos(ang), state[..., 1] + chord * np.sin(ang))
 
     def __repr__(self) -> str:
         dt = "" if self.dt is None else f", dt={self.dt!r}"
