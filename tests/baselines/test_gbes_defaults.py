@@ -12,7 +12,7 @@ import pytest
 from activetrack.baselines import GBES
 from activetrack.cli import main
 from activetrack.world import World
-from activetrack.world.scenarios import PRESETS
+from activetrack.world.scenarios import PRESETS, make_scenario
 
 
 def _first_problem(preset):
@@ -54,12 +54,15 @@ def test_simulate_and_evaluate_defaults_run_on_every_preset(preset, tmp_path, mo
     # Two steps an episode (the CLI reads the preset when it runs): what is checked is that
     # every default planner plans on the preset, which its first steps show.
     monkeypatch.setitem(PRESETS, preset, {**PRESETS[preset], "n_steps": 2})
+    # 8 sensors (crowded): GBES's default grid costs about a minute a plan; a coarse one
+    coarse = ["--gbes-spacing", "2.0"] if make_scenario(preset).n_sensors > 4 else []
     assert main(["simulate", "--scenario", preset, "--runs", "1", "--steps", "2", "--out",
-                 str(tmp_path / "sim"), "--no-plot", "--no-progress"]) == 0  # fmt: skip
+                 str(tmp_path / "sim"), "--no-plot", "--no-progress", *coarse]) == 0  # fmt: skip
     data = json.loads((tmp_path / "sim" / "results.json").read_text())
     assert list(data) == ["gsr", "gbes", "rm"]
     assert main(["evaluate", "--scenario", preset, "--policy", "gbes", "--episodes", "1",
-                 "--out", str(tmp_path / "ev"), "--no-plot", "--no-progress"]) == 0  # fmt: skip
+                 "--out", str(tmp_path / "ev"), "--no-plot", "--no-progress",
+                 *coarse]) == 0  # fmt: skip
     assert (tmp_path / "ev" / "results.json").exists()
 
 
