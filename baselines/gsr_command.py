@@ -35,6 +35,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from activetrack.kinematics.separation import segment_distance
 from activetrack.validation import FloatArray
 
 #: Commands per axis of the coarse grid over the action box.
@@ -70,15 +71,6 @@ def _outside(pts: FloatArray, targets: FloatArray, rho: FloatArray) -> np.ndarra
     return np.all(d >= rho[:, None, None], axis=-1)
 
 
-def _seg(a: FloatArray, b: FloatArray, c: FloatArray) -> FloatArray:
-    """Return the distance (...) from ``c`` to the segments ``a -> b`` (..., 2)."""
-    ab, ac = b - a, c - a
-    den = np.sum(ab * ab, -1)
-    t = np.clip(np.sum(ac * ab, -1) / np.where(den > 0.0, den, 1.0), 0.0, 1.0)
-    e = ac - t[..., None] * ab
-    return np.hypot(e[..., 0], e[..., 1])
-
-
 def keeps(pts: FloatArray, origin: FloatArray, caps: FloatArray, sweeps: FloatArray) -> np.ndarray:
     """Return whether ``pts`` (S, P, 2) meet the constraints (module docstring of
     :mod:`activetrack.baselines.gsr_command_kernel`): each keeps ``r`` from every capsule
@@ -86,11 +78,12 @@ def keeps(pts: FloatArray, origin: FloatArray, caps: FloatArray, sweeps: FloatAr
     ``r`` from every sweep point (S, J2, 5) ``(cx, cy, vx, vy, r)``."""
     ok = np.ones(pts.shape[:2], bool)
     if caps.shape[1]:
-        d = _seg(caps[:, None, :, 0:2], caps[:, None, :, 2:4], pts[:, :, None, :])
+        d = segment_distance(caps[:, None, :, 0:2], caps[:, None, :, 2:4], pts[:, :, None, :])
         ok &= np.all(d >= caps[:, None, :, 4], axis=-1)
     if sweeps.shape[1]:
         o = np.broadcast_to(origin[:, None, None, :], pts.shape[:2] + (sweeps.shape[1], 2))
-        d = _seg(o, pts[:, :, None, :] - sweeps[:, None, :, 2:4], sweeps[:, None, :, 0:2])
+        rel = pts[:, :, None, :] - sweeps[:, None, :, 2:4]
+        d = segment_distance(o, rel, sweeps[:, None, :, 0:2])
         ok &= np.all(d >= sweeps[:, None, :, 4], axis=-1)
     return ok
 

@@ -42,7 +42,6 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # before NumPy loads OpenBLA
 import argparse  # noqa: E402
 import platform  # noqa: E402
 import sys  # noqa: E402
-import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 from typing import Any  # noqa: E402
 
@@ -159,6 +158,8 @@ def batched_env(n: int, seconds: float, chunk: int = 10) -> dict[str, float]:
     """Return env-steps/s of the unicycle batched env and of both VMAS scenarios at ``n``
     copies, timed in alternating chunks of ``chunk`` steps until each ran ``seconds``, and
     the ratios ``ratio_<peer>`` (ours over the peer's)."""
+    from bench_tasks import interleaved_rates
+
     from activetrack.envs.batched import BatchedActiveTracking
 
     env = BatchedActiveTracking(n, scenario=unicycle_scenario())
@@ -170,19 +171,7 @@ def batched_env(n: int, seconds: float, chunk: int = 10) -> dict[str, float]:
         "vmas_diffdrive": vmas_stepper(n, "vmas_diffdrive"),
         "vmas_diff_drive": vmas_stepper(n, "vmas_diff_drive"),
     }
-    spent = dict.fromkeys(steppers, 0.0)
-    done = dict.fromkeys(steppers, 0)
-    for step in steppers.values():  # warm up
-        step(0)
-        step(1)
-    while min(spent.values()) < seconds:
-        for name, step in steppers.items():
-            start = time.perf_counter()
-            for k in range(chunk):
-                step(done[name] + k)
-            spent[name] += time.perf_counter() - start
-            done[name] += chunk
-    rates: dict[str, float] = {name: n * done[name] / spent[name] for name in steppers}
+    rates = interleaved_rates(steppers, n, seconds, chunk)
     for peer in ("vmas_diffdrive", "vmas_diff_drive"):
         rates[f"ratio_{peer}"] = rates["unicycle"] / rates[peer]
     return rates

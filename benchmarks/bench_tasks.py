@@ -27,6 +27,25 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 
+def interleaved_rates(steppers: dict, n: int, seconds: float, chunk: int) -> dict[str, float]:
+    """Return each stepper's env-steps/s (``n`` copies a step), timed in alternating chunks
+    of ``chunk`` steps (after two warm-up steps) until each ran ``seconds``: the peers see
+    the same load."""
+    spent = dict.fromkeys(steppers, 0.0)
+    done = dict.fromkeys(steppers, 0)
+    for step in steppers.values():  # warm up
+        step(0)
+        step(1)
+    while min(spent.values()) < seconds:
+        for name, step in steppers.items():
+            start = time.perf_counter()
+            for k in range(chunk):
+                step(done[name] + k)
+            spent[name] += time.perf_counter() - start
+            done[name] += chunk
+    return {name: n * done[name] / spent[name] for name in steppers}
+
+
 def single_env(task: str, seconds: float) -> dict[str, float]:
     """Return steps/s of the task's parallel env and of MPE2 simple_spread (same M)."""
     from bench_env import _Runner, measure
@@ -62,19 +81,7 @@ def batched_env(task: str, n: int, seconds: float, chunk: int = 10) -> dict[str,
     rng = np.random.default_rng(0)
     pool = [rng.uniform(-1, 1, (n, 2 * m)).astype(np.float32) for _ in range(8)]
     steppers = {"activetrack": lambda k: env.step(pool[k % 8]), "vmas": vmas_stepper(n, m)}
-    spent = dict.fromkeys(steppers, 0.0)
-    done = dict.fromkeys(steppers, 0)
-    for step in steppers.values():  # warm up
-        step(0)
-        step(1)
-    while min(spent.values()) < seconds:
-        for name, step in steppers.items():
-            start = time.perf_counter()
-            for k in range(chunk):
-                step(done[name] + k)
-            spent[name] += time.perf_counter() - start
-            done[name] += chunk
-    rates = {name: n * done[name] / spent[name] for name in steppers}
+    rates = interleaved_rates(steppers, n, seconds, chunk)
     return {**rates, "ratio": rates["activetrack"] / rates["vmas"]}
 
 
