@@ -148,14 +148,27 @@ def test_every_registered_id_has_a_page_whose_table_matches_the_environment(site
 
         assert int(table["Targets"]) == sc.n_targets
         assert table["Sensor models"].split(", ") == _sensor_names(sc)
-        # The scenarios give no kinematics: each sensor is a disk of radius vmax_i dt (eq. 13).
-        assert sc.kinematics is None
-        vmax = np.broadcast_to(np.asarray(sc.vmax, dtype=np.float64), (m,))
-        radii = [
-            float(re.fullmatch(r"Disk\((.+)\)", k).group(1))
-            for k in table["Kinematics"].split(", ")
-        ]
-        np.testing.assert_allclose(radii, vmax * sc.dt, rtol=1e-12)
+        if sc.kinematics is None:  # each sensor a disk of radius vmax_i dt (eq. 13)
+            vmax = np.broadcast_to(np.asarray(sc.vmax, dtype=np.float64), (m,))
+            radii = [
+                float(re.fullmatch(r"Disk\((.+)\)", k).group(1))
+                for k in table["Kinematics"].split(", ")
+            ]
+            np.testing.assert_allclose(radii, vmax * sc.dt, rtol=1e-12)
+        else:  # robots: every sensor's unicycle, whose one-step reach is v_max dt
+            shown = re.findall(
+                r"Unicycle\(v_min=(\S+), v_max=(\S+), w_max=(\S+), dt=(\S+)\)",
+                table["Kinematics"],
+            )
+            assert len(shown) == m
+            for (v_min, v_max, w_max, dt), kin in zip(shown, sc.kinematics_models, strict=True):
+                assert (float(v_min), float(v_max), float(w_max)) == (
+                    kin.v_min,
+                    kin.v_max,
+                    kin.w_max,
+                )
+                assert float(dt) == sc.dt
+                assert float(v_max) * float(dt) == pytest.approx(kin.radius, rel=1e-12)
 
         # The manual follows the table: the environment classes' docstrings.
         text = page.read_text(encoding="utf-8")

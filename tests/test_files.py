@@ -287,16 +287,20 @@ def test_signals_are_held_back_until_the_block_ends():
 
     from activetrack.files import signals_deferred
 
+    SIGS = (signal.SIGINT, signal.SIGTERM)
     seen = []
     for signum in (signal.SIGINT, signal.SIGTERM):
-        previous = signal.signal(signal.SIGTERM, signal.default_int_handler)
+        # Both signals raise KeyboardInterrupt before the block, whatever an earlier test
+        # (or library) left as their handlers: the block must hand them back to that.
+        previous = {s: signal.signal(s, signal.default_int_handler) for s in SIGS}
         try:
             with pytest.raises(KeyboardInterrupt), signals_deferred():
                 os.kill(os.getpid(), signum)
                 os.kill(os.getpid(), signum)  # twice: delivered once
                 seen.append(signum)  # reached: the signal waits for the block's end
         finally:
-            signal.signal(signal.SIGTERM, previous)
+            for s, handler in previous.items():
+                signal.signal(s, handler)
     assert seen == [signal.SIGINT, signal.SIGTERM]
 
 
