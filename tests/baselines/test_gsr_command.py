@@ -70,6 +70,7 @@ def check_plan(problem, kin, plan):
         assert value <= brute_force(problem, kin, plan, i) * (1 + 1e-9), i
 
 
+@pytest.mark.kernels
 @pytest.mark.parametrize("compiled", [True, False])
 @pytest.mark.parametrize("name", list(ROBOTS))
 def test_each_sensor_optimal_against_a_dense_command_grid(name, compiled, monkeypatch):
@@ -103,6 +104,7 @@ def test_a_batch_plans_each_copy_as_alone(name):
             np.testing.assert_array_equal(plan[b], GSR().plan(problem[b]))
 
 
+@pytest.mark.kernels
 @pytest.mark.parametrize("name", list(ROBOTS) + ["disk"])
 def test_compiled_points_are_the_kinematics_apply(name):
     from activetrack import Disk

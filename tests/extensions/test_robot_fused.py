@@ -76,6 +76,7 @@ def test_fused_team_equals_stage_by_stage(kin, n, absolute, monkeypatch) -> None
     assert projected > 10  # the rule that pushes moves out of the rho disk was exercised
 
 
+@pytest.mark.kernels
 def test_unicycle_team_step_is_advance_bit_for_bit() -> None:
     """The compiled team step against the NumPy methods it replaces (``advance`` and the
     ``rho`` test), on random states and actions with the edge cases: straight moves
@@ -105,6 +106,7 @@ def test_unicycle_team_step_is_advance_bit_for_bit() -> None:
         assert np.array_equal(one, want[3]) and np.array_equal(one_inside, brute[3])
 
 
+@pytest.mark.kernels
 def test_one_copy_team_move_is_the_general_rule_bit_for_bit() -> None:
     """A single copy's team move (:meth:`activetrack.Unicycle.team_step_one`, taken when no
     move ends inside a ``rho`` disk) against the NumPy ``advance`` and against the general
