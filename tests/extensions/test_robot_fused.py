@@ -130,3 +130,44 @@ def test_one_copy_team_move_is_the_general_rule_bit_for_bit() -> None:
             assert np.array_equal(nxt, kin.advance(x, states))
         kinds.add(bool(projected.any()))
     assert kinds == {False, True}  # both the compiled step alone and the projection
+
+
+@pytest.mark.kernels
+@pytest.mark.parametrize(
+    "kin",
+    [activetrack.Unicycle(0.0, 10.0, np.pi), activetrack.Unicycle(3.0, 10.0, 2.0)],
+    ids=repr,
+)
+def test_batched_unicycle_step_is_the_team_move_then_the_step(kin) -> None:
+    """The batched unicycle step in one compiled call (``_fast.advance_arcs``:
+    ``advance_unicycle_rows``, the copies with a move into a ``rho`` disk projected and
+    then ``advance_listed_rows``) against the path it replaces, from the same state: the
+    team's move (``TeamMotion.move``, NumPy's arithmetic) then the compiled step of given
+    positions (``advance_rows``); every output and the next headings, bit for bit, over
+    steps with and without such moves."""
+    from activetrack.world import _fast
+
+    sc = make_scenario("paper", kinematics=kin, **NEAR)
+    world = World(sc, 40)
+    assert world._arcs is not None
+    world.reset(seeds=list(range(40)))
+    rng = np.random.default_rng(3)
+    pending = []
+    for _ in range(12):
+        actions = rng.uniform(-1.3, 1.3, (40, 3, 2))
+        noise = rng.standard_normal((40, world._n_noise))
+        got = _fast.advance_arcs(world, actions, noise, slice(None))
+        heading = world._motion_next
+        arcs, world._arcs = world._arcs, None  # the path before: team_moves, advance_rows
+        try:
+            want = _fast.advance_fused(world, actions, False, noise, slice(None))
+        finally:
+            world._arcs = arcs
+        assert np.array_equal(heading, world._motion_next)
+        flat = lambda r: [r[0], r[1], *r[2]]  # noqa: E731
+        for x, y in zip(flat(got), flat(want), strict=True):
+            assert x.dtype == y.dtype and x.shape == y.shape and np.array_equal(x, y)
+        pending.append(int(got[1].any(-1).sum()))
+        world.step_actions(actions)
+    # both kinds of copies were stepped, in the same calls
+    assert any(0 < count < 40 for count in pending) and sum(pending) > 5
