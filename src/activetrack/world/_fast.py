@@ -268,3 +268,28 @@ def observe_one(w: World) -> np.ndarray:
         st = w._s
         out = with_motion(w, out, st["sensors"], st.get("motion"))
     return out
+
+
+def observe_batch(w: World) -> np.ndarray:
+    """``World.observe`` of every copy of a batched fused world ``w``: one compiled call
+    (:func:`activetrack.world._observation_kernels.observe_rows`) on views of the world's
+    own arrays, unchecked, into an array with room for the team's kinematic features,
+    written last (a team of unicycles: compiled too,
+    :func:`activetrack.world._observation_kernels.headings_into`)."""
+    t, st = w._t[0], w._s
+    x, P = t["x_pred"], t["P_pred"]
+    n, (m, d) = x.shape[-1], w._fused_obs_shape
+    N = x.shape[0]
+    features = 0 if w._team is None else w._team.n_features
+    out = np.empty((N, m, d + features), np.float32)
+    detected, _, _, order = w._obs_work
+    observation_kernels.observe_rows(
+        as_rows(x, (N,), (n,))[:, None], as_rows(P, (N,), (n, n))[:, None],
+        as_rows(st["sensors"], (N,), (m, 2)), *w._obs_args, detected.reshape(1, 1, m), 0,
+        order, out,
+    )  # fmt: skip
+    if w._arcs is not None:
+        observation_kernels.headings_into(as_rows(st["motion"], (N,), (m, 1)), out, d)
+    elif features:
+        out[..., d:] = w._team.features(w._team.states(st["sensors"], st.get("motion")))
+    return out
