@@ -171,3 +171,44 @@ def test_batched_unicycle_step_is_the_team_move_then_the_step(kin) -> None:
         world.step_actions(actions)
     # both kinds of copies were stepped, in the same calls
     assert any(0 < count < 40 for count in pending) and sum(pending) > 5
+
+
+@pytest.mark.kernels
+def test_compiled_headings_are_the_unicycle_features() -> None:
+    """``headings_into`` against :meth:`activetrack.Unicycle.features` (NumPy's cosine and
+    sine) rounded to float32, headings at the wrap and at zero included; the entries
+    around the columns it writes untouched."""
+    from activetrack.world._observation_kernels import headings_into
+
+    rng = np.random.default_rng(11)
+    motion = rng.uniform(-np.pi, np.pi, (200, 3, 1))
+    motion[:4, 0, 0] = (np.pi, -np.pi, 0.0, -0.0)
+    out = np.full((200, 3, 7), 5.0, np.float32)
+    headings_into(motion, out, 4)
+    states = np.concatenate([rng.uniform(-9, 9, (200, 3, 2)), motion], -1)
+    want = activetrack.Unicycle(0.0, 1.0, 1.0, dt=0.1).features(states).astype(np.float32)
+    assert np.array_equal(out[..., 4:6], want)
+    assert (out[..., :4] == 5.0).all() and (out[..., 6] == 5.0).all()
+
+
+@pytest.mark.parametrize("scenario", ["unicycle", "fixed_wing", "paper", "double"])
+def test_batched_observation_is_the_generic_one(scenario) -> None:
+    """A batched fused world's observation in one call (``_fast.observe_batch``) against the
+    readers' general path (``observation.encode``, then the team's NumPy features), bit for
+    bit, after a few steps: unicycles (compiled headings), a double integrator (NumPy
+    features), the paper's disks (none)."""
+    kin = {"double": activetrack.DoubleIntegrator(20.0, 10.0)}
+    sc = make_scenario("paper", kinematics=kin["double"]) if scenario in kin else scenario
+    world = World(make_scenario(sc), 7)
+    assert world._fused
+    world.reset(seeds=list(range(7)))
+    rng = np.random.default_rng(5)
+    for _ in range(4):
+        world.step_actions(rng.uniform(-1, 1, (7, world.n_sensors, 2)))
+        fast = world.observe()
+        world._fused = False  # the readers' general path
+        try:
+            general = world.observe()
+        finally:
+            world._fused = True
+        assert fast.dtype == general.dtype and np.array_equal(fast, general)
