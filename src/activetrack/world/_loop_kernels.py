@@ -195,7 +195,9 @@ def advance_unicycle_rows(
             if not (math.isfinite(x) and math.isfinite(y)):
                 return -1
             sensors_out[b, i, 0], sensors_out[b, i, 1], heading[b, i, 0] = x, y, th
-            inside = math.hypot(x - tx, y - ty) < rho_inside[i]
+            # (hypot only near the disk: far outside, the squared distance says it exactly)
+            dx, dy, near = x - tx, y - ty, rho_inside[i] * (1.0 + 1e-9)
+            inside = dx * dx + dy * dy <= near * near and math.hypot(dx, dy) < rho_inside[i]
             projected[b, i] = inside
             hit = hit or inside
         pending[b] = hit
