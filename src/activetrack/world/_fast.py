@@ -207,8 +207,8 @@ def advance_arcs(
         states = np.concatenate([sensors[rows], motion[rows]], -1)[hit]  # (H, 3), in order
         want = positions[rows][hit]
         moved = np.array(want)
-        for j, (b, i) in enumerate(zip(rows[np.nonzero(hit)[0]].tolist(),
-                                       np.nonzero(hit)[1].tolist(), strict=True)):  # fmt: skip
+        copies, agents = np.nonzero(hit)
+        for j, (b, i) in enumerate(zip(rows[copies].tolist(), agents.tolist(), strict=True)):
             moved[j] = kin.project(want[j], states[j], x_pred[b, None, :2], rho[i])
         if not np.isfinite(moved).all():
             return None
