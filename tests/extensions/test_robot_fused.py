@@ -212,3 +212,42 @@ def test_batched_observation_is_the_generic_one(scenario) -> None:
         finally:
             world._fused = True
         assert fast.dtype == general.dtype and np.array_equal(fast, general)
+
+
+@pytest.mark.kernels
+def test_unicycle_rows_rho_test_is_hypot_at_the_boundary() -> None:
+    """The one-call step's test of a move into the ``rho`` disk (a squared-distance
+    prefilter, then ``hypot``) against NumPy's ``hypot(...) < rho (1 - TOL)`` where it is
+    hardest: ``rho`` within a few ulps of sensor 0's new distance to the target (the
+    others at random distances), and far inside and outside."""
+    from activetrack.kinematics.base import TOL
+    from activetrack.world import _loop_kernels as lk
+
+    kin = activetrack.Unicycle(0.0, 10.0, np.pi, dt=0.1)
+    rng = np.random.default_rng(12)
+    b, m, n = 600, 3, 4
+    actions = rng.uniform(-1, 1, (b, m, 2))
+    sensors = rng.uniform(-50, 50, (b, m, 2))
+    motion = rng.uniform(-np.pi, np.pi, (b, m, 1))
+    x_pred = np.zeros((b, n))
+    x_pred[:, :2] = rng.uniform(-50, 50, (b, 2))
+    ends = kin.advance(actions, np.concatenate([sensors, motion], -1))[..., :2]
+    dist = np.hypot(*np.moveaxis(ends - x_pred[:, None, :2], -1, 0))  # (b, m)
+    rho = dist[:, 0] / (1.0 - TOL) * (1.0 + rng.integers(-4, 5, b) * 2.0**-52)
+    rho[::7] *= rng.uniform(0.2, 5.0, len(rho[::7]))  # far from the boundary too
+    table, mats = World(make_scenario("paper", kinematics=kin), 2)._fused_args
+    flags = np.empty((b, m), bool)
+    for row in range(b):  # one copy a call: each its own rho
+        out = (np.empty((1, m, 2)), flags[row : row + 1], np.empty((1, n)), np.empty((1, n)),
+               np.empty((1, n, n)), np.empty((1, n)), np.empty((1, n, n)), np.empty(1))  # fmt: skip
+        lk.advance_unicycle_rows(
+            actions[row : row + 1], sensors[row : row + 1], motion[row : row + 1],
+            np.zeros((1, n)), x_pred[row : row + 1], np.eye(n)[None].copy(), np.zeros((1, 10)),
+            table, mats, kin.v_min, kin.v_max, kin.w_max, kin.dt,
+            np.full(m, rho[row] * (1.0 - TOL)), *out, np.empty((1, m, 1)), np.empty(1, bool),
+        )  # fmt: skip
+    want = dist < (rho * (1.0 - TOL))[:, None]
+    assert np.array_equal(flags, want)
+    near = np.ones(b, bool)
+    near[::7] = False
+    assert 0 < want[near, 0].sum() < near.sum()  # both sides, within ulps of the boundary
