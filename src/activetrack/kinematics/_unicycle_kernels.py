@@ -15,7 +15,7 @@ import math
 
 import numpy as np
 
-from activetrack._jit import kernel
+from activetrack._jit import inline_kernel, kernel
 
 
 @kernel
@@ -30,30 +30,40 @@ def np_mod(a, b):
     return mod
 
 
+@inline_kernel
+def arc_step(a0, a1, x, y, th, v_min, v_max, w_max, dt):
+    """Return one sensor's next state ``(x, y, theta)`` after its normalized action
+    ``(a0, a1)`` (clipped to [-1, 1]: ``v = v_min + (a_0 + 1) (v_max - v_min) / 2``,
+    ``w = a_1 w_max``, held for ``dt``, the exact arc) from ``(x, y, th)``."""
+    a0 = min(max(a0, -1.0), 1.0)
+    a1 = min(max(a1, -1.0), 1.0)
+    v = v_min + 0.5 * (a0 + 1.0) * (v_max - v_min)
+    w = a1 * w_max
+    phi = 0.5 * w * dt
+    s = math.sin(phi) / phi if phi != 0.0 else 1.0
+    chord = v * dt * s
+    ang = th + phi
+    return (
+        x + chord * math.cos(ang),
+        y + chord * math.sin(ang),
+        math.pi - np_mod(math.pi - (th + 2.0 * phi), 2.0 * math.pi),
+    )
+
+
 @kernel
 def team_step_rows(actions, states, v_min, v_max, w_max, dt, targets, rho_inside, out, inside):
-    """Write each sensor's next state (x, y, theta) after its normalized action (clipped
-    to [-1, 1]: ``v = v_min + (a_0 + 1) (v_max - v_min) / 2``, ``w = a_1 w_max``, held
-    for ``dt``, the exact arc) into ``out`` (B, M, 3), and into ``inside`` (B, M) whether
-    the new position is closer than ``rho_inside`` (B, M) to one of ``targets``."""
-    span = v_max - v_min
-    two_pi = 2.0 * math.pi
+    """Write each sensor's :func:`arc_step` into ``out`` (B, M, 3), and into ``inside``
+    (B, M) whether the new position is closer than ``rho_inside`` (B, M) to one of
+    ``targets``."""
     for b in range(actions.shape[0]):
         for i in range(actions.shape[1]):
-            a0 = min(max(actions[b, i, 0], -1.0), 1.0)
-            a1 = min(max(actions[b, i, 1], -1.0), 1.0)
-            v = v_min + 0.5 * (a0 + 1.0) * span
-            w = a1 * w_max
-            phi = 0.5 * w * dt
-            s = math.sin(phi) / phi if phi != 0.0 else 1.0
-            chord = v * dt * s
-            th = states[b, i, 2]
-            ang = th + phi
-            x = states[b, i, 0] + chord * math.cos(ang)
-            y = states[b, i, 1] + chord * math.sin(ang)
+            x, y, th = arc_step(
+                actions[b, i, 0], actions[b, i, 1], states[b, i, 0], states[b, i, 1],
+                states[b, i, 2], v_min, v_max, w_max, dt,
+            )  # fmt: skip
             out[b, i, 0] = x
             out[b, i, 1] = y
-            out[b, i, 2] = math.pi - np_mod(math.pi - (th + 2.0 * phi), two_pi)
+            out[b, i, 2] = th
             hit = False
             for k in range(targets.shape[1]):
                 if math.hypot(x - targets[b, k, 0], y - targets[b, k, 1]) < rho_inside[b, i]:

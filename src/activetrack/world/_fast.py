@@ -47,6 +47,7 @@ def prepare(w: World) -> None:
     w._fused_args = (table, np.stack([t0.Phi, t0.noise_factor, t0.Q]))
     n0 = t0.dim  # one copy's work arrays: P Phi^T, the measurements, all sensors
     w._fused_work = (np.empty((n0, n0)), np.empty((m, 2)), np.ones(m, bool))
+    w._arcs = arcs_args(w._team, p.rho, m)
     constants = np.ascontiguousarray(w._constants, np.float64)
     td = observation.EXT_TARGET_DIM * K if w._extended else observation.TARGET_DIM
     w._obs_args = (constants, float(w._dt), float(w.length_scale), w._extended)
@@ -126,6 +127,10 @@ def advance_fused(
     n, m = x_true.shape[-1], w.n_sensors
     batch = x_true.shape[:-1]
     if w._team is not None:
+        if w._arcs is not None and not absolute and w._rule is None:
+            done = advance_arcs(w, moves, noise, calc)
+            if done is not None:
+                return done
         moves, team_projected = team_moves(w, absolute, moves, sensors, x_pred, calc)
         absolute = True
     out = (
@@ -140,6 +145,82 @@ def advance_fused(
         *w._fused_args, *out,
     )  # fmt: skip
     return out[0], out[1] if w._team is None else team_projected, out[2:]
+
+
+def arcs_args(team: Any, rho: Any, m: int) -> tuple | None:
+    """Return the constants of :func:`advance_arcs` for a team of ``m`` sensors that all
+    move by one :class:`activetrack.Unicycle` (the class itself, with a reach): ``(kin,
+    (v_min, v_max, w_max, dt), rho (1 - TOL), rho)`` (``rho`` (M,), the scenario's), else
+    None."""
+    from activetrack.kinematics.base import TOL  # noqa: PLC0415
+    from activetrack.kinematics.unicycle import Unicycle  # noqa: PLC0415
+
+    kin = None if team is None else team.shared
+    if type(kin) is not Unicycle or team.state_dim != 3 or not kin.radius > 0.0:
+        return None
+    rho = np.broadcast_to(np.asarray(rho, np.float64), (m,))
+    # (TeamMotion's test of a move into a rho disk: closer than rho (1 - TOL))
+    inside = np.ascontiguousarray(rho * (1.0 - TOL))
+    return kin, (kin.v_min, kin.v_max, kin.w_max, kin.dt), inside, rho
+
+
+def advance_arcs(
+    w: World, actions: FloatArray, noise: FloatArray, calc: Any
+) -> tuple[FloatArray, np.ndarray, tuple[Any, ...]] | None:
+    """Return :func:`advance_fused` of the actions of a team of unicycles (``w._arcs``; no
+    team rule), the move and the step of every copy in one compiled call
+    (:func:`activetrack.world._loop_kernels.advance_unicycle_rows`) but for the few copies
+    with a move that ends inside the ``rho`` disk: those moves projected
+    (:meth:`activetrack.kinematics.pieces.PiecewiseReach.project`, the next heading that of
+    :meth:`~activetrack.Unicycle.command` reaching the point), then those copies advanced
+    (:func:`activetrack.world._loop_kernels.advance_listed_rows`). The numbers of
+    :func:`team_moves` then the compiled step, bit for bit. Keeps the next ``motion`` for
+    ``World._motion_store``. None when a new position is not finite (the caller's path
+    then raises)."""
+    kin, arc, rho_inside, rho = w._arcs
+    st, t = w._s, w._t[0]
+    sensors, motion = st["sensors"][calc], st["motion"][calc]
+    x_true, x_pred, P_pred = t["x_true"][calc], t["x_pred"][calc], t["P_pred"][calc]
+    n, m = x_true.shape[-1], w.n_sensors
+    batch = x_true.shape[:-1]
+    ins = (
+        as_rows(sensors, batch, (m, 2)), as_rows(motion, batch, (m, 1)),
+        as_rows(x_true, batch, (n,)), as_rows(x_pred, batch, (n,)),
+        as_rows(P_pred, batch, (n, n)), as_rows(noise, batch, (w._n_noise,)),
+        *w._fused_args,
+    )  # fmt: skip
+    out = (
+        np.empty(sensors.shape), np.empty(sensors.shape[:-1], bool), np.empty(x_true.shape),
+        np.empty(x_true.shape), np.empty(P_pred.shape), np.empty(x_true.shape),
+        np.empty(P_pred.shape), np.empty(batch),
+    )  # fmt: skip
+    heading, pending = np.empty(motion.shape), np.empty(batch, bool)
+    count = loop_kernels.advance_unicycle_rows(
+        as_rows(actions, batch, (m, 2)), *ins, *arc, rho_inside, *out, heading, pending
+    )
+    if count < 0:
+        return None
+    if count:  # (rare: a move into a rho disk) the team rule's projection, then the step
+        rows = np.flatnonzero(pending)
+        positions, projected = out[0], out[1]
+        hit = projected[rows]
+        states = np.concatenate([sensors[rows], motion[rows]], -1)[hit]  # (H, 3), in order
+        want = positions[rows][hit]
+        moved = np.array(want)
+        copies, agents = np.nonzero(hit)
+        for j, (b, i) in enumerate(zip(rows[copies].tolist(), agents.tolist(), strict=True)):
+            moved[j] = kin.project(want[j], states[j], x_pred[b, None, :2], rho[i])
+        if not np.isfinite(moved).all():
+            return None
+        sub = positions[rows]
+        sub[hit] = moved
+        positions[rows] = sub
+        nxt = heading[rows]
+        nxt[hit] = kin.advance(kin.command(moved, states), states)[..., 2:]
+        heading[rows] = nxt
+        loop_kernels.advance_listed_rows(rows, *ins[2:], positions, *out[2:])
+    w._motion_next = heading
+    return out[0], out[1], out[2:]
 
 
 def team_moves(
@@ -186,4 +267,29 @@ def observe_one(w: World) -> np.ndarray:
     if w._team is not None:
         st = w._s
         out = with_motion(w, out, st["sensors"], st.get("motion"))
+    return out
+
+
+def observe_batch(w: World) -> np.ndarray:
+    """``World.observe`` of every copy of a batched fused world ``w``: one compiled call
+    (:func:`activetrack.world._observation_kernels.observe_rows`) on views of the world's
+    own arrays, unchecked, into an array with room for the team's kinematic features,
+    written last (a team of unicycles: compiled too,
+    :func:`activetrack.world._observation_kernels.headings_into`)."""
+    t, st = w._t[0], w._s
+    x, P = t["x_pred"], t["P_pred"]
+    n, (m, d) = x.shape[-1], w._fused_obs_shape
+    N = x.shape[0]
+    features = 0 if w._team is None else w._team.n_features
+    out = np.empty((N, m, d + features), np.float32)
+    detected, _, _, order = w._obs_work
+    observation_kernels.observe_rows(
+        as_rows(x, (N,), (n,))[:, None], as_rows(P, (N,), (n, n))[:, None],
+        as_rows(st["sensors"], (N,), (m, 2)), *w._obs_args, detected.reshape(1, 1, m), 0,
+        order, out,
+    )  # fmt: skip
+    if w._arcs is not None:
+        observation_kernels.headings_into(as_rows(st["motion"], (N,), (m, 1)), out, d)
+    elif features:
+        out[..., d:] = w._team.features(w._team.states(st["sensors"], st.get("motion")))
     return out

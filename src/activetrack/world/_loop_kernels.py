@@ -28,6 +28,7 @@ import numpy as np
 from activetrack._jit import inline_kernel, kernel
 from activetrack.estimation import _kernels as ek
 from activetrack.kinematics import _kernels as mk
+from activetrack.kinematics import _unicycle_kernels as uk
 from activetrack.models._motion_kernels import (
     move_target_into,
     predict_into,
@@ -96,30 +97,46 @@ def advance_row(
     ``x_post``, ``P_post``; the prediction (:func:`predict_into`, ``scratch`` (n, n)) into
     ``x_next``, ``P_next``. ``table`` (M, :data:`TABLE_COLUMNS`) holds the sensors'
     constants, ``mats`` (3, n, n) the target's ``Phi``, noise factor and ``Q``."""
-    n, m = x_true.shape[0], sensors.shape[0]
-    Phi, F, Q = mats[0], mats[1], mats[2]
     tx, ty = x_pred[0], x_pred[1]
     count = 0
-    for i in range(m):
+    for i in range(sensors.shape[0]):
         sx, sy, r = sensors[i, 0], sensors[i, 1], table[i, R]
         nx, ny = mk.move_point(moves[i, 0], moves[i, 1], sx, sy, r, absolute)
         px, py, hit = mk.keep_point(nx, ny, sx, sy, tx, ty, r, table[i, RHO])
         sensors_out[i, 0], sensors_out[i, 1], projected[i] = px, py, hit
         count += hit
+    trace = advance_moved_row(
+        x_true, x_pred, P_pred, noise, table, mats, sensors_out, x_true_out, x_post, P_post,
+        x_next, P_next, scratch, z, every,
+    )  # fmt: skip
+    return trace, count
+
+
+@inline_kernel
+def advance_moved_row(
+    x_true, x_pred, P_pred, noise, table, mats, sensors, x_true_out, x_post, P_post, x_next,
+    P_next, scratch, z, every,
+):  # fmt: skip
+    """Return the trace of the posterior position covariance after the rest of
+    :func:`advance_row`'s step, from the sensors' new positions ``sensors`` (M, 2): the
+    target's motion, the measurements, the EKF update and the prediction (the arguments
+    are :func:`advance_row`'s)."""
+    n, m = x_true.shape[0], sensors.shape[0]
+    Phi, F, Q = mats[0], mats[1], mats[2]
     move_target_into(Phi, F, x_true, noise[:n], x_true_out)
     tx, ty = x_true_out[0], x_true_out[1]
     for i in range(m):
         z[i, 0], z[i, 1] = measure_point(
-            tx, ty, sensors_out[i, 0], sensors_out[i, 1], table[i, ORIENTATION],
+            tx, ty, sensors[i, 0], sensors[i, 1], table[i, ORIENTATION],
             noise[n + 2 * i], noise[n + 2 * i + 1], table[i, STD_D], table[i, STD_T],
             table[i, USE_D] != 0.0, table[i, USE_T] != 0.0,
         )  # fmt: skip
     ek.update_row(
-        x_pred, P_pred, z, sensors_out, table[:, W_D], table[:, W_T], table[:, ORIENTATION],
+        x_pred, P_pred, z, sensors, table[:, W_D], table[:, W_T], table[:, ORIENTATION],
         every, 1, x_post, P_post,
     )  # fmt: skip
     predict_into(x_post, P_post, Phi, Q, x_next, P_next, scratch)
-    return P_post[0, 0] + P_post[1, 1], count
+    return P_post[0, 0] + P_post[1, 1]
 
 
 @kernel
@@ -143,6 +160,74 @@ def advance_rows(
         )  # fmt: skip
         count += c
     return count
+
+
+@kernel
+def advance_unicycle_rows(
+    actions, sensors, motion, x_true, x_pred, P_pred, noise, table, mats, v_min, v_max, w_max,
+    dt, rho_inside, sensors_out, projected, x_true_out, x_post, P_post, x_next, P_next, trace,
+    heading, pending,
+):  # fmt: skip
+    """Return the number of copies marked ``pending``, or -1 if a new position is not
+    finite; write one step of B copies whose sensors are unicycles, from their positions
+    ``sensors`` (B, M, 2), headings ``motion`` (B, M, 1) and normalized ``actions``
+    (B, M, 2): each sensor's :func:`activetrack.kinematics._unicycle_kernels.arc_step` into
+    ``sensors_out`` (B, M, 2) and ``heading`` (B, M, 1), and into ``projected`` (B, M)
+    whether it ends closer than ``rho_inside`` (M,) to the predicted target
+    ``x_pred[:, :2]``. A copy with such a move is marked in ``pending`` (B,) and not
+    advanced: its moves are the caller's to project, then :func:`advance_listed_rows`
+    advances it. Every other copy is advanced from its new positions by
+    :func:`advance_moved_row` (the rest of :func:`advance_row`; the other arguments are
+    its), its trace into ``trace`` (B,)."""
+    n, m = x_true.shape[1], sensors.shape[1]
+    scratch = np.empty((n, n))
+    z = np.empty((m, 2))
+    every = np.ones(m, np.bool_)
+    count = 0
+    for b in range(actions.shape[0]):
+        tx, ty = x_pred[b, 0], x_pred[b, 1]
+        hit = False
+        for i in range(m):
+            x, y, th = uk.arc_step(
+                actions[b, i, 0], actions[b, i, 1], sensors[b, i, 0], sensors[b, i, 1],
+                motion[b, i, 0], v_min, v_max, w_max, dt,
+            )  # fmt: skip
+            if not (math.isfinite(x) and math.isfinite(y)):
+                return -1
+            sensors_out[b, i, 0], sensors_out[b, i, 1], heading[b, i, 0] = x, y, th
+            # (hypot only near the disk: far outside, the squared distance says it exactly)
+            dx, dy, near = x - tx, y - ty, rho_inside[i] * (1.0 + 1e-9)
+            inside = dx * dx + dy * dy <= near * near and math.hypot(dx, dy) < rho_inside[i]
+            projected[b, i] = inside
+            hit = hit or inside
+        pending[b] = hit
+        if hit:
+            count += 1
+            continue
+        trace[b] = advance_moved_row(
+            x_true[b], x_pred[b], P_pred[b], noise[b], table, mats, sensors_out[b],
+            x_true_out[b], x_post[b], P_post[b], x_next[b], P_next[b], scratch, z, every,
+        )  # fmt: skip
+    return count
+
+
+@kernel
+def advance_listed_rows(
+    rows, x_true, x_pred, P_pred, noise, table, mats, sensors, x_true_out, x_post, P_post,
+    x_next, P_next, trace,
+):  # fmt: skip
+    """Write :func:`advance_moved_row` of the copies ``rows`` (indices), from their new
+    positions ``sensors`` (B, M, 2), into those rows of the outputs (the arguments are
+    :func:`advance_rows`'), the traces into ``trace`` (B,)."""
+    n, m = x_true.shape[1], sensors.shape[1]
+    scratch = np.empty((n, n))
+    z = np.empty((m, 2))
+    every = np.ones(m, np.bool_)
+    for b in rows:
+        trace[b] = advance_moved_row(
+            x_true[b], x_pred[b], P_pred[b], noise[b], table, mats, sensors[b],
+            x_true_out[b], x_post[b], P_post[b], x_next[b], P_next[b], scratch, z, every,
+        )  # fmt: skip
 
 
 @kernel

@@ -129,3 +129,15 @@ def observe_rows(x, P, fixes, constants, dt, L, extended, detected, flags, order
             x[b], P[b], fixes[b], constants, dt, L, extended, det, flags, target, sensor
         )  # fmt: skip
         windows_row(target, sensor, order, out[b])
+
+
+@kernel
+def headings_into(motion, out, col):
+    """Write every agent's heading ``theta = motion[b, i, 0]`` as ``(cos theta, sin
+    theta)`` into ``out[b, i, col:col + 2]`` (``out`` (B, M, D) float32, each entry rounded
+    once): :meth:`activetrack.Unicycle.features`, the observation's last entries."""
+    for b in range(motion.shape[0]):
+        for i in range(motion.shape[1]):
+            th = motion[b, i, 0]
+            out[b, i, col] = math.cos(th)
+            out[b, i, col + 1] = math.sin(th)

@@ -161,6 +161,8 @@ class WorldReaders:
         rays = self.layout.rays
         if self._one and self._fused and (index is None or (type(index) is int and index == 0)):
             return _fast.observe_one(self)[None] if index is None else _fast.observe_one(self)
+        if self._fused and index is None:  # every copy of a batched fused world
+            return _fast.observe_batch(self)
         out = observation.encode(*self._feature_args(index), self._order, rays)
         if rays:  # written straight into the observation (float32): no float64 temporary
             observation.ray_readings(

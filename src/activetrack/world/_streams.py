@@ -37,7 +37,7 @@ class RandomStreams:
         for i, steps in zip(rows.tolist(), np.atleast_1d(left).tolist(), strict=True):
             rng = self.rng(i)
             self._noise_from[i] = rng.bit_generator.state
-            self._noise[i, b - steps :] = rng.standard_normal((steps, self._n_noise))
+            self._noise[b - steps :, i] = rng.standard_normal((steps, self._n_noise))
         self._noise_left[rows] = left
         self._noise_drawn[rows] = left
 
@@ -65,10 +65,10 @@ class RandomStreams:
             self._draw_noise(rows[left == 0])
             left = self._noise_left[rows]
         if left.min() == left.max():  # copies in step (the common case): one column
-            noise = self._noise[sel if isinstance(sel, slice) else rows,
-                                self.noise_block - int(left[0])]  # fmt: skip
+            noise = self._noise[self.noise_block - int(left[0]),
+                                sel if isinstance(sel, slice) else rows]  # fmt: skip
         else:
-            noise = self._noise[rows, self.noise_block - left]
+            noise = self._noise[self.noise_block - left, rows]
         self._noise_left[rows] = left - 1
         return noise[0] if isinstance(sel, int) else noise
 

@@ -234,7 +234,7 @@ class World(  # (the mixins: world/_selection.py, _streams.py, ..., imm_tracking
 
         self._rngs: list[np.random.Generator | None] = [None] * N
         self._noise = (
-            np.zeros((N, self.noise_block, self._n_noise)) if self.noise_block > 1 else None
+            np.zeros((self.noise_block, N, self._n_noise)) if self.noise_block > 1 else None
         )
         self._noise_left = np.zeros(N, dtype=np.int64)
         # Each copy's generator state before its last block and that block's steps: what
@@ -526,8 +526,8 @@ class World(  # (the mixins: world/_selection.py, _streams.py, ..., imm_tracking
             return a if flags.c_contiguous and flags.writeable else a.copy()
         if a.shape != (self.num_copies, m, 2):
             raise ValueError(f"{name} must have shape ({self.num_copies}, {m}, 2), got {a.shape}")
-        finite = np.isfinite(a[sel]).all(axis=(-2, -1))
-        if not finite.all():
+        if not np.isfinite(a[sel]).all():  # (one reduction; the copies only to say them)
+            finite = np.isfinite(a[sel]).all(axis=(-2, -1))
             bad = self._rows(sel)[~np.atleast_1d(finite)][:10].tolist()
             raise ValueError(f"{name} must be finite (no NaN or inf); copies {bad}")
         return a
