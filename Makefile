@@ -34,11 +34,15 @@ demo: $(DEMO_STAMP)
 
 # The kernels are compiled once per clone (numba's cache in __pycache__). The tests marked
 # `kernels` also run as plain Python (NUMBA_DISABLE_JIT=1: the kernels' source checked line
-# by line), on the second core beside the main run; its output follows the main run's.
+# by line) beside the main run; its output follows the main run's. The main run spreads
+# its files over two workers (pytest-xdist, a file's tests in one worker: its fixtures
+# built once) and ends with its slowest tests.
+TEST_WORKERS ?= 2
 test: $(STAMP)
 	@NUMBA_DISABLE_JIT=1 $(PY) -m pytest -q -p no:cacheprovider -m kernels \
 		> $(VENV)/kernels-plain.log 2>&1 & plain=$$!; \
-	$(PY) -m pytest -q -p no:cacheprovider; main=$$?; \
+	$(PY) -m pytest -q -p no:cacheprovider -n $(TEST_WORKERS) --dist loadfile --durations=25; \
+		main=$$?; \
 	wait $$plain; kern=$$?; \
 	echo "--- NUMBA_DISABLE_JIT=1 pytest -m kernels"; cat $(VENV)/kernels-plain.log; \
 	test $$main -eq 0 && test $$kern -eq 0

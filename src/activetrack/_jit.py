@@ -61,6 +61,7 @@ KERNEL_MODULES = (
     "activetrack.estimation._kernels",
     "activetrack.kinematics._kernels",
     "activetrack.kinematics._unicycle_kernels",
+    "activetrack.kinematics._path_kernels",
     "activetrack.models._motion_kernels",
     "activetrack.world._loop_kernels",
     "activetrack.models._occluder_kernels",

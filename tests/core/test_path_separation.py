@@ -58,29 +58,39 @@ def _rk4(f, y, dt, n=N_SAMPLES):
     return np.stack(out, -2)
 
 
+def _limits(kins, name):
+    """Return the kinematics' attribute ``name`` per sensor (M,)."""
+    return np.array([getattr(k, name) for k in kins], np.float64)
+
+
 def _driven(kin, dt, old, new):
-    """Return ``(path (..., 201, 2), valid (...))``: the path a sensor of kinematics ``kin``
-    drove from state ``old`` to ``new`` (..., S) (the command recovered from the states,
-    integrated), and whether that command is within the limits and ends at ``new``."""
+    """Return ``(path (..., M, 201, 2), valid (..., M))``: the paths sensors of one
+    kinematics class drove from states ``old`` to ``new`` (..., M, S) (the command
+    recovered from the states, integrated), and whether that command is within the limits
+    and ends at ``new``. ``kin`` is the sensors' kinematics (M,), of one class."""
+    kins = tuple(kin) if isinstance(kin, (list, tuple)) else (kin,)
+    first = kins[0]
     scale = 1.0 + np.max(np.abs(old[..., :2]), axis=-1)
-    if isinstance(kin, Unicycle):
+    if isinstance(first, Unicycle):
+        w_max, v_min, v_max = (_limits(kins, a) for a in ("w_max", "v_min", "v_max"))
         chord = new[..., :2] - old[..., :2]
         length = np.hypot(chord[..., 0], chord[..., 1])
         turn = _wrap(new[..., 2] - old[..., 2])
         half = 0.5 * turn
         sinc = np.where(half == 0, 1.0, np.sin(half) / np.where(half == 0, 1.0, half))
         v, w = length / (dt * sinc), turn / dt
-        ok = np.abs(w) <= kin.w_max * (1 + RTOL) + 1e-12
-        ok &= (v >= kin.v_min * (1 - RTOL) - 1e-9) & (v <= kin.v_max * (1 + RTOL) + 1e-9)
+        ok = np.abs(w) <= w_max * (1 + RTOL) + 1e-12
+        ok &= (v >= v_min * (1 - RTOL) - 1e-9) & (v <= v_max * (1 + RTOL) + 1e-9)
 
         def f(y):
             return np.stack([v * np.cos(y[..., 2]), v * np.sin(y[..., 2]), w + 0 * y[..., 2]], -1)
 
         path = _rk4(f, old[..., :3], dt)[..., :2]
-    elif isinstance(kin, DoubleIntegrator):
+    elif isinstance(first, DoubleIntegrator):
+        a_max, v_max = _limits(kins, "a_max"), _limits(kins, "v_max")
         acc = (new[..., 2:4] - old[..., 2:4]) / dt
-        ok = np.hypot(acc[..., 0], acc[..., 1]) <= kin.a_max * (1 + 1e-7)
-        ok &= np.hypot(new[..., 2], new[..., 3]) <= kin.v_max * (1 + 1e-9)
+        ok = np.hypot(acc[..., 0], acc[..., 1]) <= a_max * (1 + 1e-7)
+        ok &= np.hypot(new[..., 2], new[..., 3]) <= v_max * (1 + 1e-9)
 
         def f(y):
             return np.concatenate([y[..., 2:4], acc], -1)
@@ -88,7 +98,7 @@ def _driven(kin, dt, old, new):
         path = _rk4(f, old[..., :4], dt)[..., :2]
     else:  # the disk: a straight move within its radius
         e = new[..., :2] - old[..., :2]
-        ok = np.hypot(e[..., 0], e[..., 1]) <= kin.radius * (1 + RTOL)
+        ok = np.hypot(e[..., 0], e[..., 1]) <= _limits(kins, "radius") * (1 + RTOL)
         s = np.linspace(0.0, 1.0, N_SAMPLES + 1)[:, None]
         path = old[..., None, :2] + s * e[..., None, :]
     miss = path[..., -1, :] - new[..., :2]
@@ -170,10 +180,11 @@ class Checker:
         n, m = before.shape[:2]
         paths = np.empty((n, m, N_SAMPLES + 1, 2))
         bad = np.zeros((n, m), bool)  # a kinematic limit broken
-        for i, kin in enumerate(self.kins):
-            sd = kin.state_dim
-            paths[:, i], ok = _driven(kin, self.dt, before[:, i, :sd], after[:, i, :sd])
-            bad[:, i] = ~ok
+        for cls in {type(k) for k in self.kins}:  # the sensors of a class integrated together
+            idx = [i for i, k in enumerate(self.kins) if type(k) is cls]
+            kins, sd = [self.kins[i] for i in idx], self.kins[idx[0]].state_dim
+            paths[:, idx], ok = _driven(kins, self.dt, before[:, idx, :sd], after[:, idx, :sd])
+            bad[:, idx] = ~ok
         old, new = before[..., :2], after[..., :2]
         # Separation after the step.
         e = new[:, :, None] - new[:, None]
@@ -355,7 +366,7 @@ def test_planned_steps_keep_the_team_rules(planner, name, kw):
     world.reset(seeds=[5, 6])
     chk = Checker(world)
     for _ in range(6):
-        pts = np.stack([plan(world.planning_problem(c)) for c in range(2)])
+        pts = plan(world.planning_problem())  # (the copies planned together, as batched)
         chk.step(pts, absolute=True)
     assert chk.steps == 12
 

@@ -84,6 +84,7 @@ N_FRACTIONS = 16
 N_GRID = 9
 N_RING = 32
 _RING_OUT = 1e-9  # the rho circles' points aim this (relative) outside
+_END_MARGIN = 1e-9  # (relative) an end point this much within d_ij fails without its path
 
 
 def restate(kin: Any, points: FloatArray, state: FloatArray) -> FloatArray:
@@ -214,7 +215,6 @@ class PathRule:
         of the earlier sensors, keeps those distances from their paths at the same
         instants; and the end point's distance to the nearest of ``tg`` (B, K, 2) less
         ``rho`` (with the tolerance; inf without ``rho``)."""
-        sts = st[:, None, :]
         keep = dij > 0.0
         shape = pts.shape[:-1]
         clear = np.full(shape, np.inf)
@@ -223,27 +223,32 @@ class PathRule:
             clear = np.min(np.hypot(e[..., 0], e[..., 1]), axis=-1) - rho * (1.0 - TOL)
         if not np.any(keep) and occ is None:
             return np.ones(shape, bool), np.ones(shape, bool), clear
-        fine = path(kin, pts, sts, 2 * self.n)  # (B, C, 2n + 1, 2)
         sep = np.ones(shape, bool)
+        if np.any(keep):  # an end point within d_ij: the path is not farther (a margin
+            # for the rounding of the path's last piece), no path needed
+            e = pts[:, :, None, :] - obst[:, None, keep]
+            sep = np.all(np.hypot(e[..., 0], e[..., 1]) >= dij[keep] * (1.0 - _END_MARGIN), -1)
+        rows, cols = np.nonzero(sep)  # the paths are sampled for these candidates alone
+        fine = path(kin, pts[rows, cols], st[rows], 2 * self.n)  # (L, 2n + 1, 2)
+        live = np.ones(len(rows), bool)
         if np.any(keep):
-            dist = point_distances(fine[..., ::2, :], obst[:, None, keep])  # (B, C, J')
-            sep = np.all(dist >= dij[keep], axis=-1)
-        if moving is not None and np.any(sep):  # (the candidates still separated alone)
-            rows, cols = np.nonzero(sep)
+            dist = point_distances(fine[:, ::2, :], obst[rows][:, keep])  # (L, J')
+            live = np.all(dist >= dij[keep], axis=-1)
+        if moving is not None and np.any(live):  # (the candidates still separated alone)
             paths_m, slacks_m, d_m = moving
-            sep[rows, cols] = together(
-                fine[rows, cols, None, ::2, :], paths_m[rows], slacks_m[rows], d_m
-            )[:, 0]
-        clear_occ = np.ones(shape, bool)
-        if occ is not None:
+            at = np.flatnonzero(live)
+            live[at] = together(fine[at, None, ::2, :], paths_m[rows[at]], slacks_m[rows[at]],
+                                d_m)[:, 0]  # fmt: skip
+        sep[rows, cols] = live
+        clear_occ = np.ones(shape, bool)  # (decides nothing where not separated)
+        if occ is not None and np.any(live):
             from activetrack.models import occluders  # noqa: PLC0415
 
-            a, b = hull_of(fine)  # (B, C, 3n, 2)
-            if occ.batched:  # (the layout axis: every copy)
-                clear_occ = ~np.any(occluders.blocked(a, b, occ), axis=-1)
-            else:  # the separated moves alone
-                clear_occ = np.zeros(shape, bool)
-                clear_occ[sep] = ~np.any(occluders.blocked(a[sep], b[sep], occ), axis=-1)
+            at = np.flatnonzero(live)
+            a, b = hull_of(fine[at])  # (L', 3n, 2)
+            clear_occ[rows[at], cols[at]] = ~occluders.path_blocked(
+                a, b, occ[rows[at]] if occ.batched else occ
+            )
         return sep, clear_occ, clear
 
     def _fallback(

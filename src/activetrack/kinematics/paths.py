@@ -35,8 +35,8 @@ from typing import Any
 
 import numpy as np
 
+from activetrack.kinematics._path_kernels import path_point_rows
 from activetrack.kinematics.double_integrator import DoubleIntegrator
-from activetrack.kinematics.separation import segment_distance
 from activetrack.kinematics.unicycle import Unicycle, _sinc
 from activetrack.validation import FloatArray
 
@@ -107,7 +107,14 @@ def point_distances(samples: FloatArray, points: FloatArray) -> FloatArray:
     """Return the distance (..., J) from the path through ``samples`` (..., n + 1, 2) to
     each of ``points`` (..., J, 2), less the path's :func:`slack` (a lower bound)."""
     p = np.asarray(samples, np.float64)
-    a, b = p[..., :-1, None, :], p[..., 1:, None, :]
-    q = np.asarray(points, np.float64)[..., None, :, :]
-    d = np.min(segment_distance(a, b, q), axis=-2)
-    return d - slack(p)[..., None]
+    q = np.asarray(points, np.float64)
+    lead = np.broadcast_shapes(p.shape[:-2], q.shape[:-2])
+    rows_p = np.ascontiguousarray(np.broadcast_to(p, lead + p.shape[-2:])).reshape(
+        -1, *p.shape[-2:]
+    )
+    rows_q = np.ascontiguousarray(np.broadcast_to(q, lead + q.shape[-2:])).reshape(
+        -1, *q.shape[-2:]
+    )
+    d = np.empty(rows_q.shape[:2])
+    path_point_rows(rows_p, rows_q, d)  # (segment_distance's arithmetic, compiled)
+    return d.reshape(lead + q.shape[-2:-1]) - slack(p)[..., None]

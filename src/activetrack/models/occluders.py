@@ -448,6 +448,35 @@ def blocked(a: FloatArray, b: FloatArray, occ: Occluders) -> np.ndarray:
     return _blocked(a, b, occ, "blocked")
 
 
+def path_blocked(a: FloatArray, b: FloatArray, occ: Occluders) -> np.ndarray:
+    """Return whether any of the segments ``[a, b]`` (..., S, 2) of each path (a path's
+    pieces) is :func:`blocked`, bool (...). A path whose box (of all its segments) meets
+    no polygon's box (shrunk by the layout's ``eps``, the kernel's own first test) is
+    clear without testing its segments. With a batched ``occ`` the first axis is the
+    layout axis."""
+    a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
+    shape = np.broadcast_shapes(a.shape, b.shape)[:-2]
+    a, b = np.broadcast_to(a, shape + a.shape[-2:]), np.broadcast_to(b, shape + b.shape[-2:])
+    out = np.zeros(shape, bool)
+    if not occ.n_edges or not out.size:
+        return out
+    # (per coordinate: a reduction along the middle axis is many times slower in NumPy)
+    lo = np.stack([np.minimum(a[..., k].min(-1), b[..., k].min(-1)) for k in (0, 1)], -1)
+    hi = np.stack([np.maximum(a[..., k].max(-1), b[..., k].max(-1)) for k in (0, 1)], -1)
+    _, _, _, _, bbox, _, eps, _ = occ._kernel_args  # (L, P, 4), (L,)
+    lay = _layouts(occ, shape, "path_blocked").reshape(shape)
+    box, e = bbox[lay], eps[lay][..., None]  # (..., P, 4), (..., 1)
+    near = np.any(
+        (hi[..., None, 0] > box[..., 0] + e) & (lo[..., None, 0] < box[..., 2] - e)
+        & (hi[..., None, 1] > box[..., 1] + e) & (lo[..., None, 1] < box[..., 3] - e),
+        axis=-1,
+    )  # fmt: skip
+    if np.any(near):
+        sub = occ[np.nonzero(near)[0]] if occ.batched else occ
+        out[near] = np.any(blocked(a[near], b[near], sub), axis=-1)
+    return out
+
+
 def _blocked(a: FloatArray, b: FloatArray, occ: Occluders, name: str) -> np.ndarray:
     """Return :func:`blocked` (``name`` the public function, for the layout-axis error)."""
     a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
