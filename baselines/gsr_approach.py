@@ -137,11 +137,10 @@ def approach(
         if lay is not None:
             ok &= ~inside(pts, lay)
         dist, way, rest = geodesic_to_targets(occ, rows, pts, targets[rows])
-        # The next step's best estimate: from the state after each candidate, the nearest
-        # its kinematics then reaches to the candidate's waypoint (a robot facing a wall
-        # turns first, which alone shortens nothing).
-        # The state the world gives a sensor that moves to a point (a plan is a point: a
-        # turn in place is no plan, as the world keeps the heading of a sensor that stays).
+        # The next step's estimate: from the state after each candidate, the nearest its
+        # kinematics then reaches to the candidate's waypoint. The state is the one the
+        # world gives a sensor that moves to the point (a plan is a point: a turn in place
+        # is none, the world keeps the heading of a sensor that stays).
         after = next_states(kin, pts, st)  # (R, 1 + P, S)
         far = np.asarray(kin.apply(lo + (hi - lo) * unit2, after[:, :, None, :]), np.float64)
         far = far[..., :2]  # (R, 1 + P, P2, 2)
@@ -158,7 +157,8 @@ def approach(
         good = np.isfinite(c_s) & (
             (c_s < now[:, None]) | ((c_s == now[:, None]) & (c_d < now_d[:, None]))
         )
-        # The paths of the best TRIES at a time, for the rows with none clear yet.
+        # The paths of the best TRIES at a time, for the rows with none clear yet (sorted
+        # by score, then distance, the good candidates come first in each row).
         clear = np.zeros(good.shape, bool)
         if lay is None:
             clear = good

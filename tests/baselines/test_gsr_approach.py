@@ -284,3 +284,12 @@ def test_a_unicycle_against_the_wall_turns_its_way_out():
     # 12 steps of 1 m: a quarter turn (5 steps at pi / 10 a step) leaves 7 m of travel;
     # the corner is 2.3 m away, so the geodesic falls by at least 3 m.
     assert brute_geodesic(p.sensors[0], target, rects) <= start - 3.0
+
+
+def test_roadmap_validates_its_input():
+    occ = Occluders.from_polygons([np.array(SQUARE)])
+    for bad in (-0.1, np.inf, np.nan):
+        with pytest.raises(ValueError, match="clearance"):
+            Roadmap(occ, clearance=bad)
+    with pytest.raises(ValueError, match="one layout"):
+        Roadmap(Occluders.stack([occ, occ]))
