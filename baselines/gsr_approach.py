@@ -25,14 +25,12 @@ A candidate's score looks one step further: the geodesic distance from the end p
 and the score is ``min |q - w| + rest`` over ``p`` itself and the end points ``q`` of a
 :data:`GRID_NEXT` x :data:`GRID_NEXT` grid of commands from the state after the move. The
 next step ignores the occluders (``w`` is in sight of ``p``; what the score measures is
-how well the state after the move is set to head for it): a unicycle that stands against
-a wall facing it thus turns toward its way out, step by step (a turn in place shortens no
-distance now, but the next step's), where the distance alone, or a next step kept out of
-the wall, would leave it facing the wall for ever. The sensor takes the best candidate (by score,
-then distance) if that beats its plan's (a lower score, or the same and a shorter
-distance); otherwise it keeps its plan, which GSR found feasible. Each move keeps the rule
-with the plans of the sensors before it (already moved) and after it, so the team's plan
-keeps every pair condition.
+how well the state after the move is set to head for it): of two moves that shorten the
+distance alike, a unicycle takes the one that leaves it facing its way out. The sensor
+takes the best candidate (by score, then distance) if that beats its plan's (a lower
+score, or the same and a shorter distance); otherwise it keeps its plan, which GSR found
+feasible. Each move keeps the rule with the plans of the sensors before it (already moved)
+and after it, so the team's plan keeps every pair condition.
 """
 
 from __future__ import annotations

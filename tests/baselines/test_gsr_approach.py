@@ -269,9 +269,9 @@ def test_lost_sensors_go_around_the_building_keeping_the_rule(scenario):
     assert best <= start - float(np.max(p.r))
 
 
-def test_a_unicycle_against_the_wall_turns_its_way_out():
-    # Sensor 0 stands on block 3's south wall facing it: every move forward enters the
-    # building, and a turn in place shortens no distance; the look-ahead turns it.
+def test_a_unicycle_near_the_wall_gets_round_the_block():
+    # Sensor 0 stands 0.3 m from block 3's south wall facing it: it gets round only by
+    # turning along the wall with small moves (the fine commands) whose paths stay clear.
     rects = [rect_of(b) for b in _BLOCKS]
     p = lost_problem("urban_unicycle", [[-7.0, 1.7], [-7.0, -12.0], [-4.0, -12.0], [-10.0, -12.0]])
     target, team, gsr = np.asarray(p.target), p.kinematics, GSR()
