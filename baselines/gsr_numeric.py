@@ -26,7 +26,9 @@ integrator) is solved over its commands (:mod:`activetrack.baselines.gsr_command
 team rule ``d_sep`` (``problem.d_sep``) every sensor's subproblem also keeps the world's
 pair conditions with the others' current plans
 (:mod:`activetrack.baselines.gsr_separation`), so the disk is then solved in command space
-too, and the lost sensors' approach below is not taken (it would ignore the rule).
+too, and so is the lost sensors' approach below: among occluders or under the rule it
+goes around the buildings by the geodesic distance and keeps the pair conditions with the
+others' plans (:mod:`activetrack.baselines.gsr_approach`).
 
 The sweeps change only the base of a sensor's subproblem, so its candidates and its
 information there are prepared once per plan (:func:`activetrack.solvers.numeric.prepare`),
@@ -38,7 +40,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from activetrack.baselines import gsr_command, gsr_kinematic, gsr_separation
+from activetrack.baselines import gsr_approach, gsr_command, gsr_kinematic, gsr_separation
 from activetrack.estimation import generic
 from activetrack.kinematics import feasible_set
 from activetrack.kinematics.team import all_disks
@@ -153,20 +155,24 @@ def relax(
         nonneg = problem.objective.nonnegative
         scale = before if nonneg else np.maximum(np.abs(before), 1.0)
         active[rows] = (gain > tol * scale) & changed[rows].any(axis=1)
-    if sep is None and det is not None and (occ is not None or np.any(np.isfinite(det[1]))):
+    if det is not None and (occ is not None or np.any(np.isfinite(det[1]))):
         s, value = _approach(problem, s, value, current, r, targets, rho, det, (w_d, w_t, pose),
-                             occ)  # fmt: skip
+                             occ, sep)  # fmt: skip
     return s.reshape(*shape, M, 2), value.reshape(shape), sweeps.reshape(shape), warm.reshape(shape)
 
 
-def _approach(problem, s, value, current, r, targets, rho, det, weights, occ):
+def _approach(problem, s, value, current, r, targets, rho, det, weights, occ, sep):
     """Return ``(positions, value)`` with every free sensor out of range of every target
     moved to its feasible point nearest the nearest predicted target, where that is no worse.
 
     Out of range the sensor's expected information is 0 wherever it can reach (its
     subproblem is flat), so relaxation leaves it where it stands; closing in is the
     sensible tie-break (it can only add information), and it is what lets a sensor that has
-    lost a target find it again.
+    lost a target find it again. Among occluders or under the team rule ``sep`` (M, M) the
+    nearest is by the geodesic distance around the occluders, over the points each sensor
+    can reach in command space that keep the rule with the others' plans
+    (:func:`activetrack.baselines.gsr_approach.approach`); on the open plane without the
+    rule, each sensor's exact projection of the target.
     """
     rel = s[:, None, :, :] - targets[:, :, None, :]  # (B, K, M, 2)
     seen = sensor_models.detection_factor(rel, det[0][:, None], det[1][:, None]) > 0.0
@@ -175,18 +181,29 @@ def _approach(problem, s, value, current, r, targets, rho, det, weights, occ):
     lost = ~seen.any(axis=1) & (r > 0.0) & (det[0] > 0.0)  # (B, M)
     if not np.any(lost):
         return s, value
-    b, i = np.nonzero(lost)
-    d2 = np.sum((targets[b] - current[b, i][:, None]) ** 2, axis=-1)  # (L, K)
-    goal = targets[b, np.argmin(d2, axis=-1)]
-    moved = s.copy()
     team = problem.kinematics
-    if team is not None and not all_disks(team):  # each sensor's own projection
-        for j, (bj, ij) in enumerate(zip(b.tolist(), i.tolist(), strict=True)):
-            moved[bj, ij] = team[ij].project(goal[j], current[bj, ij], targets[bj], rho[bj, ij])
+    custom = team is not None and not all_disks(team)
+    commands = not custom or gsr_command.supports(team)
+    if (occ is not None or sep is not None) and commands:  # the geodesic, in command space
+        kin, states = team, gsr_kinematic.states_of(problem, current)
+        if not custom:  # disks: each copy's own radius in the state
+            kin = (gsr_separation.RadiusDisk(),) * r.shape[1]
+            states = np.concatenate([current, r[..., None]], -1)
+        moved = gsr_approach.approach(kin, states, s, current, lost, targets, rho, occ, sep)
+    elif sep is not None:  # no command space to keep the rule in: the plans stay
+        return s, value
     else:
-        moved[b, i] = feasible_set.project(goal, current[b, i], r[b, i], targets[b], rho[b, i])
-    if occ is not None:  # a straight move the world allows: around the occluders
-        moved[b, i] = project_move(current[b, i], moved[b, i], occ[b], r[b, i])[0]
+        b, i = np.nonzero(lost)
+        d2 = np.sum((targets[b] - current[b, i][:, None]) ** 2, axis=-1)  # (L, K)
+        goal = targets[b, np.argmin(d2, axis=-1)]
+        moved = s.copy()
+        if custom:  # each sensor's own projection
+            for j, (bj, ij) in enumerate(zip(b.tolist(), i.tolist(), strict=True)):
+                moved[bj, ij] = team[ij].project(goal[j], current[bj, ij], targets[bj], rho[bj, ij])
+        else:
+            moved[b, i] = feasible_set.project(goal, current[b, i], r[b, i], targets[b], rho[b, i])
+        if occ is not None:  # a straight move the world allows: around the occluders
+            moved[b, i] = project_move(current[b, i], moved[b, i], occ[b], r[b, i])[0]
     w_d, w_t, pose = weights
     prior = problem.prior_infos.reshape(len(s), -1, 2, 2)
     new = problem.objective.of_targets(
