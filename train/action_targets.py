@@ -76,6 +76,16 @@ class PositionActions:
             k.radius  # noqa: B018 (a Unicycle without dt raises ValueError here)
         self.models = models
         self.radii = np.array([k.radius for k in models], dtype=np.float64)
+        # Sensors with equal kinematics share one call of each method (a team is usually
+        # one model: the projection's cost is mostly per call).
+        self._groups: list[tuple[Any, np.ndarray]] = []
+        for j, k in enumerate(models):
+            for g, (kg, members) in enumerate(self._groups):
+                if kg == k:
+                    self._groups[g] = (kg, np.append(members, j))
+                    break
+            else:
+                self._groups.append((k, np.array([j])))
 
     @classmethod
     def from_scenario(cls, scenario: Any) -> PositionActions | None:
@@ -112,10 +122,10 @@ class PositionActions:
         u = np.asarray(u, np.float64)
         idx = np.arange(u.shape[0]) % self.n_sensors
         out = np.empty_like(u)
-        for j, k in enumerate(self.models):
-            rows = idx == j
+        for k, members in self._groups:
+            rows = np.isin(idx, members)
             if rows.any():
-                out[rows] = k.clip(self.radii[j] * u[rows], self._origin(k))
+                out[rows] = k.clip(k.radius * u[rows], self._origin(k))
         return out
 
     def actions(self, u: np.ndarray) -> np.ndarray:
@@ -132,14 +142,14 @@ class PositionActions:
         pts = self.wanted_points(u)
         idx = np.arange(u.shape[0]) % self.n_sensors
         out = np.empty_like(u)
-        for j, k in enumerate(self.models):
-            rows = idx == j
+        for k, members in self._groups:
+            rows = np.isin(idx, members)
             if not rows.any():
                 continue
             a = k.command(pts[rows], self._origin(k))
             if isinstance(k, Unicycle) and k.v_min == 0.0 and k.w_max > 0.0:
                 # A standstill: every turn rate reaches it; turn toward the wanted point.
-                still = np.hypot(*pts[rows].T) <= STANDSTILL * self.radii[j]
+                still = np.hypot(*pts[rows].T) <= STANDSTILL * k.radius
                 if still.any():
                     want = u[rows][still]
                     turn = np.where(want[:, 1] < 0.0, -1.0, 1.0)  # (straight behind: left)
