@@ -2,8 +2,11 @@
 
 The expert is :class:`activetrack.baselines.policies.GSRPolicy`: at every step it solves
 the planning problem of the environment (``env.planning_problem()``) and returns the
-sensors' next positions; the label of each agent is the action that reaches its position
-(:func:`activetrack.kinematics.team.actions_to_reach`: each sensor's kinematics). With
+sensors' next positions. The label of each agent is that position in its heading frame
+over its reach, which the kinematics turns into the command that reaches it
+(``target="position"``, the default: :mod:`activetrack.train.action_targets`), or the
+action that reaches it (``target="command"``:
+:func:`activetrack.kinematics.team.actions_to_reach`; the two agree on disks). With
 parameter sharing every (agent, step) pair is one sample ``(observation, expert action)``;
 the *label budget* counts them.
 

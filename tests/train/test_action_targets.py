@@ -242,3 +242,38 @@ def test_position_targets_refuse_other_kinematics_and_the_config_checks_target()
         ImitationConfig(target="point")
     assert check_target("command") == "command"
     assert ImitationConfig().target == "position"
+
+
+def test_train_and_evaluate_a_position_target_policy_from_the_command_line(tmp_path, capsys):
+    from activetrack.cli import main
+
+    out = tmp_path / "bc"
+    argv = ["train", "bc", "--scenario", "unicycle", "--seed", "1", "--hidden", "8"]
+    assert (
+        main([*argv, "--episodes", "1", "--epochs", "1", "--no-progress", "--out", str(out)]) == 0
+    )
+    config = json.loads((out / "config.json").read_text())
+    assert config["target"] == "position"
+    loaded = load_policy(out / "policy.zip")
+    assert (
+        loaded.head == loaded.head
+        and loaded.head.models == make_scenario("unicycle").kinematics_models
+    )
+    ev = tmp_path / "ev"
+    code = main(
+        ["evaluate", "--scenario", "unicycle", "--policy", str(out / "policy.zip"), "--episodes",
+         "2", "--seed", "1000", "--no-plot", "--no-progress", "--out", str(ev)]
+    )  # fmt: skip
+    assert code == 0
+    rows = json.loads((ev / "results.json").read_text())
+    assert len(rows) == 2 and all(np.isfinite(r["mean_trace"]) for r in rows)
+    # PPO samples commands: it refuses to warm-start from a network that predicts points.
+    capsys.readouterr()
+    ppo = tmp_path / "ppo"
+    assert main(["train", "ppo", "--scenario", "unicycle", "--init", str(out / "policy.zip"),
+                 "--out", str(ppo)]) == 2  # fmt: skip
+    assert "predicts position targets" in capsys.readouterr().err and not ppo.exists()
+    # An unknown target is an argparse error.
+    with pytest.raises(SystemExit):
+        main(["train", "bc", "--target", "point", "--out", str(tmp_path / "x")])
+    assert "invalid choice: 'point'" in capsys.readouterr().err
