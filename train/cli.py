@@ -30,10 +30,11 @@ from activetrack.baselines.evaluation import check_batched
 from activetrack.cli import COMMANDS, add_output_arguments, field_default, seed_int
 from activetrack.files import RunOutputs, prepare_output_dir
 from activetrack.train import imitation as imitation_module
+from activetrack.train.action_targets import TARGETS
 from activetrack.train.imitation import DAGGER_DEFAULTS, ImitationConfig, train_imitation
 from activetrack.train.networks import ACTIVATIONS, NetConfig
 from activetrack.train.policy_io import VIEWS, load_policy, save_policy
-from activetrack.train.ppo import LR_SCHEDULES, OUTPUTS, PPOConfig, train_ppo
+from activetrack.train.ppo import LR_SCHEDULES, OUTPUTS, PPOConfig, check_warm_start, train_ppo
 from activetrack.train.utils import DEFAULT_THREADS, MAX_THREADS, check_int, configure_torch
 from activetrack.world.scenarios import PRESETS
 
@@ -163,6 +164,15 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
                 help="round i executes the expert with probability beta**i "
                 f"(default {default('beta')})",
             )
+        q.add_argument(
+            "--target",
+            choices=TARGETS,
+            default=None,
+            help="what the network predicts: position, the expert's next position in the "
+            "sensor's heading frame over its reach, turned into the command by the "
+            "kinematics; or command, the env's action (the same on the paper's disks) "
+            f"(default {default('target')})",
+        )
         q.add_argument(
             "--expert",
             choices=EXPERTS,
@@ -422,7 +432,7 @@ def run_train(args: argparse.Namespace) -> int:
     threads = check_int("threads", args.threads, 1, MAX_THREADS)
     init = getattr(args, "init", None)
     if init is not None:
-        load_policy(init)  # a bad file fails now, with its path and problem
+        check_warm_start(load_policy(init), init)  # a bad file fails now, with its problem
     if args.method in ("bc", "dagger"):
         check_batched(args.batched, args.workers, args.address)  # Ray if asked for
     with prepare_output_dir(args.out, OUTPUTS, args.overwrite) as outputs:
@@ -505,6 +515,7 @@ def _run_imitation(
             scenario=make_scenario(args.scenario).to_dict(),
             seed=args.seed,
             train_config=train_config,
+            head=result.head,
         )
         outputs.write_json(
             "config.json", {"seed": args.seed, "scenario": args.scenario, **train_config}

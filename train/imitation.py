@@ -2,8 +2,11 @@
 
 The expert is :class:`activetrack.baselines.policies.GSRPolicy`: at every step it solves
 the planning problem of the environment (``env.planning_problem()``) and returns the
-sensors' next positions; the label of each agent is the action that reaches its position
-(:func:`activetrack.kinematics.team.actions_to_reach`: each sensor's kinematics). With
+sensors' next positions. The label of each agent is that position in its heading frame
+over its reach, which the kinematics turns into the command that reaches it
+(``target="position"``, the default: :mod:`activetrack.train.action_targets`), or the
+action that reaches it (``target="command"``:
+:func:`activetrack.kinematics.team.actions_to_reach`; the two agree on disks). With
 parameter sharing every (agent, step) pair is one sample ``(observation, expert action)``;
 the *label budget* counts them.
 
@@ -34,12 +37,14 @@ from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 import torch
 from stable_baselines3.common.policies import ActorCriticPolicy
 
 from activetrack.baselines.rollout import MixedAgent, Recorder, Step, rollout
 from activetrack.kinematics.team import actions_to_reach
+from activetrack.train.action_targets import POSITION, PositionActions, check_target
 from activetrack.train.networks import DEFAULT_NET, NetConfig, build_policy, mean_action
 from activetrack.train.utils import (
     DEFAULT_THREADS,
@@ -53,6 +58,8 @@ from activetrack.train.utils import (
 TRAIN_SEED_LOW = 1_000_000
 #: Bounds of the label budget (episodes) and of the passes over the data.
 MAX_EPISODES, MAX_EPOCHS = 1_000_000, 1_000_000
+#: The network's action box with position targets (its saturated mean is in the unit disk).
+_UNIT_BOX = gym.spaces.Box(-1.0, 1.0, (2,), dtype=np.float32)
 
 
 @dataclass
@@ -94,6 +101,10 @@ class ImitationConfig:
         batch_size, lr, weight_decay: Adam on the mean squared error of the mean action;
             the learning rate decays to 10% by a cosine schedule over each training call.
         net: the network architecture.
+        target: what the network predicts (:mod:`activetrack.train.action_targets`):
+            ``"position"``, the expert's next position in the sensor's heading frame over
+            its reach, turned into the command by the kinematics (the same as
+            ``"command"`` on a team of disks); or ``"command"``, the env's action itself.
     """
 
     episodes: int = 100
@@ -104,6 +115,7 @@ class ImitationConfig:
     lr: float = 1e-3
     weight_decay: float = 0.0
     net: NetConfig = field(default_factory=lambda: DEFAULT_NET)
+    target: str = POSITION
 
     def __post_init__(self) -> None:
         # Every field checked and converted here, once: ValueError naming the field.
@@ -115,6 +127,7 @@ class ImitationConfig:
         self.lr = check_float("lr", self.lr, 0, 1, low_open=True)
         self.weight_decay = check_float("weight_decay", self.weight_decay, 0, 1)
         self.net = NetConfig.coerce(self.net)
+        self.target = check_target(self.target)
 
     def to_dict(self) -> dict[str, Any]:
         """Return JSON-friendly values."""
@@ -141,7 +154,13 @@ class _LabelRecorder(Recorder):
     """Keeps each episode's observations, the expert's labels (the actions that reach its
     planned positions) and posterior traces, in episode order."""
 
-    def __init__(self, n: int, on_step: Callable[[int], None] | None = None) -> None:
+    def __init__(
+        self,
+        n: int,
+        on_step: Callable[[int], None] | None = None,
+        head: PositionActions | None = None,
+    ) -> None:
+        self.head = head
         self.obs: list[list[np.ndarray]] = [[] for _ in range(n)]
         self.actions: list[list[np.ndarray]] = [[] for _ in range(n)]
         self.traces: list[list[float]] = [[] for _ in range(n)]
@@ -150,9 +169,11 @@ class _LabelRecorder(Recorder):
     def step(self, step: Step) -> None:
         problem = step.problem
         states = problem.sensors if problem.sensor_states is None else problem.sensor_states
-        labels = actions_to_reach(problem.kinematics, step.positions, states, problem.r).astype(
-            np.float32
-        )
+        if self.head is None:
+            labels = actions_to_reach(problem.kinematics, step.positions, states, problem.r)
+        else:
+            labels = self.head.labels(step.positions, states)
+        labels = labels.astype(np.float32)
         for i, j in zip(step.copies.tolist(), step.episodes.tolist(), strict=True):
             self.obs[j].append(step.observations[i] if step.batched else step.observations)
             self.actions[j].append(labels[i] if step.batched else labels)
@@ -174,6 +195,7 @@ def rollout_labels(
     learner: Callable[[np.ndarray], np.ndarray] | None = None,
     beta: float = 1.0,
     on_step: Callable[[int], None] | None = None,
+    head: PositionActions | None = None,
 ) -> tuple[Dataset, list[float]]:
     """Return the expert-labelled states visited on ``seeds`` and each episode's mean trace.
 
@@ -188,10 +210,12 @@ def rollout_labels(
     ``default_rng([seed, 1])``, as the simulation runner) and the mixing coin is
     ``default_rng([seed, 2])``. So an episode's labels do not depend on which episodes ran
     before it, and seeds split over Ray workers give the same labels as one loop.
-    ``on_step(1)`` is called after every step (progress).
+    ``on_step(1)`` is called after every step (progress). The labels are the actions
+    that reach the expert's positions, or with a ``head`` (position targets) its
+    :meth:`~activetrack.train.action_targets.PositionActions.labels`.
     """
     base = env.unwrapped
-    recorder = _LabelRecorder(len(seeds), on_step)
+    recorder = _LabelRecorder(len(seeds), on_step, head)
     rollout(base.world, MixedAgent(expert, learner, beta), seeds, recorder)
     base.agents = []  # the last episode ended in its world
     return recorder.result()
@@ -205,6 +229,7 @@ def rollout_labels_batched(
     learner: Callable[[np.ndarray], np.ndarray] | None = None,
     beta: float = 1.0,
     on_step: Callable[[int], None] | None = None,
+    head: PositionActions | None = None,
 ) -> tuple[Dataset, list[float]]:
     """Return :func:`rollout_labels`' data for a batched expert, every episode a copy of one
     :class:`~activetrack.world.World`: the expert labels all copies with one ``plan`` call
@@ -219,7 +244,7 @@ def rollout_labels_batched(
     from activetrack.world import World
 
     world = World(scenario, len(seeds), **overrides)
-    recorder = _LabelRecorder(len(seeds), on_step)
+    recorder = _LabelRecorder(len(seeds), on_step, head)
     rollout(world, MixedAgent(expert, learner, beta), seeds, recorder, batched=True)
     return recorder.result()
 
@@ -232,20 +257,21 @@ def label_seeds(
     policy: ActorCriticPolicy | None = None,
     beta: float = 1.0,
     threads: int = DEFAULT_THREADS,
+    head: PositionActions | None = None,
 ) -> tuple[Dataset, list[float]]:
     """Return :func:`rollout_labels` on ``seeds`` in a new environment (one Ray task's chunk).
 
     ``policy`` is the learner (DAgger rounds >= 1), run with ``threads`` torch threads as
-    in the training process.
+    in the training process; ``head``: the position targets, if any.
     """
     from activetrack.envs import parallel_env
 
     env = parallel_env(scenario, **overrides)
     try:
         if policy is None:
-            return rollout_labels(env, expert, seeds)
+            return rollout_labels(env, expert, seeds, head=head)
         configure_torch(threads)
-        return rollout_labels(env, expert, seeds, learner_fn(policy), beta)
+        return rollout_labels(env, expert, seeds, learner_fn(policy, head), beta, head=head)
     finally:
         env.close()
 
@@ -260,6 +286,7 @@ def _labels_on_ray(
     threads: int,
     cpus: int,
     on_episodes: Callable[[int], None] | None = None,
+    head: PositionActions | None = None,
 ) -> tuple[Dataset, list[float]]:
     """Return :func:`label_seeds` over ``seeds``, as Ray tasks on chunks, joined in order
     (``on_episodes(k)`` called as a chunk of ``k`` episodes completes)."""
@@ -267,7 +294,7 @@ def _labels_on_ray(
 
     case = {
         "scenario": scenario, "overrides": overrides, "expert": expert, "policy": policy,
-        "beta": beta, "threads": threads,
+        "beta": beta, "threads": threads, "head": head,
     }  # fmt: skip
     (done,) = distributed.map_seeds(label_seeds, [case], seeds, cpus, on_done=on_episodes)
     data = Dataset(
@@ -322,11 +349,17 @@ def fit(
     return losses
 
 
-def learner_fn(policy: ActorCriticPolicy) -> Callable[[np.ndarray], np.ndarray]:
-    """Return ``obs (M, D) -> clipped deterministic actions (M, 2)`` of ``policy``."""
+def learner_fn(
+    policy: ActorCriticPolicy, head: PositionActions | None = None
+) -> Callable[[np.ndarray], np.ndarray]:
+    """Return ``obs (R, D) -> clipped deterministic actions (R, 2)`` of ``policy`` (rows: a
+    team's agents, copy after copy); with a ``head`` the network's outputs are position
+    targets, turned into the env's actions by
+    :meth:`~activetrack.train.action_targets.PositionActions.actions`."""
 
     def act(obs: np.ndarray) -> np.ndarray:
-        return policy.predict(obs, deterministic=True)[0]
+        out = policy.predict(obs, deterministic=True)[0]
+        return out if head is None else head.actions(out)
 
     return act
 
@@ -337,6 +370,8 @@ class ImitationResult:
 
     Attributes:
         policy: the trained SB3 ``ActorCriticPolicy``.
+        head: the position targets that turn its outputs into actions (None: its outputs
+            are the actions).
         data: the aggregated dataset (its size is the label budget spent).
         losses: the final MSE of each training call (one per round).
         rollout_traces: per round, the mean trace of the rollouts that collected its data.
@@ -344,6 +379,7 @@ class ImitationResult:
     """
 
     policy: ActorCriticPolicy
+    head: PositionActions | None
     data: Dataset
     losses: list[float]
     rollout_traces: list[float]
@@ -396,7 +432,12 @@ def train_imitation(
     gen = torch.Generator().manual_seed(seed)
     env = parallel_env(scenario, **overrides)
     agent = env.possible_agents[0]
-    policy = build_policy(env.observation_space(agent), env.action_space(agent), cfg.net, cfg.lr)
+    head = None
+    if cfg.target == POSITION:
+        head = PositionActions.from_scenario(env.unwrapped.world.scenario)
+    # Position targets live in the unit disk (the heading frame over the reach).
+    space = env.action_space(agent) if head is None else _UNIT_BOX
+    policy = build_policy(env.observation_space(agent), space, cfg.net, cfg.lr)
 
     writer = None
     if tensorboard_dir is not None:
@@ -434,16 +475,18 @@ def train_imitation(
             if on_ray:
                 new, tr = _labels_on_ray(
                     scenario, overrides, expert, round_seeds, learner, beta, threads, cpus,
-                    on_episodes=lambda k: labelling.update(k * n_steps),
+                    on_episodes=lambda k: labelling.update(k * n_steps), head=head,
                 )  # fmt: skip
             elif batched:
-                act = None if learner is None else learner_fn(learner)
+                act = None if learner is None else learner_fn(learner, head)
                 new, tr = rollout_labels_batched(
-                    scenario, overrides, expert, round_seeds, act, beta, labelling.update
+                    scenario, overrides, expert, round_seeds, act, beta, labelling.update, head
                 )
             else:
-                act = None if learner is None else learner_fn(learner)
-                new, tr = rollout_labels(env, expert, round_seeds, act, beta, labelling.update)
+                act = None if learner is None else learner_fn(learner, head)
+                new, tr = rollout_labels(
+                    env, expert, round_seeds, act, beta, labelling.update, head
+                )
             # Episodes that ended early: the round's share of the bar, whole.
             labelling.update(done + len(round_seeds) * n_steps - labelling.n)
             data = data.extend(new)
@@ -467,7 +510,7 @@ def train_imitation(
     if writer is not None:
         writer.close()
     env.close()
-    return ImitationResult(policy, data, losses, traces, time.perf_counter() - t0)
+    return ImitationResult(policy, head, data, losses, traces, time.perf_counter() - t0)
 
 
 def _check_batched(batched: object, workers: object, address: object, expert: Any) -> None:

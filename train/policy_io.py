@@ -11,6 +11,11 @@ them evaluates the same way and can warm-start PPO (``activetrack train ppo --in
   network and yields that agent's action;
 - ``view="centralized"``: the agents' observations, concatenated in agent order (the
   centralized Gymnasium view's observation), yield the joint action, split per agent.
+
+A policy trained on position targets (:mod:`activetrack.train.action_targets`) saves its
+team's kinematics as ``action_target`` in ``meta.json``; the loaded policy turns the
+network's outputs into the env's commands (:meth:`LearnedPolicy.predict`), so it acts in
+the env's action space like any other.
 """
 
 from __future__ import annotations
@@ -29,6 +34,7 @@ import torch
 from stable_baselines3.common.policies import ActorCriticPolicy
 
 from activetrack.files import atomic_path
+from activetrack.train.action_targets import PositionActions
 from activetrack.train.networks import LOG_STD_RANGE, NetConfig, build_policy
 
 FORMAT = "activetrack-policy/1"
@@ -64,14 +70,20 @@ def save_policy(
     seed: int | None,
     view: str = "shared",
     train_config: dict[str, Any] | None = None,
+    head: PositionActions | None = None,
 ) -> Path:
     """Write ``policy`` and its metadata to the single file ``path``; return the path.
+
+    ``head``: the position targets the network predicts (shared view only), None when its
+    outputs are the env's actions.
 
     The file is written to a temporary file beside ``path`` and renamed into place, so a
     failed write leaves the previous file.
     """
     if view not in VIEWS:
         raise ValueError(f"view must be one of {VIEWS}, got {view!r}")
+    if head is not None and view != "shared":
+        raise ValueError("position targets need the shared view (one sensor a row)")
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     meta = {
@@ -84,6 +96,7 @@ def save_policy(
         "observation_space": _box_to_dict(policy.observation_space),
         "action_space": _box_to_dict(policy.action_space),
         "train_config": train_config or {},
+        **({} if head is None else {"action_target": head.to_dict()}),
         "versions": {"torch": torch.__version__, "numpy": np.__version__},
     }
     buf = io.BytesIO()
@@ -101,12 +114,20 @@ class LearnedPolicy:
         policy: the SB3 ``ActorCriticPolicy`` (eval mode, CPU).
         meta: the metadata saved with it (kind, scenario, seed, training budget...).
         name: a label for tables (defaults to the file name).
+        head: the position targets the network predicts (None: it predicts the actions).
     """
 
-    def __init__(self, policy: ActorCriticPolicy, meta: dict[str, Any], name: str = "learned"):
+    def __init__(
+        self,
+        policy: ActorCriticPolicy,
+        meta: dict[str, Any],
+        name: str = "learned",
+        head: PositionActions | None = None,
+    ):
         self.policy = policy.eval()
         self.meta = meta
         self.name = name
+        self.head = head
 
     @property
     def view(self) -> str:
@@ -114,14 +135,23 @@ class LearnedPolicy:
         return self.meta.get("view", "shared")
 
     def predict(self, obs: np.ndarray) -> np.ndarray:
-        """Return deterministic actions (N, A) for observations (N, D), clipped to the box."""
+        """Return deterministic actions (N, A) for observations (N, D), clipped to the box;
+        with position targets, the commands that reach the network's points (row ``i`` is
+        sensor ``i mod M``: a team's rows, copy after copy)."""
         actions, _ = self.policy.predict(np.asarray(obs, dtype=np.float32), deterministic=True)
+        if self.head is not None:
+            return self.head.actions(actions).astype(np.float32)
         return actions
 
     def act(self, observations: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         """Return every agent's action for the parallel env's observations ``{agent: obs}``."""
         agents = list(observations)
         stacked = np.stack([observations[a] for a in agents])
+        if self.head is not None and len(agents) != self.head.n_sensors:
+            raise ValueError(
+                f"this policy steers a team of {self.head.n_sensors} sensors, got "
+                f"{len(agents)} agents' observations"
+            )
         if self.view == "shared":
             actions = self.predict(stacked)
         else:
@@ -192,6 +222,16 @@ def _load_policy(path: Path) -> LearnedPolicy:
         except (UnicodeDecodeError, json.JSONDecodeError, RecursionError) as exc:
             raise _PolicyFileError(f"meta.json is not valid JSON ({exc})") from exc
         obs_space, act_space, net = _check_meta(meta)
+        head = None
+        if "action_target" in meta:
+            try:
+                head = PositionActions.from_dict(meta["action_target"])
+            except (TypeError, ValueError) as exc:
+                raise _PolicyFileError(f"meta.json: {exc}") from exc
+            if meta.get("view", "shared") != "shared" or act_space.shape != (2,):
+                raise _PolicyFileError(
+                    "meta.json: position targets need the shared view and 2 actions"
+                )
         shapes = net.expected_state_shapes(obs_space.shape[0], act_space.shape[0])
         numel = sum(math.prod(s) for s in shapes.values())
         if numel > MAX_PARAMETERS:
@@ -211,7 +251,7 @@ def _load_policy(path: Path) -> LearnedPolicy:
     _check_state(state, shapes)
     policy = build_policy(obs_space, act_space, net)
     policy.load_state_dict(state)
-    return LearnedPolicy(policy, meta, name=path.name)
+    return LearnedPolicy(policy, meta, name=path.name, head=head)
 
 
 def _check_meta(meta: Any) -> tuple[gym.spaces.Box, gym.spaces.Box, NetConfig]:

@@ -319,6 +319,17 @@ def build_ppo(
     return model
 
 
+def check_warm_start(learned: Any, init: str | Path) -> None:
+    """Raise ValueError unless the loaded policy ``learned`` (of the file ``init``) acts in
+    the env's action space itself (PPO samples commands; a network trained on position
+    targets predicts points)."""
+    if getattr(learned, "head", None) is not None:
+        raise ValueError(
+            f"{init}: its network predicts position targets, not the env's actions; PPO can "
+            "warm-start from a policy trained with --target command"
+        )
+
+
 def warm_start(model: PPO, init: str | Path, log_std_init: float | None) -> dict[str, Any]:
     """Load the actor of the policy file ``init`` into ``model.policy``; return its metadata.
 
@@ -326,6 +337,7 @@ def warm_start(model: PPO, init: str | Path, log_std_init: float | None) -> dict
     ``log_std_init`` if given.
     """
     learned = load_policy(init)
+    check_warm_start(learned, init)
     state = learned.policy.state_dict()
     own = model.policy.state_dict()
     if state.keys() != own.keys() or any(state[k].shape != own[k].shape for k in own):

@@ -50,6 +50,21 @@ def test_batched_dagger_labels_equal_the_serial_ones():
     np.testing.assert_allclose(batched.rollout_traces, serial.rollout_traces, rtol=1e-8)
 
 
+def test_batched_position_labels_on_unicycles_equal_the_serial_ones():
+    # Position targets (the default): labels are GSR's points in each robot's heading
+    # frame, and round 1's learner acts through the kinematics' projection, one call for a
+    # batch of copies' rows and for one copy's rows serially.
+    serial = train_imitation("unicycle", seed=5, config=CONFIG, n_steps=12)
+    batched = train_imitation("unicycle", seed=5, config=CONFIG, n_steps=12, batched=True)
+    assert serial.head is not None and len(serial.data) == CONFIG.episodes * 12 * 3
+    half = len(serial.data) // 2
+    np.testing.assert_array_equal(batched.data.obs[:half], serial.data.obs[:half])
+    np.testing.assert_array_equal(batched.data.actions[:half], serial.data.actions[:half])
+    np.testing.assert_allclose(batched.data.obs, serial.data.obs, rtol=1e-5, atol=1e-5)
+    np.testing.assert_allclose(batched.data.actions, serial.data.actions, rtol=1e-5, atol=1e-5)
+    np.testing.assert_allclose(batched.rollout_traces, serial.rollout_traces, rtol=1e-6)
+
+
 def test_batched_lookahead_labels_on_a_task_equal_the_serial_ones():
     seeds, kw = [31, 32], dict(n_steps=4)
     env = parallel_env("two_targets", **kw)

@@ -42,6 +42,17 @@ def test_labels_on_workers_equal_serial_labels():
     np.testing.assert_array_equal(params_vector(on_ray.policy), params_vector(serial.policy))
 
 
+@pytest.mark.slow
+def test_position_labels_on_workers_equal_serial_labels():
+    # Unicycles' position targets: the head travels to the workers with the learner.
+    serial = train_imitation("unicycle", seed=5, config=CONFIG, n_steps=8)
+    on_ray = train_imitation("unicycle", seed=5, config=CONFIG, n_steps=8, workers=2)
+    assert serial.head is not None and len(serial.data) == CONFIG.episodes * 8 * 3
+    np.testing.assert_array_equal(on_ray.data.obs, serial.data.obs)
+    np.testing.assert_array_equal(on_ray.data.actions, serial.data.actions)
+    assert on_ray.rollout_traces == serial.rollout_traces
+
+
 def test_an_episodes_labels_do_not_depend_on_the_episodes_before_it():
     """Round 1's labels, one fresh environment per episode, equal one loop over them all."""
     serial = train_imitation(
