@@ -153,3 +153,18 @@ def nees_band(run_means, dim=2, level=0.99):
     n = x.size
     half = stats.t.ppf(0.5 + level / 2, n - 1) * x.std(ddof=1) / np.sqrt(n)
     return float(dim - half), float(dim + half)
+
+
+def rk4(f, y, dt, n):
+    """Return the classical Runge-Kutta solution of ``y' = f(y)`` over ``dt`` in ``n``
+    steps at the ``n + 1`` instants (..., n + 1, D)."""
+    h = dt / n
+    out = [y]
+    for _ in range(n):
+        k1 = f(y)
+        k2 = f(y + 0.5 * h * k1)
+        k3 = f(y + 0.5 * h * k2)
+        k4 = f(y + h * k3)
+        y = y + h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+        out.append(y)
+    return np.stack(out, -2)

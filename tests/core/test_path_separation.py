@@ -30,6 +30,7 @@ from activetrack.kinematics.disk import Disk
 from activetrack.kinematics.separation import pair_distances
 from activetrack.world import World
 from activetrack.world.scenarios import make_scenario
+from tests.core.helpers import rk4
 
 RTOL = 1e-9
 N_SAMPLES = 200  # RK4 steps of each path (201 points)
@@ -42,20 +43,6 @@ URBAN_UNICYCLE = dict(kinematics=Unicycle(0.0, 10.0, 8.0), d_sep=1.5)
 
 def _wrap(a):
     return np.pi - np.mod(np.pi - a, 2.0 * np.pi)
-
-
-def _rk4(f, y, dt, n=N_SAMPLES):
-    """Return the RK4 solution of ``y' = f(y)`` over ``dt`` at n + 1 instants (..., n+1, D)."""
-    h = dt / n
-    out = [y]
-    for _ in range(n):
-        k1 = f(y)
-        k2 = f(y + 0.5 * h * k1)
-        k3 = f(y + 0.5 * h * k2)
-        k4 = f(y + h * k3)
-        y = y + h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
-        out.append(y)
-    return np.stack(out, -2)
 
 
 def _limits(kins, name):
@@ -85,7 +72,7 @@ def _driven(kin, dt, old, new):
         def f(y):
             return np.stack([v * np.cos(y[..., 2]), v * np.sin(y[..., 2]), w + 0 * y[..., 2]], -1)
 
-        path = _rk4(f, old[..., :3], dt)[..., :2]
+        path = rk4(f, old[..., :3], dt, N_SAMPLES)[..., :2]
     elif isinstance(first, DoubleIntegrator):
         a_max, v_max = _limits(kins, "a_max"), _limits(kins, "v_max")
         acc = (new[..., 2:4] - old[..., 2:4]) / dt
@@ -95,7 +82,7 @@ def _driven(kin, dt, old, new):
         def f(y):
             return np.concatenate([y[..., 2:4], acc], -1)
 
-        path = _rk4(f, old[..., :4], dt)[..., :2]
+        path = rk4(f, old[..., :4], dt, N_SAMPLES)[..., :2]
     else:  # the disk: a straight move within its radius
         e = new[..., :2] - old[..., :2]
         ok = np.hypot(e[..., 0], e[..., 1]) <= _limits(kins, "radius") * (1 + RTOL)

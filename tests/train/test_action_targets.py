@@ -24,6 +24,7 @@ from activetrack.train.imitation import ImitationConfig
 from activetrack.train.networks import NetConfig, build_policy
 from activetrack.train.policy_io import load_policy, save_policy
 from activetrack.world.scenarios import make_scenario
+from tests.core.helpers import rk4
 
 UNI = Unicycle(0.0, 10.0, np.pi, dt=0.1)
 WING = Unicycle(4.0, 10.0, 2.0 * np.pi / 3.0, dt=0.1)
@@ -39,14 +40,7 @@ def _integrate(k: Unicycle, action: np.ndarray, n: int = 2000) -> np.ndarray:
     def f(s):
         return np.array([v * np.cos(s[2]), v * np.sin(s[2]), w])
 
-    s, h = np.zeros(3), k.dt / n
-    for _ in range(n):
-        k1 = f(s)
-        k2 = f(s + 0.5 * h * k1)
-        k3 = f(s + 0.5 * h * k2)
-        k4 = f(s + h * k3)
-        s = s + h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
-    return s[:2]
+    return rk4(f, np.zeros(3), k.dt, n)[-1, :2]
 
 
 def _grid_endpoints(k: Unicycle, n: int = 401) -> np.ndarray:
