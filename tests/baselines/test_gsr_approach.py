@@ -23,7 +23,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from activetrack.baselines.geodesic import CLEARANCE, Roadmap
+from activetrack.models.roadmap import CLEARANCE, Roadmap
 from activetrack.baselines.gsr import GSR
 from activetrack.kinematics.path_rule import restate
 from activetrack.models.occluders import Occluders
