@@ -38,10 +38,10 @@ from __future__ import annotations
 import numpy as np
 
 from activetrack.baselines import gsr_command, gsr_separation
-from activetrack.models.roadmap import ROADMAPS
 from activetrack.kinematics.path_rule import restate
 from activetrack.kinematics.paths import hull_segments
 from activetrack.models.occluders import Occluders, blocked, inside
+from activetrack.models.roadmap import ROADMAPS
 from activetrack.validation import FloatArray
 
 #: Commands per axis of the grid of candidates over the action box.
