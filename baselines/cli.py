@@ -267,9 +267,10 @@ def _add_evaluate(sub: argparse._SubParsersAction) -> None:
             "Run every --policy (gsr, gsr-restarts, gbes, rm, lookahead, or the path of a "
             "policy.zip written by 'activetrack train') in the environment on the same "
             "--episodes seeds (seed, seed+1, ...). Prints mean trace and RMSE with 95% "
-            "intervals, mean return "
-            "and the ratio of mean trace to GSR's (GSR is evaluated as the reference even if "
-            "not listed); writes OUT/results.json (a list, one object per policy), "
+            "intervals, the IQM and median trace with bootstrap 95% intervals, mean return, "
+            "the ratios of the mean and IQM trace to GSR's (GSR is evaluated as the reference "
+            "even if not listed) and, with limited sensing, the track-loss rate; writes "
+            "OUT/results.json (a list, one object per policy), "
             "OUT/episodes.json and OUT/mean_trace.png. Every policy file is checked before "
             "the first episode."
         ),
@@ -311,6 +312,15 @@ def _add_evaluate(sub: argparse._SubParsersAction) -> None:
         "for lookahead; rows equal the serial ones to the planner's tolerance, and a seed's "
         "row is the same in any batch; other policies run episode by episode)",
     )
+    p.add_argument(
+        "--loss-trace",
+        type=positive_float,
+        default=None,
+        metavar="M2",
+        help="track-loss threshold (m^2): a target is lost in a step where no sensor "
+        "measured it and its position trace is above this (default: each target's prior "
+        "position trace, tr P0[:2, :2])",
+    )
     add_gbes_arguments(p)
     add_ray_arguments(p, "episodes")
     p.set_defaults(func=_cmd_evaluate, parser=p)
@@ -342,5 +352,6 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         workers=args.workers,
         address=args.address,
         batched=args.batched,
+        loss_trace=args.loss_trace,
     )
     return 0
