@@ -321,9 +321,28 @@ def _add_evaluate(sub: argparse._SubParsersAction) -> None:
         "measured it and its position trace is above this (default: each target's prior "
         "position trace, tr P0[:2, :2])",
     )
+    p.add_argument(
+        "--pool",
+        action="append",
+        default=None,
+        type=_pool,
+        metavar="NAME=POLICY[,POLICY...]",
+        help="add a row NAME pooling these --policy values (one policy's training seeds) "
+        "as a runs x episodes matrix: IQM, median and mean with bootstrap intervals over "
+        "runs and episodes, ratios to GSR (repeatable)",
+    )
     add_gbes_arguments(p)
     add_ray_arguments(p, "episodes")
     p.set_defaults(func=_cmd_evaluate, parser=p)
+
+
+def _pool(text: str) -> tuple[str, list[str]]:
+    """Parse ``NAME=POLICY[,POLICY...]`` (argparse ``type``)."""
+    name, sep, members = text.partition("=")
+    parts = [m for m in members.split(",") if m]
+    if not sep or not name or not parts:
+        raise argparse.ArgumentTypeError(f"must be NAME=POLICY[,POLICY...], got {text!r}")
+    return name, parts
 
 
 def _cmd_evaluate(args: argparse.Namespace) -> int:
@@ -353,5 +372,16 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         address=args.address,
         batched=args.batched,
         loss_trace=args.loss_trace,
+        pools=_pools(args),
     )
     return 0
+
+
+def _pools(args: argparse.Namespace) -> dict[str, list[str]] | None:
+    """Return the ``--pool`` options as a mapping; raise ValueError if a name repeats."""
+    if args.pool is None:
+        return None
+    names = [name for name, _ in args.pool]
+    if len(set(names)) != len(names):
+        raise ValueError(f"--pool: each NAME once, got {names}")
+    return dict(args.pool)

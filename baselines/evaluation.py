@@ -412,13 +412,44 @@ def _gsr_of(results: Sequence[PolicyEvaluation]) -> PolicyEvaluation:
     raise ValueError("the results hold no GSR evaluation")
 
 
-def summaries(results: Sequence[PolicyEvaluation]) -> list[dict[str, Any]]:
-    """Return the JSON summary of each result, with its ratio to GSR's mean trace."""
+def summaries(
+    results: Sequence[PolicyEvaluation], pools: Mapping[str, Sequence[str]] | None = None
+) -> list[dict[str, Any]]:
+    """Return the JSON summary of each result, with its ratio to GSR's mean trace, then one
+    row per pool (``{name: [policy labels]}``: the training seeds of one policy,
+    :func:`activetrack.baselines.protocol.pooled_summary`)."""
+    from activetrack.baselines.protocol import pooled_summary
+
     ref = _gsr_of(results)
     rows = [r.summary(ref) for r in results]
     for row, label in zip(rows, short_labels([r.policy for r in results]), strict=True):
         row["label"] = label  # distinct among these results
+    by_label = {r.policy: r for r in results}
+    pools = check_pools(pools, list(by_label))
+    rows += [pooled_summary(n, [by_label[m] for m in ms], ref) for n, ms in pools.items()]
     return rows
+
+
+def check_pools(pools: Any, labels: Sequence[str]) -> dict[str, list[str]]:
+    """Return ``pools`` checked: a mapping from a new name (not one of ``labels``) to one
+    or more distinct policy ``labels``; raise ValueError naming what is wrong."""
+    if pools is None:
+        return {}
+    if not isinstance(pools, Mapping):
+        raise ValueError(f"pools must map a name to policy labels, got {pools!r}")
+    out = {}
+    for name, members in pools.items():
+        if not isinstance(name, str) or not name or name in labels:
+            raise ValueError(f"pool names must be new non-empty names, got {name!r}")
+        members = [members] if isinstance(members, str) else list(members)
+        unknown = [m for m in members if m not in labels]
+        if not members or unknown or len(set(members)) != len(members):
+            raise ValueError(
+                f"pool {name!r} must name distinct evaluated policies (one of {list(labels)}), "
+                f"got {members}"
+            )
+        out[name] = members
+    return out
 
 
 def _with_ci(r: dict[str, Any], key: str, digits: str = ".4g") -> str:
@@ -452,6 +483,7 @@ def format_table(rows: Sequence[dict[str, Any]]) -> str:
     lines = [head, "-" * len(head)]
     for r in rows:
         name = r.get("label", r["policy"]) + ("" if r["requested"] else " (reference)")
+        name += f" ({r['runs']} runs)" if "runs" in r else ""  # a pool of training seeds
         traces = [_with_ci(r, k) for k in ("mean_trace", "iqm_trace", "median_trace")]
         ratios = [_with_ci(r, k, ".3f") for k in ("ratio_to_gsr", "iqm_ratio_to_gsr")]
         nees = "-" if r.get("nees") is None else f"{r['nees']:.2f}"
@@ -484,6 +516,7 @@ def write_results(
     meta: dict[str, Any] | None = None,
     plot: bool = True,
     overwrite: bool = False,
+    pools: Mapping[str, Sequence[str]] | None = None,
 ) -> dict[str, Path]:
     """Write ``results.json`` (a list, one object per policy), ``episodes.json`` and the plot.
 
@@ -492,7 +525,8 @@ def write_results(
     (``cpu_ms_per_decision`` with its deprecated alias ``ms_per_step``, as the summary).
     ``out_dir`` is a folder (checked by :func:`~activetrack.files.prepare_output_dir`:
     one that holds results needs ``overwrite``) or the :class:`RunOutputs` of one checked
-    earlier. The files are committed together (a failed write leaves the previous ones);
+    earlier. ``pools`` adds pooled rows to ``results.json`` (:func:`summaries`). The files
+    are committed together (a failed write leaves the previous ones);
     a previous ``mean_trace.png`` is removed when ``plot`` is false.
     """
     outputs = out_dir if isinstance(out_dir, RunOutputs) else None
@@ -528,7 +562,7 @@ def write_results(
         },
     }
     with outputs:
-        outputs.write_json("results.json", summaries(results))
+        outputs.write_json("results.json", summaries(results, pools))
         outputs.write_json("episodes.json", per_episode)
         if plot:
             from activetrack.baselines.plotting import plot_evaluation
@@ -553,16 +587,25 @@ def run_evaluation(
     address: str | None = None,
     batched: bool = False,
     loss_trace: float | None = None,
+    pools: Mapping[str, Sequence[str]] | None = None,
     **overrides: Any,
 ) -> list[dict[str, Any]]:
     """Evaluate, print the table, write ``out_dir`` if given; return the JSON summaries.
 
     The command ``activetrack evaluate`` is this function. Everything that can be checked
     before the episodes is: the output folder (one holding results needs ``overwrite``)
-    and every policy (names, policy files, their observation size), and ``workers``,
-    ``address`` and ``batched`` (:func:`evaluate`).
+    and every policy (names, policy files, their observation size), ``workers``,
+    ``address`` and ``batched`` (:func:`evaluate`), and ``pools`` (names of pooled rows,
+    each a list of ``policies``' labels: one policy's training seeds, :func:`summaries`).
     """
     workers, address = check_batched(batched, workers, address)
+    if isinstance(policies, Mapping):
+        labels = list(policies)
+    else:  # evaluate's labels, and its GSR reference if none is given
+        labels = [str(p) if isinstance(p, (str, Path)) else type(p).__name__ for p in policies]
+    if not any(label.lower() == "gsr" for label in labels):
+        labels.append("gsr")
+    pools = check_pools(pools, labels)
     if out_dir is not None and not isinstance(out_dir, RunOutputs):
         with prepare_output_dir(out_dir, OUTPUTS, overwrite) as outputs:  # locked for the run
             return run_evaluation(
@@ -578,6 +621,7 @@ def run_evaluation(
                 address=address,
                 batched=batched,
                 loss_trace=loss_trace,
+                pools=pools,
                 **overrides,
             )
     outputs = out_dir
@@ -593,7 +637,7 @@ def run_evaluation(
         loss_trace=loss_trace,
         **overrides,
     )
-    rows = summaries(results)
+    rows = summaries(results, pools)
     name = getattr(scenario, "name", scenario)
     print(f"scenario {name!r}, {episodes} episodes, seeds {seed}..{seed + episodes - 1}")
     print(format_table(rows))
@@ -606,6 +650,6 @@ def run_evaluation(
         record = make_scenario(scenario, **overrides).to_dict()
         overrides = {k: record.get(k, v) for k, v in overrides.items()}
         meta = {"scenario": given, "overrides": overrides, "episodes": episodes, "seed": seed}
-        paths = write_results(results, outputs, meta, plot=plot)
+        paths = write_results(results, outputs, meta, plot=plot, pools=pools)
         print("wrote " + ", ".join(str(p) for p in paths.values()))
     return rows

@@ -271,3 +271,59 @@ def track_loss_rate(seen: Any, traces: Any, threshold: Any) -> float:
     if seen.size == 0:
         return 0.0
     return float(np.mean(~seen & (traces > limit)))
+
+
+def pooled_summary(name: str, runs: Sequence[Any], reference: Any) -> dict[str, Any]:
+    """Return the summary of several training seeds of one policy pooled as one row: the
+    (runs, episodes) matrices of their evaluations (each a
+    :class:`~activetrack.baselines.evaluation.PolicyEvaluation` on the same episode seeds)
+    and the ratio to ``reference``'s (GSR's, one run) on those seeds.
+
+    Keys as :meth:`PolicyEvaluation.summary`'s where they apply (``mean_trace``,
+    ``iqm_trace``, ``median_trace``, ``rmse``, ``mean_return``, ``ratio_to_gsr`` and
+    ``iqm_ratio_to_gsr``, the track-loss rate and the no-detection fraction, each
+    interval the two-way bootstrap's, :func:`interval`), plus ``runs`` (their number)
+    and ``pooled`` (their labels). ``nees`` and ``cpu_ms_per_decision`` are means over
+    every run's episodes; ``longest_gap`` the longest.
+    """
+    if not runs:
+        raise ValueError(f"pool {name!r} must name at least one evaluated policy")
+    seeds = runs[0].seeds
+    for r in runs:
+        if list(r.seeds) != list(seeds):
+            raise ValueError(f"pool {name!r}: {r.policy!r} ran other episode seeds")
+
+    def matrix(field: str) -> np.ndarray | None:
+        values = [getattr(r, field) for r in runs]
+        return None if any(v is None for v in values) else np.stack(values)
+
+    trace = matrix("mean_trace")
+    out: dict[str, Any] = {"policy": name, "label": name, "pooled": [r.policy for r in runs]}
+    for key, field, stat in (
+        ("mean_trace", "mean_trace", "mean"),
+        ("iqm_trace", "mean_trace", "iqm"),
+        ("median_trace", "mean_trace", "median"),
+        ("rmse", "rmse", "mean"),
+        ("mean_return", "returns", "mean"),
+    ):
+        point, lo, hi = interval(matrix(field), stat)
+        out[key], out[f"{key}_ci95"] = point, [lo, hi]
+    for key, field in (("nees", "nees"), ("cpu_ms_per_decision", "ms_per_step")):
+        m = matrix(field)
+        out[key] = None if m is None or not np.all(np.isfinite(m)) else float(np.mean(m))
+    out["ms_per_step"] = out["cpu_ms_per_decision"]  # deprecated alias, as the summary's
+    for key, stat in (("ratio_to_gsr", "mean"), ("iqm_ratio_to_gsr", "iqm")):
+        ratio, lo, hi = paired_ratio_interval(trace, reference.mean_trace, stat)
+        out[key], out[f"{key}_ci95"] = ratio, [lo, hi]
+    lost, unseen = matrix("track_loss"), matrix("no_detection")
+    if lost is not None and np.all(np.isfinite(lost)):
+        rate, lo, hi = interval(lost, "mean")
+        out["track_loss_rate"], out["track_loss_rate_ci95"] = rate, [lo, hi]
+        out["track_loss_threshold"] = runs[0].loss_trace
+    if unseen is not None and np.all(np.isfinite(unseen)):
+        out["no_detection"] = float(np.mean(unseen))
+        out["longest_gap"] = int(np.max(matrix("longest_gap")))
+    out["runs"], out["episodes"] = len(runs), len(seeds)
+    out["seed_range"] = {"first": seeds[0], "last": seeds[-1]}
+    out["requested"] = True
+    return out

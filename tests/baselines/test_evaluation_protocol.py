@@ -103,3 +103,76 @@ def test_loss_trace_sets_the_threshold():
     assert low.track_loss.tolist() == low.no_detection.tolist() == default.no_detection.tolist()
     with pytest.raises(ValueError, match="loss_trace must be a number"):
         evaluate(["rm"], "paper", 1, SEED, progress=False, loss_trace=0.0)
+
+
+def test_pooled_row_of_training_seeds_is_the_runs_by_episodes_statistics():
+    """Three 'training seeds' of one policy on the same five episodes pooled into one row:
+    its statistics are those of the 3 x 5 matrix, by hand; its ratios are to GSR's."""
+    from activetrack.baselines.evaluation import PolicyEvaluation
+
+    rng = np.random.default_rng(11)
+    seeds = list(range(SEED, SEED + 5))
+
+    def run(label, trace):
+        e = trace.size
+        return PolicyEvaluation(
+            label, seeds, trace, np.sqrt(trace), -50 * trace, True, np.full(e, 2.0),
+            np.full(e, 1.5), rng.uniform(0, 0.3, e), np.arange(e), rng.uniform(0, 0.2, e), [8.0],
+        )  # fmt: skip
+
+    gsr = run("gsr", rng.lognormal(0.0, 0.5, 5))
+    runs = [run(f"dagger_{k}", gsr.mean_trace * rng.lognormal(0.1, 0.2, 5)) for k in range(3)]
+    rows = summaries([*runs, gsr], {"dagger": [r.policy for r in runs]})
+    assert [r["policy"] for r in rows] == ["dagger_0", "dagger_1", "dagger_2", "gsr", "dagger"]
+    pooled = rows[-1]
+    m = np.stack([r.mean_trace for r in runs])
+    assert pooled["runs"] == 3 and pooled["episodes"] == 5
+    assert pooled["pooled"] == ["dagger_0", "dagger_1", "dagger_2"]
+    assert pooled["iqm_trace"] == pytest.approx(hand_iqm(m))  # 15 values, 3 cut each end
+    assert pooled["median_trace"] == pytest.approx(np.median(m))
+    assert pooled["mean_trace"] == pytest.approx(np.mean(m))
+    assert pooled["ratio_to_gsr"] == pytest.approx(np.mean(m) / np.mean(gsr.mean_trace))
+    assert pooled["iqm_ratio_to_gsr"] == pytest.approx(hand_iqm(m) / hand_iqm(gsr.mean_trace))
+    assert pooled["mean_return"] == pytest.approx(-50 * np.mean(m))
+    assert pooled["rmse"] == pytest.approx(np.mean(np.sqrt(m)))
+    lost = np.stack([r.track_loss for r in runs])
+    assert pooled["track_loss_rate"] == pytest.approx(np.mean(lost))
+    assert pooled["no_detection"] == pytest.approx(np.mean([r.no_detection for r in runs]))
+    assert pooled["longest_gap"] == 4 and pooled["nees"] == 2.0
+    for key in ("mean_trace", "iqm_trace", "median_trace", "track_loss_rate"):
+        lo, hi = pooled[f"{key}_ci95"]
+        assert lo <= pooled[key] <= hi
+    assert "dagger (3 runs)" in format_table(rows)
+    with pytest.raises(ValueError, match="pool 'x' must name distinct evaluated policies"):
+        summaries([*runs, gsr], {"x": ["dagger_0", "nope"]})
+    with pytest.raises(ValueError, match="pool names must be new"):
+        summaries([*runs, gsr], {"gsr": ["dagger_0"]})
+
+
+def test_cli_pool_option(tmp_path, capsys):
+    """--pool adds a row whose IQM is that of the pooled episodes written; a pool naming a
+    policy not evaluated is refused before any episode runs (no output folder)."""
+    out = tmp_path / "run"
+    argv = ["evaluate", "--scenario", "paper", "--policy", "gsr", "--policy", "rm",
+            "--episodes", "2", "--no-progress", "--no-plot", "--out", str(out)]  # fmt: skip
+    assert main([*argv, "--pool", "both=gsr,rm"]) == 0
+    rows = json.loads((out / "results.json").read_text())
+    episodes = json.loads((out / "episodes.json").read_text())["policies"]
+    both = rows[-1]
+    assert (
+        both["policy"] == "both"
+        and both["runs"] == 2
+        and "both (2 runs)" in capsys.readouterr().out
+    )
+    m = [episodes[p]["mean_trace"] for p in ("gsr", "rm")]
+    assert both["iqm_trace"] == pytest.approx(hand_iqm(m))
+    bad = tmp_path / "bad"
+    assert main([*argv[:-1], str(bad), "--pool", "x=gsr,lookahead"]) == 2
+    assert "pool 'x' must name distinct evaluated policies" in capsys.readouterr().err
+    assert not bad.exists()
+    assert main([*argv[:-1], str(bad), "--pool", "x=gsr", "--pool", "x=rm"]) == 2
+    assert "each NAME once" in capsys.readouterr().err
+    with pytest.raises(SystemExit):  # argparse's usage error
+        main([*argv[:-1], str(bad), "--pool", "x"])
+    assert "must be NAME=POLICY" in capsys.readouterr().err
+    assert not bad.exists()
