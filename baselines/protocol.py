@@ -60,6 +60,14 @@ from activetrack.validation import FloatArray, check_float, check_int
 IQM_CUT = 0.25
 #: Bootstrap resamples of the intervals, and resamples per vectorized batch (memory).
 N_RESAMPLES, RESAMPLE_BATCH = 9999, 500
+#: At most this many resampled values per batch (16 MB of float64): fewer resamples per
+#: batch for a large matrix.
+BATCH_VALUES = 2_000_000
+
+
+def _batch(values_per_resample: int) -> int:
+    """Return the resamples per batch for resamples of ``values_per_resample`` values."""
+    return max(1, min(RESAMPLE_BATCH, BATCH_VALUES // max(values_per_resample, 1)))
 
 
 def iqm(values: Any, axis: int | None = None) -> Any:
@@ -125,8 +133,9 @@ def _bootstrap_distribution(
     tasks: Sequence[FloatArray], statistic: Callable, n_resamples: int, rng: np.random.Generator
 ) -> np.ndarray:
     out = np.empty(n_resamples)
-    for start in range(0, n_resamples, RESAMPLE_BATCH):
-        n = min(RESAMPLE_BATCH, n_resamples - start)
+    batch = _batch(sum(t.size for t in tasks))
+    for start in range(0, n_resamples, batch):
+        n = min(batch, n_resamples - start)
         pooled = np.concatenate([resample(t, n, rng)[0] for t in tasks], axis=1)
         out[start : start + n] = statistic(pooled)
     return out
@@ -223,8 +232,9 @@ def paired_ratio_interval(
         return point, point, point
     rng = np.random.default_rng(seed)
     dist = np.empty(n_resamples)
-    for start in range(0, n_resamples, RESAMPLE_BATCH):
-        n = min(RESAMPLE_BATCH, n_resamples - start)
+    batch = _batch(x.size + y.size)
+    for start in range(0, n_resamples, batch):
+        n = min(batch, n_resamples - start)
         xs, columns = resample(x, n, rng)
         ys, _ = resample(y, n, rng, columns)
         with np.errstate(divide="ignore", invalid="ignore"):

@@ -220,3 +220,26 @@ def test_prior_traces_are_the_position_block_of_p0():
 def test_errors_name_the_field(call, match):
     with pytest.raises(ValueError, match=match):
         call()
+
+
+def test_a_large_matrix_is_resampled_in_batches_of_bounded_size(monkeypatch):
+    """Memory is bounded: with at most 1000 values per batch, a 10 x 60 matrix (600 values
+    a resample) is resampled one resample at a time; a paired ratio's 3 x 10 and 1 x 10
+    (40 values) 25 at a time."""
+    from activetrack.baselines import protocol
+
+    sizes = []
+    real = protocol.resample
+
+    def recorded(scores, n, rng, columns=None):
+        sizes.append(n * scores.size)
+        return real(scores, n, rng, columns)
+
+    monkeypatch.setattr(protocol, "BATCH_VALUES", 1000)
+    monkeypatch.setattr(protocol, "resample", recorded)
+    rng = np.random.default_rng(12)
+    interval(rng.normal(size=(10, 60)), "iqm", n_resamples=50)
+    assert sizes == [600] * 50
+    sizes.clear()
+    paired_ratio_interval(rng.uniform(1, 2, (3, 10)), rng.uniform(1, 2, 10), n_resamples=40)
+    assert sizes == [25 * 30, 25 * 10, 15 * 30, 15 * 10]
