@@ -441,8 +441,10 @@ def check_pools(pools: Any, labels: Sequence[str]) -> dict[str, list[str]]:
     for name, members in pools.items():
         if not isinstance(name, str) or not name or name in labels:
             raise ValueError(f"pool names must be new non-empty names, got {name!r}")
-        members = [members] if isinstance(members, str) else list(members)
-        unknown = [m for m in members if m not in labels]
+        if isinstance(members, str):
+            members = [members]
+        members = list(members) if isinstance(members, (list, tuple)) else [members]
+        unknown = [m for m in members if not isinstance(m, str) or m not in labels]
         if not members or unknown or len(set(members)) != len(members):
             raise ValueError(
                 f"pool {name!r} must name distinct evaluated policies (one of {list(labels)}), "

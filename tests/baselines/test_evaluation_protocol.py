@@ -147,6 +147,11 @@ def test_pooled_row_of_training_seeds_is_the_runs_by_episodes_statistics():
         summaries([*runs, gsr], {"x": ["dagger_0", "nope"]})
     with pytest.raises(ValueError, match="pool names must be new"):
         summaries([*runs, gsr], {"gsr": ["dagger_0"]})
+    for bad in ({"x": 3}, {"x": []}, {"x": ["dagger_0", "dagger_0"]}, {"x": [None]}):
+        with pytest.raises(ValueError, match="pool 'x' must name distinct"):
+            summaries([*runs, gsr], bad)
+    with pytest.raises(ValueError, match="pools must map a name"):
+        summaries([*runs, gsr], ["dagger_0"])
 
 
 def test_cli_pool_option(tmp_path, capsys):
