@@ -267,9 +267,10 @@ def _add_evaluate(sub: argparse._SubParsersAction) -> None:
             "Run every --policy (gsr, gsr-restarts, gbes, rm, lookahead, or the path of a "
             "policy.zip written by 'activetrack train') in the environment on the same "
             "--episodes seeds (seed, seed+1, ...). Prints mean trace and RMSE with 95% "
-            "intervals, mean return "
-            "and the ratio of mean trace to GSR's (GSR is evaluated as the reference even if "
-            "not listed); writes OUT/results.json (a list, one object per policy), "
+            "intervals, the IQM and median trace with bootstrap 95% intervals, mean return, "
+            "the ratios of the mean and IQM trace to GSR's (GSR is evaluated as the reference "
+            "even if not listed) and, with limited sensing, the track-loss rate; writes "
+            "OUT/results.json (a list, one object per policy), "
             "OUT/episodes.json and OUT/mean_trace.png. Every policy file is checked before "
             "the first episode."
         ),
@@ -311,9 +312,37 @@ def _add_evaluate(sub: argparse._SubParsersAction) -> None:
         "for lookahead; rows equal the serial ones to the planner's tolerance, and a seed's "
         "row is the same in any batch; other policies run episode by episode)",
     )
+    p.add_argument(
+        "--loss-trace",
+        type=positive_float,
+        default=None,
+        metavar="M2",
+        help="track-loss threshold (m^2): a target is lost in a step where no sensor "
+        "measured it and its position trace is above this (default: each target's prior "
+        "position trace, tr P0[:2, :2])",
+    )
+    p.add_argument(
+        "--pool",
+        action="append",
+        default=None,
+        type=_pool,
+        metavar="NAME=POLICY[,POLICY...]",
+        help="add a row NAME pooling these --policy values (one policy's training seeds) "
+        "as a runs x episodes matrix: IQM, median and mean with bootstrap intervals over "
+        "runs and episodes, ratios to GSR (repeatable)",
+    )
     add_gbes_arguments(p)
     add_ray_arguments(p, "episodes")
     p.set_defaults(func=_cmd_evaluate, parser=p)
+
+
+def _pool(text: str) -> tuple[str, list[str]]:
+    """Parse ``NAME=POLICY[,POLICY...]`` (argparse ``type``)."""
+    name, sep, members = text.partition("=")
+    parts = [m for m in members.split(",") if m]
+    if not sep or not name or not parts:
+        raise argparse.ArgumentTypeError(f"must be NAME=POLICY[,POLICY...], got {text!r}")
+    return name, parts
 
 
 def _cmd_evaluate(args: argparse.Namespace) -> int:
@@ -342,5 +371,17 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         workers=args.workers,
         address=args.address,
         batched=args.batched,
+        loss_trace=args.loss_trace,
+        pools=_pools(args),
     )
     return 0
+
+
+def _pools(args: argparse.Namespace) -> dict[str, list[str]] | None:
+    """Return the ``--pool`` options as a mapping; raise ValueError if a name repeats."""
+    if args.pool is None:
+        return None
+    names = [name for name, _ in args.pool]
+    if len(set(names)) != len(names):
+        raise ValueError(f"--pool: each NAME once, got {names}")
+    return dict(args.pool)

@@ -2,7 +2,9 @@
 one episode loop (:func:`activetrack.baselines.rollout.rollout`).
 
 A row is ``(mean_trace, rmse, return, mean_nees, ms_per_step, no_detection,
-longest_gap)`` over steps 1..n_steps of an episode: serially in an environment's world
+longest_gap, track_loss)`` over steps 1..n_steps of an episode (``track_loss``:
+:func:`activetrack.baselines.protocol.track_loss_rate` at the threshold ``loss_trace``,
+by default each target's prior position trace): serially in an environment's world
 (:func:`run_episode`, a chunk of seeds in :func:`run_episodes`, one Ray task), or every
 episode a copy of one batched world (:func:`run_batched`). ``ms_per_step`` is the CPU time
 (``time.process_time``) of the policy's decisions per step, after a warm-up decision that
@@ -16,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from activetrack.baselines.protocol import prior_traces, track_loss_rate
 from activetrack.baselines.rollout import (
     ExpertAgent,
     Recorder,
@@ -43,13 +46,16 @@ def warm_up(env: Any, policy: Any, seed: int) -> None:
 class _RowRecorder(Recorder):
     """Keeps the metrics of :func:`run_episode`'s row per episode (serial: the single
     environment's infos, :meth:`~activetrack.world.World.copy_info`; batched: the world's
-    fields of each copy)."""
+    fields of each copy), and each target's position trace per step for the track-loss
+    rate at ``loss_trace`` (m^2; None: each target's prior position trace)."""
 
-    def __init__(self, n: int, on_step: Any = None) -> None:
+    def __init__(self, n: int, on_step: Any = None, loss_trace: float | None = None) -> None:
         self.traces: list[list[float]] = [[] for _ in range(n)]
         self.errors: list[list[float]] = [[] for _ in range(n)]
         self.nees: list[list[float]] = [[] for _ in range(n)]
         self.seen: list[list[np.ndarray]] = [[] for _ in range(n)]
+        self.target_traces: list[list[list[float]]] = [[] for _ in range(n)]
+        self.loss_trace = loss_trace
         self.totals = [0.0] * n
         self.seconds = 0.0
         self.on_step = on_step
@@ -66,7 +72,13 @@ class _RowRecorder(Recorder):
             self.errors[j].append(error)
             self.nees[j].append(float(world.position_nees(i)))
             self.seen[j].append(world.get("detected", i).any(axis=-1))
+            # Read only (the world's numbers unchanged): each target's own trace.
+            self.target_traces[j].append(
+                [float(np.trace(world.get("P", i, k)[:2, :2])) for k in range(world.n_targets)]
+            )
             self.totals[j] += float(step.rewards[i])
+        if self.loss_trace is None:
+            self.loss_trace = prior_traces(world.scenario)
         if self.on_step is not None and not step.batched:
             self.on_step()
 
@@ -79,20 +91,28 @@ class _RowRecorder(Recorder):
             float(np.mean(self.nees[j])),
             ms,
             *detection_gaps(np.array(self.seen[j])),
+            track_loss_rate(
+                np.array(self.seen[j]).reshape(-1, len(self.target_traces[j][0])),
+                np.array(self.target_traces[j]),
+                self.loss_trace,
+            ),
         )
 
 
-def run_episode(env: Any, policy: Any, seed: int, on_step: Any = None) -> tuple[float, ...]:
+def run_episode(
+    env: Any, policy: Any, seed: int, on_step: Any = None, loss_trace: float | None = None
+) -> tuple[float, ...]:
     """Return ``(mean_trace, rmse, return, mean_nees, ms_per_step, no_detection,
-    longest_gap)`` of one episode of ``policy`` from ``seed`` in ``env``'s world (the
+    longest_gap, track_loss)`` of one episode of ``policy`` from ``seed`` in ``env``'s world (the
     rollout of :mod:`activetrack.baselines.rollout`, serial; ``ms_per_step``: the
     policy's CPU time per decision in ms; the last two as
-    :func:`activetrack.baselines.simulation.detection_gaps`). ``on_step()`` is called
+    :func:`activetrack.baselines.simulation.detection_gaps`; the last the track-loss rate
+    at ``loss_trace``, see the module docstring). ``on_step()`` is called
     after every step (progress). The environment is reset to ``seed`` first and holds
     the episode's end after it."""
     base = env.unwrapped
     env.reset(seed=seed)  # the env's own state (agents, renderer) starts the episode
-    recorder = _RowRecorder(1, on_step)
+    recorder = _RowRecorder(1, on_step, loss_trace)
     steps = rollout(
         base.world, policy_agent(policy, base.possible_agents), [seed], recorder,
         clock=time.process_time,
@@ -102,7 +122,12 @@ def run_episode(env: Any, policy: Any, seed: int, on_step: Any = None) -> tuple[
 
 
 def run_batched(
-    scenario: Any, overrides: dict[str, Any], policy: Any, seeds: list[int], on_step: Any = None
+    scenario: Any,
+    overrides: dict[str, Any],
+    policy: Any,
+    seeds: list[int],
+    on_step: Any = None,
+    loss_trace: float | None = None,
 ) -> list[tuple[float, ...]]:
     """Return :func:`run_episode`'s rows for a planner policy, each seed's episode a copy of
     one batched :class:`~activetrack.world.World` (the policy plans every copy at once;
@@ -122,7 +147,7 @@ def run_batched(
 
     n = len(seeds)
     world = World(scenario, n, **overrides)
-    recorder = _RowRecorder(n)
+    recorder = _RowRecorder(n, loss_trace=loss_trace)
     steps = rollout(
         world, ExpertAgent(policy), seeds, recorder, batched=True, clock=time.process_time,
         warm_up=True, on_step=on_step,
@@ -132,7 +157,11 @@ def run_batched(
 
 
 def run_episodes(
-    scenario: Any, overrides: dict[str, Any], policy: Any, seeds: list[int]
+    scenario: Any,
+    overrides: dict[str, Any],
+    policy: Any,
+    seeds: list[int],
+    loss_trace: float | None = None,
 ) -> list[tuple[float, ...]]:
     """Return :func:`run_episode` on each of ``seeds`` in a new environment (one Ray task)."""
     from activetrack.envs import parallel_env
@@ -140,6 +169,6 @@ def run_episodes(
     env = parallel_env(scenario, **overrides)
     try:
         warm_up(env, policy, seeds[0])
-        return [run_episode(env, policy, s) for s in seeds]
+        return [run_episode(env, policy, s, loss_trace=loss_trace) for s in seeds]
     finally:
         env.close()

@@ -11,11 +11,16 @@ return (sum of rewards). Per policy: the mean trace and the mean RMSE with BCa b
 95% intervals (:func:`bootstrap_ci`: the episodes' traces and RMSEs are positive and
 heavy-tailed, and a Student-t interval of them can reach below zero), the median trace,
 the return with a Student-t 95% interval, and the ratio of its mean trace to GSR's with a
-paired BCa bootstrap 95% interval. GSR is always evaluated (the ratio's reference) even
-when it is not asked for; it is then reported separately. ``cpu_ms_per_decision`` is the
-CPU time (``time.process_time``) per decision (one ``plan`` or ``act`` call, per copy in
-a batched run), measured after one warm-up decision that is not counted (the compiled
-kernels' first compilation).
+paired BCa bootstrap 95% interval. The reporting protocol's statistics
+(:mod:`activetrack.baselines.protocol`): the interquartile mean (IQM) and the median of
+the episodes' mean traces with percentile bootstrap 95% intervals, the ratio of the IQM to
+GSR's with a paired one, and with limited sensing the track-loss rate (the fraction of
+(step, target) pairs with no measurement and the target's position trace above
+``loss_trace``, by default its prior's) with its interval. GSR is always evaluated (the
+ratio's reference) even when it is not asked for; it is then reported separately.
+``cpu_ms_per_decision`` is the CPU time (``time.process_time``) per decision (one
+``plan`` or ``act`` call, per copy in a batched run), measured after one warm-up decision
+that is not counted (the compiled kernels' first compilation).
 
 The JSON summary (:meth:`PolicyEvaluation.summary`) names the episodes' seeds
 ``seed_range`` ``{"first": ..., "last": ...}`` (as the simulation's ``results.json``);
@@ -60,9 +65,10 @@ from activetrack.baselines.policy_specs import (  # noqa: F401 (public here too)
     policy_loaders,
     resolve_policy,
 )
+from activetrack.baselines.protocol import prior_traces
 from activetrack.baselines.simulation import check_planners, mean_ci
 from activetrack.files import RunOutputs, prepare_output_dir
-from activetrack.validation import check_int
+from activetrack.validation import check_float, check_int
 from activetrack.world.scenarios import make_scenario
 
 
@@ -83,6 +89,10 @@ class PolicyEvaluation:
             a target and the longest such run
             (:func:`activetrack.baselines.simulation.detection_gaps`); None with unlimited
             sensing.
+        track_loss: per-episode track-loss rate
+            (:func:`activetrack.baselines.protocol.track_loss_rate`); None with unlimited
+            sensing.
+        loss_trace: its threshold per target (m^2), None with unlimited sensing.
     """
 
     policy: str
@@ -95,14 +105,22 @@ class PolicyEvaluation:
     ms_per_step: np.ndarray | None = None
     no_detection: np.ndarray | None = None
     longest_gap: np.ndarray | None = None
+    track_loss: np.ndarray | None = None
+    loss_trace: list[float] | None = None
 
     def summary(self, reference: PolicyEvaluation | None = None) -> dict[str, Any]:
         """Return the JSON summary; the ratio is to ``reference``'s mean trace (GSR).
 
         ``cpu_ms_per_decision`` is the mean CPU time per decision (ms, after a warm-up),
         ``ms_per_step`` its deprecated alias (the same value); ``seed_range`` the first and
-        last seed (the episodes' seeds are consecutive).
+        last seed (the episodes' seeds are consecutive). The protocol's statistics
+        (:mod:`activetrack.baselines.protocol`): ``iqm_trace``, ``iqm_trace_ci95``,
+        ``median_trace_ci95``, ``iqm_ratio_to_gsr`` with ``iqm_ratio_to_gsr_ci95`` and,
+        with limited sensing, ``track_loss_rate``, ``track_loss_rate_ci95`` and
+        ``track_loss_threshold`` (m^2 per target).
         """
+        from activetrack.baselines import protocol
+
         mt = float(np.mean(self.mean_trace))
         mt_lo, mt_hi = bootstrap_ci(self.mean_trace)
         rm = float(np.mean(self.rmse))
@@ -115,6 +133,9 @@ class PolicyEvaluation:
             "mean_trace": mt,
             "mean_trace_ci95": [mt_lo, mt_hi],
             "median_trace": float(np.median(self.mean_trace)),
+            "median_trace_ci95": list(protocol.interval(self.mean_trace, "median")[1:]),
+            "iqm_trace": float(protocol.iqm(self.mean_trace)),
+            "iqm_trace_ci95": list(protocol.interval(self.mean_trace, "iqm")[1:]),
             "rmse": rm,
             "rmse_ci95": [rm_lo, rm_hi],
             "mean_return": ret,
@@ -126,6 +147,8 @@ class PolicyEvaluation:
             "ms_per_step": ms,  # deprecated alias of cpu_ms_per_decision
             "ratio_to_gsr": None,
             "ratio_to_gsr_ci95": None,
+            "iqm_ratio_to_gsr": None,
+            "iqm_ratio_to_gsr_ci95": None,
             "episodes": len(self.seeds),
             "seed_range": {"first": self.seeds[0], "last": self.seeds[-1]},
             "requested": self.requested,
@@ -133,9 +156,15 @@ class PolicyEvaluation:
         if self.no_detection is not None and np.all(np.isfinite(self.no_detection)):
             out["no_detection"] = float(np.mean(self.no_detection))
             out["longest_gap"] = int(np.max(self.longest_gap))
+        if self.track_loss is not None and np.all(np.isfinite(self.track_loss)):
+            rate, lo, hi = protocol.interval(self.track_loss, "mean")
+            out["track_loss_rate"], out["track_loss_rate_ci95"] = rate, [lo, hi]
+            out["track_loss_threshold"] = self.loss_trace
         if reference is not None:
             out["ratio_to_gsr"] = mt / float(np.mean(reference.mean_trace))
             out["ratio_to_gsr_ci95"] = list(paired_ratio_ci(self.mean_trace, reference.mean_trace))
+            ratio, lo, hi = protocol.paired_ratio_interval(self.mean_trace, reference.mean_trace)
+            out["iqm_ratio_to_gsr"], out["iqm_ratio_to_gsr_ci95"] = ratio, [lo, hi]
         return out
 
 
@@ -237,6 +266,7 @@ def evaluate(
     workers: int = 1,
     address: str | None = None,
     batched: bool = False,
+    loss_trace: float | None = None,
     **overrides: Any,
 ) -> list[PolicyEvaluation]:
     """Return one :class:`PolicyEvaluation` per policy (GSR first added if it is missing).
@@ -249,7 +279,9 @@ def evaluate(
     deterministic planner (GSR, the look-ahead planner) on all episodes at once in a
     batched world (:func:`run_batched`: far faster for the look-ahead planner; its rows
     equal the serial ones bit for bit, see there); the others (random
-    motion, learned policies) still run episode by episode.
+    motion, learned policies) still run episode by episode. ``loss_trace`` (m^2, > 0) is
+    the track-loss rate's threshold for every target; None: each target's prior position
+    trace (:func:`activetrack.baselines.protocol.prior_traces`).
     """
     from tqdm.auto import tqdm
 
@@ -259,6 +291,8 @@ def evaluate(
     episodes = check_int("episodes", episodes, 1)
     seed = check_int("seed", seed, 0)
     workers, address = check_batched(batched, workers, address)
+    if loss_trace is not None:
+        loss_trace = check_float("loss_trace", loss_trace, 0.0, low_open=True)
     if isinstance(policies, Mapping):
         items = list(policies.items())
     else:
@@ -274,6 +308,11 @@ def evaluate(
     seeds = [seed + j for j in range(episodes)]
     env = parallel_env(scenario, **overrides)
     limited = env.unwrapped.world.scenario.limited_sensing
+    thresholds = (
+        prior_traces(env.unwrapped.world.scenario)
+        if loss_trace is None
+        else np.full(env.unwrapped.world.n_targets, loss_trace)
+    ).tolist()
     try:
         # Every policy loaded and checked before the first episode.
         resolved = []
@@ -296,7 +335,7 @@ def evaluate(
     try:
         if distributed.is_distributed(workers, address):
             per_policy = _episodes_on_ray(
-                scenario, overrides, resolved, seeds, workers, address, bar, n_steps
+                scenario, overrides, resolved, seeds, workers, address, bar, n_steps, loss_trace
             )
         else:
             per_policy = []
@@ -305,13 +344,13 @@ def evaluate(
                 done = bar.n
                 if batched and batchable(policy):
                     per_policy.append(
-                        run_batched(scenario, overrides, policy, seeds, on_step=bar.update)
+                        run_batched(scenario, overrides, policy, seeds, bar.update, loss_trace)
                     )
                 else:
                     warm_up(env, policy, seeds[0])
                     rows = []
                     for s in seeds:
-                        rows.append(run_episode(env, policy, s, on_step=bar.update))
+                        rows.append(run_episode(env, policy, s, bar.update, loss_trace))
                         bar.update(done + len(rows) * n_steps - bar.n)  # ended early
                     per_policy.append(rows)
                 bar.update(done + len(seeds) * n_steps - bar.n)
@@ -322,7 +361,7 @@ def evaluate(
     for index, ((label, _), rows) in enumerate(zip(items, per_policy, strict=True)):
         arr = np.asarray(rows)
         requested = has_gsr or index < len(items) - 1
-        gaps = (arr[:, 5], arr[:, 6]) if limited else (None, None)
+        gaps = (arr[:, 5], arr[:, 6], arr[:, 7], thresholds) if limited else (None,) * 4
         results.append(
             PolicyEvaluation(
                 label,
@@ -348,13 +387,17 @@ def _episodes_on_ray(
     address: str | None,
     bar: Any,
     n_steps: int,
+    loss_trace: float | None = None,
 ) -> list[list[tuple[float, ...]]]:
     """Return every policy's episode rows, :func:`run_episodes` as Ray tasks over chunks of
     ``seeds`` (:func:`activetrack.baselines.distributed.map_seeds`)."""
     from activetrack.baselines import distributed
 
     bar.set_description("ray")
-    cases = [{"scenario": scenario, "overrides": overrides, "policy": p} for p in policies]
+    cases = [
+        {"scenario": scenario, "overrides": overrides, "policy": p, "loss_trace": loss_trace}
+        for p in policies
+    ]
     with distributed.session(workers, address) as cpus:
         done = distributed.map_seeds(
             run_episodes, cases, seeds, cpus, on_done=lambda k: bar.update(k * n_steps)
@@ -369,47 +412,98 @@ def _gsr_of(results: Sequence[PolicyEvaluation]) -> PolicyEvaluation:
     raise ValueError("the results hold no GSR evaluation")
 
 
-def summaries(results: Sequence[PolicyEvaluation]) -> list[dict[str, Any]]:
-    """Return the JSON summary of each result, with its ratio to GSR's mean trace."""
+def summaries(
+    results: Sequence[PolicyEvaluation], pools: Mapping[str, Sequence[str]] | None = None
+) -> list[dict[str, Any]]:
+    """Return the JSON summary of each result, with its ratio to GSR's mean trace, then one
+    row per pool (``{name: [policy labels]}``: the training seeds of one policy,
+    :func:`activetrack.baselines.protocol.pooled_summary`)."""
+    from activetrack.baselines.protocol import pooled_summary
+
     ref = _gsr_of(results)
     rows = [r.summary(ref) for r in results]
     for row, label in zip(rows, short_labels([r.policy for r in results]), strict=True):
         row["label"] = label  # distinct among these results
+    by_label = {r.policy: r for r in results}
+    pools = check_pools(pools, list(by_label))
+    rows += [pooled_summary(n, [by_label[m] for m in ms], ref) for n, ms in pools.items()]
     return rows
+
+
+def check_pools(pools: Any, labels: Sequence[str]) -> dict[str, list[str]]:
+    """Return ``pools`` checked: a mapping from a new name (not one of ``labels``) to one
+    or more distinct policy ``labels``; raise ValueError naming what is wrong."""
+    if pools is None:
+        return {}
+    if not isinstance(pools, Mapping):
+        raise ValueError(f"pools must map a name to policy labels, got {pools!r}")
+    out = {}
+    for name, members in pools.items():
+        if not isinstance(name, str) or not name or name in labels:
+            raise ValueError(f"pool names must be new non-empty names, got {name!r}")
+        if isinstance(members, str):
+            members = [members]
+        members = list(members) if isinstance(members, (list, tuple)) else [members]
+        unknown = [m for m in members if not isinstance(m, str) or m not in labels]
+        if not members or unknown or len(set(members)) != len(members):
+            raise ValueError(
+                f"pool {name!r} must name distinct evaluated policies (one of {list(labels)}), "
+                f"got {members}"
+            )
+        out[name] = members
+    return out
+
+
+def _with_ci(r: dict[str, Any], key: str, digits: str = ".4g") -> str:
+    """Return ``r[key]`` with its ``[low, high]`` interval (``key_ci95``) if ``r`` has one,
+    "-" if it has no ``key`` (a summary written before the key existed)."""
+    value = r.get(key)
+    if value is None:
+        return "-"
+    ci = r.get(f"{key}_ci95")
+    text = f"{value:{digits}}"
+    return text if ci is None else f"{text} [{ci[0]:{digits}}, {ci[1]:{digits}}]"
 
 
 def format_table(rows: Sequence[dict[str, Any]]) -> str:
     """Return the summaries as a plain-text table (GSR added only for the ratio is marked).
 
     Policies by their short label (a policy file's folder; the full path is the JSON's
-    ``policy``); the mean trace with its bootstrap interval, then its median; ``CPU
-    ms/decision`` is ``cpu_ms_per_decision`` (CPU time per decision after a warm-up; a
-    summary written before that name gives its ``ms_per_step``).
+    ``policy``); the mean trace, its IQM and its median, each with its bootstrap interval;
+    ``CPU ms/decision`` is ``cpu_ms_per_decision`` (CPU time per decision after a warm-up;
+    a summary written before that name gives its ``ms_per_step``); the ratios of the mean
+    and of the IQM to GSR's; with limited sensing the track-loss rate, then the fraction
+    of steps without a detection and the longest such run. A summary written before a
+    column existed shows "-" there.
     """
     width = max([len("policy")] + [len(r.get("label", r["policy"])) + 12 for r in rows])
     head = (
-        f"{'policy':<{width}} {'mean trace [95% CI]':>26} {'median':>8} {'RMSE':>7} "
-        f"{'NEES':>5} {'CPU ms/decision':>15} {'return':>8} {'ratio to GSR':>22}"
+        f"{'policy':<{width}} {'mean trace [95% CI]':>26} {'IQM [95% CI]':>26} "
+        f"{'median [95% CI]':>26} {'RMSE':>7} {'NEES':>5} {'CPU ms/decision':>15} "
+        f"{'return':>8} {'ratio to GSR':>22} {'IQM ratio to GSR':>22}"
     )
     lines = [head, "-" * len(head)]
     for r in rows:
         name = r.get("label", r["policy"]) + ("" if r["requested"] else " (reference)")
-        lo, hi = r["mean_trace_ci95"]
-        trace = f"{r['mean_trace']:.4g} [{lo:.4g}, {hi:.4g}]"
-        median = "-" if r.get("median_trace") is None else f"{r['median_trace']:.4g}"
-        ratio = "-"
-        if r["ratio_to_gsr"] is not None:
-            rlo, rhi = r["ratio_to_gsr_ci95"]
-            ratio = f"{r['ratio_to_gsr']:.3f} [{rlo:.3f}, {rhi:.3f}]"
+        name += f" ({r['runs']} runs)" if "runs" in r else ""  # a pool of training seeds
+        traces = [_with_ci(r, k) for k in ("mean_trace", "iqm_trace", "median_trace")]
+        ratios = [_with_ci(r, k, ".3f") for k in ("ratio_to_gsr", "iqm_ratio_to_gsr")]
         nees = "-" if r.get("nees") is None else f"{r['nees']:.2f}"
         cpu_ms = r.get("cpu_ms_per_decision", r.get("ms_per_step"))
         ms = "-" if cpu_ms is None else f"{cpu_ms:.3g}"
         line = (
-            f"{name:<{width}} {trace:>26} {median:>8} {r['rmse']:>7.3f} {nees:>5} {ms:>15} "
-            f"{r['mean_return']:>8.2f} {ratio:>22}"
+            f"{name:<{width}} {traces[0]:>26} {traces[1]:>26} {traces[2]:>26} "
+            f"{r['rmse']:>7.3f} {nees:>5} {ms:>15} {r['mean_return']:>8.2f} "
+            f"{ratios[0]:>22} {ratios[1]:>22}"
         )
+        extra = []
+        if "track_loss_rate" in r:  # limited sensing: unmeasured and uncertain
+            extra.append(f"track loss {_with_ci(r, 'track_loss_rate', '.3f')}")
         if "no_detection" in r:  # limited sensing: steps without a measurement, longest run
-            line += f"  no detection {r['no_detection']:.3f}, longest gap {r['longest_gap']}"
+            extra.append(f"no detection {r['no_detection']:.3f}")
+            extra.append(f"longest gap {r['longest_gap']}")
+        if extra:
+            line += "  " + ", ".join(extra)
         lines.append(line)
     return "\n".join(lines)
 
@@ -424,6 +518,7 @@ def write_results(
     meta: dict[str, Any] | None = None,
     plot: bool = True,
     overwrite: bool = False,
+    pools: Mapping[str, Sequence[str]] | None = None,
 ) -> dict[str, Path]:
     """Write ``results.json`` (a list, one object per policy), ``episodes.json`` and the plot.
 
@@ -432,7 +527,8 @@ def write_results(
     (``cpu_ms_per_decision`` with its deprecated alias ``ms_per_step``, as the summary).
     ``out_dir`` is a folder (checked by :func:`~activetrack.files.prepare_output_dir`:
     one that holds results needs ``overwrite``) or the :class:`RunOutputs` of one checked
-    earlier. The files are committed together (a failed write leaves the previous ones);
+    earlier. ``pools`` adds pooled rows to ``results.json`` (:func:`summaries`). The files
+    are committed together (a failed write leaves the previous ones);
     a previous ``mean_trace.png`` is removed when ``plot`` is false.
     """
     outputs = out_dir if isinstance(out_dir, RunOutputs) else None
@@ -462,12 +558,13 @@ def write_results(
                         "longest_gap": r.longest_gap.tolist(),
                     }
                 ),
+                **({} if r.track_loss is None else {"track_loss": r.track_loss.tolist()}),
             }
             for r in results
         },
     }
     with outputs:
-        outputs.write_json("results.json", summaries(results))
+        outputs.write_json("results.json", summaries(results, pools))
         outputs.write_json("episodes.json", per_episode)
         if plot:
             from activetrack.baselines.plotting import plot_evaluation
@@ -491,16 +588,26 @@ def run_evaluation(
     workers: int = 1,
     address: str | None = None,
     batched: bool = False,
+    loss_trace: float | None = None,
+    pools: Mapping[str, Sequence[str]] | None = None,
     **overrides: Any,
 ) -> list[dict[str, Any]]:
     """Evaluate, print the table, write ``out_dir`` if given; return the JSON summaries.
 
     The command ``activetrack evaluate`` is this function. Everything that can be checked
     before the episodes is: the output folder (one holding results needs ``overwrite``)
-    and every policy (names, policy files, their observation size), and ``workers``,
-    ``address`` and ``batched`` (:func:`evaluate`).
+    and every policy (names, policy files, their observation size), ``workers``,
+    ``address`` and ``batched`` (:func:`evaluate`), and ``pools`` (names of pooled rows,
+    each a list of ``policies``' labels: one policy's training seeds, :func:`summaries`).
     """
     workers, address = check_batched(batched, workers, address)
+    if isinstance(policies, Mapping):
+        labels = list(policies)
+    else:  # evaluate's labels, and its GSR reference if none is given
+        labels = [str(p) if isinstance(p, (str, Path)) else type(p).__name__ for p in policies]
+    if not any(label.lower() == "gsr" for label in labels):
+        labels.append("gsr")
+    pools = check_pools(pools, labels)
     if out_dir is not None and not isinstance(out_dir, RunOutputs):
         with prepare_output_dir(out_dir, OUTPUTS, overwrite) as outputs:  # locked for the run
             return run_evaluation(
@@ -515,6 +622,8 @@ def run_evaluation(
                 workers=workers,
                 address=address,
                 batched=batched,
+                loss_trace=loss_trace,
+                pools=pools,
                 **overrides,
             )
     outputs = out_dir
@@ -527,9 +636,10 @@ def run_evaluation(
         workers=workers,
         address=address,
         batched=batched,
+        loss_trace=loss_trace,
         **overrides,
     )
-    rows = summaries(results)
+    rows = summaries(results, pools)
     name = getattr(scenario, "name", scenario)
     print(f"scenario {name!r}, {episodes} episodes, seeds {seed}..{seed + episodes - 1}")
     print(format_table(rows))
@@ -542,6 +652,6 @@ def run_evaluation(
         record = make_scenario(scenario, **overrides).to_dict()
         overrides = {k: record.get(k, v) for k, v in overrides.items()}
         meta = {"scenario": given, "overrides": overrides, "episodes": episodes, "seed": seed}
-        paths = write_results(results, outputs, meta, plot=plot)
+        paths = write_results(results, outputs, meta, plot=plot, pools=pools)
         print("wrote " + ", ".join(str(p) for p in paths.values()))
     return rows

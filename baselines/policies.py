@@ -39,6 +39,7 @@ from typing import Any
 import numpy as np
 
 from activetrack.validation import FloatArray
+from activetrack.world import planning_prediction
 from activetrack.world.problem import Planner, PlanningProblem
 
 
@@ -49,10 +50,17 @@ class PlannerPolicy:
         planner: the planner; ``plan(problem, rng) -> (..., M, 2)`` absolute next positions.
         seed: seeds the planner generator as ``np.random.default_rng([seed, 1])``, the
             simulation runner's; ``None`` for fresh entropy.
+        prediction: which prediction the planner plans from
+            (:mod:`activetrack.world.planning_prediction`): ``"mixture"`` (the default)
+            the filter's (with an IMM its predicted mixture's moments), an int ``j`` the
+            IMM's mode j's prediction alone (0 with the EKF, its own).
     """
 
-    def __init__(self, planner: Planner, seed: int | None = None) -> None:
+    def __init__(
+        self, planner: Planner, seed: int | None = None, prediction: str | int = "mixture"
+    ) -> None:
         self.planner = planner
+        self.prediction = planning_prediction.checked(prediction)
         self.reset(seed)
 
     def reset(self, seed: int | None = None) -> None:
@@ -60,7 +68,9 @@ class PlannerPolicy:
         self.rng = np.random.default_rng() if seed is None else np.random.default_rng([seed, 1])
 
     def plan(self, problem: PlanningProblem) -> FloatArray:
-        """Return the next absolute positions for ``problem``, shape (..., M, 2), float64."""
+        """Return the next absolute positions for ``problem``, shape (..., M, 2), float64
+        (planned from :attr:`prediction`'s problem)."""
+        problem = planning_prediction.chosen(problem, self.prediction)
         nxt = np.asarray(self.planner.plan(problem, self.rng), dtype=np.float64)
         if nxt.shape != problem.sensors.shape:
             raise ValueError(
@@ -78,40 +88,52 @@ class PlannerPolicy:
 
     def check(self, problem: PlanningProblem) -> None:
         """Raise the planner's ValueError if its settings cannot plan ``problem`` (a
-        planner without ``check`` can plan every problem)."""
+        planner without ``check`` can plan every problem), or the ValueError of a
+        :attr:`prediction` the problem's filter does not have."""
+        problem = planning_prediction.chosen(problem, self.prediction)
         check = getattr(self.planner, "check", None)
         if callable(check):
             check(problem)
 
     def __repr__(self) -> str:
-        return f"{type(self).__name__}({self.planner!r})"
+        own = "" if self.prediction == "mixture" else f", prediction={self.prediction!r}"
+        return f"{type(self).__name__}({self.planner!r}{own})"
 
 
 class GSRPolicy(PlannerPolicy):
-    """Gauss-Seidel relaxation (Section IV-B) as a policy; ``planner_kwargs`` go to ``GSR``."""
+    """Gauss-Seidel relaxation (Section IV-B) as a policy; ``planner_kwargs`` go to ``GSR``
+    (``prediction``: :class:`PlannerPolicy`'s)."""
 
-    def __init__(self, seed: int | None = None, **planner_kwargs: Any) -> None:
+    def __init__(
+        self, seed: int | None = None, prediction: str | int = "mixture", **planner_kwargs: Any
+    ) -> None:
         from activetrack.baselines.gsr import GSR
 
-        super().__init__(GSR(**planner_kwargs), seed)
+        super().__init__(GSR(**planner_kwargs), seed, prediction)
 
 
 class GBESPolicy(PlannerPolicy):
-    """Grid-based exhaustive search (Section V) as a policy; kwargs go to ``GBES``."""
+    """Grid-based exhaustive search (Section V) as a policy; kwargs go to ``GBES``
+    (``prediction``: :class:`PlannerPolicy`'s)."""
 
-    def __init__(self, seed: int | None = None, **planner_kwargs: Any) -> None:
+    def __init__(
+        self, seed: int | None = None, prediction: str | int = "mixture", **planner_kwargs: Any
+    ) -> None:
         from activetrack.baselines.gbes import GBES
 
-        super().__init__(GBES(**planner_kwargs), seed)
+        super().__init__(GBES(**planner_kwargs), seed, prediction)
 
 
 class RMPolicy(PlannerPolicy):
-    """Random motion on the curves ADB (Section V) as a policy."""
+    """Random motion on the curves ADB (Section V) as a policy (``prediction``:
+    :class:`PlannerPolicy`'s)."""
 
-    def __init__(self, seed: int | None = None, **planner_kwargs: Any) -> None:
+    def __init__(
+        self, seed: int | None = None, prediction: str | int = "mixture", **planner_kwargs: Any
+    ) -> None:
         from activetrack.baselines.random_motion import RandomMotion
 
-        super().__init__(RandomMotion(**planner_kwargs), seed)
+        super().__init__(RandomMotion(**planner_kwargs), seed, prediction)
 
 
 class LookaheadPolicy(PlannerPolicy):
@@ -119,10 +141,11 @@ class LookaheadPolicy(PlannerPolicy):
     LookaheadPlanner`); ``settings`` go to :class:`~activetrack.baselines.lookahead.Lookahead`.
 
     It plans from the prediction the planning problem carries (``problem.prediction``, set
-    by the world), for any scenario and in any order of problems. ``scenario`` matters only
-    for problems without a prediction (built by hand): the planner then recovers it from
-    the episode's problems, seen in order, of that scenario (``None``: the matching
-    preset). :meth:`reset` starts a new episode (no warm start from the last plan).
+    by the world; ``prediction``: :class:`PlannerPolicy`'s), for any scenario and in any
+    order of problems. ``scenario`` matters only for problems without a prediction (built
+    by hand): the planner then recovers it from the episode's problems, seen in order, of
+    that scenario (``None``: the matching preset). :meth:`reset` starts a new episode (no
+    warm start from the last plan).
 
     Cost: on the occluded tasks its GSR rollout runs GSR's numerical steps H times per
     step; with the default settings (horizon 10) one episode took a median 354 ms of CPU
@@ -132,10 +155,16 @@ class LookaheadPolicy(PlannerPolicy):
     rows were measured with the previous default settings.
     """
 
-    def __init__(self, seed: int | None = None, scenario: Any = "paper", **settings: Any) -> None:
+    def __init__(
+        self,
+        seed: int | None = None,
+        scenario: Any = "paper",
+        prediction: str | int = "mixture",
+        **settings: Any,
+    ) -> None:
         from activetrack.baselines.lookahead import LookaheadPlanner
 
-        super().__init__(LookaheadPlanner(scenario, **settings), seed)
+        super().__init__(LookaheadPlanner(scenario, **settings), seed, prediction)
 
     def reset(self, seed: int | None = None) -> None:
         """Re-seed and forget the episode (the next problem starts one)."""

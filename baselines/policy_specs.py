@@ -4,8 +4,11 @@ policies through the installed policy file loaders.
 A policy is an expert with ``plan(problem) -> next positions`` (e.g.
 :class:`~activetrack.baselines.policies.GSRPolicy`), anything with
 ``act(observations) -> {agent: action}`` (e.g. a learned policy), or a name: ``gsr``,
-``gsr-restarts`` (``GSR(restarts=True)``), ``gbes``, ``rm``, ``lookahead``, or the path of a
-policy file, e.g. a trained ``policy.zip``.
+``gsr-restarts`` (``GSR(restarts=True)``), ``gbes``, ``rm``, ``lookahead``,
+``gsr-single-model`` and ``lookahead-single-model`` (GSR and the look-ahead planning from
+the IMM's mode 0 alone, ``prediction=0``: :mod:`activetrack.world.planning_prediction`;
+with the EKF they are ``gsr`` and ``lookahead``), or the path of a policy file, e.g. a
+trained ``policy.zip``.
 
 Policy files load through the entry-point group :data:`POLICY_LOADERS`
 (``activetrack.policy_loaders`` in ``pyproject.toml``): an entry named for a file suffix
@@ -24,7 +27,15 @@ from typing import Any
 import numpy as np
 
 #: Names that resolve to the planners' expert policies.
-EXPERT_NAMES = ("gsr", "gsr-restarts", "gbes", "rm", "lookahead")
+EXPERT_NAMES = (
+    "gsr",
+    "gsr-restarts",
+    "gbes",
+    "rm",
+    "lookahead",
+    "gsr-single-model",
+    "lookahead-single-model",
+)
 #: The entry-point group of the policy file loaders: name = the file suffix without its
 #: dot (lower case), value = ``module:function`` taking the path and returning a policy.
 POLICY_LOADERS = "activetrack.policy_loaders"
@@ -54,6 +65,9 @@ def resolve_policy(spec: Any) -> Any:
             # It plans from the prediction each problem carries, for any scenario (the
             # scenario, here the matching preset, serves problems without one only).
             "lookahead": lambda: policies.LookaheadPolicy(scenario=None),
+            # The IMM's first mode's prediction alone (maneuvering's constant velocity).
+            "gsr-single-model": lambda: policies.GSRPolicy(prediction=0),
+            "lookahead-single-model": lambda: policies.LookaheadPolicy(scenario=None, prediction=0),
         }[name.lower()]()
     path = Path(name)
     if not path.exists() and (path.suffix or len(path.parts) > 1):  # meant as a file

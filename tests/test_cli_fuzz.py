@@ -139,6 +139,8 @@ def test_evaluate_fuzz(folders):
                 "--out": out_choices(folders),
                 "--workers": WORKERS,
                 "--address": st.just(""),
+                "--loss-trace": NUMBERS,
+                "--pool": st.sampled_from(["a=gsr", "a=gsr,rm", "gsr=rm", "x", "a=", "=gsr"]),
             }
         ),
         st.booleans(),

@@ -135,8 +135,9 @@ IMPROVED: dict[str, tuple[str, str]] = {
 #: 35): the intervals of the mean trace, of the RMSE and of the ratio to GSR are BCa
 #: bootstrap ones (their coverage is tested in tests/baselines/test_evaluation.py),
 #: ``label``, ``median_trace`` and ``cpu_ms_per_decision`` (CPU time, as the recording's
-#: left-out ``ms_per_step``) are new. They are left out of both sides; the rest is compared
-#: as usual.
+#: left-out ``ms_per_step``) are new, and so are the reporting protocol's IQM, median
+#: interval and IQM ratio (issue 40; tested in tests/baselines/test_evaluation_protocol.py).
+#: They are left out of both sides; the rest is compared as usual.
 REDEFINED: dict[str, tuple[str, ...]] = dict.fromkeys(
     ["evaluation", "evaluation_reference"],
     (
@@ -146,6 +147,11 @@ REDEFINED: dict[str, tuple[str, ...]] = dict.fromkeys(
         "label",
         "median_trace",
         "cpu_ms_per_decision",
+        "median_trace_ci95",
+        "iqm_trace",
+        "iqm_trace_ci95",
+        "iqm_ratio_to_gsr",
+        "iqm_ratio_to_gsr_ci95",
     ),
 )
 

@@ -142,3 +142,92 @@ def test_same_trajectory_in_aec_and_centralized_envs():
         got.append(cen.unwrapped.env.sensors)
         done = term or trunc
     np.testing.assert_array_equal(np.array(got), sensors_par)
+
+
+# Which prediction an expert plans from (activetrack.world.planning_prediction) ----------
+def _imm_world(spec, n=2, seeds=(5, 6), **overrides):
+    from activetrack.world import World
+
+    w = World("maneuvering", n, estimator=spec, **overrides)
+    w.reset(seeds=list(seeds))
+    return w
+
+
+def test_with_one_mode_the_mixture_and_the_single_model_plan_alike():
+    # An IMM of one mode (the filter's own model) is its own mixture: GSR planning from
+    # the mixture and from mode 0 drive the same episodes; so does the look-ahead.
+    from activetrack import IMMSpec
+    from activetrack.baselines.policies import GSRPolicy, LookaheadPolicy
+
+    sc = make_scenario("maneuvering")
+    spec = IMMSpec([sc.target_models[0]], [[1.0]])
+    for make, n_steps in ((GSRPolicy, sc.n_steps), (LookaheadPolicy, 3)):
+        worlds = [_imm_world(spec) for _ in range(2)]
+        policies = [make(seed=0), make(seed=0, prediction=0)]
+        for _ in range(n_steps):
+            plans = [p.plan(w.planning_problem()) for p, w in zip(policies, worlds, strict=True)]
+            np.testing.assert_array_equal(plans[0], plans[1])
+            for w, plan in zip(worlds, plans, strict=True):
+                w.step(plan)
+        np.testing.assert_array_equal(worlds[0].sensors, worlds[1].sensors)
+
+
+def test_the_planner_sees_the_chosen_modes_prediction():
+    # The problem the planner gets, against the mode's prediction read off the world's
+    # problem by hand; the look-ahead's plan is its plan of the problem built by hand at
+    # that prediction (PlanningProblem.from_prediction, no choice involved).
+    from activetrack import IMMSpec
+    from activetrack.baselines.policies import LookaheadPolicy
+    from activetrack.world.presets import MANEUVERING
+    from activetrack.world.problem import PlanningProblem, Prediction
+
+    w = _imm_world(IMMSpec.from_behaviour(MANEUVERING), n=1, seeds=(2,))
+    for _ in range(5):
+        w.step_actions(np.full((1, w.n_sensors, 2), 0.4))
+    problem = w.planning_problem(0)
+    modes, q = problem.prediction.modes, problem.prediction
+    seen = []
+
+    class Recording:
+        def plan(self, prob, rng):
+            seen.append(prob)
+            return prob.sensors
+
+    for j in (0, 1, 2):
+        PlannerPolicy(Recording(), seed=0, prediction=j).plan(problem)
+        np.testing.assert_array_equal(seen[-1].target, modes.means[j, :2])
+        np.testing.assert_array_equal(seen[-1].prior_cov, modes.covs[j, :2, :2])
+        np.testing.assert_array_equal(seen[-1].sensors, problem.sensors)
+    PlannerPolicy(Recording(), seed=0).plan(problem)
+    assert seen[-1] is problem
+    by_hand = PlanningProblem.from_prediction(
+        Prediction(modes.means[0], modes.covs[0], q.Phi, q.Q),
+        sensors=problem.sensors, r=problem.r, rho=problem.rho, sigma_d2=problem.sigma_d2,
+        sigma_theta2=problem.sigma_theta2,
+    )  # fmt: skip
+    single = LookaheadPolicy(seed=0, scenario=None, prediction=0).plan(problem)
+    np.testing.assert_array_equal(single, LookaheadPolicy(seed=0, scenario=None).plan(by_hand))
+    mixture = LookaheadPolicy(seed=0, scenario=None).plan(problem)
+    assert np.max(np.abs(single - mixture)) > 1e-6  # the choice reached the look-ahead
+
+
+def test_the_single_model_names_and_bad_predictions():
+    from activetrack import IMMSpec
+    from activetrack.baselines.policies import GSRPolicy, LookaheadPolicy, RMPolicy
+    from activetrack.baselines.policy_specs import resolve_policy
+    from activetrack.world.presets import MANEUVERING
+
+    gsr, ahead = resolve_policy("gsr-single-model"), resolve_policy("lookahead-single-model")
+    assert isinstance(gsr, GSRPolicy) and gsr.prediction == 0
+    assert isinstance(ahead, LookaheadPolicy) and ahead.prediction == 0
+    assert resolve_policy("gsr").prediction == "mixture"
+    for bad in ("cv", -1, 0.0, True):
+        with pytest.raises(ValueError, match="prediction must be 'mixture' or a mode index"):
+            GSRPolicy(prediction=bad)
+        with pytest.raises(ValueError, match="prediction must be 'mixture' or a mode index"):
+            LookaheadPolicy(prediction=bad)
+    problem = _imm_world(IMMSpec.from_behaviour(MANEUVERING), n=1, seeds=(0,)).planning_problem(0)
+    with pytest.raises(ValueError, match=r"mode index in \[0, 2\]"):
+        RMPolicy(seed=0, prediction=3).check(problem)  # before any episode (evaluate)
+    with pytest.raises(ValueError, match=r"mode index in \[0, 2\]"):
+        GSRPolicy(seed=0, prediction=3).plan(problem)

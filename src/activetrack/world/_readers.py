@@ -104,7 +104,8 @@ class WorldReaders:
 
         ``index`` None: every copy (leading batch axis N); an int: that copy, unbatched.
         The problem carries the full prediction (:class:`~activetrack.world.problem.Prediction`:
-        ``x_pred``, ``P_pred`` and the motion model ``Phi``, ``Q``); with K > 1 targets
+        ``x_pred``, ``P_pred`` and the motion model ``Phi``, ``Q``; with an IMM also its
+        predicted mixture mode by mode, ``Prediction.modes``); with K > 1 targets
         one per target (``multi_target``), whose positions and covariances are the
         problem's ``target`` and ``prior_cov``. The sensors are the position fixes; the sensors'
         models and the pose covariance the filter accounts for come along.
@@ -135,9 +136,12 @@ class WorldReaders:
                 for k, tp in enumerate(p.targets)
             ]
         preds = [
-            model.with_state(self.get("x_pred", index, k), self.get("P_pred", index, k))
+            model.with_state(
+                self.get("x_pred", index, k), self.get("P_pred", index, k),
+                self._predicted_modes(index, k),
+            )
             for k, model in enumerate(models)
-        ]
+        ]  # fmt: skip
         if self.n_targets > 1:
             return PlanningProblem(
                 None, None, sensors, p.r, p.rho, p.sigma_d2, p.sigma_theta2,

@@ -19,7 +19,10 @@ predicts (mix, mode-matched prediction, combination). Each step:
 3. *mix, predict, combine*: ``x_pred``/``P_pred`` (what the sensors keep ``rho`` from, the
    observation, the planning problem and so every planner read) are the moments of the
    predicted mixture ``sum_j c_j N(x_j(k+1|k), P_j(k+1|k))``: the planners plan against
-   the uncertainty the filter actually has.
+   the uncertainty the filter actually has. The planning problem's prediction carries the
+   mixture mode by mode too (``Prediction.modes``), so a policy may plan from one mode's
+   prediction alone instead (the policies' ``prediction``,
+   :mod:`activetrack.world.planning_prediction`).
 
 The IMM draws no random numbers, so a world with an IMM consumes the same normals as with
 the EKF: runs of the two estimators from the same seeds are paired. Every operation acts on
@@ -41,6 +44,7 @@ from activetrack.estimation import imm
 from activetrack.models.behaviour import distribution, stochastic_matrix
 from activetrack.models.motion import LinearMotionModel
 from activetrack.validation import FloatArray
+from activetrack.world.prediction import ModePredictions
 
 _WHAT = "estimator must be 'ekf', 'imm' or an activetrack.IMMSpec"
 
@@ -254,6 +258,20 @@ class IMMTracking:
         else:
             st.update(new)
         return (x_post, P_post, *imm.combine(c, xs, Ps))
+
+    def _predicted_modes(self, index: int | None, k: int) -> ModePredictions | None:
+        """Return target ``k``'s predicted mixture mode by mode (what ``x_pred``/``P_pred``
+        are the moments of) for copy ``index`` (unbatched) or every copy (None), or None
+        when the estimator is the EKF."""
+        if self._imm is None:
+            return None
+        st = self._imm_state[k]
+        parts = [st[key] for key in ("c", "x", "P")]
+        if self._one:
+            parts = [v if index is not None else v[None] for v in parts]
+        elif index is not None:
+            parts = [v[index] for v in parts]
+        return ModePredictions(*parts)
 
     @property
     def mode_probabilities(self) -> list[FloatArray] | None:

@@ -3,9 +3,12 @@
 :class:`Prediction` holds ``x_hat(k+1|k)``, ``P(k+1|k)`` and the motion model ``Phi, Q``
 of eq. (2), validated once; planners that look several steps ahead read it from
 :attr:`activetrack.world.problem.PlanningProblem.prediction` (one per target in a
-multi-target problem). The helpers below index, stack and read the position blocks of
-predictions for :class:`~activetrack.world.problem.PlanningProblem`. :class:`Prediction`
-is also importable from :mod:`activetrack.world.problem`.
+multi-target problem). With an IMM filter (the scenario field ``estimator``) a prediction
+also carries the predicted mixture mode by mode (:class:`ModePredictions`), whose moments
+are its ``mean`` and ``cov``: a planner may plan from one mode's prediction alone
+(:mod:`activetrack.world.planning_prediction`). The helpers below index, stack and read
+the position blocks of predictions for :class:`~activetrack.world.problem.PlanningProblem`.
+:class:`Prediction` is also importable from :mod:`activetrack.world.problem`.
 """
 
 from __future__ import annotations
@@ -16,9 +19,116 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
+from activetrack.estimation import imm
 from activetrack.validation import FloatArray, as_finite, psd, spd
 
-__all__ = ["Prediction"]
+__all__ = ["ModePredictions", "Prediction"]
+
+#: How far (relative to the components' scale) a prediction's mean and covariance may be
+#: from the moments of the mode predictions it carries.
+MOMENTS_RTOL = 1e-8
+
+
+@dataclass(frozen=True, eq=False)
+class ModePredictions:
+    """An IMM filter's predicted mixture mode by mode: ``sum_j c_j N(x_j(k+1|k),
+    P_j(k+1|k))`` (:mod:`activetrack.estimation.imm`: mixing, then eq. 3 with each mode's
+    model).
+
+    Arrays are float64, validated on creation and stored read-only; all three may carry
+    the same leading batch axes ``...`` (or axes that broadcast to them).
+
+    Attributes:
+        weights: the predicted mode probabilities ``c_j`` (..., r), >= 0, summing to 1.
+        means: the mode-matched predictions ``x_j(k+1|k)`` (..., r, n), position first.
+        covs: their covariances ``P_j(k+1|k)`` (..., r, n, n), symmetric positive definite.
+    """
+
+    weights: FloatArray
+    means: FloatArray
+    covs: FloatArray
+
+    def __post_init__(self) -> None:
+        w = as_finite("prediction.modes.weights", self.weights)
+        if w.ndim < 1 or w.shape[-1] < 1:
+            raise ValueError(
+                f"prediction.modes.weights must have shape (..., r) with r >= 1, got {w.shape}"
+            )
+        r = w.shape[-1]
+        if np.any(w < 0.0) or np.any(np.abs(w.sum(axis=-1) - 1.0) > 1e-9):
+            raise ValueError(
+                "prediction.modes.weights must be probabilities >= 0 summing to 1 (one per "
+                f"mode), got {self.weights!r}"
+            )
+        means = as_finite("prediction.modes.means", self.means)
+        if means.ndim < 2 or means.shape[-2] != r or means.shape[-1] < 2:
+            raise ValueError(
+                f"prediction.modes.means must have shape (..., {r}, n) with n >= 2, "
+                f"got {means.shape}"
+            )
+        n = means.shape[-1]
+        covs = spd("prediction.modes.covs", self.covs)
+        if covs.ndim < 3 or covs.shape[-3:] != (r, n, n):
+            raise ValueError(
+                f"prediction.modes.covs must have shape (..., {r}, {n}, {n}), got {covs.shape}"
+            )
+        batch = broadcast_batches(
+            {
+                "prediction.modes.weights": w.shape[:-1],
+                "prediction.modes.means": means.shape[:-2],
+                "prediction.modes.covs": covs.shape[:-3],
+            }
+        )
+        for name, value, tail in (("weights", w, 1), ("means", means, 2), ("covs", covs, 3)):
+            object.__setattr__(self, name, _read_only(value, batch, tail))
+
+    @property
+    def n_modes(self) -> int:
+        """Return the number of modes r."""
+        return int(self.weights.shape[-1])
+
+    @property
+    def dim(self) -> int:
+        """Return the state dimension n."""
+        return int(self.means.shape[-1])
+
+    @property
+    def batch_shape(self) -> tuple[int, ...]:
+        """Return the batch axes, ``()`` for a single prediction."""
+        return self.weights.shape[:-1]
+
+    def moments(self) -> tuple[FloatArray, FloatArray]:
+        """Return the mixture's mean (..., n) and covariance (..., n, n)."""
+        return imm.combine(self.weights, self.means, self.covs)
+
+    def _trusted(self, weights: FloatArray, means: FloatArray, covs: FloatArray) -> ModePredictions:
+        """Return mode predictions at already validated arrays (made read-only copies)."""
+        out = object.__new__(ModePredictions)
+        for name, value in (("weights", weights), ("means", means), ("covs", covs)):
+            value = np.array(value)
+            value.setflags(write=False)
+            object.__setattr__(out, name, value)
+        return out
+
+    def _broadcast(self, batch: tuple[int, ...]) -> ModePredictions:
+        """Return these mode predictions broadcast to the batch axes ``batch``."""
+        if self.batch_shape == batch:
+            return self
+        r, n = self.n_modes, self.dim
+        return self._trusted(
+            np.broadcast_to(self.weights, batch + (r,)),
+            np.broadcast_to(self.means, batch + (r, n)),
+            np.broadcast_to(self.covs, batch + (r, n, n)),
+        )
+
+
+def _read_only(value: FloatArray, batch: tuple[int, ...], tail: int) -> FloatArray:
+    """Return a read-only copy of ``value`` broadcast to the batch axes ``batch`` before its
+    ``tail`` trailing axes."""
+    shape = batch + value.shape[value.ndim - tail :]
+    value = np.array(np.broadcast_to(value, shape) if value.shape != shape else value)
+    value.setflags(write=False)
+    return value
 
 
 @dataclass(frozen=True, eq=False)
@@ -34,15 +144,19 @@ class Prediction:
         Phi: the transition matrix of eq. (2), (n, n), shared by the batch.
         Q: the process noise covariance of eq. (3), (n, n), symmetric positive
             semidefinite, shared by the batch.
+        modes: with an IMM filter, its predicted mixture mode by mode
+            (:class:`ModePredictions`, broadcast to the batch, whose moments ``mean`` and
+            ``cov`` must be within :data:`MOMENTS_RTOL`), or None: a single model's.
     """
 
     mean: FloatArray
     cov: FloatArray
     Phi: FloatArray
     Q: FloatArray
+    modes: ModePredictions | None = None
 
     def __post_init__(self) -> None:
-        self._store_state(self.mean, self.cov)
+        self._store_state(self.mean, self.cov, self.modes)
         n = self.dim
         Phi = as_finite("prediction.Phi", self.Phi)
         if Phi.shape != (n, n):
@@ -55,8 +169,11 @@ class Prediction:
             value.setflags(write=False)
             object.__setattr__(self, name, value)
 
-    def _store_state(self, mean: ArrayLike, cov: ArrayLike) -> None:
-        """Validate ``mean`` and ``cov`` and store them broadcast to their batch, read-only."""
+    def _store_state(
+        self, mean: ArrayLike, cov: ArrayLike, modes: ModePredictions | None = None
+    ) -> None:
+        """Validate ``mean``, ``cov`` and ``modes`` and store them broadcast to their batch,
+        read-only."""
         mean = as_finite("prediction.mean", mean)
         if mean.ndim < 1 or mean.shape[-1] < 2:
             raise ValueError(
@@ -75,9 +192,50 @@ class Prediction:
             value = np.array(np.broadcast_to(value, shape) if value.shape != shape else value)
             value.setflags(write=False)
             object.__setattr__(self, name, value)
+        if modes is not None:
+            modes = self._checked_modes(modes)
+        object.__setattr__(self, "modes", modes)
 
-    def with_state(self, mean: ArrayLike, cov: ArrayLike) -> Prediction:
-        """Return the prediction ``mean``, ``cov`` (validated) of the same motion model.
+    def _checked_modes(self, modes: object) -> ModePredictions:
+        """Return ``modes`` broadcast to this prediction's batch, or raise naming the field
+        (not mode predictions, another state or batch, moments that are not this mean's
+        and covariance)."""
+        if not isinstance(modes, ModePredictions):
+            raise ValueError(
+                "prediction.modes must be an activetrack.world.prediction.ModePredictions or "
+                f"None, got {type(modes).__name__}"
+            )
+        if modes.dim != self.dim:
+            raise ValueError(
+                f"prediction.modes.means must have shape (..., r, {self.dim}) (the "
+                f"prediction's state), got {modes.means.shape}"
+            )
+        batch = self.batch_shape
+        common = broadcast_batches({"prediction": batch, "prediction.modes": modes.batch_shape})
+        if common != batch:
+            raise ValueError(
+                f"the batch axes of prediction.modes {modes.batch_shape} must broadcast to "
+                f"the prediction's {batch}"
+            )
+        modes = modes._broadcast(batch)
+        x, P = modes.moments()
+        for name, mine, theirs, parts in (
+            ("mean", self.mean, x, modes.means),
+            ("cov", self.cov, P, modes.covs),
+        ):
+            scale = max(float(np.max(np.abs(parts))), float(np.max(np.abs(theirs))), 1e-300)
+            if np.max(np.abs(mine - theirs)) > MOMENTS_RTOL * scale:
+                raise ValueError(
+                    f"prediction.{name} must be the moments of prediction.modes (the "
+                    f"mixture's {name}, to a relative {MOMENTS_RTOL:g})"
+                )
+        return modes
+
+    def with_state(
+        self, mean: ArrayLike, cov: ArrayLike, modes: ModePredictions | None = None
+    ) -> Prediction:
+        """Return the prediction ``mean``, ``cov`` (validated; with the mode predictions
+        ``modes`` of an IMM, or None) of the same motion model.
 
         ``Phi`` and ``Q`` were validated once, with this prediction, and are shared, not
         checked again: the cheap way to make the prediction of every step of one model.
@@ -91,6 +249,8 @@ class Prediction:
             )
         object.__setattr__(out, "Phi", self.Phi)
         object.__setattr__(out, "Q", self.Q)
+        if modes is not None:
+            object.__setattr__(out, "modes", out._checked_modes(modes))
         return out
 
     @property
@@ -103,10 +263,13 @@ class Prediction:
         """Return the state dimension n."""
         return int(self.mean.shape[-1])
 
-    def _trusted(self, mean: FloatArray, cov: FloatArray) -> Prediction:
+    def _trusted(
+        self, mean: FloatArray, cov: FloatArray, modes: ModePredictions | None = None
+    ) -> Prediction:
         """Return the prediction of this model at already validated read-only arrays."""
         out = object.__new__(Prediction)
-        for name, value in (("mean", mean), ("cov", cov), ("Phi", self.Phi), ("Q", self.Q)):
+        for name, value in (("mean", mean), ("cov", cov), ("Phi", self.Phi), ("Q", self.Q),
+                            ("modes", modes)):  # fmt: skip
             object.__setattr__(out, name, value)
         return out
 
@@ -116,7 +279,9 @@ def indexed(pred: Prediction, index: Any) -> Prediction:
     mean, cov = np.array(pred.mean[index]), np.array(pred.cov[index])
     mean.setflags(write=False)
     cov.setflags(write=False)
-    return pred._trusted(mean, cov)
+    m = pred.modes
+    modes = None if m is None else m._trusted(m.weights[index], m.means[index], m.covs[index])
+    return pred._trusted(mean, cov, modes)
 
 
 def stacked(preds: list[Prediction]) -> Prediction:
@@ -128,7 +293,16 @@ def stacked(preds: list[Prediction]) -> Prediction:
         for q in preds
     ):
         raise ValueError("problems must all have the same prediction.Phi and prediction.Q")
-    return first.with_state(np.stack([q.mean for q in preds]), np.stack([q.cov for q in preds]))
+    modes = None
+    if any(q.modes is not None for q in preds):
+        if any(q.modes is None or q.modes.n_modes != first.modes.n_modes for q in preds):
+            raise ValueError("problems must all carry prediction.modes of as many modes, or none")
+        modes = ModePredictions(
+            *(np.stack([getattr(q.modes, f) for q in preds]) for f in ("weights", "means", "covs"))
+        )
+    return first.with_state(
+        np.stack([q.mean for q in preds]), np.stack([q.cov for q in preds]), modes
+    )
 
 
 def target_predictions(value: Any) -> tuple[Prediction, ...]:
@@ -182,7 +356,8 @@ def attach(
         cov = np.array(np.broadcast_to(pred.cov, batch + (n, n)))
         mean.setflags(write=False)
         cov.setflags(write=False)
-        pred = pred._trusted(mean, cov)
+        modes = None if pred.modes is None else pred.modes._broadcast(batch)
+        pred = pred._trusted(mean, cov, modes)
     if check_cov and not np.array_equal(pred.cov[..., :2, :2], prior_cov):
         raise ValueError(
             "prior_cov must equal prediction.cov[..., :2, :2] (the predicted position "
