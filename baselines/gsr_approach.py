@@ -7,7 +7,7 @@ move to the predicted target stalls against the wall between them, and with the 
 ``d_sep`` a move must keep the pair conditions with the others' plans. :func:`approach`
 moves each lost sensor, one sensor at a time (Gauss-Seidel, as the relaxation), toward the
 nearest predicted target by the *geodesic* distance around the occluders
-(:mod:`activetrack.baselines.geodesic`). Its candidates are the points that keep
+(:mod:`activetrack.models.roadmap`). Its candidates are the points that keep
 
 - its kinematics: the end points of a grid of its action box, :data:`GRID` commands per
   axis and the :data:`FINE` ones (:meth:`~activetrack.Kinematics.apply`; the paper's disks are
@@ -38,10 +38,10 @@ from __future__ import annotations
 import numpy as np
 
 from activetrack.baselines import gsr_command, gsr_separation
-from activetrack.baselines.geodesic import ROADMAPS
 from activetrack.kinematics.path_rule import restate
 from activetrack.kinematics.paths import hull_segments
 from activetrack.models.occluders import Occluders, blocked, inside
+from activetrack.models.roadmap import ROADMAPS
 from activetrack.validation import FloatArray
 
 #: Commands per axis of the grid of candidates over the action box.
@@ -63,7 +63,7 @@ def geodesic_to_targets(
     distance from ``pts`` (R, P, 2) of copies ``rows`` to the nearest of their targets
     ``targets`` (R, K, 2) around ``occ`` (None: straight lines; batched: copy ``rows[j]``'s
     layout ``occ[rows[j]]``), the first point its shortest path heads for and the length
-    beyond it (:meth:`activetrack.baselines.geodesic.Roadmap.paths`)."""
+    beyond it (:meth:`activetrack.models.roadmap.Roadmap.paths`)."""
     out = np.full(pts.shape[:2], np.inf)
     way, rest = np.array(pts, np.float64), np.zeros(pts.shape[:2])
     K = targets.shape[1]

@@ -23,10 +23,10 @@ import dataclasses
 import numpy as np
 import pytest
 
-from activetrack.baselines.geodesic import CLEARANCE, Roadmap
 from activetrack.baselines.gsr import GSR
 from activetrack.kinematics.path_rule import restate
 from activetrack.models.occluders import Occluders
+from activetrack.models.roadmap import CLEARANCE, Roadmap
 from activetrack.world import World
 from activetrack.world.presets import _BLOCKS
 

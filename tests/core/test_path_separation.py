@@ -390,6 +390,32 @@ def test_the_path_rule_fixes_the_straight_occluder_check():
     assert np.any((x > 0.45) & (x < 0.6) & (y > 0.3) & (y < 0.45))  # ...the arc is not
 
 
+@pytest.mark.parametrize("turn", [0.5, -1.0, 0.0])
+def test_a_unicycle_facing_a_wall_stays_and_turns_as_asked(turn):
+    """A unicycle that can stop, its every forward move into a wall 5 cm ahead, stays
+    where it is and turns in place by its command's turn ``w dt`` (a turn moves no point
+    of it); the next step it can leave along the wall."""
+    kin = Unicycle(0.0, 10.0, np.pi)
+    wall = [(0.05, -2.0), (1.0, -2.0), (1.0, 2.0), (0.05, 2.0)]
+    sc = make_scenario("paper", n_sensors=1, kinematics=kin, occluders=[wall],
+                       sensor_center=(0.0, 0.0), sensor_radius=1e-9, x0=(30.0, 0.0, 0.0, 0.0),
+                       x0_hat=(30.0, 0.0, 0.0, 0.0))  # fmt: skip
+    world = World(sc)
+    world.reset(seeds=[0])
+    before = world.sensor_states(0)[0].copy()
+    assert abs(before[2]) < 1e-9  # facing the wall (and the target beyond it), east
+    world.step_actions(np.array([[1.0, turn]]))  # full speed ahead: into the wall
+    after = world.sensor_states(0)[0]
+    np.testing.assert_array_equal(after[:2], before[:2])
+    # The env's action: w = a_1 w_max, so the heading turns by a_1 w_max dt.
+    assert after[2] == pytest.approx(before[2] + turn * np.pi * sc.dt, abs=1e-12)
+    if turn:  # turning on, it comes to face along the wall within a quarter turn, and goes
+        for _ in range(int(np.ceil(0.5 / sc.dt))):  # pi/2 at w_max = pi rad/s
+            world.step_actions(np.array([[1.0, np.sign(turn)]]))
+            assert world.sensor_states(0)[0, 0] < 0.05  # never into the wall
+        assert np.hypot(*(world.sensor_states(0)[0, :2] - before[:2])) > 0.2
+
+
 def test_d_sep_too_large_for_the_start_names_the_field_with_robots():
     for kin in (Unicycle(0.0, 10.0, 2.0), DoubleIntegrator(5.0, 10.0), Disk(1.0)):
         with pytest.raises(ValueError, match="d_sep=4.0 does not fit the team's start"):

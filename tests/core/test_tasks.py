@@ -35,6 +35,7 @@ def test_every_task_is_a_valid_scenario_with_its_layout():
             d, rays = 5 + 6 * M, 0
         # A kinematics with a heading (the unicycle tasks): each agent's (cos, sin) last.
         f = 0 if sc.kinematics is None else max(k.n_features for k in sc.kinematics_models)
+        f += 3 * K if sc.route_observation else 0  # the route readings (urban_unicycle)
         assert obs.shape == (M, d + rays + f), name
         assert w.state(0).shape == (d + M * rays + M * f + 1,)
         low, high = w.layout.bounds()

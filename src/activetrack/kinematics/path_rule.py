@@ -40,7 +40,9 @@ action box (:meth:`~activetrack.Kinematics.apply`), and those of 32 points on ea
 circle the sensor reaches. Every candidate is a point the kinematics reaches; the sensor's
 state after the step is :meth:`~activetrack.Kinematics.advance` of the
 :meth:`~activetrack.Kinematics.command` reaching it (its position exactly the point), so
-heading and velocity stay those of a move the robot can make. When no candidate is
+heading and velocity stay those of a move the robot can make; a unicycle whose pick is
+its own position turns in place as its wanted move turns (a turn moves no point of it,
+so it keeps every rule; a robot facing a wall comes to face a way out). When no candidate is
 feasible it takes the candidate that keeps the separation and the occluders and lies
 deepest out of the ``rho`` disks, and counts as ``stuck``.
 
@@ -302,6 +304,10 @@ class PathRule:
         pts = np.where((found | any_safe)[:, None], c[rows, pick], o)
         states = restate(kin, pts, st)
         hold = ~(found | any_safe)
-        if np.any(hold):
-            states[hold] = held(kin, st[hold], wanted[hold])
+        # A unicycle that stays (its own position the pick) turns in place as its wanted
+        # move turns: a turn moves no point of it, so it keeps every rule, and a robot
+        # facing a wall comes to face a way out instead of freezing.
+        turn = hold | (pick == 0) if isinstance(kin, Unicycle) else hold
+        if np.any(turn):
+            states[turn] = held(kin, st[turn], wanted[turn])
         return pts, states, ~found, hold

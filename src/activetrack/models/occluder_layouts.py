@@ -1,15 +1,15 @@
 """Random occluder layouts: rectangles drawn inside bounds, keeping given points clear.
 
-:func:`random_layout` draws one layout from a :class:`numpy.random.Generator` (the
-rectangles are drawn by the compiled
-:func:`activetrack.models._occluder_kernels.rectangles_into`); it is also importable from
-:mod:`activetrack.models.occluders`.
+:func:`random_layout` draws one layout from a :class:`numpy.random.Generator` (also
+importable from :mod:`activetrack.models.occluders`), :func:`layout_batch` a scenario's
+episodes' layouts, fixed and random; the rectangles are drawn by the compiled
+:func:`activetrack.models._occluder_kernels.rectangles_into`.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -19,7 +19,7 @@ from activetrack.validation import FloatArray
 if TYPE_CHECKING:
     from activetrack.models.occluders import Occluders
 
-__all__ = ["random_layout"]
+__all__ = ["layout_batch", "random_layout"]
 
 
 #: The smallest side of a random rectangle, relative to the bounds' scale.
@@ -90,3 +90,45 @@ def _rectangles(
             "size_range or clearance too tight)"
         )
     return list(out)  # rectangles of sides >= size_range[0]: simple
+
+
+def layout_batch(sc: Any, rngs: Any) -> Occluders:
+    """Return the batched occluders of a scenario's episodes, one layout drawn from each of
+    ``rngs``: the fixed ``sc.occluders`` and ``sc.random_occluders`` rectangles (sides in
+    ``sc.occluder_size``, inside ``sc.occluder_bounds``, clear of the sensors' start disk and
+    the targets' ``x0_hat`` by ``sc.sensor_radius``; :func:`ok.rectangles_into`).
+
+    Raises ``ValueError`` naming the fields when the rectangles cannot be placed, and
+    ``TypeError`` for an rng that is not a ``numpy.random.Generator``.
+    """
+    from activetrack.models.occluders import Occluders  # noqa: PLC0415 (it imports this module)
+
+    rngs = list(rngs)
+    for j, rng in enumerate(rngs):
+        if not isinstance(rng, np.random.Generator):
+            raise TypeError(f"rngs[{j}] must be a numpy.random.Generator, got {type(rng).__name__}")
+    clear = np.array([sc.sensor_center, *(x[:2] for x in sc.target_states("x0_hat"))], np.float64)
+    bounds = np.asarray(sc.occluder_bounds, np.float64)
+    sizes = np.asarray(sc.occluder_size, np.float64)
+    # Both sets are simple polygons already (the fixed ones checked with the scenario).
+    fixed = [np.asarray(poly, np.float64) for poly in sc.occluders]
+    counts = np.array([len(p) for p in fixed] + [4] * sc.random_occluders, np.intp)
+    if not counts.size:  # an open plane
+        return Occluders.stack([Occluders._of_simple([])] * len(rngs))
+    vertices = np.empty((len(rngs), int(counts.sum()), 2))
+    n_fixed = int(counts[: len(fixed)].sum())
+    if fixed:
+        vertices[:, :n_fixed] = np.concatenate(fixed)
+    for j, rng in enumerate(rngs):
+        drawn = vertices[j, n_fixed:].reshape(sc.random_occluders, 4, 2)  # a view
+        if ok.rectangles_into(
+            rng, bounds, sizes, clear, float(sc.sensor_radius), True, 1000, drawn
+        ) >= 0:  # fmt: skip
+            raise ValueError(
+                f"random_occluders: {sc.random_occluders} rectangles of sides "
+                f"{sc.occluder_size} do not fit in occluder_bounds {sc.occluder_bounds} "
+                f"clear of the sensors' start disk and the targets' x0_hat by sensor_radius "
+                f"{sc.sensor_radius:g}; widen occluder_bounds or lower random_occluders, "
+                "occluder_size or sensor_radius"
+            )
+    return Occluders._stack_simple(vertices, counts)

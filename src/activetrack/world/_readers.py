@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from activetrack.estimation.ekf import position_nees
+from activetrack.models.roadmap import route_readings
 from activetrack.validation import FloatArray
 from activetrack.world import _fast, observation
 from activetrack.world.prediction import Prediction
@@ -162,33 +163,43 @@ class WorldReaders:
         The layout is :mod:`activetrack.world.observation`'s (``self.layout``; ``D = 5 + 6M`` in
         the paper): the prediction and the team as seen from each agent's seat.
         """
-        rays = self.layout.rays
-        if self._one and self._fused and (index is None or (type(index) is int and index == 0)):
+        rays, fused = self.layout.rays, self._fused and not self.layout.route
+        if self._one and fused and (index is None or (type(index) is int and index == 0)):
             return _fast.observe_one(self)[None] if index is None else _fast.observe_one(self)
-        if self._fused and index is None:  # every copy of a batched fused world
+        if fused and index is None:  # every copy of a batched fused world
             return _fast.observe_batch(self)
         out = observation.encode(*self._feature_args(index), self._order, rays)
         if rays:  # written straight into the observation (float32): no float64 temporary
             observation.ray_readings(
                 self.get("sensors", index), self.occluders(index), out[..., -rays:]
             )
-        motion = self._motion_features(index)
-        if motion is not None:  # each agent's own heading or velocity, last
-            out = np.concatenate([out, motion.astype(np.float32)], -1)
+        more = [a for a in (self._route(index), self._motion_features(index)) if a is not None]
+        if more:  # each agent's own route readings, heading or velocity, last
+            out = np.concatenate([out, *(a.astype(np.float32) for a in more)], -1)
         return out
 
     def state(self, index: int | None = None) -> np.ndarray:
         """Return the global state, float32 (N, D + 1) or (D + 1,) for one copy."""
         target, sensor = observation.features(*self._feature_args(index))
         elapsed = self.get("k", index) / self._n_steps
-        return observation.global_state(target, sensor, elapsed, self._rays(index),
-                                        self._motion_features(index))  # fmt: skip
+        return observation.global_state(
+            target, sensor, elapsed, self._rays(index), self._motion_features(index),
+            self._route(index),
+        )  # fmt: skip
 
     def _rays(self, index: int | None) -> FloatArray | None:
         """Return every agent's range-finder readings (..., M, RAYS), or None (no occluders)."""
         if not self.layout.rays:
             return None
         return observation.ray_readings(self.get("sensors", index), self.occluders(index))
+
+    def _route(self, index: int | None) -> FloatArray | None:
+        """Return every agent's route readings (..., M, 3K), or None (no
+        ``route_observation``: :func:`activetrack.models.roadmap.route_readings`)."""
+        if not self.layout.route:
+            return None
+        goals = np.stack([self.get("x_pred", index, k)[..., :2] for k in range(self.n_targets)], -2)
+        return route_readings(self.get("sensors", index), goals, self.occluders(index))
 
     def occluders(
         self, index: int | None = None

@@ -70,6 +70,12 @@ occluder edge over :data:`RAY_MAX` (1: nothing within ``RAY_MAX`` m). Sizes: sen
 block ``12 + K``, observation ``7K + (12 + K) M (+ RAYS)``; the global state holds every
 agent's rays (``M RAYS``) before ``k / n_steps``.
 
+**Route readings** (``route_observation``): after the rays, each agent's way round the
+occluders to each target's prediction, 3 entries per target: the unit direction (world
+frame) of the way's first leg and the detour ratio, straight distance over the way's
+length, in (0, 1] (:func:`activetrack.models.roadmap.route_readings`); the global state
+holds every agent's (``3 K M``) after the rays.
+
 **A state beyond the position** (a kinematics with ``n_features > 0``:
 :mod:`activetrack.world._motion_state`). Each agent's observation (either layout) ends
 with its own F kinematic features (``Layout.motion``: a unicycle's heading as ``(cos,
@@ -102,6 +108,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from activetrack._jit import as_rows
+from activetrack.models.roadmap import ROUTE_DIM, route_bounds
 from activetrack.validation import FloatArray
 from activetrack.world import _observation_kernels as obk
 from activetrack.world._observation_kernels import LOG_STD_MAX, POSITION_MAX
@@ -137,6 +144,9 @@ class Layout:
             team's kinematics: a heading's ``(cos, sin)``, a velocity over the top speed),
             in [-1, 1], at the end of its observation; the global state holds every agent's
             after the rays.
+        route: the route readings per agent (:data:`ROUTE_DIM` per target with
+            ``route_observation``, else 0; :func:`route_readings`), after the rays; the
+            global state holds every agent's after the rays.
     """
 
     extended: bool
@@ -145,6 +155,7 @@ class Layout:
     flags: int = 0
     rays: int = 0
     motion: int = 0
+    route: int = 0
 
     @property
     def target_dim(self) -> int:
@@ -159,12 +170,15 @@ class Layout:
     @property
     def obs_dim(self) -> int:
         """Return the size of one agent's observation."""
-        return self.target_dim + self.sensor_dim * self.n_sensors + self.rays + self.motion
+        return (
+            self.target_dim + self.sensor_dim * self.n_sensors + self.rays + self.route
+            + self.motion
+        )  # fmt: skip
 
     @property
     def state_dim(self) -> int:
         """Return the size of the global state."""
-        per_agent = self.rays + self.motion
+        per_agent = self.rays + self.route + self.motion
         return self.target_dim + self.sensor_dim * self.n_sensors + per_agent * self.n_sensors + 1
 
     def sensor_constants(self, sc: Scenario, L: float) -> FloatArray:
@@ -195,6 +209,10 @@ class Layout:
             low, high = replace(self, motion=0).bounds(length_scale)
             one = np.ones(self.motion, dtype=np.float32)
             return np.concatenate([low, -one]), np.concatenate([high, one])
+        if self.route:  # the route readings, after the rays
+            low, high = replace(self, route=0).bounds(length_scale)
+            lo, hi = route_bounds(self.route // ROUTE_DIM)
+            return np.concatenate([low, lo]), np.concatenate([high, hi])
         if not self.extended:
             return observation_bounds(self.n_sensors, length_scale)
         low = np.full(self.obs_dim, -np.inf, dtype=np.float32)
@@ -222,11 +240,15 @@ class Layout:
     def state_bounds(self, length_scale: float | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Return float32 ``(low, high)`` of the global state (:meth:`bounds`, every
         agent's rays and kinematic features, and the elapsed fraction in [0, 1])."""
-        low, high = replace(self, motion=0).bounds(length_scale)
+        low, high = replace(self, motion=0, route=0).bounds(length_scale)
         if self.rays:  # every agent's rays instead of one agent's
             extra = np.float32(np.ones(self.rays * (self.n_sensors - 1)))
             low = np.concatenate([low, 0.0 * extra]).astype(np.float32)
             high = np.concatenate([high, extra]).astype(np.float32)
+        if self.route:  # every agent's route readings
+            lo, hi = route_bounds(self.route // ROUTE_DIM)
+            low = np.concatenate([low, np.tile(lo, self.n_sensors)])
+            high = np.concatenate([high, np.tile(hi, self.n_sensors)])
         if self.motion:
             one = np.ones(self.motion * self.n_sensors, dtype=np.float32)
             low, high = np.concatenate([low, -one]), np.concatenate([high, one])
@@ -265,7 +287,7 @@ def layout_of(sc: Scenario) -> Layout:
     return Layout(
         not caps.paper_observation, sc.n_targets, sc.n_sensors,
         0 if caps.unlimited_sensing else sc.n_targets, 0 if caps.no_occluders else RAYS,
-        int(motion),
+        int(motion), ROUTE_DIM * sc.n_targets if sc.route_observation else 0,
     )  # fmt: skip
 
 
@@ -454,20 +476,22 @@ def global_state(
     elapsed: FloatArray | float,
     rays: FloatArray | None = None,
     motion: FloatArray | None = None,
+    route: FloatArray | None = None,
 ) -> np.ndarray:
-    """Return the global state, float32 of shape (..., 6 + 6M) (with ``rays`` (..., M, R):
-    every agent's rays, then with ``motion`` (..., M, F) every agent's kinematic features,
-    before the elapsed fraction)."""
+    """Return the global state, float32 of shape (..., 6 + 6M): the target and sensor
+    blocks, then every agent's ``rays`` (..., M, R), ``route`` readings (..., M, 3K) and
+    kinematic features ``motion`` (..., M, F), each if given, then the elapsed fraction."""
     m, td, sd = sensor.shape[-2], target.shape[-1], sensor.shape[-1]
-    nr = 0 if rays is None else rays.shape[-1] * m
-    nm = 0 if motion is None else motion.shape[-1] * m
-    out = np.empty(sensor.shape[:-2] + (td + sd * m + nr + nm + 1,), dtype=np.float32)
+    per_agent = [a for a in (rays, route, motion) if a is not None]
+    extra = sum(a.shape[-1] * m for a in per_agent)
+    out = np.empty(sensor.shape[:-2] + (td + sd * m + extra + 1,), dtype=np.float32)
     out[..., :td] = target
     out[..., td : td + sd * m] = sensor.reshape(sensor.shape[:-2] + (m * sd,))
-    if nr:
-        out[..., td + sd * m : td + sd * m + nr] = rays.reshape(rays.shape[:-2] + (nr,))
-    if nm:
-        out[..., td + sd * m + nr : -1] = motion.reshape(motion.shape[:-2] + (nm,))
+    at = td + sd * m
+    for a in per_agent:
+        n = a.shape[-1] * m
+        out[..., at : at + n] = a.reshape(a.shape[:-2] + (n,))
+        at += n
     out[..., -1] = elapsed
     return out
 

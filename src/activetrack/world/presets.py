@@ -22,6 +22,7 @@ EXTENSIONS = (
     "n_targets", "sensor_model", "pose_cov", "account_pose", "objective", "max_range",
     "p_detect", "occluders", "random_occluders", "occluder_bounds", "occluder_size",
     "filter_iterations", "kinematics", "target_behaviour", "estimator", "d_sep",
+    "route_observation",
 )  # fmt: skip
 
 #: The beyond-the-paper tasks start the filter consistent: the true state is drawn from
@@ -207,13 +208,15 @@ PRESETS: dict[str, dict[str, Any]] = {
         "d_sep": D_SEP,
     },
     # The urban task's blocks, team, target and sensing with unicycle robots (UNICYCLE)
-    # kept D_SEP_URBAN = 1.5 m apart.
+    # kept D_SEP_URBAN = 1.5 m apart; each robot also observes its route around the blocks
+    # to the target's prediction (a robot with the map: route_observation).
     "urban_unicycle": {
         **_URBAN,
         "name": "urban_unicycle",
         "occluders": _BLOCKS,
         "kinematics": UNICYCLE,
         "d_sep": D_SEP_URBAN,
+        "route_observation": True,
     },
 }
 

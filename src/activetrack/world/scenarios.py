@@ -185,6 +185,9 @@ class Scenario:
         d_sep: the team rule of a minimum separation (:mod:`activetrack.kinematics.separation`):
             0 (none, the paper), a distance [0, 1e9] every pair keeps, or M radii (a pair
             keeps ``d_i + d_j``); the world enforces it, and it must fit the start disk.
+        route_observation: whether each agent also observes its route to each target's
+            prediction around the occluders (direction and detour:
+            :func:`activetrack.world.observation.route_readings`); False (the default).
 
     One coupled limit: the first predicted position variance (from P0, the model and q)
     may be at most 1e10 times the smallest range variance, so that one update never
@@ -226,6 +229,7 @@ class Scenario:
     target_behaviour: Any = None
     estimator: Any = "ekf"
     d_sep: float | tuple[float, ...] = 0.0
+    route_observation: bool = False
     _cache: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -254,6 +258,11 @@ class Scenario:
         if not isinstance(self.account_pose, (bool, np.bool_)):
             raise ValueError(f"account_pose must be True or False, got {self.account_pose!r}")
         put("account_pose", bool(self.account_pose))
+        if not isinstance(self.route_observation, (bool, np.bool_)):
+            raise ValueError(
+                f"route_observation must be True or False, got {self.route_observation!r}"
+            )
+        put("route_observation", bool(self.route_observation))
         put("sensor_model", _converted_models(self.sensor_model, m))
         put("pose_cov", _converted_pose_cov(self.pose_cov, m))
         if self.max_range is not None:
@@ -311,45 +320,10 @@ class Scenario:
 
     def draw_occluder_batch(self, rngs: Any):  # -> Occluders, batched
         """Return the batched occluders of episodes drawn from ``rngs`` (one layout each, as
-        :meth:`draw_occluders`; the rectangles compiled:
-        :func:`activetrack.models._occluder_kernels.rectangles_into`)."""
-        from activetrack.models import _occluder_kernels as occluder_kernels  # noqa: PLC0415 (occluded scenarios only)
-        from activetrack.models.occluders import Occluders  # noqa: PLC0415
+        :meth:`draw_occluders`; :func:`activetrack.models.occluder_layouts.layout_batch`)."""
+        from activetrack.models.occluder_layouts import layout_batch  # noqa: PLC0415
 
-        rngs = list(rngs)
-        for j, rng in enumerate(rngs):
-            if not isinstance(rng, np.random.Generator):
-                raise TypeError(
-                    f"rngs[{j}] must be a numpy.random.Generator, got {type(rng).__name__}"
-                )
-
-        clear = np.array(
-            [self.sensor_center, *(x[:2] for x in self.target_states("x0_hat"))], np.float64
-        )
-        bounds = np.asarray(self.occluder_bounds, np.float64)
-        sizes = np.asarray(self.occluder_size, np.float64)
-        # Both sets are simple polygons already (the fixed ones checked with the scenario).
-        fixed = [np.asarray(poly, np.float64) for poly in self.occluders]
-        counts = np.array([len(p) for p in fixed] + [4] * self.random_occluders, np.intp)
-        if not counts.size:  # an open plane
-            return Occluders.stack([Occluders._of_simple([])] * len(rngs))
-        vertices = np.empty((len(rngs), int(counts.sum()), 2))
-        n_fixed = int(counts[: len(fixed)].sum())
-        if fixed:
-            vertices[:, :n_fixed] = np.concatenate(fixed)
-        for j, rng in enumerate(rngs):
-            drawn = vertices[j, n_fixed:].reshape(self.random_occluders, 4, 2)  # a view
-            if occluder_kernels.rectangles_into(
-                rng, bounds, sizes, clear, float(self.sensor_radius), True, 1000, drawn
-            ) >= 0:  # fmt: skip
-                raise ValueError(
-                    f"random_occluders: {self.random_occluders} rectangles of sides "
-                    f"{self.occluder_size} do not fit in occluder_bounds {self.occluder_bounds} "
-                    f"clear of the sensors' start disk and the targets' x0_hat by sensor_radius "
-                    f"{self.sensor_radius:g}; widen occluder_bounds or lower random_occluders, "
-                    "occluder_size or sensor_radius"
-                )
-        return Occluders._stack_simple(vertices, counts)
+        return layout_batch(self, rngs)
 
     def _check_information_ratio(self) -> None:
         """Check the coupled limit of the class docstring (one update's variance reduction)."""

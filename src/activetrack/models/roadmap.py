@@ -1,5 +1,6 @@
 """Geodesic distances among occluders: how far a sensor must travel, around the buildings, to
-reach a point (issue 36: a sensor that has lost the target goes around a block, not into it).
+reach a point (issue 36: a sensor that has lost the target goes around a block, not into it;
+GSR's approach, and the agents' route readings, :func:`route_readings`).
 
 The free plane is the plane minus the occluded region ``U`` (the union of the polygons'
 open interiors, :mod:`activetrack.models.occluders`). A shortest path in it between two
@@ -24,8 +25,6 @@ reached through that polygon: the legs to the goal ignore the polygons that cont
 from __future__ import annotations
 
 import numpy as np
-from scipy.sparse import csr_matrix
-from scipy.sparse.csgraph import shortest_path
 
 from activetrack.models.occluders import Occluders, blocked, inside
 from activetrack.validation import FloatArray
@@ -75,6 +74,9 @@ class Roadmap:
         if n == 0:
             self.between = np.zeros((0, 0))
             return
+        from scipy.sparse import csr_matrix  # noqa: PLC0415 (occluded worlds only)
+        from scipy.sparse.csgraph import shortest_path  # noqa: PLC0415
+
         seen = ~blocked(self.nodes[:, None, :], self.nodes[None, :, :], occ)
         length = np.hypot(*np.moveaxis(self.nodes[:, None, :] - self.nodes[None, :, :], -1, 0))
         # Edges of zero length (two corners that coincide) join their nodes at no cost.
@@ -159,5 +161,56 @@ class Roadmaps:
         return found
 
 
-#: The planners' shared cache.
+#: The planners' and the observation's shared cache.
 ROADMAPS = Roadmaps()
+
+#: Route readings per sensor and goal (:func:`route_readings`): the first leg's direction
+#: (x, y) and the detour ratio.
+ROUTE_DIM = 3
+
+
+def route_bounds(n_targets: int) -> tuple[np.ndarray, np.ndarray]:
+    """Return float32 ``(low, high)`` of one agent's route readings (3K): the directions in
+    [-1, 1], the detour ratios in [0, 1]."""
+    low = np.tile(np.float32([-1.0, -1.0, 0.0]), n_targets)
+    return low, np.ones(ROUTE_DIM * n_targets, dtype=np.float32)
+
+
+def route_readings(positions: FloatArray, goals: FloatArray, occ: object) -> FloatArray:
+    """Return each sensor's route readings to each goal, float64 (..., M, 3K), from the
+    sensors' ``positions`` (..., M, 2) and the goals (..., K, 2) (the targets'
+    predictions), among the occluders ``occ`` (None: an open plane; batched over the
+    copies or one layout for all).
+
+    The route is the shortest path around the occluders
+    (:class:`activetrack.models.roadmap.Roadmap`, the geodesic GSR's lost sensors follow).
+    Per target: the unit direction (world frame) of its first leg, toward the first corner
+    it turns around or the goal itself, and the detour ratio ``|goal - position| /
+    geodesic distance`` in (0, 1], 1 on a clear straight line. A goal cut off from the
+    sensor (or reached: zero distance) reads direction (0, 0), ratio 0 (or 1).
+    """
+    p = np.asarray(positions, np.float64)
+    g = np.asarray(goals, np.float64)
+    batch, m, kk = p.shape[:-2], p.shape[-2], g.shape[-2]
+    p, g = p.reshape(-1, m, 2), g.reshape(-1, kk, 2)
+    s = p.shape[0]
+    dist, way = np.empty((s, m, kk)), np.empty((s, m, kk, 2))
+    for k in range(kk):
+        if occ is None:  # the straight line
+            way[:, :, k] = g[:, None, k]
+            dist[:, :, k] = np.hypot(*np.moveaxis(g[:, None, k] - p, -1, 0))
+        elif occ.batched:  # each copy's layout
+            for c in range(s):
+                d, w, _ = ROADMAPS.of(occ[c]).paths(p[c : c + 1], g[c : c + 1, k])
+                dist[c, :, k], way[c, :, k] = d[0], w[0]
+        else:
+            dist[:, :, k], way[:, :, k] = ROADMAPS.of(occ).paths(p, g[:, k])[:2]
+    leg = way - p[:, :, None, :]
+    n = np.hypot(leg[..., 0], leg[..., 1])
+    ok = np.isfinite(dist) & (n > 0.0)
+    out = np.zeros((s, m, kk, ROUTE_DIM))
+    out[..., :2] = np.where(ok[..., None], leg / np.where(ok, n, 1.0)[..., None], 0.0)
+    straight = np.hypot(*np.moveaxis(g[:, None, :, :] - p[:, :, None, :], -1, 0))
+    ratio = np.where(dist > 0.0, straight / np.where(dist > 0.0, dist, 1.0), 1.0)
+    out[..., 2] = np.clip(np.where(np.isfinite(dist), ratio, 0.0), 0.0, 1.0)
+    return out.reshape(batch + (m, ROUTE_DIM * kk))
