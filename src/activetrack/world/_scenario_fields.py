@@ -103,6 +103,7 @@ CHOICES: dict[str, tuple[Any, ...]] = {
     "sensor_model": SENSOR_MODELS,
     "objective": OBJECTIVE_NAMES,
     "account_pose": (True, False),
+    "route_observation": (False, True),
 }
 #: What a field of :data:`CHOICES` takes besides its names (one per sensor or target where
 #: the field is per sensor or per target).
