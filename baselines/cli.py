@@ -264,7 +264,8 @@ def _add_evaluate(sub: argparse._SubParsersAction) -> None:
         "evaluate",
         help=COMMANDS["evaluate"][1],
         description=(
-            "Run every --policy (gsr, gsr-restarts, gbes, rm, lookahead, or the path of a "
+            "Run every --policy (gsr, gsr-restarts, gbes, rm, lookahead, gsr-single-model, "
+            "lookahead-single-model, or the path of a "
             "policy.zip written by 'activetrack train') in the environment on the same "
             "--episodes seeds (seed, seed+1, ...). Prints mean trace and RMSE with 95% "
             "intervals, the IQM and median trace with bootstrap 95% intervals, mean return, "
@@ -286,9 +287,19 @@ def _add_evaluate(sub: argparse._SubParsersAction) -> None:
         action="append",
         required=True,
         metavar="NAME|PATH",
-        help="gsr, gsr-restarts, gbes, rm, lookahead or PATH/policy.zip (repeatable); "
+        help="gsr, gsr-restarts, gbes, rm, lookahead, gsr-single-model, "
+        "lookahead-single-model (planning from the IMM's first mode alone: see --estimator) "
+        "or PATH/policy.zip (repeatable); "
         "lookahead costs about 0.35-0.7 s of CPU per step on urban and urban_random "
         "(benchmarks/time_lookahead.py --scenario urban): use --batched there",
+    )
+    p.add_argument(
+        "--estimator",
+        choices=("ekf", "imm"),
+        default=None,
+        help="the filter: the scenario's (default), ekf, or imm (an IMM of the scenario's "
+        "target_behaviour modes, e.g. maneuvering); the planners plan from its mixture, "
+        "the *-single-model names from its first mode",
     )
     p.add_argument(
         "--episodes",
@@ -373,6 +384,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         batched=args.batched,
         loss_trace=args.loss_trace,
         pools=_pools(args),
+        **({} if args.estimator is None else {"estimator": args.estimator}),
     )
     return 0
 

@@ -283,3 +283,29 @@ def test_a_dangling_link_or_long_name_as_out_fails_before_computing(tmp_path, ca
             err = capsys.readouterr().err
             assert f"error: {out}: " in err and message in err, err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["dangling"]
+
+
+def test_evaluate_estimator_option_runs_the_imm(tmp_path):
+    """``--estimator imm`` evaluates in the IMM world (the Python API's
+    ``estimator=IMMSpec.from_behaviour(MANEUVERING)``, row for row), where planning from
+    the first mode alone is another policy; a scenario without modes is refused."""
+    from activetrack import IMMSpec
+    from activetrack.baselines.evaluation import evaluate
+    from activetrack.world.presets import MANEUVERING
+
+    out, names = tmp_path / "imm", ["gsr", "gsr-single-model"]
+    argv = ["evaluate", "--scenario", "maneuvering", "--estimator", "imm", "--episodes", "2",
+            "--no-plot", "--no-progress", "--policy", names[0], "--policy", names[1]]  # fmt: skip
+    assert main([*argv, "--out", str(out)]) == 0
+    rows = {r["label"]: r["mean_trace"] for r in json.loads((out / "results.json").read_text())}
+    spec = IMMSpec.from_behaviour(MANEUVERING)
+    imm = evaluate(names, "maneuvering", 2, progress=False, estimator=spec)
+    for res in imm:
+        assert rows[res.policy] == pytest.approx(float(res.mean_trace.mean()), rel=1e-12)
+    ekf = evaluate(["gsr"], "maneuvering", 2, progress=False)[0]
+    assert rows["gsr"] != pytest.approx(float(ekf.mean_trace.mean()), rel=1e-6)
+    assert rows["gsr"] != rows["gsr-single-model"]
+    bad = ["evaluate", "--scenario", "paper", "--estimator", "imm", "--policy", "gsr",
+           "--episodes", "1", "--no-plot", "--no-progress"]  # fmt: skip
+    assert main([*bad, "--out", str(tmp_path / "bad")]) == 2
+    assert not (tmp_path / "bad" / "results.json").exists()
