@@ -414,8 +414,10 @@ class TeamTracking:
         spread = []
         for t in self._robot_filters:
             pos = t["x_hat"][..., :2]
-            dev = pos - pos.mean(axis=-2, keepdims=True)
-            spread.append(np.sqrt((dev * dev).sum(-1).mean(-1)))
+            # (the mean square distance from the mean is half the mean square distance
+            # between pairs: exactly 0 when every robot agrees)
+            d = pos[..., :, None, :] - pos[..., None, :, :]
+            spread.append(np.sqrt(0.5 * (d * d).sum(-1).mean(axis=(-2, -1))))
         out = {
             "robot_score_mean": s.mean(-1),
             "robot_score_worst": s.max(-1),
