@@ -201,10 +201,11 @@ def test_ci_fuse_is_never_over_confident_under_any_correlation():
         common = np.tile(common[:n], (r, 1))
         C = C + common @ common.T
         P = np.stack([C[j * n : (j + 1) * n, j * n : (j + 1) * n] for j in range(r)])
-        fx, fP = ci_fuse(np.zeros((r, n)), P, np.ones((r, r), bool))
-        w = 1.0 / np.trace(P, axis1=1, axis2=2)
-        w /= w.sum()
-        G = np.concatenate([w[j] * fP[0] @ np.linalg.inv(P[j]) for j in range(r)], 1)
+        every = np.ones((r, r), bool)
+        _, fP = ci_fuse(np.zeros((r, n)), P, every)
+        # The fused mean is linear in the estimates (the errors): its map G, column by
+        # column, from the fusion itself; the fused error's covariance is G C G^T.
+        G = np.stack([ci_fuse(e.reshape(r, n), P, every)[0][0] for e in np.eye(r * n)], 1)
         err = G @ C @ G.T
         assert np.linalg.eigvalsh(fP[0] - err).min() > -1e-9 * np.trace(fP[0])
     # while the Kalman (information) fusion of the same estimates is over-confident
