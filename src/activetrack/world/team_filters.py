@@ -182,8 +182,14 @@ class TeamTracking:
     def _init_team(self) -> None:
         sc = self.scenario
         self._comm = sc.communication
+        #: Whether agents observe decentralized (activetrack.world.team_observation).
+        self._team_obs = sc.team_observation
         if self._comm is None:
             return
+        if self._team_obs:
+            from activetrack.world import team_observation  # noqa: PLC0415 (its own option)
+
+            self._team_constants = team_observation.constants(self)
         n_c, m = self.num_copies, self.n_sensors
         self._team_delay = self._comm.delay
         self._fusion = sc.team_fusion
@@ -371,6 +377,23 @@ class TeamTracking:
         return combined(self.objective, vals)
 
     # Readers -------------------------------------------------------------------------
+    def observation_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """Return float32 ``(low, high)`` of one agent's observation: the layout's
+        (:meth:`activetrack.world.observation.Layout.bounds`), or with ``team_observation``
+        the decentralized one's (:func:`activetrack.world.team_observation.bounds`)."""
+        if not self._team_obs:
+            return self.layout.bounds(self.length_scale)
+        from activetrack.world import team_observation  # noqa: PLC0415 (its own option)
+
+        return team_observation.bounds(self)
+
+    def team_info(self, index: int) -> dict[str, list[float] | float]:
+        """Return copy ``index``'s per-robot and team figures for an environment's infos:
+        ``robot_score`` (M,) and :meth:`team_metrics` (empty without communication)."""
+        if self._comm is None:
+            return {}
+        return {"robot_score": self._team_scores[index].tolist(), **self.team_metrics(index)}
+
     @property
     def decentralized(self) -> bool:
         """Whether the world keeps a filter per robot (a ``communication`` model is set)."""
