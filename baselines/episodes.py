@@ -2,13 +2,16 @@
 one episode loop (:func:`activetrack.baselines.rollout.rollout`).
 
 A row is ``(mean_trace, rmse, return, mean_nees, ms_per_step, no_detection,
-longest_gap, track_loss)`` over steps 1..n_steps of an episode (``track_loss``:
+longest_gap, track_loss, robot_score_mean, robot_score_worst, disagreement)`` over steps
+1..n_steps of an episode (``track_loss``:
 :func:`activetrack.baselines.protocol.track_loss_rate` at the threshold ``loss_trace``,
-by default each target's prior position trace): serially in an environment's world
-(:func:`run_episode`, a chunk of seeds in :func:`run_episodes`, one Ray task), or every
-episode a copy of one batched world (:func:`run_batched`). ``ms_per_step`` is the CPU time
-(``time.process_time``) of the policy's decisions per step, after a warm-up decision that
-is not counted (:func:`warm_up`: the compiled kernels' first compilation).
+by default each target's prior position trace; the last three, with a filter per robot,
+the means over the steps of :meth:`activetrack.world.World.team_metrics`, else NaN):
+serially in an environment's world (:func:`run_episode`, a chunk of seeds in
+:func:`run_episodes`, one Ray task), or every episode a copy of one batched world
+(:func:`run_batched`). ``ms_per_step`` is the CPU time (``time.process_time``) of the
+policy's decisions per step, after a warm-up decision that is not counted
+(:func:`warm_up`: the compiled kernels' first compilation).
 """
 
 from __future__ import annotations
@@ -55,6 +58,8 @@ class _RowRecorder(Recorder):
         self.nees: list[list[float]] = [[] for _ in range(n)]
         self.seen: list[list[np.ndarray]] = [[] for _ in range(n)]
         self.target_traces: list[list[list[float]]] = [[] for _ in range(n)]
+        # With a filter per robot: the team's metrics per step (team_filters.team_metrics).
+        self.team: list[list[list[float]]] = [[] for _ in range(n)]
         self.loss_trace = loss_trace
         self.totals = [0.0] * n
         self.seconds = 0.0
@@ -77,6 +82,8 @@ class _RowRecorder(Recorder):
                 [float(np.trace(world.get("P", i, k)[:2, :2])) for k in range(world.n_targets)]
             )
             self.totals[j] += float(step.rewards[i])
+            if world.decentralized:
+                self.team[j].append(list(world.team_metrics(i).values()))
         if self.loss_trace is None:
             self.loss_trace = prior_traces(world.scenario)
         if self.on_step is not None and not step.batched:
@@ -96,6 +103,7 @@ class _RowRecorder(Recorder):
                 np.array(self.target_traces[j]),
                 self.loss_trace,
             ),
+            *(np.mean(self.team[j], axis=0).tolist() if self.team[j] else [np.nan] * 3),
         )
 
 

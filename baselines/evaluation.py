@@ -93,6 +93,10 @@ class PolicyEvaluation:
             (:func:`activetrack.baselines.protocol.track_loss_rate`); None with unlimited
             sensing.
         loss_trace: its threshold per target (m^2), None with unlimited sensing.
+        team: with a filter per robot (a ``communication`` model), per-episode means over
+            the steps of the robots' mean score, the worst robot's score and the robots'
+            disagreement (m) (:meth:`activetrack.world.World.team_metrics`), (episodes,
+            3); else None.
     """
 
     policy: str
@@ -107,6 +111,7 @@ class PolicyEvaluation:
     longest_gap: np.ndarray | None = None
     track_loss: np.ndarray | None = None
     loss_trace: list[float] | None = None
+    team: np.ndarray | None = None
 
     def summary(self, reference: PolicyEvaluation | None = None) -> dict[str, Any]:
         """Return the JSON summary; the ratio is to ``reference``'s mean trace (GSR).
@@ -160,6 +165,9 @@ class PolicyEvaluation:
             rate, lo, hi = protocol.interval(self.track_loss, "mean")
             out["track_loss_rate"], out["track_loss_rate_ci95"] = rate, [lo, hi]
             out["track_loss_threshold"] = self.loss_trace
+        if self.team is not None and np.all(np.isfinite(self.team)):
+            for key, column in zip(TEAM_METRICS, self.team.T, strict=True):
+                out[key] = float(np.mean(column))
         if reference is not None:
             out["ratio_to_gsr"] = mt / float(np.mean(reference.mean_trace))
             out["ratio_to_gsr_ci95"] = list(paired_ratio_ci(self.mean_trace, reference.mean_trace))
@@ -167,6 +175,9 @@ class PolicyEvaluation:
             out["iqm_ratio_to_gsr"], out["iqm_ratio_to_gsr_ci95"] = ratio, [lo, hi]
         return out
 
+
+#: The team's metrics of a world with a filter per robot, in the summary and the episodes.
+TEAM_METRICS = ("robot_score_mean", "robot_score_worst", "disagreement")
 
 #: Bootstrap resamples of the intervals, and resamples per vectorized batch (memory).
 N_RESAMPLES, RESAMPLE_BATCH = 9999, 500
@@ -373,6 +384,7 @@ def evaluate(
                 arr[:, 3],
                 arr[:, 4],
                 *gaps,
+                arr[:, 8:11] if np.all(np.isfinite(arr[:, 8:11])) else None,
             )  # fmt: skip
         )
     return results
@@ -502,6 +514,11 @@ def format_table(rows: Sequence[dict[str, Any]]) -> str:
         if "no_detection" in r:  # limited sensing: steps without a measurement, longest run
             extra.append(f"no detection {r['no_detection']:.3f}")
             extra.append(f"longest gap {r['longest_gap']}")
+        if "disagreement" in r:  # a filter per robot: its robots' scores, their spread
+            extra.append(
+                f"robots mean {r['robot_score_mean']:.4g}, worst {r['robot_score_worst']:.4g}, "
+                f"disagreement {r['disagreement']:.3g} m"
+            )
         if extra:
             line += "  " + ", ".join(extra)
         lines.append(line)
@@ -559,6 +576,11 @@ def write_results(
                     }
                 ),
                 **({} if r.track_loss is None else {"track_loss": r.track_loss.tolist()}),
+                **(
+                    {}
+                    if r.team is None
+                    else {k: c.tolist() for k, c in zip(TEAM_METRICS, r.team.T, strict=True)}
+                ),
             }
             for r in results
         },

@@ -73,6 +73,9 @@ from activetrack.world.problem import PlanningProblem
 #: Relative margin of the bound test: a block combination is pruned only if its lower
 #: bound exceeds the incumbent by this factor, which covers the rounding of both.
 _PRUNE_RTOL = 1e-10
+#: The most sensors GBES takes: its grid search broadcasts one array axis per sensor and
+#: one more, and NumPy's arrays have at most 32 axes.
+GBES_MAX_SENSORS = 31
 
 #: Arc-length steps above this keep every grid point: the grid drops points closer than
 #: 1e-12 m in both coordinates, and with 2 or more steps per arc (each at most pi radians)
@@ -356,6 +359,11 @@ class GBES:
             raise ValueError(
                 f"search takes a single problem, got batch_shape {problem.batch_shape}; "
                 "use plan, or index the problem"
+            )
+        if problem.n_sensors > GBES_MAX_SENSORS:
+            raise ValueError(
+                f"GBES searches every sensor's grid jointly, one array axis each: at most "
+                f"{GBES_MAX_SENSORS} sensors, got {problem.n_sensors}; plan with GSR"
             )
         fit = self.fitted(problem)
         total = fit.check(problem)

@@ -124,7 +124,7 @@ class BatchedActiveTracking(VectorEnv):
         m = self.n_sensors = sc.n_sensors
         self.length_scale = self.world.length_scale
 
-        low, high = self.world.layout.bounds(self.length_scale)
+        low, high = self.world.observation_bounds()
         self.single_observation_space = spaces.Box(
             np.tile(low, m), np.tile(high, m), dtype=np.float32
         )

@@ -102,7 +102,9 @@ class TrackingParallelEnv(ParallelEnv):
         over targets of ``tr P_11``, the posterior position covariance's trace (the
         paper's eq. 12, 17), ``"worst_trace"`` the largest of them, ``"logdet"`` the sum of
         their log-determinants (:mod:`activetrack.models.objective`). The return is the sum
-        over the episode's steps.
+        over the episode's steps. With a ``communication`` model (the ``radio`` tasks) each
+        robot keeps its own filter and each agent gets ``-reward_scale`` times the
+        objective at its own robot's posterior (:mod:`activetrack.world.team_filters`).
 
     Episode End:
         Truncation: after ``n_steps`` steps every agent is truncated (the episode's
@@ -118,14 +120,18 @@ class TrackingParallelEnv(ParallelEnv):
     ``[v_min, v_max]`` and ``[-w_max, w_max]`` and held over the step). It observes
     ``Box(float32, (5 + 6M,))`` (:mod:`activetrack.world.observation`; a unicycle's
     observation ends with its heading ``(cos, sin)``). :meth:`state` is the ``6 + 6M``
-    global state for centralized critics (then every agent's heading).
+    global state for centralized critics (then every agent's heading). With
+    ``team_observation`` each agent observes only its own estimate and its neighbours'
+    messages (:mod:`activetrack.world.team_observation`); the global state is unchanged.
 
     Infos (per agent, plain Python values): ``step`` k, ``trace`` the posterior
     ``tr P(k|k)_11`` (m^2), ``position_error`` ``||p_T - p_hat_T(k|k)||`` (m, privileged),
     ``projected`` whether this agent's move was pushed out of its ``rho`` disk this step,
     ``n_projected`` how often in the episode, ``max_trace_exceeded`` the termination flag;
     with ``d_sep > 0`` the team rule's ``collisions``, ``n_collisions``, ``n_stuck`` and
-    ``min_separation`` (:mod:`activetrack.world._motion_state`).
+    ``min_separation`` (:mod:`activetrack.world._motion_state`); with ``communication``
+    the agent's ``robot_score`` (the objective on its own estimate) and the team's
+    ``robot_score_mean``, ``robot_score_worst`` and ``disagreement`` (m).
 
     For experts: :meth:`planning_problem` (the raw problem of eq. 15-17) and
     :meth:`step_positions` (step with absolute next positions). :meth:`observe` returns the
@@ -157,7 +163,7 @@ class TrackingParallelEnv(ParallelEnv):
         self.length_scale = self.world.length_scale
 
         # Some bounds scale with the length scale (activetrack.world.observation, "Bounds").
-        low, high = self.world.layout.bounds(self.length_scale)
+        low, high = self.world.observation_bounds()
         # One space object per agent, returned as is (PettingZoo seeds them separately);
         # the dicts are also exposed as attributes for libraries that still read them.
         self.observation_spaces = {
@@ -296,9 +302,15 @@ class TrackingParallelEnv(ParallelEnv):
     def _dicts(
         self, agents: list[str], obs: np.ndarray, reward: float, terminated: bool, truncated: bool
     ) -> StepReturn:
+        if self.world.decentralized:  # each robot's reward from its own estimate
+            reward = (-self.scenario.reward_scale * self.world.robot_scores(0)).tolist()
+            rewards = dict(zip(self.possible_agents, reward, strict=True))
+            rewards = {a: rewards[a] for a in agents}
+        else:
+            rewards = dict.fromkeys(agents, reward)
         out = (
             dict(zip(agents, obs, strict=True)),
-            dict.fromkeys(agents, reward),
+            rewards,
             dict.fromkeys(agents, terminated),
             dict.fromkeys(agents, truncated),
             self._infos(agents, terminated),
@@ -310,6 +322,9 @@ class TrackingParallelEnv(ParallelEnv):
     def _infos(self, agents: list[str], exceeded: bool) -> dict[str, dict[str, Any]]:
         k, trace, err, proj, nproj = self.world.copy_info(0)
         sep = self.world.separation_info(0)  # (empty without d_sep)
+        team = self.world.team_info(0)  # (empty without communication)
+        if team:  # each agent its own robot's score
+            team["robot_score"] = dict(zip(self.possible_agents, team["robot_score"], strict=True))
         return {
             a: {
                 "step": k,
@@ -319,6 +334,7 @@ class TrackingParallelEnv(ParallelEnv):
                 "n_projected": nproj[i],
                 "max_trace_exceeded": exceeded,
                 **sep,
+                **({**team, "robot_score": team["robot_score"][a]} if team else {}),
             }
             for i, a in enumerate(agents)
         }

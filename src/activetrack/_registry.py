@@ -44,6 +44,9 @@ TASK_IDS = {
     "activetrack/FixedWing-v0": "fixed_wing",
     "activetrack/Crowded-v0": "crowded",
     "activetrack/UrbanUnicycle-v0": "urban_unicycle",
+    "activetrack/Radio-v0": "radio",
+    "activetrack/Swarm-v0": "swarm",
+    "activetrack/UrbanRadio-v0": "urban_radio",
 }
 #: Every registered id and its preset (``ActiveTracking-v0`` is the paper).
 ALL_IDS = {ENV_ID: "paper", **TASK_IDS}

@@ -21,7 +21,7 @@ def _first_problem(preset):
     return world.planning_problem(0)
 
 
-@pytest.mark.parametrize("preset", sorted(PRESETS))
+@pytest.mark.parametrize("preset", sorted(set(PRESETS) - {"swarm"}))
 def test_the_default_grid_fits_its_bound_on_every_preset(preset):
     problem = _first_problem(preset)
     gbes = GBES()
@@ -56,11 +56,16 @@ def test_simulate_and_evaluate_defaults_run_on_every_preset(preset, tmp_path, mo
     monkeypatch.setitem(PRESETS, preset, {**PRESETS[preset], "n_steps": 2})
     # 8 sensors (crowded): GBES's default grid costs about a minute a plan; a coarse one
     coarse = ["--gbes-spacing", "2.0"] if make_scenario(preset).n_sensors > 4 else []
+    # 32 sensors (swarm): beyond GBES's grid (the test below), GSR and RM only
+    swarm = make_scenario(preset).n_sensors > 31
+    planners = ["--planner", "gsr", "--planner", "rm"] if swarm else []
     assert main(["simulate", "--scenario", preset, "--runs", "1", "--steps", "2", "--out",
-                 str(tmp_path / "sim"), "--no-plot", "--no-progress", *coarse]) == 0  # fmt: skip
+                 str(tmp_path / "sim"), "--no-plot", "--no-progress", *coarse,
+                 *planners]) == 0  # fmt: skip
     data = json.loads((tmp_path / "sim" / "results.json").read_text())
-    assert list(data) == ["gsr", "gbes", "rm"]
-    assert main(["evaluate", "--scenario", preset, "--policy", "gbes", "--episodes", "1",
+    assert list(data) == (["gsr", "rm"] if swarm else ["gsr", "gbes", "rm"])
+    policy = "gsr" if swarm else "gbes"
+    assert main(["evaluate", "--scenario", preset, "--policy", policy, "--episodes", "1",
                  "--out", str(tmp_path / "ev"), "--no-plot", "--no-progress",
                  *coarse]) == 0  # fmt: skip
     assert (tmp_path / "ev" / "results.json").exists()
@@ -70,3 +75,9 @@ def test_evaluate_takes_gbes_spacing(tmp_path):
     assert main(["evaluate", "--scenario", "paper", "--policy", "gbes", "--episodes", "1",
                  "--gbes-spacing", "0.2", "--out", str(tmp_path / "ev"), "--no-plot",
                  "--no-progress"]) == 0  # fmt: skip
+
+
+def test_gbes_refuses_more_sensors_than_its_grid_has_axes():
+    # swarm's 32 robots: one array axis each and one more is beyond NumPy's 32
+    with pytest.raises(ValueError, match="at most 31 sensors, got 32; plan with GSR"):
+        GBES().search(_first_problem("swarm"))

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from activetrack import Disk, FilterModel, SensorModel
+from activetrack.models.communication import RangeLimited
 from activetrack.world import World, capabilities, observation
 from activetrack.world.capabilities import Capabilities
 from activetrack.world.problem import PlanningProblem
@@ -18,7 +19,7 @@ from activetrack.world.scenarios import PRESETS, make_scenario
 FLAGS = (
     "one_target", "range_bearing", "known_poses", "pose_free_filter", "unlimited_sensing",
     "no_occluders", "single_update", "trace_objective", "disk_kinematics", "builtin_sensors",
-    "filter_targets", "no_separation",
+    "filter_targets", "no_separation", "central_filter",
 )  # fmt: skip
 
 
@@ -77,6 +78,16 @@ PRESET_FLAGS = {
         "disk_kinematics": False,
         "no_separation": False,
     },  # fmt: skip
+    # a filter per robot (issue 37): stage by stage
+    "radio": {**dict.fromkeys(FLAGS, True), "central_filter": False},
+    "swarm": {**dict.fromkeys(FLAGS, True), "one_target": False, "central_filter": False},
+    "urban_radio": {
+        **dict.fromkeys(FLAGS, True),
+        "unlimited_sensing": False,
+        "no_occluders": False,
+        "single_update": False,
+        "central_filter": False,
+    },  # fmt: skip
 }
 
 # Which paths each preset takes, as docs/architecture.md and the presets describe them.
@@ -99,6 +110,10 @@ PRESET_PATHS = {  # (paper_model, paper_problem, paper_observation, fused_step)
     # the paper's sensors and disks; the iterated EKF and the team rule d_sep: stage by stage
     "crowded": (False, True, True, False),
     "urban_unicycle": (False, False, False, False),
+    # the paper's measurement setup, a filter per robot: stage by stage
+    "radio": (True, True, True, False),
+    "swarm": (False, False, False, False),
+    "urban_radio": (False, False, False, False),
 }
 
 
@@ -138,11 +153,16 @@ def expected(fields: dict) -> dict[str, bool]:
         "builtin_sensors": all(isinstance(m, str) for m in models),
         "filter_targets": fields.get("target_behaviour") is None,
         "no_separation": not np.any(fields.get("d_sep", 0.0)),
+        "central_filter": fields.get("communication") is None,
     }
     return {
         **f,
-        # The paper: every flag; its planning problem: those the planners see.
-        "paper_model": all(f.values()),
+        # The paper's measurement setup: every flag but how the true targets move and
+        # whether the robots also keep filters of their own (the maneuvering and radio
+        # presets); its planning problem: those the planners see.
+        "paper_model": all(
+            v for k, v in f.items() if k not in ("central_filter", "filter_targets")
+        ),
         "paper_problem": all(
             f[k]
             for k in (
@@ -167,6 +187,7 @@ def expected(fields: dict) -> dict[str, bool]:
                 "builtin_sensors",
                 "filter_targets",
                 "no_separation",
+                "central_filter",
             )
         ),  # fmt: skip
     }
@@ -214,6 +235,8 @@ def random_fields(rng: np.random.Generator) -> dict:
         fields["kinematics"] = (Disk(1.0), OwnDisk(1.0) if own else Disk(0.5), Disk(1.0))
     if rng.random() < 0.2:  # true targets that follow a behaviour (here their own model)
         fields["target_behaviour"] = FilterModel(make_scenario("paper").model)
+    if rng.random() < 0.2:  # a filter per robot
+        fields["communication"] = RangeLimited(10.0, drop=0.2)
     return fields
 
 

@@ -197,7 +197,9 @@ def _nees_runs(
     # as does the paper's fixed true start away from the prior mean: the unicycle tasks)
     [t for t in TASKS if not make_scenario(t).limited_sensing
      and make_scenario(t).capabilities.filter_targets
-     and make_scenario(t).target_init == "gaussian"],
+     and make_scenario(t).target_init == "gaussian"
+     # (the decentralized tasks: every robot's filter, tests/core/test_team_filters.py)
+     and make_scenario(t).communication is None],
 )  # fmt: skip
 def test_filter_is_consistent_on_every_task(name):
     # The mean over 200 runs of each run's time-averaged position NEES (per target) lies

@@ -163,6 +163,8 @@ class WorldReaders:
         The layout is :mod:`activetrack.world.observation`'s (``self.layout``; ``D = 5 + 6M`` in
         the paper): the prediction and the team as seen from each agent's seat.
         """
+        if self._team_obs:  # each agent its own estimate and messages (team_observation)
+            return self._team_observe(index)
         rays, fused = self.layout.rays, self._fused and not self.layout.route
         if self._one and fused and (index is None or (type(index) is int and index == 0)):
             return _fast.observe_one(self)[None] if index is None else _fast.observe_one(self)
@@ -177,6 +179,18 @@ class WorldReaders:
         if more:  # each agent's own route readings, heading or velocity, last
             out = np.concatenate([out, *(a.astype(np.float32) for a in more)], -1)
         return out
+
+    def _team_observe(self, index: int | None) -> np.ndarray:
+        """Return :func:`activetrack.world.team_observation.observe` with the agents' own
+        rays, route readings and kinematic features as its tail."""
+        from activetrack.world import team_observation  # noqa: PLC0415 (its own option)
+
+        tail = []
+        if self.layout.rays:
+            tail.append(observation.ray_readings(self.get("sensors", index), self.occluders(index)))
+        tail += [a for a in (self._route(index), self._motion_features(index)) if a is not None]
+        tail = np.concatenate(tail, -1) if tail else None
+        return team_observation.observe(self, index, tail)
 
     def state(self, index: int | None = None) -> np.ndarray:
         """Return the global state, float32 (N, D + 1) or (D + 1,) for one copy."""

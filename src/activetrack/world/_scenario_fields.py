@@ -104,6 +104,8 @@ CHOICES: dict[str, tuple[Any, ...]] = {
     "objective": OBJECTIVE_NAMES,
     "account_pose": (True, False),
     "route_observation": (False, True),
+    "team_fusion": ("measurements", "covariance_intersection"),
+    "team_observation": (False, True),
 }
 #: What a field of :data:`CHOICES` takes besides its names (one per sensor or target where
 #: the field is per sensor or per target).
@@ -161,6 +163,9 @@ def accepted(name: str) -> str:
         "name": "a string",
         "estimator": "'ekf', 'imm' (the target_behaviour's mode set), or an "
         "activetrack.IMMSpec (modes of the targets' state and dt, a row-stochastic transition)",
+        "communication": "None (one central filter) or an activetrack.CommunicationModel "
+        "(FullCommunication, or RangeLimited: range >= 0, drop in [0, 1], delay an integer "
+        "< n_steps, line_of_sight) or its record",
         "d_sep": "0 (none), a distance in [0, 1e9] every pair keeps, or M radii in [0, 1e9] "
         "(a pair keeps d_i + d_j); it must fit the start disk",
     }[name]

@@ -74,6 +74,8 @@ class Capabilities:
             behaviour (:mod:`activetrack.world.behaviours`), stage by stage.
         no_separation: ``d_sep`` is 0: no team rule; else the world's moves go through
             :class:`activetrack.kinematics.separation.Separation`, stage by stage.
+        central_filter: no ``communication`` model: one central filter; else a filter per
+            robot too (:mod:`activetrack.world.team_filters`), stage by stage.
     """
 
     one_target: bool
@@ -88,6 +90,7 @@ class Capabilities:
     builtin_sensors: bool = True
     filter_targets: bool = True
     no_separation: bool = True
+    central_filter: bool = True
 
     @classmethod
     def of(cls, sc: Any) -> Capabilities:
@@ -106,6 +109,7 @@ class Capabilities:
             builtin_sensors=all(m.builtin for m in sc.sensor_objects),
             filter_targets=sc.target_behaviour is None,
             no_separation=not any(np.atleast_1d(sc.d_sep)),
+            central_filter=sc.communication is None,
         )
 
     @property
@@ -141,7 +145,7 @@ class Capabilities:
         call (:func:`activetrack.world.tracking.advance_target`), not stage by stage."""
         return (
             self.one_target and self.unlimited_sensing and self.single_update
-            and self.filter_targets
+            and self.filter_targets and self.central_filter
         )  # fmt: skip
 
     @property

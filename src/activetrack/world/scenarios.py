@@ -21,7 +21,7 @@ from activetrack.models.motion import LinearMotionModel, make_model
 from activetrack.models.objective import Objective
 from activetrack.models.sensor import SensorModel, as_sensor_model, record, slot_code
 from activetrack.validation import FloatArray, UnexpectedKeywordError
-from activetrack.world import behaviours, imm_tracking
+from activetrack.world import behaviours, imm_tracking, team_filters
 from activetrack.world._scenario_fields import (
     _PER_SENSOR,
     CHOICES,
@@ -188,6 +188,13 @@ class Scenario:
         route_observation: whether each agent also observes its route to each target's
             prediction around the occluders (direction and detour:
             :func:`activetrack.world.observation.route_readings`); False (the default).
+        communication: None (one central filter, the paper's team) or an
+            :class:`activetrack.CommunicationModel`: who hears whom each step; the world
+            then keeps a filter per robot too (:mod:`activetrack.world.team_filters`).
+        team_fusion: how a robot uses what it hears: ``"measurements"`` (its neighbours'
+            measurements, the default) or ``"covariance_intersection"`` (their estimates).
+        team_observation: whether each agent observes only its own estimate and its
+            neighbours' messages (:mod:`activetrack.world.team_observation`); False.
 
     One coupled limit: the first predicted position variance (from P0, the model and q)
     may be at most 1e10 times the smallest range variance, so that one update never
@@ -230,6 +237,9 @@ class Scenario:
     estimator: Any = "ekf"
     d_sep: float | tuple[float, ...] = 0.0
     route_observation: bool = False
+    communication: Any = None
+    team_fusion: str = "measurements"
+    team_observation: bool = False
     _cache: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -306,6 +316,7 @@ class Scenario:
         self._check_information_ratio()
         put("d_sep", separation.converted(self.d_sep, m))
         separation.check_scenario(self)
+        team_filters.check_fields(self, put)
         if self.random_occluders:  # a layout can be drawn (the reset would fail otherwise)
             self.draw_occluders(np.random.default_rng(0))
 
@@ -517,6 +528,7 @@ class Scenario:
             if f.name == "target_behaviour":  # a record of which behaviours, not their code
                 v = behaviours.record(v)
             v = imm_tracking.record(v) if f.name == "estimator" else v
+            v = team_filters.record(v) if f.name == "communication" else v
             out[f.name] = v.name if isinstance(v, LinearMotionModel) else v
         return out
 

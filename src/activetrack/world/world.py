@@ -75,6 +75,7 @@ from activetrack.world._streams import RandomStreams
 from activetrack.world.behaviours import TargetMotion
 from activetrack.world.imm_tracking import IMMTracking
 from activetrack.world.scenarios import Scenario, make_scenario
+from activetrack.world.team_filters import TeamTracking
 
 #: Steps of noise a copy draws per generator call in a world of several copies.
 DEFAULT_NOISE_BLOCK = 64
@@ -99,7 +100,7 @@ class StepResult(NamedTuple):
 
 class World(  # (the mixins: world/_selection.py, _streams.py, ..., imm_tracking.py)
     CopySelection, RandomStreams, WorldReaders, OccludedMoves, TargetMotion, MotionState,
-    IMMTracking,
+    IMMTracking, TeamTracking,
 ):  # fmt: skip
     """``num_copies`` independent tracking episodes of one scenario, stepped together.
 
@@ -290,6 +291,7 @@ class World(  # (the mixins: world/_selection.py, _streams.py, ..., imm_tracking
         self._t: list[dict[str, Any]] = targets
         self._init_behaviours()  # the true targets' behaviours (activetrack.world.behaviours)
         self._init_imm()  # an IMM estimator's state (activetrack.world.imm_tracking)
+        self._init_team()  # a filter per robot (activetrack.world.team_filters)
 
     # Reset ------------------------------------------------------------------------------
     def reset(
@@ -388,6 +390,7 @@ class World(  # (the mixins: world/_selection.py, _streams.py, ..., imm_tracking
                 self._s[key][sel] = value
         self._reset_behaviours(rows)  # (spawned generators: the copies' streams do not move)
         self._reset_imm(sel)
+        self._reset_team(rows)  # (after the behaviours': its own spawned generators)
         self._noise_left[sel] = 0
         if self._noise is not None:
             self._draw_noise(rows)
@@ -602,4 +605,6 @@ class World(  # (the mixins: world/_selection.py, _streams.py, ..., imm_tracking
                     continue
                 x_post, P_post = tracking.filter_update(p, x_pred, P_pred, z, fixes, seen)
             results.append((x_true, x_post, P_post, *predict(x_post, P_post, tp.Phi, tp.Q)))
+        if general and self._comm is not None:  # each robot's filters (no random draws here)
+            self._team_step(z_all, fixes, detected, sensors, sel)
         return sensors, fixes, projected, detected, results
