@@ -114,7 +114,19 @@ class DistributedGSR:
         #: The rounds each copy's groups ran in the latest :meth:`plan` (batch + (M,), by robot).
         self.last_rounds: np.ndarray | None = None
 
-    def plan(self, views: Sequence[PlanningProblem], links: ArrayLike) -> FloatArray:
+    def plan(self, problem: PlanningProblem, rng: np.random.Generator | None = None) -> FloatArray:
+        """Return the team's next absolute positions for a world's planning problem,
+        batch + (M, 2): a decentralized team's
+        (:class:`~activetrack.world.team_problem.TeamProblem`) by its robots' own
+        predictions and links, a central team's as one group sharing its estimate (no
+        ``rng``: deterministic)."""
+        team = getattr(problem, "team", None)
+        if team is None:
+            m = problem.n_sensors
+            return self.plan_views([problem] * m, np.ones(problem.batch_shape + (m, m), bool))
+        return self.plan_views(team.views(problem), team.links)
+
+    def plan_views(self, views: Sequence[PlanningProblem], links: ArrayLike) -> FloatArray:
         """Return the team's next absolute positions, batch + (M, 2).
 
         ``views[i]`` is the step's planning problem as robot ``i`` sees it (its own

@@ -112,6 +112,20 @@ class GSRPolicy(PlannerPolicy):
         super().__init__(GSR(**planner_kwargs), seed, prediction)
 
 
+class DistributedGSRPolicy(PlannerPolicy):
+    """GSR by message passing inside each connected group, each robot on its own estimate
+    (:class:`~activetrack.baselines.distributed_gsr.DistributedGSR`, issue 37) as a policy;
+    ``planner_kwargs`` go to ``DistributedGSR`` (``prediction``: :class:`PlannerPolicy`'s).
+    On a central team it is GSR."""
+
+    def __init__(
+        self, seed: int | None = None, prediction: str | int = "mixture", **planner_kwargs: Any
+    ) -> None:
+        from activetrack.baselines.distributed_gsr import DistributedGSR
+
+        super().__init__(DistributedGSR(**planner_kwargs), seed, prediction)
+
+
 class GBESPolicy(PlannerPolicy):
     """Grid-based exhaustive search (Section V) as a policy; kwargs go to ``GBES``
     (``prediction``: :class:`PlannerPolicy`'s)."""

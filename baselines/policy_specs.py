@@ -7,7 +7,9 @@ A policy is an expert with ``plan(problem) -> next positions`` (e.g.
 ``gsr-restarts`` (``GSR(restarts=True)``), ``gbes``, ``rm``, ``lookahead``,
 ``gsr-single-model`` and ``lookahead-single-model`` (GSR and the look-ahead planning from
 the IMM's mode 0 alone, ``prediction=0``: :mod:`activetrack.world.planning_prediction`;
-with the EKF they are ``gsr`` and ``lookahead``), or the path of a policy file, e.g. a
+with the EKF they are ``gsr`` and ``lookahead``), ``distributed-gsr`` (GSR by message
+passing inside each connected group of a decentralized team, each robot on its own
+estimate: :mod:`activetrack.baselines.distributed_gsr`), or the path of a policy file, e.g. a
 trained ``policy.zip``.
 
 Policy files load through the entry-point group :data:`POLICY_LOADERS`
@@ -35,6 +37,7 @@ EXPERT_NAMES = (
     "lookahead",
     "gsr-single-model",
     "lookahead-single-model",
+    "distributed-gsr",
 )
 #: The entry-point group of the policy file loaders: name = the file suffix without its
 #: dot (lower case), value = ``module:function`` taking the path and returning a policy.
@@ -68,6 +71,8 @@ def resolve_policy(spec: Any) -> Any:
             # The IMM's first mode's prediction alone (maneuvering's constant velocity).
             "gsr-single-model": lambda: policies.GSRPolicy(prediction=0),
             "lookahead-single-model": lambda: policies.LookaheadPolicy(scenario=None, prediction=0),
+            # Each robot on its own estimate, inside its connected group (issue 37).
+            "distributed-gsr": policies.DistributedGSRPolicy,
         }[name.lower()]()
     path = Path(name)
     if not path.exists() and (path.suffix or len(path.parts) > 1):  # meant as a file

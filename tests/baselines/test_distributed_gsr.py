@@ -41,7 +41,7 @@ def test_message_passing_with_full_links_ends_where_central_gsr_ends(name):
     for p in _problems(name, 6, 12):
         m = p.n_sensors
         central = GSR().plan(p)
-        ours = d.plan([p] * m, np.ones(p.batch_shape + (m, m), bool))
+        ours = d.plan_views([p] * m, np.ones(p.batch_shape + (m, m), bool))
         np.testing.assert_allclose(p.score(ours), p.score(central), rtol=1e-9)
         np.testing.assert_allclose(ours, central, atol=1e-5)
         assert d.last_rounds.max() <= d.rounds
@@ -51,7 +51,7 @@ def test_shortcut_is_gsr_bit_for_bit_with_full_links_and_one_estimate():
     for name in ("paper", "two_targets", "urban"):
         for p in _problems(name, 4, 5):
             m = p.n_sensors
-            ours = DistributedGSR().plan([p] * m, np.ones(p.batch_shape + (m, m), bool))
+            ours = DistributedGSR().plan_views([p] * m, np.ones(p.batch_shape + (m, m), bool))
             assert np.array_equal(ours, GSR().plan(p))
 
 
@@ -64,7 +64,7 @@ def test_disconnected_groups_each_plan_as_a_team_of_their_own():
         for g in groups:
             for i in g:
                 links[c, i, g] = True
-    ours = DistributedGSR(shortcut=False).plan([p] * 4, links)
+    ours = DistributedGSR(shortcut=False).plan_views([p] * 4, links)
     for c, groups in enumerate(([[0, 2], [1, 3]], [[0, 1, 2], [3]])):
         keys = ("sensors", "r", "rho", "sigma_d2", "sigma_theta2")
         one = dataclasses.replace(
@@ -86,7 +86,7 @@ def test_a_robot_alone_plans_on_its_own_estimate():
     views = [p] * m
     views[1] = own
     links = np.eye(m, dtype=bool)[None]
-    ours = DistributedGSR().plan(views, links)
+    ours = DistributedGSR().plan_views(views, links)
     np.testing.assert_allclose(ours[0, 1], GSR().plan(_sub(own, [1]))[0, 0], atol=1e-5)
     np.testing.assert_allclose(ours[0, 0], GSR().plan(_sub(p, [0]))[0, 0], atol=1e-5)
 
@@ -94,13 +94,51 @@ def test_a_robot_alone_plans_on_its_own_estimate():
 def test_rounds_are_bounded_and_bad_arguments_name_the_field():
     p = _problems("homogeneous", 3, 2)[-1]
     d = DistributedGSR(rounds=1, shortcut=False)
-    d.plan([p] * 4, np.ones((3, 4, 4), bool))
+    d.plan_views([p] * 4, np.ones((3, 4, 4), bool))
     assert d.last_rounds.max() == 1
     with pytest.raises(ValueError, match="rounds"):
         DistributedGSR(rounds=0)
     with pytest.raises(ValueError, match="tol"):
         DistributedGSR(tol=1.5)
     with pytest.raises(ValueError, match="links"):
-        DistributedGSR().plan([p] * 4, np.ones((3, 4, 3), bool))
+        DistributedGSR().plan_views([p] * 4, np.ones((3, 4, 3), bool))
     with pytest.raises(ValueError, match="views"):
-        DistributedGSR().plan([p] * 3, np.ones((3, 4, 4), bool))
+        DistributedGSR().plan_views([p] * 3, np.ones((3, 4, 4), bool))
+
+
+def test_on_a_decentralized_world_each_robot_plans_on_its_own_estimate():
+    """radio with 5 m links that drop half their packets: the world's problem carries every
+    robot's prediction (the world's filters per robot) and links; distributed GSR plans
+    each group from them: a robot without links plans alone on its own prediction (GSR on
+    a one-sensor problem of that prediction, built here from the world's arrays), which
+    differs from its team mates'."""
+    from activetrack.models.communication import RangeLimited
+    from activetrack.world.problem import Prediction
+
+    w = World("radio", 16, communication=RangeLimited(range=5.0, drop=0.5))
+    w.reset(seeds=list(range(16)))
+    w.step(GSR().plan(w.planning_problem()))  # at reset every robot holds the prior
+    policy = DistributedGSR()
+    alone_seen = 0
+    for _ in range(20):
+        p = w.planning_problem()
+        plan = policy.plan(p)
+        links = np.asarray(w.links())
+        x, P = w.team_get("x_pred"), w.team_get("P_pred")
+        np.testing.assert_array_equal(p.team.links, links)
+        for c in range(16):
+            for i in range(p.n_sensors):
+                if links[c, i].sum() + links[c, :, i].sum() > 2:  # in contact with someone
+                    continue
+                assert not np.array_equal(x[c, i], x[c, i - 1])  # its own estimate
+                alone_seen += 1
+                q = p.prediction
+                own = Prediction(x[c, i], P[c, i], q.Phi, q.Q)
+                row = {
+                    k: np.broadcast_to(getattr(p, k), (16, p.n_sensors))[c, [i]]
+                    for k in ("r", "rho", "sigma_d2", "sigma_theta2")
+                }
+                one = PlanningProblem.from_prediction(own, sensors=p.sensors[c, [i]], **row)
+                np.testing.assert_allclose(plan[c, i], GSR().plan(one)[0], atol=1e-6)
+        w.step(plan)
+    assert alone_seen > 0

@@ -19,7 +19,7 @@ import numpy as np
 from activetrack.estimation.ekf import position_nees
 from activetrack.models.roadmap import route_readings
 from activetrack.validation import FloatArray
-from activetrack.world import _fast, observation
+from activetrack.world import _fast, observation, team_problem
 from activetrack.world.prediction import Prediction
 from activetrack.world.problem import PlanningProblem
 
@@ -143,19 +143,17 @@ class WorldReaders:
             for k, model in enumerate(models)
         ]  # fmt: skip
         if self.n_targets > 1:
-            return PlanningProblem(
+            problem = PlanningProblem(
                 None, None, sensors, p.r, p.rho, p.sigma_d2, p.sigma_theta2,
                 prediction=tuple(preds), multi_target=True, **extra,
             )  # fmt: skip
-        return PlanningProblem.from_prediction(
-            preds[0],
-            sensors=sensors,
-            r=p.r,
-            rho=p.rho,
-            sigma_d2=p.sigma_d2,
-            sigma_theta2=p.sigma_theta2,
-            **extra,
-        )
+        else:
+            problem = PlanningProblem.from_prediction(
+                preds[0], sensors=sensors, r=p.r, rho=p.rho, sigma_d2=p.sigma_d2,
+                sigma_theta2=p.sigma_theta2, **extra,
+            )  # fmt: skip
+        # A decentralized team's problem also carries each robot's prediction and the links.
+        return team_problem.with_team(self, problem, index)
 
     def observe(self, index: int | None = None) -> np.ndarray:
         """Return every agent's observation, float32 (N, M, D), or (M, D) for one copy.

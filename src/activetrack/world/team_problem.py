@@ -1,0 +1,73 @@
+"""The planning problem of a decentralized team: the central problem plus what each robot
+knows (issue 37).
+
+With a communication model (the scenario field ``communication``;
+:mod:`activetrack.world.team_filters`) the world's planning problem is a
+:class:`TeamProblem`: the central filter's problem (what a centralized planner plans
+from, unchanged) carrying :class:`TeamViews`, every robot's own prediction of every
+target and the last step's link matrix. :meth:`TeamViews.views` turns them into one
+:class:`~activetrack.world.problem.PlanningProblem` per robot (the team's sensors, reaches
+and rules, robot ``i``'s prediction): what a distributed planner
+(:class:`activetrack.baselines.distributed_gsr.DistributedGSR`) gives each robot.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from activetrack.world.problem import PlanningProblem, Prediction
+
+_FIELDS = tuple(f.name for f in dataclasses.fields(PlanningProblem))
+
+
+@dataclass(frozen=True, eq=False)
+class TeamViews:
+    """Every robot's prediction of every target and the step's links.
+
+    Attributes:
+        predictions: one :class:`Prediction` per target whose mean (..., M, n) and
+            covariance (..., M, n, n) carry a robot axis before the state: robot ``i``'s
+            ``x_hat_i(k+1|k)``, ``P_i(k+1|k)``.
+        links: the last step's link matrix, bool (..., M, M) (row: receiver).
+    """
+
+    predictions: tuple[Prediction, ...]
+    links: np.ndarray
+
+    def views(self, problem: PlanningProblem) -> list[PlanningProblem]:
+        """Return robot ``i``'s problem for every ``i``: ``problem`` (the team's sensors,
+        reaches and rules) with robot ``i``'s prediction of every target."""
+        base = PlanningProblem(**{k: getattr(problem, k) for k in _FIELDS})
+        out = []
+        for i in range(problem.n_sensors):
+            own = tuple(
+                q.with_state(q.mean[..., i, :], q.cov[..., i, :, :]) for q in self.predictions
+            )
+            pred: Any = own if problem.multi_target else own[0]
+            out.append(dataclasses.replace(base, prior_cov=None, target=None, prediction=pred))
+        return out
+
+
+@dataclass(frozen=True)
+class TeamProblem(PlanningProblem):
+    """A :class:`PlanningProblem` (the central filter's) with the team's :class:`TeamViews`."""
+
+    team: TeamViews | None = None
+
+
+def with_team(world: Any, problem: PlanningProblem, index: int | None) -> PlanningProblem:
+    """Return ``problem`` as a :class:`TeamProblem` carrying ``world``'s robots' predictions
+    and links (copy ``index``, or every copy), or ``problem`` itself for a central team."""
+    if not world.decentralized:
+        return problem
+    models = problem.prediction if problem.multi_target else (problem.prediction,)
+    preds = tuple(
+        q.with_state(world.team_get("x_pred", index, k), world.team_get("P_pred", index, k))
+        for k, q in enumerate(models)
+    )
+    team = TeamViews(preds, np.asarray(world.links(index), bool))
+    return TeamProblem(**{k: getattr(problem, k) for k in _FIELDS}, team=team)
