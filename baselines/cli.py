@@ -265,7 +265,7 @@ def _add_evaluate(sub: argparse._SubParsersAction) -> None:
         help=COMMANDS["evaluate"][1],
         description=(
             "Run every --policy (gsr, gsr-restarts, gbes, rm, lookahead, gsr-single-model, "
-            "lookahead-single-model, distributed-gsr, or the path of a "
+            "lookahead-single-model, distributed-gsr, distributed-lookahead, or the path of a "
             "policy.zip written by 'activetrack train') in the environment on the same "
             "--episodes seeds (seed, seed+1, ...). Prints mean trace and RMSE with 95% "
             "intervals, the IQM and median trace with bootstrap 95% intervals, mean return, "
@@ -290,7 +290,8 @@ def _add_evaluate(sub: argparse._SubParsersAction) -> None:
         help="gsr, gsr-restarts, gbes, rm, lookahead, gsr-single-model, "
         "lookahead-single-model (planning from the IMM's first mode alone: see --estimator), "
         "distributed-gsr (each robot on its own estimate, inside its group of a "
-        "decentralized team) or PATH/policy.zip (repeatable); "
+        "decentralized team), distributed-lookahead (per group, by its leader) or "
+        "PATH/policy.zip (repeatable); "
         "lookahead costs about 0.35-0.7 s of CPU per step on urban and urban_random "
         "(benchmarks/time_lookahead.py --scenario urban): use --batched there",
     )

@@ -126,6 +126,25 @@ class DistributedGSRPolicy(PlannerPolicy):
         super().__init__(DistributedGSR(**planner_kwargs), seed, prediction)
 
 
+class DistributedLookaheadPolicy(PlannerPolicy):
+    """The look-ahead run per connected group by the group's leader on its own estimate
+    (:class:`~activetrack.baselines.group_planner.GroupPlanner`, issue 37); ``settings``
+    as :class:`LookaheadPolicy`'s. On a central team it is the look-ahead."""
+
+    def __init__(
+        self, seed: int | None = None, prediction: str | int = "mixture", **settings: Any
+    ) -> None:
+        from activetrack.baselines.group_planner import GroupPlanner
+        from activetrack.baselines.lookahead import LookaheadPlanner
+
+        super().__init__(GroupPlanner(lambda: LookaheadPlanner(None, **settings)), seed, prediction)
+
+    def reset(self, seed: int | None = None) -> None:
+        """Re-seed and forget the episode (every group's planner)."""
+        super().reset(seed)
+        self.planner.reset()
+
+
 class GBESPolicy(PlannerPolicy):
     """Grid-based exhaustive search (Section V) as a policy; kwargs go to ``GBES``
     (``prediction``: :class:`PlannerPolicy`'s)."""

@@ -9,7 +9,9 @@ A policy is an expert with ``plan(problem) -> next positions`` (e.g.
 the IMM's mode 0 alone, ``prediction=0``: :mod:`activetrack.world.planning_prediction`;
 with the EKF they are ``gsr`` and ``lookahead``), ``distributed-gsr`` (GSR by message
 passing inside each connected group of a decentralized team, each robot on its own
-estimate: :mod:`activetrack.baselines.distributed_gsr`), or the path of a policy file, e.g. a
+estimate: :mod:`activetrack.baselines.distributed_gsr`), ``distributed-lookahead`` (the
+look-ahead per connected group, by its leader on its own estimate:
+:mod:`activetrack.baselines.group_planner`), or the path of a policy file, e.g. a
 trained ``policy.zip``.
 
 Policy files load through the entry-point group :data:`POLICY_LOADERS`
@@ -38,6 +40,7 @@ EXPERT_NAMES = (
     "gsr-single-model",
     "lookahead-single-model",
     "distributed-gsr",
+    "distributed-lookahead",
 )
 #: The entry-point group of the policy file loaders: name = the file suffix without its
 #: dot (lower case), value = ``module:function`` taking the path and returning a policy.
@@ -73,6 +76,7 @@ def resolve_policy(spec: Any) -> Any:
             "lookahead-single-model": lambda: policies.LookaheadPolicy(scenario=None, prediction=0),
             # Each robot on its own estimate, inside its connected group (issue 37).
             "distributed-gsr": policies.DistributedGSRPolicy,
+            "distributed-lookahead": policies.DistributedLookaheadPolicy,
         }[name.lower()]()
     path = Path(name)
     if not path.exists() and (path.suffix or len(path.parts) > 1):  # meant as a file

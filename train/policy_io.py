@@ -221,6 +221,8 @@ def _load_policy(path: Path) -> LearnedPolicy:
             meta = json.loads(_member(zf, "meta.json", MAX_META_BYTES))
         except (UnicodeDecodeError, json.JSONDecodeError, RecursionError) as exc:
             raise _PolicyFileError(f"meta.json is not valid JSON ({exc})") from exc
+        if isinstance(meta, dict) and meta.get("network") == "set":  # a team-size-free net
+            return _load_set_policy(zf, meta, path)
         obs_space, act_space, net = _check_meta(meta)
         head = None
         if "action_target" in meta:
@@ -252,6 +254,31 @@ def _load_policy(path: Path) -> LearnedPolicy:
     policy = build_policy(obs_space, act_space, net)
     policy.load_state_dict(state)
     return LearnedPolicy(policy, meta, name=path.name, head=head)
+
+
+def _load_set_policy(zf: zipfile.ZipFile, meta: dict, path: Path) -> Any:
+    """Return the :class:`~activetrack.train.set_policy.SetPolicy` of a policy file whose
+    ``meta.json`` says ``"network": "set"``, every size checked before allocating."""
+    from activetrack.train import set_policy
+
+    if meta.get("format") != FORMAT:
+        raise _PolicyFileError(f"not an activetrack policy file (format {meta.get('format')!r})")
+    try:
+        net = set_policy.net_from_meta(meta, MAX_PARAMETERS)
+    except (TypeError, ValueError) as exc:
+        raise _PolicyFileError(f"meta.json: {exc}") from exc
+    shapes = {k: tuple(v.shape) for k, v in net.state_dict().items()}
+    numel = sum(math.prod(s) for s in shapes.values())
+    raw = _member(zf, "policy.pth", 8 * numel + 1_000_000)
+    try:
+        state = torch.load(io.BytesIO(raw), map_location="cpu", weights_only=True)
+    except Exception as exc:  # torch raises many types for a corrupt file
+        raise _PolicyFileError(
+            f"policy.pth is not a torch state dict ({type(exc).__name__})"
+        ) from exc
+    _check_state(state, shapes)
+    net.load_state_dict(state)
+    return set_policy.SetPolicy(net, meta, name=path.name)
 
 
 def _check_meta(meta: Any) -> tuple[gym.spaces.Box, gym.spaces.Box, NetConfig]:

@@ -51,6 +51,19 @@ class TeamViews:
             out.append(dataclasses.replace(base, prior_cov=None, target=None, prediction=pred))
         return out
 
+    def view_of(self, problem: PlanningProblem, robots: np.ndarray) -> PlanningProblem:
+        """Return ``problem`` with, in every copy ``c``, robot ``robots[c]``'s prediction of
+        every target (``robots``: int, the problem's batch shape)."""
+        base = PlanningProblem(**{k: getattr(problem, k) for k in _FIELDS})
+        idx = np.asarray(robots)[..., None, None]
+        own = []
+        for q in self.predictions:
+            mean = np.take_along_axis(q.mean, idx, axis=-2)[..., 0, :]
+            cov = np.take_along_axis(q.cov, idx[..., None], axis=-3)[..., 0, :, :]
+            own.append(q.with_state(mean, cov))
+        pred: Any = tuple(own) if problem.multi_target else own[0]
+        return dataclasses.replace(base, prior_cov=None, target=None, prediction=pred)
+
 
 @dataclass(frozen=True)
 class TeamProblem(PlanningProblem):
