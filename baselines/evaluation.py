@@ -261,10 +261,12 @@ def check_batched(batched: object, workers: object, address: object) -> tuple[in
 
 def batchable(policy: Any) -> bool:
     """Return whether ``policy`` is a deterministic planner that plans batched problems
-    (GSR and the look-ahead planner), the policies ``batched`` runs in one world."""
-    from activetrack.baselines.policies import GSRPolicy, LookaheadPolicy
+    (GSR, the look-ahead planner and their distributed forms), the policies ``batched``
+    runs in one world."""
+    from activetrack.baselines import policies as p
 
-    return isinstance(policy, (GSRPolicy, LookaheadPolicy))
+    kinds = (p.GSRPolicy, p.LookaheadPolicy, p.DistributedGSRPolicy, p.DistributedLookaheadPolicy)
+    return isinstance(policy, kinds)
 
 
 def evaluate(

@@ -1,0 +1,174 @@
+"""The decentralized tables of docs/results/decentralized.md (issue 37).
+
+``scaling``: a set policy (``--policy``, trained on 4 robots) beside distributed GSR and
+central GSR on teams of 4, 8, 16 and 32 robots of the ``radio`` family (radio's range,
+drops and target with every robot range-and-bearing, range variance 2 m^2, bearing
+variance 0.01 rad^2), 100 held-out episodes each (seeds 1000..1099, paired). The team's
+score is the robots' mean trace on their own estimates (``team[:, 0]`` of the rows).
+
+``sweep``: on ``radio`` itself, the team's mean trace as the range shrinks (drop 0.2) and
+as the drop rate grows (range 10 m), for central GSR, distributed GSR, the look-ahead per
+group and a set policy (``--policy``, trained on radio); a figure (``--figure``).
+
+Both write their rows to ``--out`` (JSON, a new file) and print a Markdown table::
+
+    OPENBLAS_NUM_THREADS=1 python docs/scripts/decentralized_tables.py scaling \\
+        --policy runs/set_m4.zip --out scaling.json
+    OPENBLAS_NUM_THREADS=1 python docs/scripts/decentralized_tables.py sweep \\
+        --policy runs/set_radio.zip --out sweep.json --figure docs/_static/figures/radio_sweep.png
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+#: The scaling family's overrides of ``radio`` (a team of any size).
+FAMILY = {"sigma_d2": 2.0, "sigma_theta2": 0.01, "team_observation": True}
+SIZES = (4, 8, 16, 32)
+RANGES = (math.inf, 15.0, 10.0, 5.0, 2.5)
+DROPS = (0.0, 0.2, 0.5, 0.8)
+
+
+def _rows(runs: list, reference: str) -> list[dict[str, Any]]:
+    """Return per-policy rows: the robots' mean trace, its ratio to ``reference`` (paired
+    BCa 95%), the central filter's mean trace and the CPU ms per decision."""
+    from activetrack.baselines.evaluation import paired_ratio_ci
+
+    team = {r.policy: r.team[:, 0] for r in runs}
+    ref = team[reference]
+    out = []
+    for r in runs:
+        a = team[r.policy]
+        lo, hi = paired_ratio_ci(a, ref)
+        out.append({
+            "policy": r.policy, "robots_mean_trace": float(a.mean()),
+            "ratio": float(a.mean() / ref.mean()), "ratio_ci95": [float(lo), float(hi)],
+            "central_trace": float(r.mean_trace.mean()),
+            "ms_per_step": float(np.mean(r.ms_per_step)),
+        })  # fmt: skip
+    return out
+
+
+def scaling(policy: str, episodes: int) -> list[dict[str, Any]]:
+    """Return the scaling rows, one per (team size, policy)."""
+    from activetrack.baselines.evaluation import evaluate
+    from activetrack.train.policy_io import load_policy
+
+    learned = load_policy(policy)
+    out = []
+    for m in SIZES:
+        runs = evaluate(
+            {"gsr": "gsr", "distributed-gsr": "distributed-gsr", "set policy": learned},
+            "radio", episodes=episodes, seed=1000, batched=True, progress=False,
+            n_sensors=m, **FAMILY,
+        )  # fmt: skip
+        for row in _rows(runs, "distributed-gsr"):
+            out.append({"robots": m, **row})
+            print(out[-1], flush=True)
+    return out
+
+
+def sweep(policy: str, episodes: int) -> list[dict[str, Any]]:
+    """Return the sweep rows, one per (range, drop, policy)."""
+    from activetrack.baselines.evaluation import evaluate
+    from activetrack.models.communication import RangeLimited
+    from activetrack.train.policy_io import load_policy
+
+    learned = load_policy(policy)
+    cases = [(r, 0.2) for r in RANGES] + [(10.0, d) for d in DROPS if d != 0.2]
+    out = []
+    for rng, drop in cases:
+        comm = RangeLimited(range=rng, drop=drop)
+        runs = evaluate(
+            {
+                "gsr": "gsr", "distributed-gsr": "distributed-gsr",
+                "distributed-lookahead": "distributed-lookahead", "set policy": learned,
+            },
+            "radio", episodes=episodes, seed=1000, batched=True, progress=False,
+            communication=comm, team_observation=True,
+        )  # fmt: skip
+        for row in _rows(runs, "gsr"):
+            out.append({"range": rng if math.isfinite(rng) else None, "drop": drop, **row})
+            print(out[-1], flush=True)
+    return out
+
+
+def figure(rows: list[dict[str, Any]], path: Path) -> None:
+    """Draw the robots' mean trace against the range (drop 0.2) and the drop (range 10 m)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from activetrack.files import atomic_path
+
+    fig, (a, b) = plt.subplots(1, 2, figsize=(10, 4), sharey=True)
+    for name in dict.fromkeys(r["policy"] for r in rows):
+        mine = [r for r in rows if r["policy"] == name]
+        by_range = [r for r in mine if r["drop"] == 0.2]
+        xs = [r["range"] if r["range"] is not None else 40.0 for r in by_range]
+        a.plot(xs, [r["robots_mean_trace"] for r in by_range], "o-", label=name)
+        by_drop = sorted((r for r in mine if r["range"] == 10.0), key=lambda r: r["drop"])
+        b.plot([r["drop"] for r in by_drop], [r["robots_mean_trace"] for r in by_drop], "o-")
+    a.set_xscale("log")
+    a.set_xlabel("communication range (m; 40 = unlimited), drop 0.2")
+    b.set_xlabel("drop probability, range 10 m")
+    a.set_ylabel("robots' mean trace (m$^2$)")
+    a.legend()
+    fig.suptitle("radio, 100 held-out episodes")
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png", dpi=110)
+    plt.close(fig)
+
+
+def table(rows: list[dict[str, Any]], keys: tuple[str, ...]) -> str:
+    """Return the rows as a Markdown table led by ``keys``."""
+    head = [*keys, "policy", "robots' mean trace", "ratio [95% CI]", "central trace", "ms/step"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for r in rows:
+        lead = ["inf" if r[k] is None else f"{r[k]:g}" for k in keys]
+        lo, hi = r["ratio_ci95"]
+        lines.append("| " + " | ".join([
+            *lead, r["policy"], f"{r['robots_mean_trace']:.3f}",
+            f"{r['ratio']:.3f} [{lo:.3f}, {hi:.3f}]", f"{r['central_trace']:.3f}",
+            f"{r['ms_per_step']:.2f}",
+        ]) + " |")  # fmt: skip
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Run the chosen table, write its rows and print it."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("which", choices=("scaling", "sweep"))
+    parser.add_argument("--policy", required=True, help="the set policy's policy.zip")
+    parser.add_argument("--episodes", type=int, default=100)
+    parser.add_argument("--out", type=Path, required=True, help="a new JSON file")
+    parser.add_argument("--figure", type=Path, help="sweep: the figure's PNG path")
+    args = parser.parse_args(argv)
+    if args.out.exists():
+        parser.error(f"--out: {args.out} exists (results are not overwritten)")
+    if args.episodes < 1:
+        parser.error(f"--episodes must be a positive integer, got {args.episodes}")
+    from activetrack.files import atomic_write_json
+    from activetrack.train.utils import configure_torch
+
+    configure_torch(1)  # one torch thread: the policy's ms/step is its own
+    if args.which == "scaling":
+        rows = scaling(args.policy, args.episodes)
+        print(table(rows, ("robots",)))
+    else:
+        rows = sweep(args.policy, args.episodes)
+        print(table(rows, ("range", "drop")))
+        if args.figure is not None:
+            figure(rows, args.figure)
+    atomic_write_json(args.out, rows)
+
+
+if __name__ == "__main__":
+    main()
