@@ -164,6 +164,18 @@ class PursuitParallelEnv(ParallelEnv):
         self._set_targets(actions)
         return self._finish(self.tracking.step(dict(zip(self.sensor_agents, sensors, strict=True))))
 
+    def step_team(
+        self, sensor_actions: dict[str, Any], target_actions: dict[str, Any] | None = None
+    ) -> StepReturn:
+        """Move the sensors by their actions (``{sensor_i: (2,)}``) and the targets by
+        ``target_actions`` (None: by their fallback behaviour) and advance."""
+        if not self.agents:
+            raise RuntimeError("the episode is over (no live agents): call reset() first")
+        sensors = actions_array(sensor_actions, self.sensor_agents)
+        if target_actions is not None:
+            self._set_targets(target_actions)
+        return self._finish(self.tracking.step(dict(zip(self.sensor_agents, sensors, strict=True))))
+
     def step_positions(
         self, positions: dict[str, Any] | np.ndarray, target_actions: dict[str, Any] | None = None
     ) -> StepReturn:
