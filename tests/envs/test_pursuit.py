@@ -85,3 +85,18 @@ def test_errors_name_the_agent_or_the_field():
     assert env2.target_agents == ["target_0"]
     obs, _ = env2.reset(seed=0)
     assert env2.observation_space("target_0").contains(obs["target_0"])
+
+
+def test_with_limited_sensing_a_target_observes_which_sensors_detected_it():
+    sc = make_scenario("urban", target_behaviour=Controlled(5.0, 0.1))
+    env = PursuitParallelEnv(sc)
+    env.reset(seed=2)
+    rng = np.random.default_rng(2)
+    seen = []
+    for _ in range(30):
+        obs = env.step({a: rng.uniform(-1, 1, 2) for a in env.agents})[0]
+        flags = obs["target_0"][-4:]
+        np.testing.assert_array_equal(flags, env.world.get("detected", 0)[0].astype(np.float32))
+        seen.append(flags)
+    assert 0 < np.mean(seen) < 1  # both cases occur (a test of the flags, not a constant)
+    assert env.observation_space("target_0").shape == (7 + 2 * 4 + 4,)
