@@ -144,11 +144,7 @@ class _View(gym.Env):
         else:
             acts = dict(zip(g.sensor_agents, np.reshape(sensors, (-1, 2)), strict=True))
             out = g.step_team(acts, ta)
-        obs, rewards, terms, truncs, infos = out
-        if g.agents:  # (the last step's observations stay for the final return)
-            self._obs = obs
-        else:
-            self._obs = {**self._obs, **obs}
+        self._obs, rewards, terms, truncs, infos = out  # (every agent's, the last step's too)
         a = g.sensor_agents[0]
         return rewards[a], terms[a], truncs[a], infos[a]
 
