@@ -327,12 +327,17 @@ def pursuit_episodes(
     """Return the sensors' mean posterior trace per step (m^2; the protocol's score) on
     each episode of ``seeds``: the sensors planned by ``planner`` (a name of
     :data:`PLANNERS`), the target moved by ``evader`` (``obs -> action``) or, with
-    ``evader`` None, by its fallback (the scripted evader)."""
+    ``evader`` None, by its fallback (the scripted evader). A planner that draws (RM) is
+    reseeded for each episode as ``activetrack evaluate`` does, so with the scripted
+    evader every row is the ``evader`` task's, episode for episode."""
+    from activetrack.baselines.rollout import reset_policy
+
     game = PursuitParallelEnv(scenario, **overrides)
     plan = _planner(planner)
     out = []
     for s in seeds:
         obs, _ = game.reset(seed=s)
+        reset_policy(plan, s)  # a planner that draws: the runner's generator for the seed
         traces = []
         while game.agents:
             ta = None if evader is None else {"target_0": evader(obs["target_0"])}

@@ -66,8 +66,10 @@ def test_the_commands_run_end_to_end(tmp_path):
     from activetrack.envs import parallel_env
 
     env = parallel_env("evader")
-    got = run_episode(env, resolve_policy("gsr"), 1000)
-    assert rows["gsr", "scripted"]["scores"][0] == pytest.approx(got[0], rel=1e-12)
+    for p in ("gsr", "rm"):  # (RM draws: reseeded per episode as the runner does)
+        for j, seed in enumerate((1000, 1003)):
+            got = run_episode(env, resolve_policy(p), seed)
+            assert rows[p, "scripted"]["scores"][3 * j] == pytest.approx(got[0], rel=1e-12)
     assert "| gsr | learned |" in (ev / "pursuit_eval.md").read_text()
 
 
