@@ -86,3 +86,16 @@ def test_bad_settings_name_their_field(tmp_path):
     bad.write_bytes(b"not a zip")
     with pytest.raises(ValueError, match="not an evader.zip"):
         sp.load_evader(bad)
+
+
+def test_the_commands_check_their_arguments_before_training(tmp_path, capsys):
+    out = tmp_path / "out"
+    assert main(["train", "selfplay", "--rounds", "0", "--out", str(out)]) == 2
+    assert "activetrack train selfplay: error: rounds must be" in capsys.readouterr().err
+    missing = tmp_path / "none.zip"
+    argv = ["train", "selfplay-evaluate", "--evader", str(missing), "--out", str(out)]
+    assert main(argv) == 2
+    assert "no such evader file" in capsys.readouterr().err
+    assert main([*argv[:-2], "--episodes", "0", "--out", str(out)]) == 2
+    assert "episodes must be" in capsys.readouterr().err
+    assert not out.exists()
