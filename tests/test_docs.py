@@ -114,7 +114,7 @@ def test_every_registered_id_has_a_page_whose_table_matches_the_environment(site
         agents = list(penv.possible_agents)
         m = sc.n_sensors
         # A two-team game (activetrack.envs.pursuit) adds its controlled targets' agents.
-        targets = [f"target_{j}" for j in range(len(genv.unwrapped.world.controlled_targets))]
+        targets = [f"target_{j}" for j in range(len(penv.unwrapped.world.controlled_targets))]
         assert agents == [f"sensor_{i}" for i in range(m)] + targets
 
         assert table["Gymnasium id"] == env_id
