@@ -113,16 +113,18 @@ def test_every_registered_id_has_a_page_whose_table_matches_the_environment(site
         pobs, _ = penv.reset(seed=0)
         agents = list(penv.possible_agents)
         m = sc.n_sensors
-        assert agents == [f"sensor_{i}" for i in range(m)]
+        # A two-team game (activetrack.envs.pursuit) adds its controlled targets' agents.
+        targets = [f"target_{j}" for j in range(len(penv.unwrapped.world.controlled_targets))]
+        assert agents == [f"sensor_{i}" for i in range(m)] + targets
 
         assert table["Gymnasium id"] == env_id
         assert table["Import"].startswith(f'gymnasium.make("{env_id}")')
         assert table["PettingZoo id"].startswith(f'pettingzoo.make("parallel", "{env_id}")')
         assert table["Scenario preset"] == sc.name == ALL_IDS[env_id]
         count, listed = table["Agents"].split(": ", 1)
-        assert int(count) == m
+        assert int(count) == len(agents)
         shown = listed.split(", ")
-        assert shown == (agents if m <= 4 else [agents[0], "...", agents[-1]])
+        assert shown == (agents if len(agents) <= 4 else [agents[0], "...", agents[-1]])
 
         # Spaces: the printed Box is the environment's, and its shape is the arrays'.
         assert table["Action space (Gymnasium)"] == repr(genv.action_space)

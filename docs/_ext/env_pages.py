@@ -315,7 +315,7 @@ def usage(env_id: str, data: dict[str, Any]) -> list[str]:
 def page(env_id: str, config: Any = None, srcdir: str | os.PathLike[str] = DOCS) -> str:
     """Return the Markdown source of the page of ``env_id`` (its media read from
     ``srcdir``'s :data:`MEDIA_DIR`)."""
-    from activetrack._registry import ALL_IDS
+    from activetrack._registry import ALL_IDS, TWO_TEAM_ENTRY_POINTS
     from activetrack.envs.centralized import CentralizedTrackingEnv
     from activetrack.envs.tracking_env import TrackingParallelEnv
     from activetrack.world.scenarios import make_scenario
@@ -400,6 +400,19 @@ def page(env_id: str, config: Any = None, srcdir: str | os.PathLike[str] = DOCS)
         _manual(CentralizedTrackingEnv, config),
         _manual(inspect.getmodule(CentralizedTrackingEnv), config),
     ]
+    if env_id in TWO_TEAM_ENTRY_POINTS:  # PettingZoo's id is the two-team game
+        from activetrack.envs.pursuit import PursuitParallelEnv
+
+        lines += [
+            "## The two-team game (PettingZoo)",
+            "",
+            f'`pettingzoo.make("parallel" | "aec", "{env_id}")` is the two-team game',
+            "`activetrack.envs.pursuit.PursuitParallelEnv` (the sensors' side as above, the",
+            "targets as agents); Gymnasium's view is the sensors' against the fallback:",
+            "",
+            _manual(PursuitParallelEnv, config),
+            _manual(inspect.getmodule(PursuitParallelEnv), config),
+        ]
     return "\n".join(lines)
 
 

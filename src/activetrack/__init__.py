@@ -37,6 +37,7 @@ from activetrack.kinematics.double_integrator import DoubleIntegrator
 from activetrack.kinematics.unicycle import Unicycle
 from activetrack.metrics.gospa import GOSPAResult, gospa
 from activetrack.models.behaviour import (
+    Controlled,
     Evasive,
     FilterModel,
     Maneuvering,
@@ -104,6 +105,7 @@ __all__ = [
     "RangeLimited",
     "covariance_intersection",
     "Disk",
+    "Controlled",
     "Evasive",
     "FilterModel",
     "DoubleIntegrator",

@@ -47,6 +47,7 @@ TASK_IDS = {
     "activetrack/Radio-v0": "radio",
     "activetrack/Swarm-v0": "swarm",
     "activetrack/UrbanRadio-v0": "urban_radio",
+    "activetrack/Pursuit-v0": "pursuit",
 }
 #: Every registered id and its preset (``ActiveTracking-v0`` is the paper).
 ALL_IDS = {ENV_ID: "paper", **TASK_IDS}
@@ -54,6 +55,15 @@ GYM_ENTRY_POINT = "activetrack.envs.centralized:CentralizedTrackingEnv"
 VECTOR_ENTRY_POINT = "activetrack.envs.batched:BatchedActiveTracking"
 PARALLEL_ENTRY_POINT = "activetrack.envs.tracking_env:parallel_env"
 AEC_ENTRY_POINT = "activetrack.envs.tracking_env:env"
+#: Ids whose PettingZoo games have two teams (sensors and the targets as agents,
+#: :mod:`activetrack.envs.pursuit`): their parallel and AEC entry points. Gymnasium's view
+#: of them stays the sensors' (the targets move by their fallback behaviour).
+TWO_TEAM_ENTRY_POINTS = {
+    "activetrack/Pursuit-v0": (
+        "activetrack.envs.pursuit:parallel_env",
+        "activetrack.envs.pursuit:env",
+    ),
+}
 
 
 def _kwargs(env_id: str) -> dict[str, Any]:
@@ -91,11 +101,11 @@ def register_pettingzoo() -> None:
     if not hasattr(pettingzoo, "register"):
         return
     for env_id in ALL_IDS:
+        parallel, aec = TWO_TEAM_ENTRY_POINTS.get(env_id, (PARALLEL_ENTRY_POINT, AEC_ENTRY_POINT))
         if env_id not in pettingzoo.parallel_registry:
-            pettingzoo.register("parallel", env_id, entry_point=PARALLEL_ENTRY_POINT,
-                                kwargs=_kwargs(env_id))  # fmt: skip
+            pettingzoo.register("parallel", env_id, entry_point=parallel, kwargs=_kwargs(env_id))
         if env_id not in pettingzoo.aec_registry:
-            pettingzoo.register("aec", env_id, entry_point=AEC_ENTRY_POINT, kwargs=_kwargs(env_id))
+            pettingzoo.register("aec", env_id, entry_point=aec, kwargs=_kwargs(env_id))
 
 
 #: Framework module -> its registration, run when the module is (or has been) imported.

@@ -67,6 +67,7 @@ PRESET_FLAGS = {
     },  # fmt: skip
     "maneuvering": {**dict.fromkeys(FLAGS, True), "filter_targets": False},
     "evader": {**dict.fromkeys(FLAGS, True), "filter_targets": False},
+    "pursuit": {**dict.fromkeys(FLAGS, True), "filter_targets": False},  # evader's world
     "unicycle": {**dict.fromkeys(FLAGS, True), "disk_kinematics": False},
     "fixed_wing": {**dict.fromkeys(FLAGS, True), "disk_kinematics": False},
     "crowded": {**dict.fromkeys(FLAGS, True), "no_separation": False, "single_update": False},
@@ -104,6 +105,7 @@ PRESET_PATHS = {  # (paper_model, paper_problem, paper_observation, fused_step)
     # the paper's measurement setup; the targets' behaviours: stage by stage
     "maneuvering": (True, True, True, False),
     "evader": (True, True, True, False),
+    "pursuit": (True, True, True, False),
     # unicycles: the team moves first, by its kinematics, then the one compiled step
     "unicycle": (False, False, True, True),
     "fixed_wing": (False, False, True, True),

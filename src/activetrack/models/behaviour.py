@@ -13,7 +13,11 @@ reactive behaviour, the sensors' true positions:
   Kirubarajan 2001, ch. 11), each mode discretized exactly (:func:`coordinated_turn`);
 - :class:`StopAndGo`: moving (eq. 39) and stopped, a two-mode Markov chain;
 - :class:`Evasive`: a scripted evader that runs straight away from the nearest sensor at
-  its speed limit, optionally only when a sensor is within a detection range.
+  its speed limit, optionally only when a sensor is within a detection range;
+- :class:`Controlled`: a target moved by an external action each step (its velocity within
+  its speed limit), the target of a separate agent (a user, a learning algorithm: the
+  two-team ``pursuit`` environment, :mod:`activetrack.envs.pursuit`); without an action
+  it moves by its ``fallback`` behaviour.
 
 **Mode.** A behaviour may carry a discrete mode (the maneuvering target's current turn
 rate, whether the evader is fleeing); it is part of the target's true state, held by the
@@ -436,3 +440,89 @@ def _direction(away: FloatArray, velocity: FloatArray) -> FloatArray:
         if n > 0.0:
             return v / n
     return np.array([1.0, 0.0])
+
+
+class Controlled(TargetBehaviour):
+    """A target moved by an agent: each step its velocity is an external action.
+
+    The action ``a`` (2,) is the velocity as a fraction of ``speed``: a vector longer than
+    1 is scaled onto the unit disk, so the target moves at most ``speed`` (m/s). With an
+    action, :meth:`act` sets the velocity to ``speed a`` and moves ``speed a dt`` along it
+    (the entries after the velocity, e.g. an acceleration, are set to 0), as
+    :class:`Evasive` does when it flees. The world takes the actions before a step
+    (:meth:`activetrack.world.World.set_target_actions`); a step without one moves the
+    target by :meth:`step`, the ``fallback`` behaviour (its modes are this behaviour's), or
+    with ``fallback=None`` it coasts at its own velocity clipped to ``speed``.
+    Deterministic given the actions (unless ``fallback`` draws).
+    """
+
+    name = "controlled"
+    reactive = True
+
+    def __init__(self, speed: float, dt: float, fallback: TargetBehaviour | None = None) -> None:
+        self.speed = real_scalar("speed", speed)
+        self.dt = real_scalar("dt", dt)
+        if fallback is not None and not isinstance(fallback, TargetBehaviour):
+            raise ValueError(f"fallback must be a TargetBehaviour or None, got {fallback!r}")
+        if isinstance(fallback, Controlled):
+            raise ValueError("fallback must not be Controlled itself (it moves without actions)")
+        fdt = getattr(fallback, "dt", None)
+        if fdt is not None and not np.isclose(float(fdt), self.dt, rtol=1e-12, atol=0.0):
+            raise ValueError(f"fallback's dt ({float(fdt):g}) must be dt ({self.dt:g})")
+        self.fallback = fallback
+
+    @property
+    def n_modes(self) -> int:
+        """Return the fallback's number of modes (1 without a fallback)."""
+        return 1 if self.fallback is None else self.fallback.n_modes
+
+    def initial_mode(self, rng: np.random.Generator) -> int:
+        """Return the fallback's first mode (0 without one, no draw)."""
+        return 0 if self.fallback is None else self.fallback.initial_mode(rng)
+
+    def step(
+        self,
+        x: FloatArray,
+        rng: np.random.Generator,
+        sensors: FloatArray | None = None,
+        mode: int = 0,
+    ) -> tuple[FloatArray, int]:
+        """Return ``(x_next, mode_next)`` of a step without an action: the fallback's, or
+        coasting at the own velocity clipped to ``speed`` (mode 0)."""
+        if self.fallback is not None:
+            return self.fallback.step(x, rng, sensors, mode)
+        x = _with_velocity(self._state(x))
+        v = x[2:4]
+        sp = float(np.hypot(v[0], v[1]))
+        out = x.copy()
+        out[2:4] = v * (self.speed / sp) if sp > self.speed else v
+        out[:2] = x[:2] + self.dt * out[2:4]
+        return out, 0
+
+    def act(self, x: FloatArray, action: FloatArray) -> FloatArray:
+        """Return the state after a step with ``action`` (2,): velocity ``speed a`` (``a``
+        scaled onto the unit disk), the position moved by ``dt`` times it, the entries after
+        the velocity 0."""
+        x = _with_velocity(self._state(x))
+        a = unit_disk_action("action", action)
+        out = np.zeros_like(x)
+        out[2:4] = self.speed * a
+        out[:2] = x[:2] + self.dt * out[2:4]
+        return out
+
+
+def unit_disk_action(name: str, value: ArrayLike) -> FloatArray:
+    """Return ``value`` as a finite (2,) float64 scaled onto the unit disk when longer than
+    1, else a ValueError naming ``name``."""
+    a = as_finite(name, value)
+    if a.shape != (2,):
+        raise ValueError(f"{name} must have shape (2,) (a velocity over the speed), got {a.shape}")
+    n = float(np.hypot(a[0], a[1]))
+    return a / n if n > 1.0 else a
+
+
+def _with_velocity(x: FloatArray) -> FloatArray:
+    """Return ``x`` if it holds a position and a velocity (n >= 4), else a ValueError."""
+    if x.shape[0] < 4:
+        raise ValueError(f"x must hold a position and a velocity (n >= 4), got {x.shape}")
+    return x

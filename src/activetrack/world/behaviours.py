@@ -20,6 +20,10 @@ behaviours from the same seeds are paired. A :class:`~activetrack.FilterModel` i
 exception: it moves by :meth:`~activetrack.FilterModel.move` on those very normals (the
 world's compiled kernel, bit for bit). A copy's behaviour draws only from its own
 generators, so its numbers do not depend on the other copies.
+
+A :class:`~activetrack.Controlled` target is moved by an agent: :meth:`TargetMotion.
+set_target_actions` gives the actions of the copies' next step (consumed by it); a
+copy stepped without them moves its controlled targets by their fallback.
 """
 
 from __future__ import annotations
@@ -29,8 +33,8 @@ from typing import Any
 
 import numpy as np
 
-from activetrack.models.behaviour import FilterModel, TargetBehaviour
-from activetrack.validation import FloatArray
+from activetrack.models.behaviour import Controlled, FilterModel, TargetBehaviour
+from activetrack.validation import FloatArray, as_finite
 
 _WHAT = "target_behaviour must be None, an activetrack.TargetBehaviour or a tuple of one per target"
 
@@ -118,9 +122,52 @@ class TargetMotion:
     def _init_behaviours(self) -> None:
         """Set up the behaviours' generators and modes (None without a behaviour)."""
         self._behaviours = per_target(self.scenario.target_behaviour, self.n_targets)
+        self._controlled = tuple(
+            k for k, b in enumerate(self._behaviours or ()) if isinstance(b, Controlled)
+        )
         if self._behaviours is not None:
             self._behaviour_rngs: list[list[np.random.Generator] | None] = [None] * self.num_copies
             self._modes = np.zeros((self.num_copies, self.n_targets), dtype=np.int64)
+            self._target_actions = np.zeros((self.num_copies, len(self._controlled), 2))
+            self._acted = np.zeros(self.num_copies, dtype=bool)
+
+    @property
+    def controlled_targets(self) -> tuple[int, ...]:
+        """Return the indices of the targets moved by an agent (:class:`~activetrack.
+        Controlled`), in target order; empty when none is."""
+        return self._controlled
+
+    def set_target_actions(self, actions: Any, copies: Any = None) -> None:
+        """Set the actions of the controlled targets for the next step of some copies.
+
+        ``actions`` is (N, C, 2) for every copy, or (C, 2) for a world of one copy (C the
+        number of :attr:`controlled_targets`, in their order): each a target's velocity over
+        its speed (:meth:`activetrack.Controlled.act`; longer than 1: scaled onto the unit
+        disk); ``copies`` (indices or a mask) limits them to those copies. They hold for
+        the copies' next step only (a reset drops them). Raises ValueError naming
+        ``target_actions`` for another shape or a value that is not finite, and when the
+        scenario has no controlled target.
+        """
+        c = len(self._controlled)
+        if not c:
+            raise ValueError(
+                "target_actions: no target of this scenario is controlled (give it the "
+                "target_behaviour activetrack.Controlled)"
+            )
+        a = as_finite("target_actions", actions)
+        if self.num_copies == 1 and a.shape == (c, 2):
+            a = a[None]
+        if a.shape != (self.num_copies, c, 2):
+            one = f"({c}, 2) or " if self.num_copies == 1 else ""
+            raise ValueError(
+                f"target_actions must have shape {one}({self.num_copies}, {c}, 2), got {a.shape}"
+            )
+        sel = self._select(copies)
+        if sel is None:  # no copy selected
+            return
+        rows = self._rows(sel)
+        self._target_actions[rows] = a[rows]
+        self._acted[rows] = True
 
     @property
     def target_modes(self) -> np.ndarray | None:
@@ -133,6 +180,7 @@ class TargetMotion:
         if self._behaviours is None:
             return
         for i in rows.tolist():
+            self._acted[i] = False
             gens = self.rng(i).spawn(self.n_targets)
             self._behaviour_rngs[i] = gens
             pairs = zip(self._behaviours, gens, strict=True)
@@ -152,8 +200,12 @@ class TargetMotion:
                 out.append(b.move(x, noise[proc]))
                 continue
             nxt = np.array(x, dtype=np.float64)
+            c = self._controlled.index(k) if k in self._controlled else -1
             for i in rows:
                 at = ... if self._one else i
+                if c >= 0 and self._acted[i]:  # the agent's action (the mode stays)
+                    nxt[at] = b.act(x[at], self._target_actions[i, c])
+                    continue
                 mode = int(self._modes[i, k])
                 nxt[at], self._modes[i, k] = b.step(
                     x[at], self._behaviour_rngs[i][k], sensors[at], mode
@@ -161,4 +213,5 @@ class TargetMotion:
             if not np.all(np.isfinite(nxt)):
                 raise ValueError(f"target_behaviour {b!r} moved target {k} to a non-finite state")
             out.append(nxt)
+        self._acted[rows] = False  # an action holds for one step
         return out

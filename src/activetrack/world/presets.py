@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 
 from activetrack.kinematics.unicycle import Unicycle
-from activetrack.models.behaviour import Evasive, Maneuvering
+from activetrack.models.behaviour import Controlled, Evasive, Maneuvering
 from activetrack.models.communication import RangeLimited
 
 #: The fields added beyond the paper's setup (several targets, sensor models, poses,
@@ -67,6 +67,9 @@ MANEUVERING = Maneuvering(
 #: The evader task's target: it runs straight from the nearest sensor at the sensors' speed
 #: (vmax = 10 m/s), always.
 EVADER = Evasive(speed=10.0, dt=0.1)
+#: The pursuit task's target: moved by an agent at most at the sensors' speed (10 m/s);
+#: without the agent's action it is the evader task's scripted EVADER.
+PURSUED = Controlled(speed=10.0, dt=0.1, fallback=EVADER)
 
 #: The unicycle task's robots: the paper's top speed (10 m/s), able to stop and turn in
 #: place (v_min = 0), turning at most pi rad/s (half a turn a second, 18 degrees a step).
@@ -184,6 +187,17 @@ PRESETS: dict[str, dict[str, Any]] = {
         "x0_hat": (0.0, 0.0, -8.0, 6.0),
         "target_behaviour": EVADER,
     },
+    # The evader task's team and target, the target moved by an agent (PURSUED: the
+    # two-team game, activetrack.envs.pursuit); without its actions, EVADER.
+    "pursuit": {
+        **_TASK,
+        "name": "pursuit",
+        "sigma_d2": 2.0,
+        "sigma_theta2": 0.25,
+        "x0": (0.0, 0.0, -8.0, 6.0),
+        "x0_hat": (0.0, 0.0, -8.0, 6.0),
+        "target_behaviour": PURSUED,
+    },
     # The paper's setting (its team of three, target and noise) with unicycle robots
     # (UNICYCLE): a heading, the paper's top speed, a turning limit of pi rad/s.
     "unicycle": {"name": "unicycle", "kinematics": UNICYCLE},
@@ -270,5 +284,5 @@ PRESETS.update({
 TASKS = (
     "two_targets", "range_only", "bearing_only", "mixed", "uncertain_poses", "urban",
     "urban_random", "maneuvering", "evader", "unicycle", "fixed_wing", "crowded",
-    "urban_unicycle", "radio", "swarm", "urban_radio",
+    "urban_unicycle", "radio", "swarm", "urban_radio", "pursuit",
 )  # fmt: skip
