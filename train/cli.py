@@ -36,6 +36,7 @@ from activetrack.train.networks import ACTIVATIONS, NetConfig
 from activetrack.train.policy_io import VIEWS, load_policy, save_policy
 from activetrack.train.ppo import LR_SCHEDULES, OUTPUTS, PPOConfig, check_warm_start, train_ppo
 from activetrack.train.selfplay_cli import add_selfplay_parsers
+from activetrack.train.set_policy_cli import add_set_policy_parser
 from activetrack.train.utils import DEFAULT_THREADS, MAX_THREADS, check_int, configure_torch
 from activetrack.world.scenarios import PRESETS
 
@@ -250,6 +251,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     q.set_defaults(func=run_train, parser=q)
     _add_rllib_parser(methods, common)
     add_selfplay_parsers(methods)  # (the two-team game: activetrack.train.selfplay_cli)
+    add_set_policy_parser(methods)  # (decentralized teams: activetrack.train.set_policy_cli)
 
 
 #: ``train rllib-ppo`` option -> :class:`~activetrack.train.rllib.RLlibPPOConfig` field. The

@@ -105,3 +105,19 @@ def test_a_tiny_dagger_run_learns():
 
     assert len(traces) == 2 and np.isfinite(traces).all()
     assert team_trace(policy) < 0.8 * team_trace(untrained)
+
+
+def test_the_command_trains_writes_and_refuses_a_central_team(tmp_path, capsys):
+    from activetrack.cli import main
+
+    out = tmp_path / "run"
+    args = ["train", "set-dagger", "--scenario", "radio", "--robots", "3", "--episodes", "2",
+            "--iterations", "1", "--epochs", "1", "--hidden", "8", "--out", str(out)]  # fmt: skip
+    assert main(args) == 0
+    assert (out / "policy.zip").is_file() and (out / "set_dagger.json").is_file()
+    assert load_policy(out / "policy.zip").net.hidden == 8
+    capsys.readouterr()
+    assert main(args) == 2  # the folder holds results: refused without --overwrite
+    assert "already holds results" in capsys.readouterr().err
+    assert main(["train", "set-dagger", "--scenario", "paper", "--out", str(tmp_path / "p")]) == 2
+    assert "no communication model" in capsys.readouterr().err
