@@ -43,6 +43,7 @@ from activetrack.models.behaviour import (
     StopAndGo,
     TargetBehaviour,
 )
+from activetrack.models.births import BirthProcess
 from activetrack.models.communication import (
     CommunicationModel,
     DelayLine,
@@ -126,6 +127,7 @@ __all__ = [
     "Scenario",
     "SensorModel",
     "TargetBehaviour",
+    "BirthProcess",
     "TraceObjective",
     "World",
     "Unicycle",
