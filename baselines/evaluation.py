@@ -51,6 +51,7 @@ from typing import Any
 import numpy as np
 
 from activetrack.baselines.episodes import (  # noqa: F401 (public here too)
+    CENSUS_FIELDS,
     run_batched,
     run_episode,
     run_episodes,
@@ -93,6 +94,10 @@ class PolicyEvaluation:
             (:func:`activetrack.baselines.protocol.track_loss_rate`); None with unlimited
             sensing.
         loss_trace: its threshold per target (m^2), None with unlimited sensing.
+        census: with targets that appear and leave (the field ``births``), per-episode
+            arrays ``gospa``, ``fraction_tracked``, ``first_detection`` (s) and
+            ``all_tracked`` (1.0 or 0.0) (:data:`activetrack.baselines.episodes.CENSUS_FIELDS`);
+            None otherwise.
     """
 
     policy: str
@@ -107,6 +112,7 @@ class PolicyEvaluation:
     longest_gap: np.ndarray | None = None
     track_loss: np.ndarray | None = None
     loss_trace: list[float] | None = None
+    census: dict[str, np.ndarray] | None = None
 
     def summary(self, reference: PolicyEvaluation | None = None) -> dict[str, Any]:
         """Return the JSON summary; the ratio is to ``reference``'s mean trace (GSR).
@@ -160,6 +166,13 @@ class PolicyEvaluation:
             rate, lo, hi = protocol.interval(self.track_loss, "mean")
             out["track_loss_rate"], out["track_loss_rate_ci95"] = rate, [lo, hi]
             out["track_loss_threshold"] = self.loss_trace
+        if self.census is not None:  # targets that appear and leave
+            c = self.census
+            out["gospa"] = float(np.mean(c["gospa"]))
+            out["fraction_tracked"] = float(np.nanmean(c["fraction_tracked"]))
+            first = c["first_detection"][np.isfinite(c["first_detection"])]
+            out["first_detection_s"] = float(np.mean(first)) if first.size else None
+            out["all_tracked_fraction"] = float(np.mean(c["all_tracked"]))
         if reference is not None:
             out["ratio_to_gsr"] = mt / float(np.mean(reference.mean_trace))
             out["ratio_to_gsr_ci95"] = list(paired_ratio_ci(self.mean_trace, reference.mean_trace))
@@ -308,6 +321,7 @@ def evaluate(
     seeds = [seed + j for j in range(episodes)]
     env = parallel_env(scenario, **overrides)
     limited = env.unwrapped.world.scenario.limited_sensing
+    births = env.unwrapped.world.scenario.births is not None
     thresholds = (
         prior_traces(env.unwrapped.world.scenario)
         if loss_trace is None
@@ -373,6 +387,7 @@ def evaluate(
                 arr[:, 3],
                 arr[:, 4],
                 *gaps,
+                census=dict(zip(CENSUS_FIELDS, arr[:, 8:12].T, strict=True)) if births else None,
             )  # fmt: skip
         )
     return results
@@ -559,6 +574,14 @@ def write_results(
                     }
                 ),
                 **({} if r.track_loss is None else {"track_loss": r.track_loss.tolist()}),
+                **(
+                    {}
+                    if r.census is None  # NaN (no target detected) written as null
+                    else {
+                        k: [None if not np.isfinite(v) else float(v) for v in a]
+                        for k, a in r.census.items()
+                    }
+                ),
             }
             for r in results
         },

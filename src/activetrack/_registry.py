@@ -44,6 +44,7 @@ TASK_IDS = {
     "activetrack/FixedWing-v0": "fixed_wing",
     "activetrack/Crowded-v0": "crowded",
     "activetrack/UrbanUnicycle-v0": "urban_unicycle",
+    "activetrack/Patrol-v0": "patrol",
 }
 #: Every registered id and its preset (``ActiveTracking-v0`` is the paper).
 ALL_IDS = {ENV_ID: "paper", **TASK_IDS}
