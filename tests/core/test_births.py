@@ -10,7 +10,7 @@ from scipy import stats
 import activetrack as at
 from activetrack.models import search_map
 from activetrack.world import World
-from activetrack.world.track_management import initiated, track_rule
+from activetrack.world.track_management import initiated, lead_points, track_rule
 
 REGION = (-20.0, -20.0, 20.0, 20.0)
 
@@ -45,6 +45,11 @@ def test_entry_states_lie_on_the_edge_heading_inward_uniform_by_length():
     assert np.all((speed >= 1.0) & (speed <= 2.0))
     # one step later (1 s) every arrival is inside: the velocity points in
     assert np.all(b.inside(p + 1e-3 * v))
+    # and its ray crosses the central half [7.5, 22.5] x [2.5, 7.5] (sampled along it)
+    t = np.linspace(0.0, 40.0, 4001)
+    ray = p[:, None, :] + t[None, :, None] * (v / speed[:, None])[:, None, :]
+    hits = (np.abs(ray[..., 0] - 15.0) <= 7.5 + 1e-6) & (np.abs(ray[..., 1] - 5.0) <= 2.5 + 1e-6)
+    assert np.all(hits.any(axis=1))
     # uniform by length: the long sides hold 60 of the 80 m of the perimeter
     long_sides = np.isclose(p[:, 1], 0.0) | np.isclose(p[:, 1], 10.0)
     n, k = len(p), int(long_sides.sum())
@@ -195,3 +200,14 @@ def test_absent_targets_are_never_detected_and_tracks_follow_the_rule():
             elif tracked[s] and k - last[s] >= b.delete_after:
                 tracked[s] = False
         np.testing.assert_array_equal(world.tracked[0], tracked)
+
+
+def test_search_points_beyond_reach_are_shown_on_the_way_from_the_nearest_sensor():
+    sensors = np.array([[0.0, 0.0], [100.0, 0.0]])
+    pts = np.array([[30.0, 40.0], [5.0, 0.0], [100.0, -8.0]])
+    out = lead_points(pts, sensors, np.array([10.0, 20.0]))
+    # the first: 50 m from sensor 0 (its nearest), shown 8 m along the way (0.8 x 10)
+    np.testing.assert_allclose(out[0], [4.8, 6.4])
+    np.testing.assert_allclose(out[1], [5.0, 0.0])  # within 8 m: unchanged
+    np.testing.assert_allclose(out[2], [100.0, -8.0])  # within 16 m of sensor 1
+    np.testing.assert_array_equal(lead_points(pts, sensors, None), pts)

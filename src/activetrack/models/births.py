@@ -12,8 +12,8 @@ carries it and the team's tracks). Every step, after the present targets move:
    order, and arrivals beyond the free slots are lost (K caps how many are present). Each
    starts (:meth:`BirthProcess.entry_states`) at a point uniform by length on the region's
    edge, or with ``spawn_areas`` uniform by area in those rectangles, heading for a point
-   uniform in the region at a speed uniform in ``speed`` (so it enters; any further state
-   components are 0).
+   uniform in the region's central half (the region shrunk by half about its centre) at
+   a speed uniform in ``speed`` (so it enters; any further state components are 0).
 
 Episodes start with no target present. The births draw from a generator of their own
 (:meth:`numpy.random.Generator.spawn` from the copy's stream at reset), so the copy's other
@@ -135,8 +135,8 @@ class BirthProcess(ComparedByValue):
 
     def entry_states(self, rng: np.random.Generator, n: int, dim: int) -> FloatArray:
         """Return ``n`` arrivals' states (n, dim): position (see the module docstring),
-        velocity toward a point uniform in the region at a speed uniform in ``speed``,
-        further components 0."""
+        velocity toward a point uniform in the region's central half at a speed uniform in
+        ``speed``, further components 0."""
         x0, y0, x1, y1 = self.region
         out = np.zeros((n, dim))
         for j in range(n):
@@ -158,7 +158,11 @@ class BirthProcess(ComparedByValue):
                 u = rng.random(2)
                 pos = (a[0] + u[0] * (a[2] - a[0]), a[1] + u[1] * (a[3] - a[1]))
             u = rng.random(3)
-            aim = np.array([x0 + u[0] * (x1 - x0), y0 + u[1] * (y1 - y0)])
+            # a point of the central half of the region (the region shrunk by half about its
+            # centre): every arrival heads well inside, none skims along the edge
+            aim = np.array(
+                [x0 + (0.25 + 0.5 * u[0]) * (x1 - x0), y0 + (0.25 + 0.5 * u[1]) * (y1 - y0)]
+            )
             way = aim - np.asarray(pos)
             norm = math.hypot(way[0], way[1])
             heading = way / norm if norm > 0.0 else np.zeros(2)

@@ -17,10 +17,15 @@ not present is never detected), the EKF update of every slot, then per slot:
   axis (other sensors' measurements of that step are not used);
 - **deletion**: a track not detected for ``delete_after`` steps in a row is dropped (the
   team cannot tell a departed target from a missed one);
-- a slot without a track shows a **search point** (:mod:`activetrack.models.search_map`)
-  as its posterior, position variance ``search_var``, velocity 0 with ``velocity_var``:
-  what the planners and the observation read there, so a team that tracks nothing goes
-  where targets not yet detected most likely are.
+- a slot without a track shows a **search point** as its posterior, position variance
+  ``search_var``, velocity 0 with ``velocity_var``: what the planners and the observation
+  read there, so a team that tracks nothing goes where targets not yet detected most
+  likely are. The slots without a track take the cells of highest ``q``
+  (:func:`activetrack.models.search_map.search_points`); a cell farther than
+  :data:`SEARCH_LEAD` times its nearest sensor's ``max_range`` from that sensor (as the
+  team believes it is) is shown at that distance on the way to it: a planner counts a
+  sensor's information only within its range, so a point beyond every range would pull
+  no sensor, while this one draws the nearest toward the cell step by step.
 
 The score is the objective over the tracks held plus ``search_weight`` times the search
 map's expected number of targets not yet detected (:func:`score_of`); ``trace`` (what
@@ -38,6 +43,28 @@ from activetrack.models import search_map
 from activetrack.models.motion import predict
 from activetrack.models.objective import TRACE, Objective, combined
 from activetrack.validation import FloatArray
+
+#: How far (in units of the nearest sensor's max_range) a search point is shown at most.
+SEARCH_LEAD = 0.8
+
+
+def lead_points(
+    points: FloatArray, sensors: FloatArray, max_range: FloatArray | None
+) -> FloatArray:
+    """Return the search points (n, 2) as shown: each point farther than ``SEARCH_LEAD
+    max_range_i`` from its nearest sensor ``i`` (of ``sensors`` (M, 2)) moved onto the
+    segment from that sensor to it, at that distance (unchanged without a range)."""
+    if max_range is None:
+        return points
+    rel = points[:, None, :] - sensors[None, :, :]
+    dist = np.hypot(rel[..., 0], rel[..., 1])  # (n, M)
+    near = np.argmin(dist, axis=1)
+    d = dist[np.arange(len(points)), near]
+    lead = SEARCH_LEAD * np.asarray(max_range, dtype=np.float64)[near]
+    far = d > lead
+    out = points.copy()
+    out[far] = sensors[near[far]] + (lead[far] / d[far])[:, None] * rel[far, near[far]]
+    return out
 
 
 def initiated(
@@ -168,7 +195,7 @@ class TrackManagement:
             self._step_count[i] = 0
             self._search_q[i] = 1.0 / (g * g)
             posts = [None] * self.n_targets
-            self._searching(i, posts)
+            self._searching(i, posts, self.get("fixes" if self._pose else "sensors", i))
             for k, (x, P) in enumerate(posts):
                 self._store_slot(i, k, x, P)
             trace, score = self._score_row(i)
@@ -183,14 +210,15 @@ class TrackManagement:
         for key, v in (("x_hat", x), ("P", P), ("x_pred", xp), ("P_pred", Pp)):
             self._set(key, k, i, v)
 
-    def _searching(self, i: int, posts: list) -> None:
+    def _searching(self, i: int, posts: list, sensors: FloatArray) -> None:
         """Fill the entries of ``posts`` that are None (slots without a track) with search
-        points' posteriors ``(x, P)`` of copy ``i``."""
+        points' posteriors ``(x, P)`` of copy ``i`` whose sensors are at ``sensors`` (M, 2)."""
         empty = [k for k, v in enumerate(posts) if v is None]
         if not empty:
             return
         b = self._births
         pts = search_map.search_points(self._search_q[i], self._cells, len(empty), self._spacing)
+        pts = lead_points(pts, np.asarray(sensors).reshape(-1, 2), self.params.max_range)
         for k, pt in zip(empty, pts, strict=True):
             n = self.params.targets[k].dim
             x = np.zeros(n)
@@ -272,7 +300,7 @@ class TrackManagement:
                     )  # fmt: skip
                 elif tracked:
                     posts[k] = False  # the filter's update stands
-            self._searching(i, posts)
+            self._searching(i, posts, fixes[at])
             for k, post in enumerate(posts):
                 if post is False:
                     continue
