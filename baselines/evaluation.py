@@ -488,8 +488,10 @@ def format_table(rows: Sequence[dict[str, Any]]) -> str:
     ``CPU ms/decision`` is ``cpu_ms_per_decision`` (CPU time per decision after a warm-up;
     a summary written before that name gives its ``ms_per_step``); the ratios of the mean
     and of the IQM to GSR's; with limited sensing the track-loss rate, then the fraction
-    of steps without a detection and the longest such run. A summary written before a
-    column existed shows "-" there.
+    of steps without a detection and the longest such run; with targets that appear and
+    leave the mean GOSPA, the fraction of time tracked, the mean time to first detection
+    and the fraction of episodes in which every target was tracked. A summary written
+    before a column existed shows "-" there.
     """
     width = max([len("policy")] + [len(r.get("label", r["policy"])) + 12 for r in rows])
     head = (
@@ -517,6 +519,12 @@ def format_table(rows: Sequence[dict[str, Any]]) -> str:
         if "no_detection" in r:  # limited sensing: steps without a measurement, longest run
             extra.append(f"no detection {r['no_detection']:.3f}")
             extra.append(f"longest gap {r['longest_gap']}")
+        if "gospa" in r:  # targets that appear and leave
+            first = r["first_detection_s"]
+            extra.append(f"GOSPA {r['gospa']:.3f}")
+            extra.append(f"tracked {r['fraction_tracked']:.3f} of the time")
+            extra.append("first detection " + ("-" if first is None else f"{first:.2f} s"))
+            extra.append(f"all tracked in {r['all_tracked_fraction']:.2f} of episodes")
         if extra:
             line += "  " + ", ".join(extra)
         lines.append(line)
