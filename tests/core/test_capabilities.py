@@ -77,6 +77,7 @@ PRESET_FLAGS = {
         "disk_kinematics": False,
         "no_separation": False,
     },  # fmt: skip
+    "patrol": {**dict.fromkeys(FLAGS, True), "one_target": False, "unlimited_sensing": False},
 }
 
 # Which paths each preset takes, as docs/architecture.md and the presets describe them.
@@ -99,6 +100,7 @@ PRESET_PATHS = {  # (paper_model, paper_problem, paper_observation, fused_step)
     # the paper's sensors and disks; the iterated EKF and the team rule d_sep: stage by stage
     "crowded": (False, True, True, False),
     "urban_unicycle": (False, False, False, False),
+    "patrol": (False, False, False, False),
 }
 
 
