@@ -39,6 +39,14 @@ from activetrack.metrics.track_census import TrackCensus, census_of
 CENSUS_FIELDS = ("gospa", "fraction_tracked", "first_detection", "all_tracked")
 
 
+def _mean_of_finite(values: list[float]) -> float:
+    """Return the mean of the finite values (NaN: a step without a track of a present
+    target, with ``births``), NaN if none is; the plain mean when all are."""
+    arr = np.asarray(values)
+    ok = np.isfinite(arr)
+    return float(np.mean(arr)) if ok.all() else float(np.mean(arr[ok])) if ok.any() else np.nan
+
+
 def warm_up(env: Any, policy: Any, seed: int) -> None:
     """Make one decision of ``policy`` on the first observation of the episode ``seed``
     and forget it (the policy reset again): compiles what its first call compiles, so
@@ -103,7 +111,7 @@ class _RowRecorder(Recorder):
             float(np.mean(self.traces[j])),
             float(np.sqrt(np.mean(np.square(self.errors[j])))),
             self.totals[j],
-            float(np.mean(self.nees[j])),
+            _mean_of_finite(self.nees[j]),
             ms,
             *detection_gaps(np.array(self.seen[j])),
             track_loss_rate(

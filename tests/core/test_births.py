@@ -211,3 +211,26 @@ def test_search_points_beyond_reach_are_shown_on_the_way_from_the_nearest_sensor
     np.testing.assert_allclose(out[1], [5.0, 0.0])  # within 8 m: unchanged
     np.testing.assert_allclose(out[2], [100.0, -8.0])  # within 16 m of sensor 1
     np.testing.assert_array_equal(lead_points(pts, sensors, None), pts)
+
+
+def test_errors_and_nees_are_over_the_tracks_held_of_present_targets():
+    world = World("patrol", 2, n_steps=200)
+    world.reset(seeds=[11, 12])
+    checked = 0
+    for _ in range(200):
+        world.step(world.get("sensors"))
+        for i in range(2):
+            held = world.present[i] & world.tracked[i]
+            errs, nees = [], []
+            for k in np.flatnonzero(held).tolist():
+                e = world.get("x_true", i, k)[:2] - world.get("x_hat", i, k)[:2]
+                errs.append(float(e @ e))
+                nees.append(float(e @ np.linalg.solve(world.get("P", i, k)[:2, :2], e)))
+            want = np.sqrt(np.mean(errs)) if errs else 0.0
+            assert world.position_error(i) == pytest.approx(want, rel=1e-12)
+            if nees:
+                assert world.position_nees(i) == pytest.approx(np.mean(nees), rel=1e-9)
+                checked += 1
+            else:
+                assert np.isnan(world.position_nees(i))
+    assert checked > 50
