@@ -234,3 +234,23 @@ def test_errors_and_nees_are_over_the_tracks_held_of_present_targets():
             else:
                 assert np.isnan(world.position_nees(i))
     assert checked > 50
+
+
+def test_the_observation_ends_with_the_track_flags_inside_its_bounds():
+    world = World("patrol", 1, n_steps=120)
+    world.reset(seeds=[3])
+    low, high = world.layout.bounds(world.length_scale)
+    K, M = world.n_targets, world.n_sensors
+    seen_both = set()
+    for _ in range(120):
+        world.step(world.get("sensors", 0))
+        obs = world.observe(0)
+        flags = world.tracked[0].astype(np.float32)
+        assert obs.shape == (M, world.layout.obs_dim)
+        for i in range(M):
+            np.testing.assert_array_equal(obs[i, -K:], flags)
+        assert np.all((obs >= low) & (obs <= high))
+        state = world.state(0)
+        np.testing.assert_array_equal(state[-1 - M * K : -1], np.tile(flags, M))
+        seen_both |= set(flags.tolist())
+    assert seen_both == {0.0, 1.0}

@@ -173,7 +173,8 @@ class WorldReaders:
             observation.ray_readings(
                 self.get("sensors", index), self.occluders(index), out[..., -rays:]
             )
-        more = [a for a in (self._route(index), self._motion_features(index)) if a is not None]
+        more = [a for a in (self._route(index), self._motion_features(index),
+                            self._track_flags(index)) if a is not None]  # fmt: skip
         if more:  # each agent's own route readings, heading or velocity, last
             out = np.concatenate([out, *(a.astype(np.float32) for a in more)], -1)
         return out
@@ -184,7 +185,7 @@ class WorldReaders:
         elapsed = self.get("k", index) / self._n_steps
         return observation.global_state(
             target, sensor, elapsed, self._rays(index), self._motion_features(index),
-            self._route(index),
+            self._route(index), self._track_flags(index),
         )  # fmt: skip
 
     def _rays(self, index: int | None) -> FloatArray | None:
@@ -192,6 +193,15 @@ class WorldReaders:
         if not self.layout.rays:
             return None
         return observation.ray_readings(self.get("sensors", index), self.occluders(index))
+
+    def _track_flags(self, index: int | None) -> FloatArray | None:
+        """Return every agent's track flags (..., M, K), 1 where the team holds a track,
+        or None (no ``births``)."""
+        if self._births is None:
+            return None
+        held = self._tracked if index is None else self._tracked[index]
+        shape = held.shape[:-1] + (self.n_sensors, self.n_targets)
+        return np.broadcast_to(held[..., None, :], shape).astype(np.float64)
 
     def _route(self, index: int | None) -> FloatArray | None:
         """Return every agent's route readings (..., M, 3K), or None (no
