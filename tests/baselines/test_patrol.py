@@ -30,6 +30,7 @@ def test_census_on_a_hand_made_episode():
     assert census.summary()["all_tracked"] is True
 
 
+@pytest.mark.slow  # 12 batched GSR episodes of 300 steps
 def test_gsr_tracks_every_target_that_enters_patrol():
     # The acceptance: every target that enters is tracked in >= 95% of episodes. With n
     # episodes, a true rate of 0.95 gives at least x successes with probability 0.99
