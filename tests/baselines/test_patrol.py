@@ -30,14 +30,14 @@ def test_census_on_a_hand_made_episode():
     assert census.summary()["all_tracked"] is True
 
 
-@pytest.mark.slow  # 12 batched GSR episodes of 300 steps
+@pytest.mark.slow  # 20 batched GSR episodes of 300 steps
 def test_gsr_tracks_every_target_that_enters_patrol():
     # The acceptance: every target that enters is tracked in >= 95% of episodes. With n
     # episodes, a true rate of 0.95 gives at least x successes with probability 0.99
     # (x = the binomial's 1% quantile); fewer fails the test.
     from activetrack.baselines.evaluation import evaluate
 
-    n = 12
+    n = 20
     res = evaluate(["gsr"], "patrol", episodes=n, seed=0, progress=False, batched=True)[0]
     ok = res.census["all_tracked"]
     x = stats.binom.ppf(0.01, n, 0.95)
