@@ -49,3 +49,30 @@ def test_gsr_tracks_every_target_that_enters_patrol():
     assert {"gospa", "fraction_tracked", "first_detection_s", "all_tracked_fraction"} <= set(
         summary
     )
+
+
+def test_gsr_searches_the_region_when_nothing_is_tracked():
+    # No arrivals: nothing is ever tracked, and GSR only has the search points to go by.
+    # Standing where it starts (within 5 m of the centre) the team sees at most the cells
+    # within 20 m of the centre; searching, it must see (a cell's centre within a
+    # sensor's range at some step) every one of the 8 x 8 cells in 150 steps.
+    import activetrack as at
+    from activetrack.baselines.gsr import GSR
+    from activetrack.models.search_map import centers
+    from activetrack.world import World
+
+    region = (-20.0, -20.0, 20.0, 20.0)
+    world = World("patrol", 1, births=at.BirthProcess(0.0, region), n_steps=150)
+    world.reset(seeds=[0])
+    cells = centers(region, 8).reshape(-1, 2)
+    seen = np.zeros(len(cells), dtype=bool)
+    assert np.all(np.linalg.norm(world.get("sensors", 0), axis=1) <= 5.0)
+    gsr, rng = GSR(), np.random.default_rng(0)
+    for _ in range(150):
+        world.step(gsr.plan(world.planning_problem(0), rng))
+        d = np.linalg.norm(cells[:, None, :] - world.get("sensors", 0)[None], axis=-1)
+        seen |= (d <= 15.0).any(axis=1)
+        assert not world.tracked[0].any()
+    start = np.linalg.norm(cells, axis=1) <= 15.0 + 5.0  # what a team near the start sees
+    assert start.mean() < 0.85
+    assert seen.all(), seen.mean()
