@@ -2,12 +2,16 @@
 one episode loop (:func:`activetrack.baselines.rollout.rollout`).
 
 A row is ``(mean_trace, rmse, return, mean_nees, ms_per_step, no_detection,
-longest_gap, track_loss, robot_score_mean, robot_score_worst, disagreement)`` over steps
-1..n_steps of an episode (``track_loss``:
-:func:`activetrack.baselines.protocol.track_loss_rate` at the threshold ``loss_trace``,
-by default each target's prior position trace; the last three, with a filter per robot,
-the means over the steps of :meth:`activetrack.world.World.team_metrics`, else NaN):
-serially in an environment's world (:func:`run_episode`, a chunk of seeds in
+longest_gap, track_loss, robot_score_mean, robot_score_worst, disagreement, gospa,
+fraction_tracked, first_detection, all_tracked)`` over steps 1..n_steps of an episode
+(``track_loss``: :func:`activetrack.baselines.protocol.track_loss_rate` at the threshold
+``loss_trace``, by default each target's prior position trace; the team's three, with a
+filter per robot, the means over the steps of :meth:`activetrack.world.World.team_metrics`,
+else NaN; the last four, with targets that appear and leave (the field ``births``),
+:class:`activetrack.metrics.track_census.TrackCensus`'s mean GOSPA, mean over the
+episode's targets of the fraction of time tracked and of the time to first detection (s;
+over those detected), and 1.0 if every target was tracked, else 0.0; NaN without births or
+targets): serially in an environment's world (:func:`run_episode`, a chunk of seeds in
 :func:`run_episodes`, one Ray task), or every episode a copy of one batched world
 (:func:`run_batched`). ``ms_per_step`` is the CPU time (``time.process_time``) of the
 policy's decisions per step, after a warm-up decision that is not counted
@@ -31,6 +35,18 @@ from activetrack.baselines.rollout import (
     rollout,
 )
 from activetrack.baselines.simulation import detection_gaps
+from activetrack.metrics.track_census import TrackCensus, census_of
+
+#: The row's entries with targets that appear and leave (NaN without births).
+CENSUS_FIELDS = ("gospa", "fraction_tracked", "first_detection", "all_tracked")
+
+
+def _mean_of_finite(values: list[float]) -> float:
+    """Return the mean of the finite values (NaN: a step without a track of a present
+    target, with ``births``), NaN if none is; the plain mean when all are."""
+    arr = np.asarray(values)
+    ok = np.isfinite(arr)
+    return float(np.mean(arr)) if ok.all() else float(np.mean(arr[ok])) if ok.any() else np.nan
 
 
 def warm_up(env: Any, policy: Any, seed: int) -> None:
@@ -64,11 +80,17 @@ class _RowRecorder(Recorder):
         self.totals = [0.0] * n
         self.seconds = 0.0
         self.on_step = on_step
+        self.census: list[TrackCensus | None] = [None] * n
 
     def step(self, step: Step) -> None:
         world = step.world
         self.seconds += step.seconds
+        births = world.scenario.births is not None
         for i, j in zip(step.copies.tolist(), step.episodes.tolist(), strict=True):
+            if births:  # targets that appear and leave: the multi-target metrics
+                if self.census[j] is None:
+                    self.census[j] = TrackCensus(world.scenario.dt)
+                self.census[j].add(*census_of(world, i))
             if step.batched:
                 trace, error = float(world.get("trace", i)), float(world.position_error(i))
             else:
@@ -95,7 +117,7 @@ class _RowRecorder(Recorder):
             float(np.mean(self.traces[j])),
             float(np.sqrt(np.mean(np.square(self.errors[j])))),
             self.totals[j],
-            float(np.mean(self.nees[j])),
+            _mean_of_finite(self.nees[j]),
             ms,
             *detection_gaps(np.array(self.seen[j])),
             track_loss_rate(
@@ -104,6 +126,20 @@ class _RowRecorder(Recorder):
                 self.loss_trace,
             ),
             *(np.mean(self.team[j], axis=0).tolist() if self.team[j] else [np.nan] * 3),
+            *self._census_row(j),
+        )
+
+    def _census_row(self, j: int) -> tuple[float, ...]:
+        """Return episode ``j``'s census entries (:data:`CENSUS_FIELDS`), NaN without births."""
+        if self.census[j] is None:
+            return (np.nan,) * len(CENSUS_FIELDS)
+        s = self.census[j].summary()
+        first = [t for t in s["first_detection"] if t is not None]
+        return (
+            s["gospa"],
+            float(np.mean(s["fraction_tracked"])) if s["fraction_tracked"] else np.nan,
+            float(np.mean(first)) if first else np.nan,
+            float(s["all_tracked"]),
         )
 
 

@@ -51,6 +51,7 @@ from typing import Any
 import numpy as np
 
 from activetrack.baselines.episodes import (  # noqa: F401 (public here too)
+    CENSUS_FIELDS,
     run_batched,
     run_episode,
     run_episodes,
@@ -97,6 +98,10 @@ class PolicyEvaluation:
             the steps of the robots' mean score, the worst robot's score and the robots'
             disagreement (m) (:meth:`activetrack.world.World.team_metrics`), (episodes,
             3); else None.
+        census: with targets that appear and leave (the field ``births``), per-episode
+            arrays ``gospa``, ``fraction_tracked``, ``first_detection`` (s) and
+            ``all_tracked`` (1.0 or 0.0) (:data:`activetrack.baselines.episodes.CENSUS_FIELDS`);
+            None otherwise.
     """
 
     policy: str
@@ -112,6 +117,7 @@ class PolicyEvaluation:
     track_loss: np.ndarray | None = None
     loss_trace: list[float] | None = None
     team: np.ndarray | None = None
+    census: dict[str, np.ndarray] | None = None
 
     def summary(self, reference: PolicyEvaluation | None = None) -> dict[str, Any]:
         """Return the JSON summary; the ratio is to ``reference``'s mean trace (GSR).
@@ -168,6 +174,13 @@ class PolicyEvaluation:
         if self.team is not None and np.all(np.isfinite(self.team)):
             for key, column in zip(TEAM_METRICS, self.team.T, strict=True):
                 out[key] = float(np.mean(column))
+        if self.census is not None:  # targets that appear and leave
+            c = self.census
+            out["gospa"] = float(np.mean(c["gospa"]))
+            out["fraction_tracked"] = float(np.nanmean(c["fraction_tracked"]))
+            first = c["first_detection"][np.isfinite(c["first_detection"])]
+            out["first_detection_s"] = float(np.mean(first)) if first.size else None
+            out["all_tracked_fraction"] = float(np.mean(c["all_tracked"]))
         if reference is not None:
             out["ratio_to_gsr"] = mt / float(np.mean(reference.mean_trace))
             out["ratio_to_gsr_ci95"] = list(paired_ratio_ci(self.mean_trace, reference.mean_trace))
@@ -321,6 +334,7 @@ def evaluate(
     seeds = [seed + j for j in range(episodes)]
     env = parallel_env(scenario, **overrides)
     limited = env.unwrapped.world.scenario.limited_sensing
+    births = env.unwrapped.world.scenario.births is not None
     thresholds = (
         prior_traces(env.unwrapped.world.scenario)
         if loss_trace is None
@@ -387,6 +401,7 @@ def evaluate(
                 arr[:, 4],
                 *gaps,
                 arr[:, 8:11] if np.all(np.isfinite(arr[:, 8:11])) else None,
+                census=dict(zip(CENSUS_FIELDS, arr[:, 11:15].T, strict=True)) if births else None,
             )  # fmt: skip
         )
     return results
@@ -487,8 +502,10 @@ def format_table(rows: Sequence[dict[str, Any]]) -> str:
     ``CPU ms/decision`` is ``cpu_ms_per_decision`` (CPU time per decision after a warm-up;
     a summary written before that name gives its ``ms_per_step``); the ratios of the mean
     and of the IQM to GSR's; with limited sensing the track-loss rate, then the fraction
-    of steps without a detection and the longest such run. A summary written before a
-    column existed shows "-" there.
+    of steps without a detection and the longest such run; with targets that appear and
+    leave the mean GOSPA, the fraction of time tracked, the mean time to first detection
+    and the fraction of episodes in which every target was tracked. A summary written
+    before a column existed shows "-" there.
     """
     width = max([len("policy")] + [len(r.get("label", r["policy"])) + 12 for r in rows])
     head = (
@@ -521,6 +538,12 @@ def format_table(rows: Sequence[dict[str, Any]]) -> str:
                 f"robots mean {r['robot_score_mean']:.4g}, worst {r['robot_score_worst']:.4g}, "
                 f"disagreement {r['disagreement']:.3g} m"
             )
+        if "gospa" in r:  # targets that appear and leave
+            first = r["first_detection_s"]
+            extra.append(f"GOSPA {r['gospa']:.3f}")
+            extra.append(f"tracked {r['fraction_tracked']:.3f} of the time")
+            extra.append("first detection " + ("-" if first is None else f"{first:.2f} s"))
+            extra.append(f"all tracked in {r['all_tracked_fraction']:.2f} of episodes")
         if extra:
             line += "  " + ", ".join(extra)
         lines.append(line)
@@ -582,6 +605,14 @@ def write_results(
                     {}
                     if r.team is None
                     else {k: c.tolist() for k, c in zip(TEAM_METRICS, r.team.T, strict=True)}
+                ),
+                **(
+                    {}
+                    if r.census is None  # NaN (no target detected) written as null
+                    else {
+                        k: [None if not np.isfinite(v) else float(v) for v in a]
+                        for k, a in r.census.items()
+                    }
                 ),
             }
             for r in results

@@ -298,11 +298,16 @@ class EpisodeHistory:
         K = world.n_targets
         p = world.params
         x_hat = [g("x_hat", i, j) for j in range(K)]
+        x_true, drawn = [g("x_true", i, j) for j in range(K)], x_hat
         limited = world.scenario.limited_sensing
+        if world.present is not None:  # targets that appear and leave: NaN is not drawn
+            none = np.full(2, np.nan)
+            x_true = [x if on else none for x, on in zip(x_true, world.present[i], strict=True)]
+            drawn = [x if on else none for x, on in zip(x_hat, world.tracked[i], strict=True)]
         self.append(
             g("k", i),
-            [g("x_true", i, j) for j in range(K)],
-            x_hat,
+            x_true,
+            drawn,
             [g("P", i, j) for j in range(K)],
             g("sensors", i),
             x_hat if centers is None else centers,
@@ -619,7 +624,8 @@ class TrackingRenderer:
             t["now_ellipse"].set_data(now[:, 0], now[:, 1])
             t["ellipses"].set_segments([p[j] for p in polys[::stride]])
             nows.append(now)
-            trace += float(last.covs[j, 0, 0] + last.covs[j, 1, 1])
+            if np.isfinite(last.estimates[j, 0]):  # (a slot without a track: not drawn)
+                trace += float(last.covs[j, 0, 0] + last.covs[j, 1, 1])
         K = last.n_targets
         for i, (trail, head, circle) in enumerate(
             zip(art["trails"], art["heads"], art["rho"], strict=True)
@@ -667,7 +673,7 @@ class TrackingRenderer:
         art["title"].set_text(title)
         pts = np.concatenate([true.reshape(-1, 2), est.reshape(-1, 2), trails.reshape(-1, 2),
                               *nows, *extra])  # fmt: skip
-        self._fit_view(pts.min(0), pts.max(0))
+        self._fit_view(np.nanmin(pts, 0), np.nanmax(pts, 0))
 
     def _draw_sensing(self, last: Snapshot) -> str:
         """Draw the occluders, ranges and lines of sight of ``last``; return the title's
@@ -690,10 +696,11 @@ class TrackingRenderer:
         for i, line in enumerate(art["sight"]):
             seg = _segments(last.sensors[i : i + 1], last.targets[seen[:, i]])
             line.set_data(seg[:, 0], seg[:, 1])
-        j, i = np.nonzero(~seen)
+        there = np.isfinite(last.targets[:, :1])  # (K, 1): a target absent is not missed
+        j, i = np.nonzero(~seen & there)
         seg = _segments(last.sensors[i], last.targets[j])
         art["missed"].set_data(seg[:, 0], seg[:, 1])
-        return f"   missed {len(i)}/{seen.size}"
+        return f"   missed {len(i)}/{int(there.sum()) * seen.shape[1]}"
 
     def _fit_view(self, lo: FloatArray, hi: FloatArray) -> None:
         """Keep a square view around the data; change it only when the data leaves it

@@ -63,8 +63,9 @@ SEED, EPISODES = 1000, 100
 #: The policies compared: the expert and random motion.
 POLICIES = ("gsr", "rm")
 #: The GIF: every FRAME_STEP-th frame of the episode (and its last), SIZE x SIZE pixels,
-#: one palette of COLORS colours (about 100-200 KB per episode of 50 steps).
-FRAME_STEP, SIZE, COLORS = 2, 360, 64
+#: one palette of COLORS colours (about 100-200 KB per episode of 50 steps); a longer
+#: episode keeps at most about MAX_FRAMES frames (a larger step).
+FRAME_STEP, SIZE, COLORS, MAX_FRAMES = 2, 360, 64, 40
 
 
 def name_of(env_id: str) -> str:
@@ -87,8 +88,9 @@ def _small_gif(frames: list[Any], path: Path, fps: float) -> None:
 
     from activetrack.files import atomic_path
 
-    kept = frames[::FRAME_STEP]
-    if (len(frames) - 1) % FRAME_STEP:
+    step = max(FRAME_STEP, len(frames) // MAX_FRAMES)
+    kept = frames[::step]
+    if (len(frames) - 1) % step:
         kept.append(frames[-1])
     kept = [f.resize((SIZE, SIZE), Image.Resampling.LANCZOS) for f in kept]
     # One palette for the whole episode, from a few frames side by side.
@@ -101,7 +103,7 @@ def _small_gif(frames: list[Any], path: Path, fps: float) -> None:
     with atomic_path(path) as tmp:
         quantized[0].save(
             tmp, format="GIF", save_all=True, append_images=quantized[1:], loop=0,
-            duration=round(1000.0 * FRAME_STEP / fps), optimize=True,
+            duration=round(1000.0 * step / fps), optimize=True,
         )  # fmt: skip
 
 

@@ -44,6 +44,7 @@ from activetrack.models.behaviour import (
     StopAndGo,
     TargetBehaviour,
 )
+from activetrack.models.births import BirthProcess
 from activetrack.models.communication import (
     CommunicationModel,
     DelayLine,
@@ -128,6 +129,7 @@ __all__ = [
     "Scenario",
     "SensorModel",
     "TargetBehaviour",
+    "BirthProcess",
     "TraceObjective",
     "World",
     "Unicycle",

@@ -48,6 +48,7 @@ TASK_IDS = {
     "activetrack/Swarm-v0": "swarm",
     "activetrack/UrbanRadio-v0": "urban_radio",
     "activetrack/Pursuit-v0": "pursuit",
+    "activetrack/Patrol-v0": "patrol",
 }
 #: Every registered id and its preset (``ActiveTracking-v0`` is the paper).
 ALL_IDS = {ENV_ID: "paper", **TASK_IDS}

@@ -89,6 +89,7 @@ PRESET_FLAGS = {
         "single_update": False,
         "central_filter": False,
     },  # fmt: skip
+    "patrol": {**dict.fromkeys(FLAGS, True), "one_target": False, "unlimited_sensing": False},
 }
 
 # Which paths each preset takes, as docs/architecture.md and the presets describe them.
@@ -116,6 +117,7 @@ PRESET_PATHS = {  # (paper_model, paper_problem, paper_observation, fused_step)
     "radio": (True, True, True, False),
     "swarm": (False, False, False, False),
     "urban_radio": (False, False, False, False),
+    "patrol": (False, False, False, False),
 }
 
 

@@ -173,7 +173,8 @@ class WorldReaders:
             observation.ray_readings(
                 self.get("sensors", index), self.occluders(index), out[..., -rays:]
             )
-        more = [a for a in (self._route(index), self._motion_features(index)) if a is not None]
+        more = [a for a in (self._route(index), self._motion_features(index),
+                            self._track_flags(index)) if a is not None]  # fmt: skip
         if more:  # each agent's own route readings, heading or velocity, last
             out = np.concatenate([out, *(a.astype(np.float32) for a in more)], -1)
         return out
@@ -196,7 +197,7 @@ class WorldReaders:
         elapsed = self.get("k", index) / self._n_steps
         return observation.global_state(
             target, sensor, elapsed, self._rays(index), self._motion_features(index),
-            self._route(index),
+            self._route(index), self._track_flags(index),
         )  # fmt: skip
 
     def _rays(self, index: int | None) -> FloatArray | None:
@@ -204,6 +205,15 @@ class WorldReaders:
         if not self.layout.rays:
             return None
         return observation.ray_readings(self.get("sensors", index), self.occluders(index))
+
+    def _track_flags(self, index: int | None) -> FloatArray | None:
+        """Return every agent's track flags (..., M, K), 1 where the team holds a track,
+        or None (no ``births``)."""
+        if self._births is None:
+            return None
+        held = self._tracked if index is None else self._tracked[index]
+        shape = held.shape[:-1] + (self.n_sensors, self.n_targets)
+        return np.broadcast_to(held[..., None, :], shape).astype(np.float64)
 
     def _route(self, index: int | None) -> FloatArray | None:
         """Return every agent's route readings (..., M, 3K), or None (no
@@ -256,13 +266,20 @@ class WorldReaders:
         """Return ``||p_T(k) - p_hat_T(k|k)||`` (m) per copy, or of copy ``index``.
 
         With K > 1 targets: the root mean square over the targets (``per_target``: each
-        target's, on a last axis of K).
+        target's, on a last axis of K); with ``births``, over the present targets whose
+        slot holds a track (0 when none does; ``per_target``: NaN for the others).
         """
         if self.n_targets > 1:
             err = np.stack(
                 [self._error(self.get("x_true", index, k), self.get("x_hat", index, k))
                  for k in range(self.n_targets)], -1,
             )  # fmt: skip
+            if self._births is not None:  # the tracks held of the targets present
+                held = self._held(index)
+                if per_target:
+                    return np.where(held, err, np.nan)
+                n = np.maximum(held.sum(-1), 1)
+                return np.sqrt(np.sum(np.where(held, err * err, 0.0), axis=-1) / n)
             return err if per_target else np.sqrt(np.mean(err * err, axis=-1))
         if self._one and index is not None:
             x, h = self._t[0]["x_true"], self._t[0]["x_hat"]
@@ -307,9 +324,23 @@ class WorldReaders:
 
         With K > 1 targets: the mean over the targets (``per_target``: each target's, on a
         last axis of K); each is chi-square with 2 degrees of freedom for a consistent filter.
+        With ``births``: over the present targets whose slot holds a track (NaN for the
+        others, and the mean NaN when none does).
         """
         nees = np.stack(
             [position_nees(self.get("x_true", index, k), self.get("x_hat", index, k),
                            self.get("P", index, k)) for k in range(self.n_targets)], -1,
         )  # fmt: skip
+        if self._births is not None:  # the tracks held of the targets present
+            nees = np.where(self._held(index), nees, np.nan)
+            if per_target:
+                return nees
+            with np.errstate(invalid="ignore"):
+                n = np.sum(~np.isnan(nees), -1)
+                return np.where(n > 0, np.nansum(nees, -1) / np.maximum(n, 1), np.nan)
         return nees if per_target else np.mean(nees, axis=-1)
+
+    def _held(self, index: int | None) -> np.ndarray:
+        """Return which slots hold a track of a present target, (K,) or (N, K)."""
+        held = self._present & self._tracked
+        return held if index is None else held[index]

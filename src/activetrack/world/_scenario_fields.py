@@ -168,6 +168,8 @@ def accepted(name: str) -> str:
         "< n_steps, line_of_sight) or its record",
         "d_sep": "0 (none), a distance in [0, 1e9] every pair keeps, or M radii in [0, 1e9] "
         "(a pair keeps d_i + d_j); it must fit the start disk",
+        "births": "None (every target present throughout), or an activetrack.BirthProcess "
+        "(targets that appear and leave; needs limited sensing, the EKF, range_bearing sensors)",
     }[name]
 
 

@@ -82,6 +82,11 @@ with its own F kinematic features (``Layout.motion``: a unicycle's heading as ``
 sin)``, a double integrator's velocity over its top speed; zero-padded to the team's
 largest F), in [-1, 1]; the global state holds every agent's (``M F``) after the rays and
 before ``k / n_steps``.
+
+**Targets that appear and leave** (``births``): each agent's observation ends with K
+entries, 1 if the team holds a track in slot k, else 0 (a slot without one shows a search
+point in its target block: :mod:`activetrack.world.track_management`); the global state
+holds every agent's (``M K``) last before ``k / n_steps``.
 :class:`Layout` says which layout a scenario uses and its sizes and bounds.
 
 **Bounds** (:meth:`Layout.bounds`, the spaces' boxes). Bounded by definition: the
@@ -147,6 +152,7 @@ class Layout:
         route: the route readings per agent (:data:`ROUTE_DIM` per target with
             ``route_observation``, else 0; :func:`route_readings`), after the rays; the
             global state holds every agent's after the rays.
+        tracks: the track flags per agent (K with ``births``, else 0), last.
     """
 
     extended: bool
@@ -156,6 +162,7 @@ class Layout:
     rays: int = 0
     motion: int = 0
     route: int = 0
+    tracks: int = 0
 
     @property
     def target_dim(self) -> int:
@@ -172,13 +179,13 @@ class Layout:
         """Return the size of one agent's observation."""
         return (
             self.target_dim + self.sensor_dim * self.n_sensors + self.rays + self.route
-            + self.motion
+            + self.motion + self.tracks
         )  # fmt: skip
 
     @property
     def state_dim(self) -> int:
         """Return the size of the global state."""
-        per_agent = self.rays + self.route + self.motion
+        per_agent = self.rays + self.route + self.motion + self.tracks
         return self.target_dim + self.sensor_dim * self.n_sensors + per_agent * self.n_sensors + 1
 
     def sensor_constants(self, sc: Scenario, L: float) -> FloatArray:
@@ -205,6 +212,10 @@ class Layout:
         """Return float32 ``(low, high)`` of one agent's observation (module docstring,
         "Bounds"); without the ``length_scale`` L the log noise entries and the pose
         standard deviations are left unbounded (their bounds scale with L)."""
+        if self.tracks:  # the track flags, last, in [0, 1]
+            low, high = replace(self, tracks=0).bounds(length_scale)
+            one = np.ones(self.tracks, dtype=np.float32)
+            return np.concatenate([low, 0.0 * one]), np.concatenate([high, one])
         if self.motion:  # the agent's kinematic features, last, in [-1, 1]
             low, high = replace(self, motion=0).bounds(length_scale)
             one = np.ones(self.motion, dtype=np.float32)
@@ -240,7 +251,7 @@ class Layout:
     def state_bounds(self, length_scale: float | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Return float32 ``(low, high)`` of the global state (:meth:`bounds`, every
         agent's rays and kinematic features, and the elapsed fraction in [0, 1])."""
-        low, high = replace(self, motion=0, route=0).bounds(length_scale)
+        low, high = replace(self, motion=0, route=0, tracks=0).bounds(length_scale)
         if self.rays:  # every agent's rays instead of one agent's
             extra = np.float32(np.ones(self.rays * (self.n_sensors - 1)))
             low = np.concatenate([low, 0.0 * extra]).astype(np.float32)
@@ -252,6 +263,9 @@ class Layout:
         if self.motion:
             one = np.ones(self.motion * self.n_sensors, dtype=np.float32)
             low, high = np.concatenate([low, -one]), np.concatenate([high, one])
+        if self.tracks:
+            one = np.ones(self.tracks * self.n_sensors, dtype=np.float32)
+            low, high = np.concatenate([low, 0.0 * one]), np.concatenate([high, one])
         return np.append(low, np.float32(0.0)), np.append(high, np.float32(1.0))
 
 
@@ -288,6 +302,7 @@ def layout_of(sc: Scenario) -> Layout:
         not caps.paper_observation, sc.n_targets, sc.n_sensors,
         0 if caps.unlimited_sensing else sc.n_targets, 0 if caps.no_occluders else RAYS,
         int(motion), ROUTE_DIM * sc.n_targets if sc.route_observation else 0,
+        0 if sc.births is None else sc.n_targets,
     )  # fmt: skip
 
 
@@ -477,12 +492,14 @@ def global_state(
     rays: FloatArray | None = None,
     motion: FloatArray | None = None,
     route: FloatArray | None = None,
+    tracks: FloatArray | None = None,
 ) -> np.ndarray:
     """Return the global state, float32 of shape (..., 6 + 6M): the target and sensor
-    blocks, then every agent's ``rays`` (..., M, R), ``route`` readings (..., M, 3K) and
-    kinematic features ``motion`` (..., M, F), each if given, then the elapsed fraction."""
+    blocks, then every agent's ``rays`` (..., M, R), ``route`` readings (..., M, 3K),
+    kinematic features ``motion`` (..., M, F) and track flags ``tracks`` (..., M, K), each
+    if given, then the elapsed fraction."""
     m, td, sd = sensor.shape[-2], target.shape[-1], sensor.shape[-1]
-    per_agent = [a for a in (rays, route, motion) if a is not None]
+    per_agent = [a for a in (rays, route, motion, tracks) if a is not None]
     extra = sum(a.shape[-1] * m for a in per_agent)
     out = np.empty(sensor.shape[:-2] + (td + sd * m + extra + 1,), dtype=np.float32)
     out[..., :td] = target

@@ -15,6 +15,7 @@ import numpy as np
 
 from activetrack.kinematics.unicycle import Unicycle
 from activetrack.models.behaviour import Controlled, Evasive, Maneuvering
+from activetrack.models.births import BirthProcess
 from activetrack.models.communication import RangeLimited
 
 #: The fields added beyond the paper's setup (several targets, sensor models, poses,
@@ -23,7 +24,7 @@ EXTENSIONS = (
     "n_targets", "sensor_model", "pose_cov", "account_pose", "objective", "max_range",
     "p_detect", "occluders", "random_occluders", "occluder_bounds", "occluder_size",
     "filter_iterations", "kinematics", "target_behaviour", "estimator", "d_sep",
-    "route_observation", "communication", "team_fusion", "team_observation",
+    "route_observation", "communication", "team_fusion", "team_observation", "births",
 )  # fmt: skip
 
 #: The beyond-the-paper tasks start the filter consistent: the true state is drawn from
@@ -279,10 +280,35 @@ PRESETS.update({
         "communication": RangeLimited(15.0, drop=0.2, line_of_sight=True),
     },
 })  # fmt: skip
+#: The patrol task's arrivals: on average one every 100 steps (10 s) on the edge of a
+#: 60 m square, at 1 to 3 m/s toward a point inside it (crossing in 20 to 85 s); a track
+#: not detected for 20 steps (2 s) is dropped.
+PATROL_BIRTHS = BirthProcess(0.02, (-20.0, -20.0, 20.0, 20.0), speed=(1.0, 3.0), delete_after=20)
+PRESETS["patrol"] = {
+    # Four range-and-bearing robots (the paper's sensor 1) watch a 60 m square from its
+    # centre; targets enter and leave it (PATROL_BIRTHS), at most four at once (slots),
+    # moving at nearly constant velocity (q = 0.1); each robot sees 15 m and detects a
+    # target in range with probability 0.9; 600 steps (60 s).
+    **_TASK,
+    "name": "patrol",
+    "n_targets": 4,
+    "sigma_d2": 2.0,
+    "sigma_theta2": 0.25,
+    "q": 0.1,
+    "x0": ((0.0, 0.0, 0.0, 0.0),) * 4,
+    "x0_hat": ((0.0, 0.0, 0.0, 0.0),) * 4,
+    "sensor_center": (0.0, 0.0),
+    "sensor_radius": 5.0,
+    "max_range": 15.0,
+    "p_detect": 0.9,
+    "n_steps": 300,
+    "births": PATROL_BIRTHS,
+}
 
 #: The named tasks beyond the paper (presets with registered environment ids).
 TASKS = (
     "two_targets", "range_only", "bearing_only", "mixed", "uncertain_poses", "urban",
     "urban_random", "maneuvering", "evader", "unicycle", "fixed_wing", "crowded",
     "urban_unicycle", "radio", "swarm", "urban_radio", "pursuit",
+    "urban_unicycle", "patrol",
 )  # fmt: skip

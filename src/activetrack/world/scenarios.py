@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from activetrack.kinematics import separation, team
+from activetrack.models import births
 from activetrack.models.motion import LinearMotionModel, make_model
 from activetrack.models.objective import Objective
 from activetrack.models.sensor import SensorModel, as_sensor_model, record, slot_code
@@ -195,6 +196,9 @@ class Scenario:
             measurements, the default) or ``"covariance_intersection"`` (their estimates).
         team_observation: whether each agent observes only its own estimate and its
             neighbours' messages (:mod:`activetrack.world.team_observation`); False.
+        births: None (every target there throughout) or an :class:`activetrack.BirthProcess`:
+            the K targets are slots that targets enter and leave, and the team tracks those
+            it has detected (:mod:`activetrack.world.track_management`).
 
     One coupled limit: the first predicted position variance (from P0, the model and q)
     may be at most 1e10 times the smallest range variance, so that one update never
@@ -240,6 +244,7 @@ class Scenario:
     communication: Any = None
     team_fusion: str = "measurements"
     team_observation: bool = False
+    births: Any = None
     _cache: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -313,6 +318,7 @@ class Scenario:
             put("P0", _per_target_p0(self.P0, dims))
         put("target_behaviour", behaviours.converted(self.target_behaviour, self))
         put("estimator", imm_tracking.converted(self.estimator, self))
+        put("births", births.converted(self.births, self))
         self._check_information_ratio()
         put("d_sep", separation.converted(self.d_sep, m))
         separation.check_scenario(self)
@@ -529,6 +535,7 @@ class Scenario:
                 v = behaviours.record(v)
             v = imm_tracking.record(v) if f.name == "estimator" else v
             v = team_filters.record(v) if f.name == "communication" else v
+            v = repr(v) if f.name == "births" and v is not None else v
             out[f.name] = v.name if isinstance(v, LinearMotionModel) else v
         return out
 

@@ -76,6 +76,7 @@ from activetrack.world.behaviours import TargetMotion
 from activetrack.world.imm_tracking import IMMTracking
 from activetrack.world.scenarios import Scenario, make_scenario
 from activetrack.world.team_filters import TeamTracking
+from activetrack.world.track_management import TrackManagement
 
 #: Steps of noise a copy draws per generator call in a world of several copies.
 DEFAULT_NOISE_BLOCK = 64
@@ -100,7 +101,7 @@ class StepResult(NamedTuple):
 
 class World(  # (the mixins: world/_selection.py, _streams.py, ..., imm_tracking.py)
     CopySelection, RandomStreams, WorldReaders, OccludedMoves, TargetMotion, MotionState,
-    IMMTracking, TeamTracking,
+    IMMTracking, TeamTracking, TrackManagement,
 ):  # fmt: skip
     """``num_copies`` independent tracking episodes of one scenario, stepped together.
 
@@ -292,6 +293,7 @@ class World(  # (the mixins: world/_selection.py, _streams.py, ..., imm_tracking
         self._init_behaviours()  # the true targets' behaviours (activetrack.world.behaviours)
         self._init_imm()  # an IMM estimator's state (activetrack.world.imm_tracking)
         self._init_team()  # a filter per robot (activetrack.world.team_filters)
+        self._init_tracks()  # births, departures, tracks (activetrack.world.track_management)
 
     # Reset ------------------------------------------------------------------------------
     def reset(
@@ -391,6 +393,7 @@ class World(  # (the mixins: world/_selection.py, _streams.py, ..., imm_tracking
         self._reset_behaviours(rows)  # (spawned generators: the copies' streams do not move)
         self._reset_imm(sel)
         self._reset_team(rows)  # (after the behaviours': its own spawned generators)
+        self._reset_tracks(rows)
         self._noise_left[sel] = 0
         if self._noise is not None:
             self._draw_noise(rows)
@@ -478,6 +481,8 @@ class World(  # (the mixins: world/_selection.py, _streams.py, ..., imm_tracking
             if detected is not None:
                 detected = detected[sel]
         score = trace if self._plain else combined(self.objective, np.stack(scores, -1))
+        if self._births is not None:  # over the tracks held, plus the search term
+            trace, score = self._track_score(sel)
         terminated = trace > self._max_trace  # never when max_trace is None (inf)
         new = {
             "sensors": sensors,
@@ -579,6 +584,8 @@ class World(  # (the mixins: world/_selection.py, _streams.py, ..., imm_tracking
                 tracking.move_target(tp, t["x_true"][calc], noise[proc])
                 for t, tp, (proc, _) in zip(tgt, p.targets, self._noise_slices, strict=True)
             ] if self._behaviours is None else self._move_targets(sel, calc, noise)  # fmt: skip
+            if self._births is not None:  # departures and births
+                moved_t = self._arrivals(moved_t, sel, calc)
             true_pos = np.empty(moved_t[0].shape[:-1] + (K, 2))
             for k, x in enumerate(moved_t):
                 true_pos[..., k, :] = x[..., :2]
@@ -586,6 +593,7 @@ class World(  # (the mixins: world/_selection.py, _streams.py, ..., imm_tracking
             if self._limited:
                 draws = noise[self._detect_slice] if p.p_detect is not None else None
                 detected = tracking.detections(p, true_pos, sensors, draws, self._occ)
+                detected = detected if self._births is None else self._mask_absent(detected)
         results = []
         for k, (t, tp, x_pred, (proc, meas)) in enumerate(
             zip(tgt, p.targets, x_preds, self._noise_slices, strict=True)
@@ -607,4 +615,6 @@ class World(  # (the mixins: world/_selection.py, _streams.py, ..., imm_tracking
             results.append((x_true, x_post, P_post, *predict(x_post, P_post, tp.Phi, tp.Q)))
         if general and self._comm is not None:  # each robot's filters (no random draws here)
             self._team_step(z_all, fixes, detected, sensors, sel)
+        if self._births is not None:  # initiation, deletion, search points
+            self._manage_tracks(results, z_all, sensors, fixes, detected, sel)
         return sensors, fixes, projected, detected, results
