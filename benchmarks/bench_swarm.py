@@ -95,16 +95,6 @@ def batched(task: str, n: int, seconds: float, repeats: int) -> dict[str, Any]:
     return out
 
 
-def _check_out(path: Path | None) -> None:
-    """Raise SystemExit unless ``path`` (if given) is a new file in an existing folder."""
-    if path is None:
-        return
-    if not path.parent.is_dir():
-        raise SystemExit(f"--out: no folder {path.parent}")
-    if path.exists():
-        raise SystemExit(f"--out: {path} exists (results are not overwritten)")
-
-
 def main(argv: list[str] | None = None) -> dict:
     """Print the rates and ratios; return them as a dict (and write ``--out``)."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -118,6 +108,8 @@ def main(argv: list[str] | None = None) -> dict:
         parser.error(f"--n must be a positive integer, got {args.n}")
     if args.repeats < 1:
         parser.error(f"--repeats must be a positive integer, got {args.repeats}")
+    from bench_robots import _check_out  # (a new file in an existing folder)
+
     _check_out(args.out)
     import torch
     import vmas
