@@ -177,18 +177,17 @@ def format_table(summaries: dict[str, dict[str, Any]]) -> str:
     """Return the results as an aligned text table (means with 95% intervals)."""
     head = ("planner", "mean trace (m^2) [95% CI]", "RMSE (m) [95% CI]", "NEES", "plan ms (median)")
     rows = [head]
+
+    def ci(s: dict[str, Any], key: str, digits: int) -> str:  # "-": none (no track held)
+        if s[key] is None:
+            return "-"
+        lo, hi = s[f"{key}_ci95"]
+        return f"{s[key]:.{digits}f} [{lo:.{digits}f}, {hi:.{digits}f}]"
+
     for name, s in summaries.items():
-        lo, hi = s["mean_trace_ci95"]
-        rlo, rhi = s["rmse_ci95"]
-        rows.append(
-            (
-                name,
-                f"{s['mean_trace']:.4f} [{lo:.4f}, {hi:.4f}]",
-                f"{s['rmse']:.4f} [{rlo:.4f}, {rhi:.4f}]",
-                f"{s['nees']:.2f}",
-                f"{s['plan_time_ms_median']:.2f}",
-            )
-        )
+        nees = "-" if s["nees"] is None else f"{s['nees']:.2f}"
+        ms = f"{s['plan_time_ms_median']:.2f}"
+        rows.append((name, ci(s, "mean_trace", 4), ci(s, "rmse", 4), nees, ms))
     widths = [max(len(r[k]) for r in rows) for k in range(len(head))]
     lines = ["  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)) for r in rows]
     lines.insert(1, "  ".join("-" * w for w in widths))

@@ -177,16 +177,30 @@ class PolicyEvaluation:
         if self.census is not None:  # targets that appear and leave
             c = self.census
             out["gospa"] = float(np.mean(c["gospa"]))
-            out["fraction_tracked"] = float(np.nanmean(c["fraction_tracked"]))
+            tracked = c["fraction_tracked"][np.isfinite(c["fraction_tracked"])]
+            out["fraction_tracked"] = float(np.mean(tracked)) if tracked.size else None
             first = c["first_detection"][np.isfinite(c["first_detection"])]
             out["first_detection_s"] = float(np.mean(first)) if first.size else None
             out["all_tracked_fraction"] = float(np.mean(c["all_tracked"]))
-        if reference is not None:
+        # (GSR's trace is 0 only where no track was ever held: births, short episodes)
+        if reference is not None and np.mean(reference.mean_trace) > 0:
             out["ratio_to_gsr"] = mt / float(np.mean(reference.mean_trace))
             out["ratio_to_gsr_ci95"] = list(paired_ratio_ci(self.mean_trace, reference.mean_trace))
             ratio, lo, hi = protocol.paired_ratio_interval(self.mean_trace, reference.mean_trace)
             out["iqm_ratio_to_gsr"], out["iqm_ratio_to_gsr_ci95"] = ratio, [lo, hi]
         return out
+
+
+def json_safe(obj: Any) -> Any:
+    """Return ``obj`` with every non-finite float (a figure with nothing to average: e.g.
+    the NEES of an episode that never held a track, with ``births``) as None (JSON null)."""
+    if isinstance(obj, dict):
+        return {k: json_safe(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [json_safe(v) for v in obj]
+    if isinstance(obj, (float, np.floating)) and not np.isfinite(obj):
+        return None
+    return obj
 
 
 #: The team's metrics of a world with a filter per robot, in the summary and the episodes.
@@ -541,7 +555,8 @@ def format_table(rows: Sequence[dict[str, Any]]) -> str:
         if "gospa" in r:  # targets that appear and leave
             first = r["first_detection_s"]
             extra.append(f"GOSPA {r['gospa']:.3f}")
-            extra.append(f"tracked {r['fraction_tracked']:.3f} of the time")
+            tracked = r["fraction_tracked"]
+            extra.append("tracked " + ("-" if tracked is None else f"{tracked:.3f} of the time"))
             extra.append("first detection " + ("-" if first is None else f"{first:.2f} s"))
             extra.append(f"all tracked in {r['all_tracked_fraction']:.2f} of episodes")
         if extra:
@@ -619,8 +634,8 @@ def write_results(
         },
     }
     with outputs:
-        outputs.write_json("results.json", summaries(results, pools))
-        outputs.write_json("episodes.json", per_episode)
+        outputs.write_json("results.json", json_safe(summaries(results, pools)))
+        outputs.write_json("episodes.json", json_safe(per_episode))
         if plot:
             from activetrack.baselines.plotting import plot_evaluation
 

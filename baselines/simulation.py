@@ -78,8 +78,11 @@ class RunRecord:
 
     @property
     def mean_nees(self) -> float:
-        """Return the mean position NEES over the run's steps (2 for a consistent filter)."""
-        return float(np.mean(self.nees))
+        """Return the mean position NEES over the run's steps with a finite one (2 for a
+        consistent filter; with ``births`` a step holding no track of a present target has
+        none), NaN if no step has one."""
+        ok = np.isfinite(self.nees)
+        return float(np.mean(self.nees[ok])) if ok.any() else float("nan")
 
     @property
     def no_detection(self) -> float:
@@ -242,6 +245,10 @@ class MonteCarloResult:
             ("rmse", self.rmse),
             ("nees", self.nees),
         ):
+            values = np.asarray(values)[np.isfinite(values)]  # NaN: no track held (births)
+            if values.size == 0:  # written as null, not as NaN (not JSON)
+                out[key], out[f"{key}_ci95"] = None, [None, None]
+                continue
             mean, lo, hi = mean_ci(values)
             out[key] = mean
             out[f"{key}_ci95"] = [lo, hi]

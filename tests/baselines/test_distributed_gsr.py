@@ -12,6 +12,7 @@ import pytest
 
 from activetrack.baselines.distributed_gsr import DistributedGSR
 from activetrack.baselines.gsr import GSR
+from activetrack.models.communication import RangeLimited
 from activetrack.world import World
 from activetrack.world.problem import PlanningProblem
 
@@ -142,3 +143,13 @@ def test_on_a_decentralized_world_each_robot_plans_on_its_own_estimate():
                 np.testing.assert_allclose(plan[c, i], GSR().plan(one)[0], atol=1e-6)
         w.step(plan)
     assert alone_seen > 0
+
+
+def test_a_copy_of_a_decentralized_problem_keeps_its_views():
+    w = World("radio", 3, communication=RangeLimited(range=5.0, drop=0.5))
+    w.reset(seeds=[0, 1, 2])
+    w.step(GSR().plan(w.planning_problem()))
+    p = w.planning_problem()
+    one = p[1]
+    np.testing.assert_array_equal(one.team.links, p.team.links[1])
+    np.testing.assert_array_equal(DistributedGSR().plan(one), DistributedGSR().plan(p)[1])

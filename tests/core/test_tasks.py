@@ -36,6 +36,7 @@ def test_every_task_is_a_valid_scenario_with_its_layout():
         # A kinematics with a heading (the unicycle tasks): each agent's (cos, sin) last.
         f = 0 if sc.kinematics is None else max(k.n_features for k in sc.kinematics_models)
         f += 3 * K if sc.route_observation else 0  # the route readings (urban_unicycle)
+        f += K if sc.births is not None else 0  # the track flags (patrol)
         assert obs.shape == (M, d + rays + f), name
         assert w.state(0).shape == (d + M * rays + M * f + 1,)
         low, high = w.layout.bounds()

@@ -18,6 +18,8 @@ from dataclasses import fields
 import numpy as np
 import pytest
 
+from activetrack._registry import TWO_TEAM_ENTRY_POINTS
+
 pytest.importorskip("ray")
 pytest.importorskip("ray.rllib")
 
@@ -43,7 +45,13 @@ def test_rllib_env_check_passes_for_every_registered_id(scenario):
     ids = rllib.register_rllib_envs()
     assert "activetrack/ActiveTracking-v0" in ids
     for env_id in ids:
-        # Through RLlib's registry, as an env runner creates it.
+        # Through RLlib's registry, as an env runner creates it. A two-team game needs a
+        # target an agent moves: its own scenario (its sensors and its target_0).
+        if env_id in TWO_TEAM_ENTRY_POINTS:
+            env = _global_registry.get(ENV_CREATOR, env_id)({})
+            check_multiagent_environments(env)
+            assert "target_0" in env.possible_agents
+            continue
         env = _global_registry.get(ENV_CREATOR, env_id)({"scenario": scenario})
         check_multiagent_environments(env)
         assert set(env.possible_agents) == set(parallel_env(scenario).possible_agents)

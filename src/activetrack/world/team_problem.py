@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from activetrack.world.prediction import indexed
 from activetrack.world.problem import PlanningProblem, Prediction
 
 _FIELDS = tuple(f.name for f in dataclasses.fields(PlanningProblem))
@@ -37,6 +38,10 @@ class TeamViews:
 
     predictions: tuple[Prediction, ...]
     links: np.ndarray
+
+    def __getitem__(self, index: Any) -> TeamViews:
+        """Return the views of the copies at ``index`` of the batch axes."""
+        return TeamViews(tuple(indexed(q, index) for q in self.predictions), self.links[index])
 
     def views(self, problem: PlanningProblem) -> list[PlanningProblem]:
         """Return robot ``i``'s problem for every ``i``: ``problem`` (the team's sensors,
@@ -70,6 +75,12 @@ class TeamProblem(PlanningProblem):
     """A :class:`PlanningProblem` (the central filter's) with the team's :class:`TeamViews`."""
 
     team: TeamViews | None = None
+
+    def __getitem__(self, index: Any) -> PlanningProblem:
+        """Return the problem(s) at ``index`` of the batch axes, with their views."""
+        base = PlanningProblem(**{k: getattr(self, k) for k in _FIELDS})[index]
+        team = None if self.team is None else self.team[index]
+        return TeamProblem(**{k: getattr(base, k) for k in _FIELDS}, team=team)
 
 
 def with_team(world: Any, problem: PlanningProblem, index: int | None) -> PlanningProblem:
