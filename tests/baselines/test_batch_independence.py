@@ -48,7 +48,10 @@ def _policies(task: str) -> dict[str, object]:
 @pytest.mark.parametrize("task", sorted(PRESETS))
 def test_a_seeds_records_do_not_depend_on_its_batch(task: str) -> None:
     per_window = []
-    for first, episodes in WINDOWS:
+    # 32 robots and 8 targets (swarm): the seed alone and second of 3 (the look-ahead's
+    # plans cost most of the suite's slowest test otherwise)
+    windows = WINDOWS[:2] if World(task, 1).n_sensors > 16 else WINDOWS
+    for first, episodes in windows:
         results = evaluate(
             _policies(task), task, episodes, first, progress=False, batched=True, n_steps=STEPS
         )
