@@ -144,13 +144,15 @@ class DistributedGSR:
         same = labels[..., :, None] == labels[..., None, :]  # (..., M, M): i's group
         plans = self._warm_starts(views)
         running = np.ones(shape + (m,), bool)  # by robot: its group has not stopped
+        first = np.argmax(same, axis=-1)  # each robot's group's lowest member
         rounds = np.zeros(shape + (m,), np.int64)
         for _ in range(self.rounds):
             if not running.any():
                 break
-            start = np.stack(
-                [self._view(views, i, same, running, plans).score(plans) for i in range(m)], -1
-            )
+            # Each group's objective at the round's start, as its lowest robot measures it.
+            start = np.zeros(shape + (m,))
+            for i in np.unique(first):
+                start[..., i] = self._view(views, i, same, running, plans).score(plans)
             gain = np.zeros(shape + (m,))
             for i in range(m):
                 view = self._view(views, i, same, running, plans)
@@ -164,7 +166,6 @@ class DistributedGSR:
             rounds += running
             # A group's improvement and its objective at the round's start (its lowest robot's).
             total = np.einsum("...ij,...j->...i", same.astype(float), gain)
-            first = np.argmax(same, axis=-1)  # each robot's group's lowest member
             f0 = np.take_along_axis(start, first, axis=-1)
             running &= ~(total <= self.tol * f0)
         self.last_rounds = rounds
