@@ -73,6 +73,8 @@ class _RowRecorder(Recorder):
         self.errors: list[list[float]] = [[] for _ in range(n)]
         self.nees: list[list[float]] = [[] for _ in range(n)]
         self.seen: list[list[np.ndarray]] = [[] for _ in range(n)]
+        # With births: which slots hold a target (the detection metrics count only those).
+        self.present: list[list[np.ndarray]] = [[] for _ in range(n)]
         self.target_traces: list[list[list[float]]] = [[] for _ in range(n)]
         # With a filter per robot: the team's metrics per step (team_filters.team_metrics).
         self.team: list[list[list[float]]] = [[] for _ in range(n)]
@@ -99,10 +101,13 @@ class _RowRecorder(Recorder):
             self.errors[j].append(error)
             self.nees[j].append(float(world.position_nees(i)))
             self.seen[j].append(world.get("detected", i).any(axis=-1))
-            # Read only (the world's numbers unchanged): each target's own trace.
-            self.target_traces[j].append(
-                [float(np.trace(world.get("P", i, k)[:2, :2])) for k in range(world.n_targets)]
-            )
+            # Read only (the world's numbers unchanged): each target's own trace; a present
+            # target the team holds no track of is as lost as can be (inf).
+            traces = [float(np.trace(world.get("P", i, k)[:2, :2])) for k in range(world.n_targets)]
+            if births:
+                self.present[j].append(world.present[i].copy())
+                traces = np.where(world.tracked[i], traces, np.inf).tolist()
+            self.target_traces[j].append(traces)
             self.totals[j] += float(step.rewards[i])
             if world.decentralized:
                 self.team[j].append(list(world.team_metrics(i).values()))
@@ -113,17 +118,19 @@ class _RowRecorder(Recorder):
 
     def row(self, j: int, ms: float) -> tuple[float, ...]:
         """Return episode ``j``'s row (``ms``: the CPU ms per decision)."""
+        present = np.array(self.present[j]) if self.present[j] else None
         return (
             float(np.mean(self.traces[j])),
             float(np.sqrt(np.mean(np.square(self.errors[j])))),
             self.totals[j],
             _mean_of_finite(self.nees[j]),
             ms,
-            *detection_gaps(np.array(self.seen[j])),
+            *detection_gaps(np.array(self.seen[j]), present),
             track_loss_rate(
                 np.array(self.seen[j]).reshape(-1, len(self.target_traces[j][0])),
                 np.array(self.target_traces[j]),
                 self.loss_trace,
+                present,
             ),
             *(np.mean(self.team[j], axis=0).tolist() if self.team[j] else [np.nan] * 3),
             *self._census_row(j),

@@ -261,35 +261,40 @@ def prior_traces(scenario: Any) -> FloatArray:
     return np.array([float(np.trace(np.asarray(p)[:2, :2])) for p in scenario.initial_covs])
 
 
-def track_loss_rate(seen: Any, traces: Any, threshold: Any) -> float:
+def track_loss_rate(seen: Any, traces: Any, threshold: Any, present: Any = None) -> float:
     """Return the fraction of (step, target) pairs in which no sensor measured the target
     and its posterior position trace exceeded ``threshold`` (m^2, one per target or one
     for all).
 
     ``seen`` and ``traces`` are (steps, K) (or (steps,) for one target): whether some
     sensor measured each target at each step, and the trace of its position covariance
-    after the step. An episode of no steps has a rate of 0.
+    after the step (``inf`` where the team holds no track of it). ``present`` (the same
+    shape; None: always) keeps only the pairs in which the target was there, for targets
+    that appear and leave. An episode without such a pair has a rate of 0.
     """
     from activetrack.validation import real_array
 
     seen = np.asarray(seen, dtype=bool)
-    traces = real_array("traces", traces)
-    if seen.shape != traces.shape or seen.ndim not in (1, 2):
+    traces = real_array("traces", traces, finite=False)
+    if np.isnan(traces).any() or (traces < 0).any():
+        raise ValueError("traces must be >= 0 (inf: no track), got NaN or a negative value")
+    there = np.ones_like(seen) if present is None else np.asarray(present, dtype=bool)
+    if seen.shape != traces.shape or seen.shape != there.shape or seen.ndim not in (1, 2):
         raise ValueError(
-            f"seen and traces must have the same shape (steps,) or (steps, K), got "
-            f"{seen.shape} and {traces.shape}"
+            f"seen, traces and present must have the same shape (steps,) or (steps, K), "
+            f"got {seen.shape}, {traces.shape} and {there.shape}"
         )
     if seen.ndim == 1:  # one target
-        seen, traces = seen[:, None], traces[:, None]
+        seen, traces, there = seen[:, None], traces[:, None], there[:, None]
     limit = real_array("threshold", threshold)
     if limit.ndim > 1 or limit.size not in (1, traces.shape[1]) or np.any(limit < 0):
         raise ValueError(
             f"threshold must be >= 0, one value or one per target ({traces.shape[1]}), "
             f"got {threshold!r}"
         )
-    if seen.size == 0:
+    if not there.any():
         return 0.0
-    return float(np.mean(~seen & (traces > limit)))
+    return float(np.sum(~seen & there & (traces > limit)) / np.sum(there))
 
 
 def pooled_summary(name: str, runs: Sequence[Any], reference: Any) -> dict[str, Any]:

@@ -97,20 +97,28 @@ class RunRecord:
         return 0 if self.seen is None else detection_gaps(self.seen)[1]
 
 
-def detection_gaps(seen: np.ndarray) -> tuple[float, int]:
+def detection_gaps(seen: np.ndarray, present: np.ndarray | None = None) -> tuple[float, int]:
     """Return ``(fraction, longest)`` for ``seen`` (steps, K): the fraction of (step, target)
     pairs in which no sensor measured the target, and the longest run of consecutive steps
-    in which some one target went unmeasured."""
+    in which some one target went unmeasured.
+
+    ``present`` (the same shape; None: every target at every step) restricts both to the
+    pairs in which the target was there: with targets that appear and leave, an empty slot
+    is not a missed detection, and a step without the target ends a run. No present pair
+    gives ``(0.0, 0)``.
+    """
     seen = np.asarray(seen, dtype=bool).reshape(len(seen), -1)
-    if seen.size == 0:
+    there = np.ones_like(seen) if present is None else np.asarray(present, bool).reshape(seen.shape)
+    if not there.any():
         return 0.0, 0
+    missed = ~seen & there
     longest = 0
-    for column in (~seen).T:
+    for column in missed.T:
         # Lengths of the runs of True: differences of the run boundaries.
         edges = np.flatnonzero(np.diff(np.concatenate([[0], column.astype(np.int8), [0]])))
         if edges.size:
             longest = max(longest, int(np.max(edges[1::2] - edges[::2])))
-    return float(np.mean(~seen)), longest
+    return float(missed.sum() / there.sum()), longest
 
 
 class _RunRecorder(Recorder):

@@ -192,6 +192,22 @@ def test_track_loss_rate_on_a_hand_made_episode():
     assert track_loss_rate(np.ones((0, 2), bool), np.ones((0, 2)), 1.0) == 0.0
 
 
+def test_track_loss_rate_counts_only_present_targets():
+    # Targets that appear and leave (patrol): the episode above with slot 1 empty at
+    # steps 0-2 and slot 0 held without a track (inf) at step 4. Present pairs: 7. Lost:
+    # (2, 0) 9 > 8, (3, 0) 12 > 8, (4, 1) 2.5 > 2; not lost: (1, 0) 5 <= 8, (3, 1)
+    # 1.5 <= 2, (4, 0) measured even without a track. The empty slot's (1, 1) is gone.
+    seen = np.array([[1, 1], [0, 0], [0, 1], [0, 0], [1, 0]], dtype=bool)
+    traces = np.array([[1.0, 1.0], [5.0, 3.0], [9.0, 0.5], [12.0, 1.5], [np.inf, 2.5]])
+    present = np.array([[1, 0], [1, 0], [1, 0], [1, 1], [1, 1]], dtype=bool)
+    assert track_loss_rate(seen, traces, [8.0, 2.0], present) == pytest.approx(3 / 7)
+    traces[4, 0], seen[4, 0] = np.inf, False  # unseen and no track: lost
+    assert track_loss_rate(seen, traces, [8.0, 2.0], present) == pytest.approx(4 / 7)
+    assert track_loss_rate(seen, traces, 1.0, np.zeros_like(seen)) == 0.0  # nobody there
+    with pytest.raises(ValueError, match="traces must be >= 0"):
+        track_loss_rate(seen, np.full(seen.shape, np.nan), 1.0)
+
+
 def test_prior_traces_are_the_position_block_of_p0():
     assert prior_traces(make_scenario("urban")).tolist() == [4.0 + 4.0]  # P0 (4, 4, 25, 25)
     two = make_scenario("two_targets")

@@ -105,6 +105,25 @@ def test_detection_gaps_against_a_loop():
         assert fraction == pytest.approx((~seen).sum() / seen.size)
 
 
+def test_detection_gaps_count_only_present_targets():
+    # Targets that appear and leave: an empty slot is not a miss, and a step without the
+    # target ends a run. Against a loop over the present pairs only.
+    rng = np.random.default_rng(5)
+    for _ in range(200):
+        shape = (rng.integers(1, 40), rng.integers(1, 4))
+        seen, present = rng.random(shape) < 0.5, rng.random(shape) < 0.7
+        longest, missed, there = 0, 0, 0
+        for s_col, p_col in zip(seen.T, present.T, strict=True):
+            run = 0
+            for s, p in zip(s_col, p_col, strict=True):
+                run = run + 1 if (p and not s) else 0
+                longest, missed, there = max(longest, run), missed + (p and not s), there + p
+        fraction, gap = detection_gaps(seen, present)
+        assert gap == longest
+        assert fraction == pytest.approx(missed / there if there else 0.0)
+    assert detection_gaps(np.zeros((3, 2), bool), np.zeros((3, 2), bool)) == (0.0, 0)
+
+
 @pytest.mark.slow
 def test_filter_is_consistent_with_missed_detections():
     # 200 GSR-driven runs of the range-only team, each sensor detecting with probability
