@@ -35,13 +35,21 @@ def test_gsr_tracks_every_target_that_enters_patrol():
     # The acceptance: every target that enters is tracked in >= 95% of episodes. With n
     # episodes, a true rate of 0.95 gives at least x successes with probability 0.99
     # (x = the binomial's 1% quantile); fewer fails the test.
+    # And the tracks are honest: the mean over episodes of each episode's mean position
+    # NEES (over the steps holding tracks of present targets) lies in the 99% band of that
+    # statistic (tests.core.helpers.nees_band: 2 +- 0.2 here). With the paper's bearing
+    # variance of 0.25 rad^2 instead of patrol's 0.01 it is 6.4: one robot's track at
+    # 15 m linearizes a bearing over a 7 m spread.
     from activetrack.baselines.evaluation import evaluate
+    from tests.core.helpers import nees_band
 
     n = 20
     res = evaluate(["gsr"], "patrol", episodes=n, seed=0, progress=False, batched=True)[0]
     ok = res.census["all_tracked"]
     x = stats.binom.ppf(0.01, n, 0.95)
     assert ok.sum() >= x, ok
+    lo, hi = nees_band(res.nees)
+    assert lo < res.nees.mean() < hi, (res.nees.mean(), lo, hi)
     assert np.all(np.isfinite(res.census["gospa"]))
     first = res.census["first_detection"]
     assert np.all(first[np.isfinite(first)] >= 0.0)
