@@ -9,6 +9,10 @@ For each run folder (its ``results.json`` and the scenario recorded in its
 bootstrap intervals, the track-loss rate with its interval and the no-detection fraction
 (limited sensing; "-" otherwise), and the paired ratios of the IQM and of the mean to
 GSR's (``docs/results/protocol.md``). A pooled row (``--pool``) names its number of runs.
+Runs of a task whose targets appear and leave (``births``: the results carry ``gospa``)
+get a second table, the multi-target census: GOSPA, the fraction of the time present
+each target was tracked, the time to first detection, the episodes in which every
+target was tracked, RMSE, NEES and the decision time.
 """
 
 from __future__ import annotations
@@ -50,6 +54,32 @@ def rows(folder: Path) -> list[str]:
     return out
 
 
+CENSUS_HEAD = (
+    "| task | policy | GOSPA (m) | tracked | first detection (s) | all tracked "
+    "| RMSE (m) | NEES | ms/step |"
+)
+
+
+def census_rows(folder: Path) -> list[str]:
+    """Return the census table's rows of one output folder (none without ``gospa``)."""
+    results = json.loads((folder / "results.json").read_text(encoding="utf-8"))
+    meta = json.loads((folder / "episodes.json").read_text(encoding="utf-8"))["meta"]
+    task = meta["scenario"] if isinstance(meta["scenario"], str) else meta["scenario"]["name"]
+    out = []
+    for r in results:
+        if r.get("gospa") is None:
+            continue
+        n = r["episodes"]
+        ok = round(r["all_tracked_fraction"] * n)
+        out.append(
+            f"| `{task}` | {r.get('label', r['policy'])} | {r['gospa']:.3f} | "
+            f"{r['fraction_tracked']:.3f} | {r['first_detection_s']:.2f} | "
+            f"{ok / n:.2f} ({ok}/{n}) | {r['rmse']:.3f} | {r['nees']:.2f} | "
+            f"{r['ms_per_step']:.3g} |"
+        )
+    return out
+
+
 def main(argv: list[str]) -> int:
     if not argv:
         print(__doc__, file=sys.stderr)
@@ -58,6 +88,12 @@ def main(argv: list[str]) -> int:
     print("|" + "---|" * HEAD.count(" | ") + "---|")
     for folder in argv:
         print("\n".join(rows(Path(folder))))
+    census = [row for folder in argv for row in census_rows(Path(folder))]
+    if census:
+        print()
+        print(CENSUS_HEAD)
+        print("|" + "---|" * CENSUS_HEAD.count(" | ") + "---|")
+        print("\n".join(census))
     return 0
 
 
