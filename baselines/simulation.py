@@ -51,6 +51,8 @@ class RunRecord:
         terminated: whether the run stopped early because the trace exceeded ``max_trace``.
         seen: (steps, K) whether some sensor measured each target at each step; None
             with unlimited sensing (every sensor measures every target every step).
+        present: (steps, K) whether each slot held a target (targets that appear and
+            leave, ``births``); None otherwise (every target at every step).
     """
 
     seed: int
@@ -65,6 +67,7 @@ class RunRecord:
     position_covs: FloatArray
     terminated: bool = False
     seen: np.ndarray | None = None
+    present: np.ndarray | None = None
 
     @property
     def mean_trace(self) -> float:
@@ -88,13 +91,13 @@ class RunRecord:
     def no_detection(self) -> float:
         """Return the fraction of steps in which no sensor measured a target (mean over
         targets; 0 with unlimited sensing)."""
-        return 0.0 if self.seen is None else detection_gaps(self.seen)[0]
+        return 0.0 if self.seen is None else detection_gaps(self.seen, self.present)[0]
 
     @property
     def longest_gap(self) -> int:
         """Return the longest run of consecutive steps in which no sensor measured a target
         (the longest over targets; 0 with unlimited sensing)."""
-        return 0 if self.seen is None else detection_gaps(self.seen)[1]
+        return 0 if self.seen is None else detection_gaps(self.seen, self.present)[1]
 
 
 def detection_gaps(seen: np.ndarray, present: np.ndarray | None = None) -> tuple[float, int]:
@@ -105,10 +108,16 @@ def detection_gaps(seen: np.ndarray, present: np.ndarray | None = None) -> tuple
     ``present`` (the same shape; None: every target at every step) restricts both to the
     pairs in which the target was there: with targets that appear and leave, an empty slot
     is not a missed detection, and a step without the target ends a run. No present pair
-    gives ``(0.0, 0)``.
+    gives ``(0.0, 0)``. (A slot a target leaves and another enters in the same step, which
+    happens only when the first was never tracked, continues one run.)
     """
     seen = np.asarray(seen, dtype=bool).reshape(len(seen), -1)
-    there = np.ones_like(seen) if present is None else np.asarray(present, bool).reshape(seen.shape)
+    there = np.ones_like(seen) if present is None else np.asarray(present, bool)
+    if there.reshape(len(there), -1).shape != seen.shape:
+        raise ValueError(
+            f"present must have the shape of seen {seen.shape}, got {np.shape(present)}"
+        )
+    there = there.reshape(seen.shape)
     if not there.any():
         return 0.0, 0
     missed = ~seen & there
@@ -133,6 +142,7 @@ class _RunRecorder(Recorder):
         self.sensors, self.covs = [g("sensors", 0).copy()], [g("P", 0)[..., :2, :2].copy()]
         self.trace, self.error, self.nees, self.plan_time, self.violation, self.seen = (
             [], [], [], [], [], [])  # fmt: skip
+        self.present: list[np.ndarray] = []  # with births: the slots holding a target
 
     def step(self, step: Step) -> None:
         world, g = step.world, step.world.get
@@ -143,6 +153,8 @@ class _RunRecorder(Recorder):
         self.nees.append(float(world.position_nees(0)))
         if self.limited:
             self.seen.append(g("detected", 0).any(axis=-1))
+        if world.scenario.births is not None:
+            self.present.append(world.present[0].copy())
         self.true_states.append(g("x_true", 0).copy())
         self.estimates.append(g("x_hat", 0).copy())
         self.sensors.append(g("sensors", 0).copy())
@@ -162,6 +174,7 @@ class _RunRecorder(Recorder):
             position_covs=np.array(self.covs),
             terminated=terminated,
             seen=np.array(self.seen) if self.limited else None,
+            present=np.array(self.present) if self.present else None,
         )
 
 

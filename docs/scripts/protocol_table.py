@@ -54,9 +54,14 @@ def rows(folder: Path) -> list[str]:
     return out
 
 
+def value(row: dict, key: str, digits: str) -> str:
+    """Return ``row[key]`` formatted, or "-" if the row has none (None: not defined)."""
+    return "-" if row.get(key) is None else f"{row[key]:{digits}}"
+
+
 CENSUS_HEAD = (
     "| task | policy | GOSPA (m) | tracked | first detection (s) | all tracked "
-    "| RMSE (m) | NEES | ms/step |"
+    "| RMSE (m) | NEES | CPU ms/decision |"
 )
 
 
@@ -70,12 +75,12 @@ def census_rows(folder: Path) -> list[str]:
         if r.get("gospa") is None:
             continue
         n = r["episodes"]
-        ok = round(r["all_tracked_fraction"] * n)
+        ok = "-" if r.get("all_tracked_fraction") is None else round(r["all_tracked_fraction"] * n)
         out.append(
-            f"| `{task}` | {r.get('label', r['policy'])} | {r['gospa']:.3f} | "
-            f"{r['fraction_tracked']:.3f} | {r['first_detection_s']:.2f} | "
-            f"{ok / n:.2f} ({ok}/{n}) | {r['rmse']:.3f} | {r['nees']:.2f} | "
-            f"{r['ms_per_step']:.3g} |"
+            f"| `{task}` | {r.get('label', r['policy'])} | {value(r, 'gospa', '.3f')} | "
+            f"{value(r, 'fraction_tracked', '.3f')} | {value(r, 'first_detection_s', '.2f')} | "
+            f"{ok}/{n} | {value(r, 'rmse', '.3f')} | {value(r, 'nees', '.2f')} | "
+            f"{value(r, 'cpu_ms_per_decision', '.3g')} |"
         )
     return out
 

@@ -122,6 +122,24 @@ def test_detection_gaps_count_only_present_targets():
         assert gap == longest
         assert fraction == pytest.approx(missed / there if there else 0.0)
     assert detection_gaps(np.zeros((3, 2), bool), np.zeros((3, 2), bool)) == (0.0, 0)
+    with pytest.raises(ValueError, match="present must have the shape of seen"):
+        detection_gaps(np.zeros((3, 2), bool), np.zeros((2, 3), bool))
+
+
+def test_simulate_counts_missed_detections_of_present_targets_only():
+    # A patrol run through simulate(): the record keeps which slots held a target, and
+    # its no-detection fraction is the share of present (step, slot) pairs unmeasured.
+    import activetrack as at
+    from activetrack.baselines.gsr import GSR
+    from activetrack.baselines.simulation import simulate
+
+    births = at.BirthProcess(0.1, (-20.0, -20.0, 20.0, 20.0), speed=(1.0, 3.0), delete_after=20)
+    run = simulate(at.make_scenario("patrol", births=births, n_steps=80), GSR(), seed=2)
+    assert run.present is not None and run.present.shape == run.seen.shape
+    assert run.present.any() and not run.present.all()  # slots fill and empty
+    missed = (~run.seen & run.present).sum() / run.present.sum()
+    assert run.no_detection == pytest.approx(missed)
+    assert run.no_detection < np.mean(~run.seen)  # the empty slots no longer count
 
 
 @pytest.mark.slow

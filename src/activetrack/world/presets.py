@@ -290,7 +290,7 @@ PRESETS["patrol"] = {
     # velocity (q = 0.1); each robot sees 15 m and detects a target in range with
     # probability 0.9; 300 steps (30 s). Bearings of 0.01 rad^2, as on radio: a track is
     # often one robot's, and with the paper's 0.25 rad^2 (0.5 rad) the EKF linearizes
-    # over a 7 m spread at 15 m and its tracks are over-confident (mean NEES above 4).
+    # over a 7 m spread at 15 m and its tracks are over-confident (mean NEES 3.8).
     **_TASK,
     "name": "patrol",
     "n_targets": 4,
