@@ -36,11 +36,18 @@ def cell(row: dict, key: str, digits: str) -> str:
     return f"{row[key]:{digits}} [{lo:{digits}}, {hi:{digits}}]"
 
 
-def rows(folder: Path) -> list[str]:
-    """Return the table rows of one ``activetrack evaluate`` output folder."""
+def load(folder: Path) -> tuple[str, list[dict]]:
+    """Return ``(task, results)`` of one ``activetrack evaluate`` output folder: the
+    scenario's name (from ``episodes.json``) and the rows of ``results.json``."""
     results = json.loads((folder / "results.json").read_text(encoding="utf-8"))
     meta = json.loads((folder / "episodes.json").read_text(encoding="utf-8"))["meta"]
     task = meta["scenario"] if isinstance(meta["scenario"], str) else meta["scenario"]["name"]
+    return task, results
+
+
+def rows(folder: Path) -> list[str]:
+    """Return the table rows of one ``activetrack evaluate`` output folder."""
+    task, results = load(folder)
     out = []
     for r in results:
         name = r.get("label", r["policy"]) + (f" ({r['runs']} runs)" if "runs" in r else "")
@@ -67,9 +74,7 @@ CENSUS_HEAD = (
 
 def census_rows(folder: Path) -> list[str]:
     """Return the census table's rows of one output folder (none without ``gospa``)."""
-    results = json.loads((folder / "results.json").read_text(encoding="utf-8"))
-    meta = json.loads((folder / "episodes.json").read_text(encoding="utf-8"))["meta"]
-    task = meta["scenario"] if isinstance(meta["scenario"], str) else meta["scenario"]["name"]
+    task, results = load(folder)
     out = []
     for r in results:
         if r.get("gospa") is None:
