@@ -206,6 +206,10 @@ def test_track_loss_rate_counts_only_present_targets():
     assert track_loss_rate(seen, traces, 1.0, np.zeros_like(seen)) == 0.0  # nobody there
     with pytest.raises(ValueError, match="traces must be >= 0"):
         track_loss_rate(seen, np.full(seen.shape, np.nan), 1.0)
+    with pytest.raises(ValueError, match="seen, traces and present must have the same shape"):
+        track_loss_rate(seen, traces, 1.0, present.T)
+    with pytest.raises(ValueError, match="traces must be >= 0"):
+        track_loss_rate(seen, -traces, 1.0)
 
 
 def test_prior_traces_are_the_position_block_of_p0():
