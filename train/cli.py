@@ -31,9 +31,9 @@ from activetrack.cli import COMMANDS, add_output_arguments, field_default, seed_
 from activetrack.files import RunOutputs, prepare_output_dir
 from activetrack.train import imitation as imitation_module
 from activetrack.train.action_targets import TARGETS
-from activetrack.train.analytic_cli import add_analytic_parser
 from activetrack.train.imitation import DAGGER_DEFAULTS, ImitationConfig, train_imitation
 from activetrack.train.networks import ACTIVATIONS, NetConfig
+from activetrack.train.pathwise_cli import add_pathwise_parser
 from activetrack.train.policy_io import VIEWS, load_policy, save_policy
 from activetrack.train.ppo import LR_SCHEDULES, OUTPUTS, PPOConfig, check_warm_start, train_ppo
 from activetrack.train.selfplay_cli import add_selfplay_parsers
@@ -252,7 +252,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     q.set_defaults(func=run_train, parser=q)
     _add_rllib_parser(methods, common)
     add_selfplay_parsers(methods)  # (the two-team game: activetrack.train.selfplay_cli)
-    add_analytic_parser(methods)  # (gradients through the filter: activetrack.train.analytic_cli)
+    add_pathwise_parser(methods)  # (gradients through the filter: activetrack.train.pathwise_cli)
     add_set_policy_parser(methods)  # (decentralized teams: activetrack.train.set_policy_cli)
 
 

@@ -11,14 +11,14 @@ import torch
 from activetrack.estimation import ekf
 from activetrack.kinematics.sensor_motion import apply_actions
 from activetrack.models.motion import predict
-from activetrack.train.analytic import (
-    AnalyticConfig,
+from activetrack.train.networks import NetConfig, build_policy, mean_action
+from activetrack.train.pathwise import (
     LoopSimulator,
+    PathwiseConfig,
     check_paper_loop,
     paper_loop_presets,
-    train_analytic,
+    train_pathwise,
 )
-from activetrack.train.networks import NetConfig, build_policy, mean_action
 from activetrack.train.policy_io import load_policy, save_policy
 from activetrack.world import World
 from activetrack.world.scenarios import make_scenario
@@ -166,7 +166,7 @@ def test_only_the_papers_loop():
 )
 def test_config_is_checked(field, value):
     with pytest.raises(ValueError, match=field):
-        AnalyticConfig(**{field: value})
+        PathwiseConfig(**{field: value})
 
 
 def test_training_improves_a_policy_on_held_out_episodes(tmp_path):
@@ -181,10 +181,10 @@ def test_training_improves_a_policy_on_held_out_episodes(tmp_path):
     net = NetConfig(hidden=(32, 32))
     start = build_policy(env.observation_space(agent), env.action_space(agent), net)
     init = save_policy(tmp_path / "start.zip", start, net, kind="bc", scenario=SC.to_dict(), seed=0)
-    cfg = AnalyticConfig(iterations=40, batch=16, lr=3e-3, eval_every=20, eval_episodes=10)
-    result = train_analytic("paper", init, tmp_path / "run", cfg, progress=False)
+    cfg = PathwiseConfig(iterations=40, batch=16, lr=3e-3, eval_every=20, eval_episodes=10)
+    result = train_pathwise("paper", init, tmp_path / "run", cfg, progress=False)
     trained = load_policy(result.policy_path)
-    assert trained.meta["kind"] == "analytic" and result.validation[0][0] == 0
+    assert trained.meta["kind"] == "pathwise" and result.validation[0][0] == 0
 
     def actor(policy):
         return lambda o: mean_action(policy, o.float()).double()

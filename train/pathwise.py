@@ -18,7 +18,7 @@ to improving on an imitated planner by the few percent that separate good polici
 :class:`LoopSimulator` is that loop in torch (float64, batched over episodes), with the
 observation of :mod:`activetrack.world.observation` (the paper's layout), so the policy
 sees exactly what it sees in the environment; its steps are tested against the library's
-own move, filter and observation (tests/train/test_analytic.py). :func:`train_analytic`
+own move, filter and observation (tests/train/test_pathwise.py). :func:`train_pathwise`
 starts from a policy file (BC of the look-ahead planner, for example), takes Adam steps on
 the batch mean trace, validates the deterministic policy in the real environment on
 validation seeds every ``eval_every`` iterations, keeps the best, and writes
@@ -76,11 +76,11 @@ def check_paper_loop(scenario: Any) -> None:
     for name, value in _PAPER_LOOP.items():
         if getattr(scenario, name) != value:
             raise ValueError(
-                f"analytic training supports the paper's loop only: {name} must be {value!r},"
+                f"pathwise training supports the paper's loop only: {name} must be {value!r},"
                 f" got {getattr(scenario, name)!r}"
             )
     if np.any(np.asarray(scenario.orientation, dtype=np.float64) != 0.0):
-        raise ValueError("analytic training supports the paper's loop only: orientation must be 0")
+        raise ValueError("pathwise training supports the paper's loop only: orientation must be 0")
 
 
 def paper_loop_presets() -> tuple[str, ...]:
@@ -282,8 +282,8 @@ class LoopSimulator:
 
 
 @dataclass
-class AnalyticConfig:
-    """Settings of :func:`train_analytic`.
+class PathwiseConfig:
+    """Settings of :func:`train_pathwise`.
 
     Attributes:
         iterations: Adam steps [1, 1e6].
@@ -317,8 +317,8 @@ class AnalyticConfig:
 
 
 @dataclass
-class AnalyticResult:
-    """What :func:`train_analytic` returns: the policy file, the validation curve
+class PathwiseResult:
+    """What :func:`train_pathwise` returns: the policy file, the validation curve
     ``[(iteration, mean trace), ...]`` (the start's at 0), the best iteration and the wall
     time in seconds."""
 
@@ -332,17 +332,17 @@ class AnalyticResult:
 OUTPUTS = ("policy.zip", "validation.json", "config.json")
 
 
-def train_analytic(
+def train_pathwise(
     scenario: Any,
     init: str | Path,
     out_dir: str | Path,
-    config: AnalyticConfig | None = None,
+    config: PathwiseConfig | None = None,
     progress: bool = True,
     overwrite: bool = False,
-) -> AnalyticResult:
+) -> PathwiseResult:
     """Fine-tune the policy file ``init`` by gradients through the loop; return the result.
 
-    Writes ``policy.zip`` (the best validated policy, kind ``"analytic"``),
+    Writes ``policy.zip`` (the best validated policy, kind ``"pathwise"``),
     ``validation.json`` (the validation curve) and ``config.json`` into ``out_dir``, all
     at the end (a folder holding them is refused unless ``overwrite``).
     """
@@ -351,14 +351,14 @@ def train_analytic(
     from activetrack.train.networks import NetConfig, actor_parameters, mean_action
     from activetrack.world.scenarios import make_scenario
 
-    cfg = config or AnalyticConfig()
-    if not isinstance(cfg, AnalyticConfig):
-        raise TypeError(f"config must be an AnalyticConfig, got {type(cfg).__name__}")
+    cfg = config or PathwiseConfig()
+    if not isinstance(cfg, PathwiseConfig):
+        raise TypeError(f"config must be an PathwiseConfig, got {type(cfg).__name__}")
     sc = make_scenario(scenario)
     sim = LoopSimulator(sc)
     learned = load_policy(init)
     if learned.view != "shared" or learned.head is not None:
-        raise ValueError(f"{init}: analytic training needs a shared-view policy of actions")
+        raise ValueError(f"{init}: pathwise training needs a shared-view policy of actions")
     with prepare_output_dir(out_dir, OUTPUTS, overwrite) as outputs:  # locked for the run
         configure_torch(cfg.threads)
         seed_everything(cfg.seed)
@@ -372,7 +372,7 @@ def train_analytic(
         curve = [(0, best)]
         best_state = {k: v.clone() for k, v in policy.state_dict().items()}
         best_it = 0
-        bar = tqdm(range(1, cfg.iterations + 1), desc="analytic", disable=not progress)
+        bar = tqdm(range(1, cfg.iterations + 1), desc="pathwise", disable=not progress)
         for it in bar:
             actor = lambda o: mean_action(policy, o.float()).double()  # noqa: E731
             traces, _ = sim.rollout(actor, rng, cfg.batch)
@@ -397,7 +397,7 @@ def train_analytic(
             outputs.staged("policy.zip"),
             policy,
             NetConfig.from_dict(learned.meta["net"]),
-            kind="analytic",
+            kind="pathwise",
             scenario=sc.to_dict(),
             seed=cfg.seed,
             train_config=train_config,
@@ -405,4 +405,4 @@ def train_analytic(
         outputs.write_json("validation.json", {"validation_seed": VALIDATION_SEED, "curve": curve})
         outputs.write_json("config.json", {"scenario": sc.to_dict(), **train_config})
         path = outputs.commit()["policy.zip"]
-    return AnalyticResult(Path(path), curve, best_it, seconds)
+    return PathwiseResult(Path(path), curve, best_it, seconds)

@@ -1,4 +1,4 @@
-"""``activetrack train analytic``: the command line of :mod:`activetrack.train.analytic`
+"""``activetrack train pathwise``: the command line of :mod:`activetrack.train.pathwise`
 (a policy fine-tuned by gradients through the filter)."""
 
 from __future__ import annotations
@@ -7,7 +7,7 @@ import argparse
 from typing import Any
 
 from activetrack.cli import add_output_arguments, field_default, seed_int
-from activetrack.train import analytic as an
+from activetrack.train import pathwise as pw
 from activetrack.train.utils import DEFAULT_THREADS, MAX_THREADS
 
 #: The command's options beyond the scenario, seed and output: (flag, config field, type).
@@ -21,40 +21,40 @@ OPTIONS = (
 )
 
 
-def add_analytic_parser(methods: argparse._SubParsersAction) -> None:
-    """Add ``analytic`` to the ``train`` methods ``methods``."""
+def add_pathwise_parser(methods: argparse._SubParsersAction) -> None:
+    """Add ``pathwise`` to the ``train`` methods ``methods``."""
     text = (
         "fine-tune a policy file by gradients of the episode's mean trace through the "
         "filter's recursion (the paper's loop; start from BC of the look-ahead planner)"
     )
-    q = methods.add_parser("analytic", help=text, description=text)
-    q.add_argument("--scenario", choices=an.paper_loop_presets(), default="paper",
+    q = methods.add_parser("pathwise", help=text, description=text)
+    q.add_argument("--scenario", choices=pw.paper_loop_presets(), default="paper",
                    help="preset (default %(default)s)")  # fmt: skip
     q.add_argument("--init", required=True, help="the policy.zip to start from")
     q.add_argument("--seed", type=seed_int, default=0, help="training seed (default %(default)s)")
     add_output_arguments(q, None, required=True)
     for option, name, type_ in OPTIONS:
         q.add_argument(option, dest=name, type=type_, default=None,
-                       help=f"(default {field_default(an.AnalyticConfig, name)})")  # fmt: skip
+                       help=f"(default {field_default(pw.PathwiseConfig, name)})")  # fmt: skip
     q.add_argument("--threads", type=int, default=DEFAULT_THREADS,
                    help=f"torch threads, 1 to {MAX_THREADS} (default %(default)s)")  # fmt: skip
     q.add_argument("--no-progress", action="store_true", help="hide the progress bar")
-    q.set_defaults(func=run_analytic, parser=q)
+    q.set_defaults(func=run_pathwise, parser=q)
 
 
-def run_analytic(args: argparse.Namespace) -> int:
-    """Run ``activetrack train analytic``; return the exit code."""
+def run_pathwise(args: argparse.Namespace) -> int:
+    """Run ``activetrack train pathwise``; return the exit code."""
     given: dict[str, Any] = {
         name: getattr(args, name) for _, name, _ in OPTIONS if getattr(args, name) is not None
     }
-    cfg = an.AnalyticConfig(**given, seed=args.seed, threads=args.threads)
-    result = an.train_analytic(
+    cfg = pw.PathwiseConfig(**given, seed=args.seed, threads=args.threads)
+    result = pw.train_pathwise(
         args.scenario, args.init, args.out, cfg, progress=not args.no_progress,
         overwrite=args.overwrite,
     )  # fmt: skip
     start, best = result.validation[0][1], min(v for _, v in result.validation)
     print(
-        f"analytic: {cfg.iterations} iterations of {cfg.batch} episodes, {result.seconds:.1f} s;"
+        f"pathwise: {cfg.iterations} iterations of {cfg.batch} episodes, {result.seconds:.1f} s;"
         f" validation mean trace {start:.4f} -> {best:.4f} (iteration {result.best_iteration})"
         f" -> {result.policy_path}"
     )
