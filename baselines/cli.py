@@ -320,9 +320,9 @@ def _add_evaluate(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--batched",
         action="store_true",
-        help="run gsr and lookahead on all episodes at once in a batched world (far faster "
-        "for lookahead; rows equal the serial ones to the planner's tolerance, and a seed's "
-        "row is the same in any batch; other policies run episode by episode)",
+        help="run gsr, lookahead and learned policies (policy.zip) on all episodes at once "
+        "in a batched world (far faster; a planner's rows equal the serial ones to its "
+        "tolerance, a network's to float32 rounding; rm runs episode by episode)",
     )
     p.add_argument(
         "--loss-trace",

@@ -27,6 +27,7 @@ import numpy as np
 
 from activetrack.baselines.protocol import prior_traces, track_loss_rate
 from activetrack.baselines.rollout import (
+    BatchActorAgent,
     ExpertAgent,
     Recorder,
     Step,
@@ -180,8 +181,9 @@ def run_batched(
     on_step: Any = None,
     loss_trace: float | None = None,
 ) -> list[tuple[float, ...]]:
-    """Return :func:`run_episode`'s rows for a planner policy, each seed's episode a copy of
-    one batched :class:`~activetrack.world.World` (the policy plans every copy at once;
+    """Return :func:`run_episode`'s rows for a planner policy (or a policy with
+    ``act_batch``, a learned one), each seed's episode a copy of one batched
+    :class:`~activetrack.world.World` (the policy plans, or acts on, every copy at once;
     the rollout of :mod:`activetrack.baselines.rollout`, batched).
 
     The world's copies are the environment's episodes (same seeds, same draws; a copy's
@@ -189,7 +191,9 @@ def run_batched(
     each copy as alone, so a deterministic planner's rows equal the serial ones bit for
     bit (tests/baselines/test_batch_independence.py: GSR on every preset), and a copy's
     row does not depend on the batch: the same seed gives the same row alone (a batch of
-    one) or among any other copies.
+    one) or among any other copies. A learned policy's network runs on all copies' rows
+    at once; its float32 arithmetic can round a row differently in another batch, so its
+    rows equal the serial ones to that rounding (tests/train/test_batched_evaluation.py).
     ``ms_per_step`` is the batch's CPU time per decision divided by the number of copies,
     after a warm-up decision (the batch's first, planned twice).
     ``on_step(k)`` is called after every step with the number of copies that stepped.
@@ -199,8 +203,10 @@ def run_batched(
     n = len(seeds)
     world = World(scenario, n, **overrides)
     recorder = _RowRecorder(n, loss_trace=loss_trace)
+    planner = callable(getattr(policy, "plan", None))
+    agent = ExpertAgent(policy) if planner else BatchActorAgent(policy)
     steps = rollout(
-        world, ExpertAgent(policy), seeds, recorder, batched=True, clock=time.process_time,
+        world, agent, seeds, recorder, batched=True, clock=time.process_time,
         warm_up=True, on_step=on_step,
     )  # fmt: skip
     ms = 1e3 * recorder.seconds / (n * steps)

@@ -296,6 +296,12 @@ def batchable(policy: Any) -> bool:
     return isinstance(policy, kinds)
 
 
+def acts_batched(policy: Any) -> bool:
+    """Return whether ``policy`` acts on every copy's observations at once (a learned
+    policy's ``act_batch``), so that ``batched`` runs it in one world."""
+    return not batchable(policy) and callable(getattr(policy, "act_batch", None))
+
+
 def evaluate(
     policies: Sequence[Any] | Mapping[str, Any],
     scenario: Any = "paper",
@@ -318,8 +324,10 @@ def evaluate(
     an environment of its own, so the results equal the serial ones. ``batched`` runs each
     deterministic planner (GSR, the look-ahead planner) on all episodes at once in a
     batched world (:func:`run_batched`: far faster for the look-ahead planner; its rows
-    equal the serial ones bit for bit, see there); the others (random
-    motion, learned policies) still run episode by episode. ``loss_trace`` (m^2, > 0) is
+    equal the serial ones bit for bit, see there), and each learned policy with
+    ``act_batch`` (:class:`activetrack.train.policy_io.LearnedPolicy`) on all episodes'
+    observations at once (rows equal the serial ones to float32 rounding); random motion
+    still runs episode by episode. ``loss_trace`` (m^2, > 0) is
     the track-loss rate's threshold for every target; None: each target's prior position
     trace (:func:`activetrack.baselines.protocol.prior_traces`).
     """
@@ -383,7 +391,7 @@ def evaluate(
             for name, policy in zip(names, resolved, strict=True):
                 bar.set_description(name)
                 done = bar.n
-                if batched and batchable(policy):
+                if batched and (batchable(policy) or acts_batched(policy)):
                     per_policy.append(
                         run_batched(scenario, overrides, policy, seeds, bar.update, loss_trace)
                     )

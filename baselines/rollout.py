@@ -285,6 +285,23 @@ class ActorAgent(Agent):
         step.by_actions = np.ones(step.copies.size, dtype=bool)
 
 
+class BatchActorAgent(Agent):
+    """A policy that maps every copy's observations (N, M, D) to actions (N, M, A) in one
+    call (``act_batch(observations)``; batched mode), optionally ``reset(seed)``."""
+
+    def __init__(self, policy: Any) -> None:
+        self.policy = policy
+
+    def start(self, seeds: Sequence[int], batched: bool) -> None:
+        reset_policy(self.policy, seeds[0])
+
+    def decide(self, step: Step) -> None:
+        obs = step.observe()
+        actions = np.asarray(step.timed(self.policy.act_batch, obs), dtype=np.float64)
+        step.actions = actions.reshape(*obs.shape[:2], -1)
+        step.by_actions = np.ones(step.copies.size, dtype=bool)
+
+
 def policy_agent(policy: Any, agents: Sequence[str]) -> Agent:
     """Return the agent of ``policy``: an expert if it has ``plan``, an actor otherwise."""
     if callable(getattr(policy, "plan", None)):

@@ -143,6 +143,20 @@ class LearnedPolicy:
             return self.head.actions(actions).astype(np.float32)
         return actions
 
+    def act_batch(self, observations: np.ndarray) -> np.ndarray:
+        """Return the actions (N, M, A) of N teams' observations (N, M, D) in one forward
+        pass (a batched world's :meth:`~activetrack.world.World.observe`)."""
+        obs = np.asarray(observations, dtype=np.float32)
+        if obs.ndim != 3:
+            raise ValueError(f"act_batch needs observations (N, M, D), got shape {obs.shape}")
+        n, m = obs.shape[:2]
+        if self.head is not None and m != self.head.n_sensors:
+            raise ValueError(
+                f"this policy steers a team of {self.head.n_sensors} sensors, got {m} agents"
+            )
+        rows = obs.reshape(n * m, -1) if self.view == "shared" else obs.reshape(n, -1)
+        return self.predict(rows).reshape(n, m, -1)
+
     def act(self, observations: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         """Return every agent's action for the parallel env's observations ``{agent: obs}``."""
         agents = list(observations)
