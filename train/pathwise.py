@@ -40,7 +40,7 @@ import torch
 
 from activetrack.files import prepare_output_dir
 from activetrack.train.policy_io import load_policy, save_policy
-from activetrack.train.ppo import VALIDATION_SEED, validation_trace
+from activetrack.train.ppo import VALIDATION_SEED
 from activetrack.train.utils import (
     DEFAULT_THREADS,
     check_float,
@@ -332,37 +332,71 @@ class PathwiseResult:
 OUTPUTS = ("policy.zip", "validation.json", "config.json")
 
 
+def validation_trace(policy: Any, scenario: Any, episodes: int) -> float:
+    """Return the deterministic shared-view ``policy``'s mean trace over the validation
+    seeds 500000, ... (:data:`activetrack.train.ppo.VALIDATION_SEED`), every episode a
+    copy of one batched world (:func:`activetrack.baselines.episodes.run_batched`)."""
+    from activetrack.baselines.episodes import run_batched
+    from activetrack.train.policy_io import LearnedPolicy
+
+    was_training = policy.training
+    seeds = list(range(VALIDATION_SEED, VALIDATION_SEED + episodes))
+    rows = run_batched(scenario, {}, LearnedPolicy(policy.eval(), {"view": "shared"}), seeds)
+    policy.train(was_training)
+    return float(np.mean([row[0] for row in rows]))
+
+
+def _start_policy(init: str | Path | None, scenario: Any, net: Any) -> tuple[Any, Any]:
+    """Return ``(policy, net config)``: the actor of the file ``init``, or (None) a fresh
+    network of ``net`` (default :data:`activetrack.train.networks.DEFAULT_NET`)."""
+    from activetrack.envs import parallel_env
+    from activetrack.train.networks import DEFAULT_NET, NetConfig, build_policy
+
+    if init is None:
+        env = parallel_env(scenario)
+        agent = env.possible_agents[0]
+        net = NetConfig.coerce(net) if net is not None else DEFAULT_NET
+        return build_policy(env.observation_space(agent), env.action_space(agent), net), net
+    if net is not None:
+        raise ValueError("net sets the network of a fresh start: give init=None")
+    learned = load_policy(init)
+    if learned.view != "shared" or learned.head is not None:
+        raise ValueError(f"{init}: pathwise training needs a shared-view policy of actions")
+    return learned.policy, NetConfig.from_dict(learned.meta["net"])
+
+
 def train_pathwise(
     scenario: Any,
-    init: str | Path,
+    init: str | Path | None,
     out_dir: str | Path,
     config: PathwiseConfig | None = None,
     progress: bool = True,
     overwrite: bool = False,
+    net: Any = None,
 ) -> PathwiseResult:
-    """Fine-tune the policy file ``init`` by gradients through the loop; return the result.
+    """Train a policy by gradients through the loop; return the result.
 
+    ``init``: the policy file to start from (its network), or None for a fresh network
+    of ``net`` (a :class:`~activetrack.train.networks.NetConfig`, default 2x256 tanh)
+    seeded by ``config.seed``: then only the reward's gradient teaches it (no expert).
     Writes ``policy.zip`` (the best validated policy, kind ``"pathwise"``),
     ``validation.json`` (the validation curve) and ``config.json`` into ``out_dir``, all
     at the end (a folder holding them is refused unless ``overwrite``).
     """
     from tqdm.auto import tqdm
 
-    from activetrack.train.networks import NetConfig, actor_parameters, mean_action
+    from activetrack.train.networks import actor_parameters, mean_action
     from activetrack.world.scenarios import make_scenario
 
     cfg = config or PathwiseConfig()
     if not isinstance(cfg, PathwiseConfig):
-        raise TypeError(f"config must be an PathwiseConfig, got {type(cfg).__name__}")
+        raise TypeError(f"config must be a PathwiseConfig, got {type(cfg).__name__}")
     sc = make_scenario(scenario)
     sim = LoopSimulator(sc)
-    learned = load_policy(init)
-    if learned.view != "shared" or learned.head is not None:
-        raise ValueError(f"{init}: pathwise training needs a shared-view policy of actions")
+    seed_everything(cfg.seed)  # (a fresh network's initial weights)
+    policy, net_config = _start_policy(init, sc, net)
     with prepare_output_dir(out_dir, OUTPUTS, overwrite) as outputs:  # locked for the run
         configure_torch(cfg.threads)
-        seed_everything(cfg.seed)
-        policy = learned.policy
         policy.train()
         rng = np.random.default_rng([cfg.seed, 7])
         params = actor_parameters(policy)
@@ -390,13 +424,14 @@ def train_pathwise(
                     best_state = {k: v.clone() for k, v in policy.state_dict().items()}
         seconds = time.perf_counter() - start
         policy.load_state_dict(best_state)
+        start_file = None if init is None else str(init)
         train_config = {
-            **asdict(cfg), "init": str(init), "best_iteration": best_it, "seconds": seconds,
+            **asdict(cfg), "init": start_file, "best_iteration": best_it, "seconds": seconds,
         }  # fmt: skip
         save_policy(
             outputs.staged("policy.zip"),
             policy,
-            NetConfig.from_dict(learned.meta["net"]),
+            net_config,
             kind="pathwise",
             scenario=sc.to_dict(),
             seed=cfg.seed,

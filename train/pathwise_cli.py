@@ -8,6 +8,7 @@ from typing import Any
 
 from activetrack.cli import add_output_arguments, field_default, seed_int
 from activetrack.train import pathwise as pw
+from activetrack.train.networks import NetConfig
 from activetrack.train.utils import DEFAULT_THREADS, MAX_THREADS
 
 #: The command's options beyond the scenario, seed and output: (flag, config field, type).
@@ -30,7 +31,13 @@ def add_pathwise_parser(methods: argparse._SubParsersAction) -> None:
     q = methods.add_parser("pathwise", help=text, description=text)
     q.add_argument("--scenario", choices=pw.paper_loop_presets(), default="paper",
                    help="preset (default %(default)s)")  # fmt: skip
-    q.add_argument("--init", required=True, help="the policy.zip to start from")
+    q.add_argument(
+        "--init",
+        default=None,
+        help="the policy.zip to start from (default: a fresh network, taught by the reward alone)",
+    )
+    q.add_argument("--hidden", type=int, nargs="+", default=None,
+                   help="a fresh network's MLP sizes (default 256 256)")  # fmt: skip
     q.add_argument("--seed", type=seed_int, default=0, help="training seed (default %(default)s)")
     add_output_arguments(q, None, required=True)
     for option, name, type_ in OPTIONS:
@@ -48,9 +55,10 @@ def run_pathwise(args: argparse.Namespace) -> int:
         name: getattr(args, name) for _, name, _ in OPTIONS if getattr(args, name) is not None
     }
     cfg = pw.PathwiseConfig(**given, seed=args.seed, threads=args.threads)
+    net = None if args.hidden is None else NetConfig(hidden=tuple(args.hidden))
     result = pw.train_pathwise(
         args.scenario, args.init, args.out, cfg, progress=not args.no_progress,
-        overwrite=args.overwrite,
+        overwrite=args.overwrite, net=net,
     )  # fmt: skip
     start, best = result.validation[0][1], min(v for _, v in result.validation)
     print(
