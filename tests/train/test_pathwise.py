@@ -216,3 +216,24 @@ def test_fresh_start_is_seeded_and_reproducible(tmp_path):
     assert va == vb and torch.equal(a, b) and not torch.equal(a, c)
     with pytest.raises(ValueError, match="init=None"):
         train_pathwise("paper", tmp_path / "a" / "policy.zip", tmp_path / "d", cfg, net=net)
+
+
+def test_command_trains_and_evaluate_loads_the_policy(tmp_path, capsys):
+    from activetrack.baselines.evaluation import evaluate
+    from activetrack.cli import main
+
+    out = tmp_path / "pw"
+    argv = ["train", "pathwise", "--iterations", "2", "--batch", "2", "--eval-every", "2"]
+    argv += ["--eval-episodes", "2", "--hidden", "8", "--no-progress", "--out", str(out)]
+    assert main(argv) == 0
+    assert "pathwise: 2 iterations of 2 episodes" in capsys.readouterr().out
+    rows = evaluate([str(out / "policy.zip")], "paper", episodes=2, seed=5, progress=False)
+    assert np.all(np.isfinite(rows[-1].mean_trace))
+    # refused before training: a results folder, a scenario beyond the paper's loop, a
+    # bad budget
+    assert main(argv) == 2
+    assert "--overwrite" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["train", "pathwise", "--scenario", "two_targets", "--out", str(tmp_path / "x")])
+    assert main(["train", "pathwise", "--batch", "0", "--out", str(tmp_path / "y")]) == 2
+    assert "batch" in capsys.readouterr().err
