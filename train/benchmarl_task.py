@@ -193,11 +193,15 @@ ActiveTrackingTask = _TaskEnum(
 
 
 def experiment_config(
-    save_folder: str | Path, max_frames: int = 400, frames_per_batch: int = 200
+    save_folder: str | Path, max_frames: int = 400, frames_per_batch: int = 200, **fields: Any
 ) -> Any:
     """Return BenchMARL's ``ExperimentConfig`` for a short CPU run: ``max_frames``
     environment steps (of all sensors together, one per world step) collected
     ``frames_per_batch`` at a time, a checkpoint at the end, no evaluation or loggers.
+
+    ``fields`` set further ``ExperimentConfig`` fields last (e.g. BenchMARL's own
+    optimisation defaults for a benchmark run, :mod:`activetrack.train.bench_learn`);
+    a name that is not a field raises ``TypeError``.
     """
     from benchmarl.experiment import ExperimentConfig
 
@@ -230,6 +234,10 @@ def experiment_config(
     ec.save_folder = str(folder)
     ec.checkpoint_interval = 0
     ec.checkpoint_at_end = True
+    for name, value in fields.items():
+        if not hasattr(ec, name):
+            raise TypeError(f"experiment_config() got an unexpected keyword argument {name!r}")
+        setattr(ec, name, value)
     return ec
 
 
@@ -245,11 +253,17 @@ def algorithm_config(name: str) -> Any:
 
 
 def make_experiment(
-    task: TaskClass, algorithm: str, seed: int = 0, threads: int = DEFAULT_THREADS, **config: Any
+    task: TaskClass,
+    algorithm: str,
+    seed: int = 0,
+    threads: int = DEFAULT_THREADS,
+    callbacks: list[Any] | None = None,
+    **config: Any,
 ) -> Any:
     """Return a BenchMARL ``Experiment`` of ``algorithm`` on ``task`` with MLP actor and
     critic, torch set to ``threads`` intra-op threads; ``config`` goes to
-    :func:`experiment_config`.
+    :func:`experiment_config`, ``callbacks`` (BenchMARL ``Callback`` objects) to the
+    experiment.
 
     One thread by default, as the library's other training entry points: on this 2-core
     machine under load a 400-frame MAPPO run on ``paper`` took 2.5 s with one thread and
@@ -266,6 +280,7 @@ def make_experiment(
         critic_model_config=MlpConfig.get_from_yaml(),
         seed=seed,
         config=experiment_config(**config),
+        callbacks=callbacks,
     )
 
 
