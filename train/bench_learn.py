@@ -27,9 +27,10 @@ needs ``overwrite``; everything is staged and moved into place together at the e
 
 - ``marl_eval.json``: marl-eval's raw-data format ``{"activetrack": {task: {algorithm:
   {"seed_<k>": {"step_<i>": {"step_count", "elapsed_time", "return": [...],
-  "mean_trace": [...]}, ..., "absolute_metrics": {"return": [...], "mean_trace":
-  [...]}}}}}}``, the steps the curve's evaluations and ``absolute_metrics`` the final
-  evaluation's episodes (as marl-eval's ``JsonLogger`` names runs and steps);
+  "mean_trace": [...]}, ..., "absolute_metrics": {"elapsed_time", "return": [...],
+  "mean_trace": [...]}}}}}}``, the steps the curve's evaluations and ``absolute_metrics``
+  the final evaluation's episodes and the run's training time (as marl-eval's
+  ``JsonLogger`` names runs and steps);
 - ``learning_curves.png``: per task, the return and the mean trace against environment
   steps and against wall time, one line per algorithm (the median over training seeds of
   each run's mean over the curve's episodes) with the interquartile band over seeds, and
@@ -53,7 +54,7 @@ from typing import Any
 
 import numpy as np
 
-from activetrack.validation import check_int
+from activetrack.validation import check_float, check_int
 
 #: Environment name in marl-eval's JSON and in BenchMARL's run names.
 ENV_NAME = "activetrack"
@@ -64,15 +65,19 @@ ALGORITHMS = ("mappo", "ippo", "masac", "isac", "maddpg", "iddpg")
 #: On-policy algorithms (the others replay).
 ON_POLICY = ("mappo", "ippo")
 #: Default budget per run, in environment frames (world steps), and frames per batch.
-#: MAPPO on ``paper`` ran 10,000 frames in about NN s on this 2-core machine (one torch
-#: thread; docs/results/benchmark.md): DEFAULT_FRAMES keeps one run under ~10 minutes.
-DEFAULT_FRAMES = 60_000
+#: On this 2-core machine under load (one torch thread) a run on ``paper`` took 85 s per
+#: 10,000 frames with MAPPO, 86 s with IPPO and 117 s with MASAC (``summary.json``'s
+#: ``seconds_per_10k_frames``; docs/guide/learning.md): 48,000 frames (8 batches) keep one
+#: run under about 10 minutes (MAPPO 6.8, MASAC 9.4).
+DEFAULT_FRAMES = 48_000
 DEFAULT_FRAMES_PER_BATCH = 6_000
 #: BenchMARL's optimisation defaults (its base_experiment.yaml): on-policy 45 passes of
 #: minibatches of 400 per batch; off-policy 1000 optimizer steps of 128 samples per 6000
 #: collected frames (kept as a ratio for other batch sizes).
 MINIBATCH_ITERS, MINIBATCH_SIZE = 45, 400
 OFF_POLICY_STEPS_PER_FRAME, OFF_POLICY_BATCH = 1000 / 6000, 128
+#: BenchMARL's learning rate (Adam, every algorithm).
+LR = 5e-5
 #: The largest training seed and evaluation seed (as the other commands').
 MAX_SEED = 2**31 - 1
 
@@ -118,6 +123,7 @@ class BenchConfig:
         curve_points: evaluations along each run (besides the untrained one), at most one
             per batch.
         curve_episodes: episodes per curve evaluation, at most ``eval_episodes``.
+        lr: Adam's learning rate, in (0, 1] (BenchMARL's default 5e-5).
         threads: torch intra-op threads.
     """
 
@@ -130,6 +136,7 @@ class BenchConfig:
     eval_seed: int = 1000
     curve_points: int = 10
     curve_episodes: int = 10
+    lr: float = LR
     threads: int = 1
 
     def __post_init__(self) -> None:
@@ -150,6 +157,7 @@ class BenchConfig:
         set_(self, "eval_seed", check_int("eval_seed", self.eval_seed, 0, MAX_SEED - episodes))
         set_(self, "curve_points", check_int("curve_points", self.curve_points, 1, 10_000))
         set_(self, "curve_episodes", check_int("curve_episodes", self.curve_episodes, 1, episodes))
+        set_(self, "lr", check_float("lr", self.lr, 0.0, 1.0, low_open=True))
         set_(self, "threads", check_int("threads", self.threads, 1, MAX_THREADS))
 
     @property
@@ -170,10 +178,12 @@ class BenchConfig:
         fpb = self.frames_per_batch
         if algorithm in ON_POLICY:
             return {
+                "lr": self.lr,
                 "on_policy_n_minibatch_iters": MINIBATCH_ITERS,
                 "on_policy_minibatch_size": min(MINIBATCH_SIZE, fpb),
             }
         return {
+            "lr": self.lr,
             "off_policy_n_optimizer_steps": max(1, round(OFF_POLICY_STEPS_PER_FRAME * fpb)),
             "off_policy_train_batch_size": OFF_POLICY_BATCH,
             "off_policy_memory_size": min(1_000_000, self.frames),
@@ -307,6 +317,7 @@ def train_run(
     """Train one run of ``algorithm`` on ``task`` with training seed ``seed`` in ``folder``
     (an existing folder; BenchMARL makes its run folder inside); return its record."""
     from activetrack.train.benchmarl_task import ActiveTrackingTask, make_experiment
+    from activetrack.train.utils import configure_torch
 
     callback = CurveCallback(
         task,
@@ -332,6 +343,7 @@ def train_run(
         seconds = callback.elapsed()
     finally:
         callback.close()
+        configure_torch(config.threads)  # closing the run's envs raised torch's threads
     if experiment.total_frames != config.frames:
         raise RuntimeError(f"{task}/{algorithm}/seed {seed}: ran {experiment.total_frames} frames")
     checkpoint = Path(experiment.folder_name) / "checkpoints" / f"checkpoint_{config.frames}.pt"
@@ -357,6 +369,8 @@ def marl_eval_data(
         run = {f"step_{i}": dict(point) for i, point in enumerate(r.curve)}
         final = finals[(r.task, run_label(r.algorithm, r.seed))]
         run["absolute_metrics"] = {
+            # The steps' metrics, so that marl-eval's DiagnoseData finds the same in both.
+            "elapsed_time": r.seconds,
             "return": [float(x) for x in final.returns],
             "mean_trace": [float(x) for x in final.mean_trace],
         }
@@ -589,6 +603,9 @@ def add_parser(sub: argparse._SubParsersAction, help_text: str) -> argparse.Argu
         help="episodes per curve evaluation (default %(default)s)",
     )
     p.add_argument(
+        "--lr", type=float, default=default("lr"), help="Adam's learning rate (default %(default)s)"
+    )
+    p.add_argument(
         "--threads",
         type=positive_int,
         default=default("threads"),
@@ -618,6 +635,7 @@ def run_command(args: argparse.Namespace) -> int:
         eval_seed=args.eval_seed,
         curve_points=args.curve_points,
         curve_episodes=args.curve_episodes,
+        lr=args.lr,
         threads=args.threads,
     )
     try:

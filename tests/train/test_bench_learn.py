@@ -60,10 +60,9 @@ def _check_schema(data):
                 for k in steps:
                     point = run[k]
                     assert isinstance(point["step_count"], int)
-                    metrics = {m for m, v in point.items() if isinstance(v, list)}
-                    metrics_seen.add(frozenset(metrics))
-                    assert all(np.isfinite(point[m]).all() for m in metrics)
-                metrics_seen.add(frozenset(run["absolute_metrics"]))
+                    metrics_seen.add(frozenset(point))
+                    assert all(np.isfinite(v).all() for v in point.values())
+                metrics_seen.add(frozenset(run["absolute_metrics"]) | {"step_count"})
     assert len(steps_seen) == 1 and len(metrics_seen) == 1, (steps_seen, metrics_seen)
 
 
@@ -71,6 +70,7 @@ def _check_schema(data):
 @pytest.mark.slow  # the six tiny runs and their evaluations: about a minute
 def test_bench_learn_end_to_end(bench, tmp_path):
     from activetrack.cli import main
+    from activetrack.world.scenarios import make_scenario
 
     data = json.loads((bench / "marl_eval.json").read_text())
     summary = json.loads((bench / "summary.json").read_text())
@@ -82,6 +82,9 @@ def test_bench_learn_end_to_end(bench, tmp_path):
     assert len(summary["runs"]) == len(TASKS) * len(ALGORITHMS)
 
     for task in TASKS:
+        scenario = make_scenario(task)
+        assert scenario.objective in (None, "trace"), scenario.objective
+        scale = scenario.reward_scale * scenario.n_steps
         assert set(data["activetrack"][task]) == set(ALGORITHMS)
         episodes = json.loads((bench / "eval" / task / "episodes.json").read_text())["policies"]
         rows = json.loads((bench / "eval" / task / "results.json").read_text())
@@ -92,11 +95,18 @@ def test_bench_learn_end_to_end(bench, tmp_path):
             assert [p["step_count"] for p in steps] == curve_frames
             times = [p["elapsed_time"] for p in steps]
             assert times[0] >= 0 and np.all(np.diff(times) > 0)
-            # Return and mean trace are the env's reward and the world's trace, two
-            # readings of one episode: the reward is -trace per step (summed over
-            # n_steps = 50 steps, the trace averaged over them).
+            # Return and mean trace are the env's rewards and the world's traces, two
+            # readings of one episode: the reward is -reward_scale times the trace (the
+            # objective of these tasks) per step, summed over n_steps steps, where the
+            # mean trace averages the trace over them.
             for p in [*steps, run["absolute_metrics"]]:
-                np.testing.assert_allclose(p["return"], -50 * np.asarray(p["mean_trace"]))
+                np.testing.assert_allclose(p["return"], -scale * np.asarray(p["mean_trace"]))
+            # The run's training time (summary.json's): from the last update on, only the
+            # checkpoint is written, so it is at least the last step's.
+            (row,) = [
+                r for r in summary["runs"] if (r["task"], r["algorithm"]) == (task, algorithm)
+            ]
+            assert run["absolute_metrics"]["elapsed_time"] == row["seconds"] >= times[-1]
             # absolute_metrics: the final evaluation's episodes of this run.
             label = f"{algorithm}-seed0"
             assert run["absolute_metrics"]["return"] == episodes[label]["return"]
@@ -167,6 +177,31 @@ def test_marl_eval_reads_the_json(bench):
             assert curves["mean_mean_trace"][algorithm].shape == (1, len(TASKS), 3)
 
 
+@needs_benchmarl
+@pytest.mark.slow  # two updates of MAPPO on 1000 frames each, 40 episodes: about 30 s
+def test_mappo_learns_against_its_measured_start(tmp_path):
+    """A small MAPPO budget (2000 frames, Adam at 3e-4) on ``paper``: the trained
+    checkpoint, evaluated by ``evaluate`` through the .pt loader, has a lower mean trace
+    than the same run's untrained policy (the curve's step 0) on the same 20 held-out
+    episodes, by more than three standard errors of the paired differences."""
+    from activetrack.baselines.evaluation import evaluate
+    from activetrack.train.bench_learn import BenchConfig, train_run
+
+    n = 20
+    config = BenchConfig(
+        tasks=("paper",), algorithms=("mappo",), seeds=1, frames=2000, frames_per_batch=1000,
+        eval_episodes=n, eval_seed=SEED, curve_points=1, curve_episodes=n, lr=3e-4,
+    )  # fmt: skip
+    record = train_run("paper", "mappo", 0, config, tmp_path)
+    start = record.curve[0]
+    assert start["step_count"] == 0 and len(start["mean_trace"]) == n
+    (trained, _gsr) = evaluate({"trained": str(record.checkpoint)}, "paper", n, SEED, False)
+    assert trained.seeds == list(range(SEED, SEED + n))
+    d = np.asarray(start["mean_trace"]) - trained.mean_trace
+    margin = 3 * np.std(d, ddof=1) / np.sqrt(n)
+    assert np.mean(d) > margin, (np.mean(start["mean_trace"]), np.mean(trained.mean_trace), margin)
+
+
 def test_config_is_checked_at_the_boundary():
     from activetrack.train.bench_learn import BenchConfig
 
@@ -185,6 +220,8 @@ def test_config_is_checked_at_the_boundary():
         ({"curve_points": 0}, r"curve_points must be an integer in \[1, 10000\]"),
         ({"curve_episodes": 11, "eval_episodes": 10}, r"curve_episodes .* in \[1, 10\]"),
         ({"threads": 0}, r"threads must be an integer in \[1, "),
+        ({"lr": 0.0}, r"lr must be a number in \(0, 1\]"),
+        ({"lr": float("nan")}, "lr must be"),
         ({"seeds": 2.5}, r"seeds must be an integer"),
     ]
     for kwargs, message in cases:
@@ -209,6 +246,7 @@ def test_curve_frames_and_optimisation_settings():
     # BenchMARL's defaults: 45 passes of minibatches of 400 (of a smaller batch: the
     # batch), 1000 off-policy steps per 6000 frames.
     assert c.experiment_fields("mappo") == {
+        "lr": 5e-5,
         "on_policy_n_minibatch_iters": 45,
         "on_policy_minibatch_size": 100,
     }
