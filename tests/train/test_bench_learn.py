@@ -183,7 +183,9 @@ def test_mappo_learns_against_its_measured_start(tmp_path):
     """A small MAPPO budget (2000 frames, Adam at 3e-4) on ``paper``: the trained
     checkpoint, evaluated by ``evaluate`` through the .pt loader, has a lower mean trace
     than the same run's untrained policy (the curve's step 0) on the same 20 held-out
-    episodes, by more than three standard errors of the paired differences."""
+    episodes, by more than three standard errors of the paired differences and by at
+    least a tenth of the start (a policy that barely moved, at a learning rate a million
+    times smaller, improves every episode by 1e-6 of its trace: consistent, not learning)."""
     from activetrack.baselines.evaluation import evaluate
     from activetrack.train.bench_learn import BenchConfig, train_run
 
@@ -198,7 +200,7 @@ def test_mappo_learns_against_its_measured_start(tmp_path):
     (trained, _gsr) = evaluate({"trained": str(record.checkpoint)}, "paper", n, SEED, False)
     assert trained.seeds == list(range(SEED, SEED + n))
     d = np.asarray(start["mean_trace"]) - trained.mean_trace
-    margin = 3 * np.std(d, ddof=1) / np.sqrt(n)
+    margin = max(3 * np.std(d, ddof=1) / np.sqrt(n), 0.1 * np.mean(start["mean_trace"]))
     assert np.mean(d) > margin, (np.mean(start["mean_trace"]), np.mean(trained.mean_trace), margin)
 
 
