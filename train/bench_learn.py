@@ -319,6 +319,14 @@ def train_run(
     from activetrack.train.benchmarl_task import ActiveTrackingTask, make_experiment
     from activetrack.train.utils import configure_torch
 
+    (task,) = _names("task", task, task_names())
+    (algorithm,) = _names("algorithm", algorithm, ALGORITHMS)
+    seed = check_int("seed", seed, 0, MAX_SEED)
+    if not isinstance(config, BenchConfig):
+        raise ValueError(f"config must be a BenchConfig, got {type(config).__name__}")
+    if not Path(folder).is_dir():
+        raise ValueError(f"folder {str(folder)!r} is not a directory")
+
     callback = CurveCallback(
         task,
         [config.eval_seed + j for j in range(config.curve_episodes)],

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import importlib.util
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -231,6 +232,19 @@ def test_config_is_checked_at_the_boundary():
             BenchConfig(**kwargs)
     with pytest.raises(TypeError, match="unexpected keyword argument 'budget'"):
         BenchConfig(budget=3)
+    if importlib.util.find_spec("benchmarl") is None:
+        return
+    from activetrack.train.bench_learn import train_run
+
+    for args, message in (
+        (("nope", "mappo", 0), "task must be one or more distinct names"),
+        (("paper", "qmix", 0), "algorithm must be one or more distinct names"),
+        (("paper", "mappo", -1), r"seed must be an integer in \[0, 2147483647\]"),
+    ):
+        with pytest.raises(ValueError, match=message):
+            train_run(*args, BenchConfig(), Path("."))
+    with pytest.raises(ValueError, match="is not a directory"):
+        train_run("paper", "mappo", 0, BenchConfig(), Path("no/such/folder"))
 
 
 def test_curve_frames_and_optimisation_settings():
