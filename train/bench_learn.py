@@ -421,7 +421,12 @@ def plot_curves(
                     (row[m], steps, "environment steps"),
                     (row[2 + m], wall, "wall time (s)"),
                 ):
-                    ax.plot(x, mid, color=f"C{k}", label=f"{algorithm} ({len(runs)} seeds)")
+                    ax.plot(
+                        x,
+                        mid,
+                        color=f"C{k}",
+                        label=f"{algorithm} ({len(runs)} seed{'s' if len(runs) > 1 else ''})",
+                    )
                     ax.fill_between(x, lo, hi, color=f"C{k}", alpha=0.2)
                     ax.set_xlabel(xlabel)
                     ax.set_ylabel(label)
