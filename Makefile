@@ -14,7 +14,10 @@ $(STAMP): pyproject.toml
 	$(PY) -m pip install --quiet --upgrade pip
 	# torch first and pinned, so pip never pulls a multi-GB CUDA build for the [rl] extra.
 	$(PY) -m pip install --quiet "torch==2.13.0"
-	$(PY) -m pip install --quiet -e ".[rl,dev,ray,docs]"
+	$(PY) -m pip install --quiet -e ".[rl,dev,ray,docs,marl]"
+	# BenchMARL and marl-eval without their dependencies (pins older than ours; see the
+	# [marl] extra in pyproject.toml): tests/train/test_benchmarl.py, test_bench_learn.py.
+	$(PY) -m pip install --quiet --no-deps "benchmarl==1.5.2" "id-marl-eval==0.0.4"
 	touch $(STAMP) $(DEMO_STAMP)
 
 $(DEMO_STAMP): pyproject.toml

@@ -68,6 +68,7 @@ def import_benchmarl() -> Any:
 import_benchmarl()
 
 from benchmarl.environments.common import Task, TaskClass  # noqa: E402
+from benchmarl.experiment.callback import Callback  # noqa: E402
 from torchrl.data import Composite  # noqa: E402
 from torchrl.envs import EnvBase, PettingZooWrapper  # noqa: E402
 
@@ -193,11 +194,15 @@ ActiveTrackingTask = _TaskEnum(
 
 
 def experiment_config(
-    save_folder: str | Path, max_frames: int = 400, frames_per_batch: int = 200
+    save_folder: str | Path, max_frames: int = 400, frames_per_batch: int = 200, **fields: Any
 ) -> Any:
     """Return BenchMARL's ``ExperimentConfig`` for a short CPU run: ``max_frames``
     environment steps (of all sensors together, one per world step) collected
     ``frames_per_batch`` at a time, a checkpoint at the end, no evaluation or loggers.
+
+    ``fields`` set further ``ExperimentConfig`` fields last (e.g. BenchMARL's own
+    optimisation defaults for a benchmark run, :mod:`activetrack.train.bench_learn`);
+    a name that is not a field raises ``TypeError``.
     """
     from benchmarl.experiment import ExperimentConfig
 
@@ -230,6 +235,10 @@ def experiment_config(
     ec.save_folder = str(folder)
     ec.checkpoint_interval = 0
     ec.checkpoint_at_end = True
+    for name, value in fields.items():
+        if not hasattr(ec, name):
+            raise TypeError(f"experiment_config() got an unexpected keyword argument {name!r}")
+        setattr(ec, name, value)
     return ec
 
 
@@ -244,12 +253,47 @@ def algorithm_config(name: str) -> Any:
     return cls.get_from_yaml()
 
 
+class KeepThreads(Callback):
+    """A BenchMARL callback that sets torch's intra-op threads back to ``threads`` after
+    every collection.
+
+    Why: when the collector has collected its budget it closes its environment, and
+    TorchRL's batched env (``SerialEnv``) raises torch's thread count by its number of
+    workers on closing (``BatchedEnvBase.close``); the run's last update then ran on two
+    threads instead of one: 15 to 21 s per 100 minibatch steps of MAPPO on ``paper``
+    (minibatches of 400) instead of 2 s, on this 2-core machine under load
+    (tests/train/test_benchmarl.py checks every update's thread count).
+    """
+
+    def __init__(self, threads: int):
+        super().__init__()
+        self.threads = threads
+
+    def __getstate__(self) -> dict[str, Any]:
+        # BenchMARL pickles its callbacks into the run's config.pkl: not the experiment.
+        return {**self.__dict__, "experiment": None}
+
+    def on_batch_collected(self, batch: Any) -> None:
+        """Set torch's threads back before the update."""
+        import torch
+
+        torch.set_num_threads(self.threads)
+
+
 def make_experiment(
-    task: TaskClass, algorithm: str, seed: int = 0, threads: int = DEFAULT_THREADS, **config: Any
+    task: TaskClass,
+    algorithm: str,
+    seed: int = 0,
+    threads: int = DEFAULT_THREADS,
+    callbacks: list[Any] | None = None,
+    **config: Any,
 ) -> Any:
     """Return a BenchMARL ``Experiment`` of ``algorithm`` on ``task`` with MLP actor and
     critic, torch set to ``threads`` intra-op threads; ``config`` goes to
-    :func:`experiment_config`.
+    :func:`experiment_config`, ``callbacks`` (BenchMARL ``Callback`` objects) to the
+    experiment after a :class:`KeepThreads` (torch keeps ``threads`` through the run;
+    after ``run()`` call :func:`~activetrack.train.utils.configure_torch` again: closing
+    the run's environments raises the count).
 
     One thread by default, as the library's other training entry points: on this 2-core
     machine under load a 400-frame MAPPO run on ``paper`` took 2.5 s with one thread and
@@ -258,7 +302,7 @@ def make_experiment(
     from benchmarl.experiment import Experiment
     from benchmarl.models.mlp import MlpConfig
 
-    configure_torch(threads)
+    threads = configure_torch(threads)
     return Experiment(
         task=task,
         algorithm_config=algorithm_config(algorithm),
@@ -266,6 +310,7 @@ def make_experiment(
         critic_model_config=MlpConfig.get_from_yaml(),
         seed=seed,
         config=experiment_config(**config),
+        callbacks=[KeepThreads(threads), *(callbacks or [])],
     )
 
 
@@ -273,6 +318,7 @@ def run_experiment(task: TaskClass, algorithm: str, seed: int = 0, **config: Any
     """Train ``algorithm`` on ``task`` and return the path of the final checkpoint."""
     experiment = make_experiment(task, algorithm, seed, **config)
     experiment.run()
+    configure_torch(config.get("threads", DEFAULT_THREADS))  # closing the envs raised it
     checkpoints = sorted(
         (Path(experiment.folder_name) / "checkpoints").glob("checkpoint_*.pt"),
         key=lambda p: int(p.stem.rsplit("_", 1)[1]),

@@ -31,6 +31,7 @@ from activetrack.cli import COMMANDS, add_output_arguments, field_default, seed_
 from activetrack.files import RunOutputs, prepare_output_dir
 from activetrack.train import imitation as imitation_module
 from activetrack.train.action_targets import TARGETS
+from activetrack.train.bench_learn import add_parser as add_bench_learn_parser
 from activetrack.train.imitation import DAGGER_DEFAULTS, ImitationConfig, train_imitation
 from activetrack.train.networks import ACTIVATIONS, NetConfig
 from activetrack.train.pathwise_cli import add_pathwise_parser
@@ -254,6 +255,8 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     add_selfplay_parsers(methods)  # (the two-team game: activetrack.train.selfplay_cli)
     add_pathwise_parser(methods)  # (gradients through the filter: activetrack.train.pathwise_cli)
     add_set_policy_parser(methods)  # (decentralized teams: activetrack.train.set_policy_cli)
+    # `activetrack bench-learn`, a command of its own (BenchMARL: activetrack.train.bench_learn)
+    add_bench_learn_parser(sub, COMMANDS["bench-learn"][1])
 
 
 #: ``train rllib-ppo`` option -> :class:`~activetrack.train.rllib.RLlibPPOConfig` field. The

@@ -46,6 +46,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "activetrack.train.cli",
         "train a policy: imitation of GSR (bc, dagger) or PPO (the [rl] extra)",
     ),
+    "bench-learn": (
+        "activetrack.train.cli",
+        "benchmark BenchMARL's MARL algorithms on tasks: curves, marl-eval JSON, evaluation",
+    ),
     "kernels": (
         "activetrack.kernel_cache",
         "compile the numba kernels now (or clear their cache) and report time and folder",

@@ -1,6 +1,8 @@
-"""BenchMARL trains MAPPO and IPPO on our tasks end to end (issue 40's first acceptance
-item): a tiny run finishes and checkpoints, the checkpoint restores the trained actor
-(not a fresh one), the actor acts in our env, and ``activetrack evaluate`` runs it."""
+"""BenchMARL on our tasks (issue 40): a tiny run finishes and checkpoints, every update
+runs on the torch threads asked for, the checkpoint restores the trained actor (not a
+fresh one), the actor acts in our env, and ``activetrack evaluate`` runs it.
+(``activetrack bench-learn``'s end-to-end test, tests/train/test_bench_learn.py, runs
+MAPPO, IPPO and MASAC on ``paper`` and ``two_targets``.)"""
 
 from __future__ import annotations
 
@@ -47,6 +49,8 @@ def _own_rollout(policy, scenario, seed):
 @pytest.mark.slow  # about 30-60 s of training per case on this machine
 @pytest.mark.parametrize(("algorithm", "task_name"), CASES)
 def test_benchmarl_trains_checkpoints_and_evaluates(algorithm, task_name, tmp_path):
+    import torch
+
     from activetrack.cli import main
     from activetrack.train.benchmarl_task import ActiveTrackingTask, load_policy, make_experiment
 
@@ -56,9 +60,20 @@ def test_benchmarl_trains_checkpoints_and_evaluates(algorithm, task_name, tmp_pa
     runs.mkdir()
     experiment = make_experiment(task, algorithm, seed=0, save_folder=runs, max_frames=400)
     before = _actor_params(experiment)
+    # Every update runs on the one torch thread asked for (default 1), the last one too:
+    # the collector closes its env when the budget is collected, and TorchRL raises the
+    # thread count then (KeepThreads sets it back).
+    threads, optimize = [], experiment._optimizer_loop
+
+    def counting(group):
+        threads.append(torch.get_num_threads())
+        return optimize(group)
+
+    experiment._optimizer_loop = counting
     experiment.run()
     trained = _actor_params(experiment)
     assert experiment.total_frames == 400  # the whole budget was collected
+    assert len(threads) >= 2 and set(threads) == {1}, threads
 
     checkpoints = list((runs / experiment.name / "checkpoints").glob("checkpoint_*.pt"))
     assert [c.name for c in checkpoints] == ["checkpoint_400.pt"]
