@@ -296,11 +296,11 @@ class PathwiseConfig:
         threads: torch's CPU threads [1, 256].
     """
 
-    iterations: int = 300
-    batch: int = 64
-    lr: float = 2e-5
+    iterations: int = 800
+    batch: int = 128
+    lr: float = 2e-4
     grad_clip: float = 1.0
-    eval_every: int = 25
+    eval_every: int = 50
     eval_episodes: int = 200
     seed: int = 0
     threads: int = DEFAULT_THREADS
