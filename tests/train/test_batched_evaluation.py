@@ -38,12 +38,10 @@ def _policy_file(tmp_path, scenario: str, view: str = "shared"):
     )  # fmt: skip
 
 
-@pytest.mark.parametrize(
-    ("scenario", "view"), [("paper", "shared"), ("paper", "centralized"), ("two_targets", "shared")]
-)
+@pytest.mark.parametrize(("scenario", "view"), [("paper", "shared"), ("two_targets", "shared")])
 def test_batched_rows_are_the_serial_ones(tmp_path, scenario, view):
     path = str(_policy_file(tmp_path, scenario, view))
-    kw = {"scenario": scenario, "episodes": 6, "seed": 40, "progress": False}
+    kw = {"scenario": scenario, "episodes": 4, "seed": 40, "progress": False}
     serial = evaluate([path], **kw)
     batched = evaluate([path], batched=True, **kw)
     for a, b in zip(serial, batched, strict=True):
@@ -52,8 +50,9 @@ def test_batched_rows_are_the_serial_ones(tmp_path, scenario, view):
         np.testing.assert_allclose(b.rmse, a.rmse, rtol=1e-4, atol=1e-6)
 
 
-def test_act_batch_is_act_per_team(tmp_path):
-    learned = load_policy(_policy_file(tmp_path, "paper"))
+@pytest.mark.parametrize("view", ["shared", "centralized"])
+def test_act_batch_is_act_per_team(tmp_path, view):
+    learned = load_policy(_policy_file(tmp_path, "paper", view))
     obs = np.random.default_rng(0).normal(size=(5, 3, 23)).astype(np.float32)
     got = learned.act_batch(obs)
     agents = ["sensor_0", "sensor_1", "sensor_2"]
