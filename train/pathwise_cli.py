@@ -55,6 +55,8 @@ def run_pathwise(args: argparse.Namespace) -> int:
         name: getattr(args, name) for _, name, _ in OPTIONS if getattr(args, name) is not None
     }
     cfg = pw.PathwiseConfig(**given, seed=args.seed, threads=args.threads)
+    if args.hidden is not None and args.init is not None:
+        raise ValueError("--hidden sets a fresh network's sizes: it cannot be combined with --init")
     net = None if args.hidden is None else NetConfig(hidden=tuple(args.hidden))
     result = pw.train_pathwise(
         args.scenario, args.init, args.out, cfg, progress=not args.no_progress,

@@ -237,3 +237,25 @@ def test_command_trains_and_evaluate_loads_the_policy(tmp_path, capsys):
         main(["train", "pathwise", "--scenario", "two_targets", "--out", str(tmp_path / "x")])
     assert main(["train", "pathwise", "--batch", "0", "--out", str(tmp_path / "y")]) == 2
     assert "batch" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    ("argv", "named"),
+    [
+        (["--grad-clip", "0"], "grad_clip"),
+        (["--eval-every", "0"], "eval_every"),
+        (["--threads", "0"], "threads"),
+        (["--hidden", "0"], "hidden"),
+        (["--lr", "nan"], "lr"),
+        (["--iterations", "0"], "iterations"),
+        (["--init", "missing.zip"], "missing.zip"),
+        (["--init", "missing.zip", "--hidden", "8"], "--hidden"),
+    ],
+)
+def test_command_refuses_bad_input_before_writing(tmp_path, capsys, argv, named):
+    from activetrack.cli import main
+
+    out = tmp_path / "pw"
+    assert main(["train", "pathwise", *argv, "--out", str(out)]) == 2
+    assert named in capsys.readouterr().err
+    assert not out.exists()
