@@ -40,7 +40,7 @@ import torch
 
 from activetrack.files import prepare_output_dir
 from activetrack.train.policy_io import load_policy, save_policy
-from activetrack.train.ppo import VALIDATION_SEED
+from activetrack.train.ppo import VALIDATION_SEED, validation_trace
 from activetrack.train.utils import (
     DEFAULT_THREADS,
     check_float,
@@ -332,20 +332,6 @@ class PathwiseResult:
 OUTPUTS = ("policy.zip", "validation.json", "config.json")
 
 
-def validation_trace(policy: Any, scenario: Any, episodes: int) -> float:
-    """Return the deterministic shared-view ``policy``'s mean trace over the validation
-    seeds 500000, ... (:data:`activetrack.train.ppo.VALIDATION_SEED`), every episode a
-    copy of one batched world (:func:`activetrack.baselines.episodes.run_batched`)."""
-    from activetrack.baselines.episodes import run_batched
-    from activetrack.train.policy_io import LearnedPolicy
-
-    was_training = policy.training
-    seeds = list(range(VALIDATION_SEED, VALIDATION_SEED + episodes))
-    rows = run_batched(scenario, {}, LearnedPolicy(policy.eval(), {"view": "shared"}), seeds)
-    policy.train(was_training)
-    return float(np.mean([row[0] for row in rows]))
-
-
 def _start_policy(init: str | Path | None, scenario: Any, net: Any) -> tuple[Any, Any]:
     """Return ``(policy, net config)``: the actor of the file ``init``, or (None) a fresh
     network of ``net`` (default :data:`activetrack.train.networks.DEFAULT_NET`)."""
@@ -402,7 +388,7 @@ def train_pathwise(
         params = actor_parameters(policy)
         opt = torch.optim.Adam(params, lr=cfg.lr)
         start = time.perf_counter()
-        best = validation_trace(policy, sc, cfg.eval_episodes)
+        best = validation_trace(policy, sc, cfg.eval_episodes, batched=True)
         curve = [(0, best)]
         best_state = {k: v.clone() for k, v in policy.state_dict().items()}
         best_it = 0
@@ -417,7 +403,7 @@ def train_pathwise(
             opt.step()
             bar.set_postfix(batch_trace=f"{float(loss.detach()):.3f}", best=f"{best:.4f}")
             if it % cfg.eval_every == 0 or it == cfg.iterations:
-                value = validation_trace(policy, sc, cfg.eval_episodes)
+                value = validation_trace(policy, sc, cfg.eval_episodes, batched=True)
                 curve.append((it, value))
                 if value < best:  # strictly better on the same validation episodes
                     best, best_it = value, it

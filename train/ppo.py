@@ -231,15 +231,33 @@ class ValidationCallback(BaseCallback):
 
 
 def validation_trace(
-    policy: Any, scenario: Any, episodes: int, view: str = "shared", **overrides: Any
+    policy: Any,
+    scenario: Any,
+    episodes: int,
+    view: str = "shared",
+    *,
+    batched: bool = False,
+    **overrides: Any,
 ) -> float:
-    """Return the deterministic policy's mean trace over validation seeds 500000, ...."""
+    """Return the deterministic policy's mean trace over validation seeds 500000, ....
+
+    ``batched``: every episode a copy of one batched world
+    (:func:`activetrack.baselines.episodes.run_batched`; equal to the serial episodes to
+    float32 rounding), else episode by episode in one environment.
+    """
     from activetrack.baselines import rollout as ro
     from activetrack.envs import parallel_env
     from activetrack.train.policy_io import LearnedPolicy
 
     was_training = policy.training
     learned = LearnedPolicy(policy, {"view": view})
+    seeds = range(VALIDATION_SEED, VALIDATION_SEED + episodes)
+    if batched:
+        from activetrack.baselines.episodes import run_batched
+
+        rows = run_batched(scenario, overrides, learned, list(seeds))
+        policy.train(was_training)
+        return float(np.mean([row[0] for row in rows]))
     env = parallel_env(scenario, **overrides)
     traces: list[float] = []
 
@@ -247,7 +265,6 @@ def validation_trace(
         def step(self, step: ro.Step) -> None:
             traces.append(float(step.world.get("trace", 0)))
 
-    seeds = range(VALIDATION_SEED, VALIDATION_SEED + episodes)
     ro.rollout(env.world, ro.ActorAgent(learned, env.possible_agents), seeds, Traces())
     policy.train(was_training)
     return float(np.mean(traces))
