@@ -256,19 +256,26 @@ class LoopSimulator:
         return x_post, 0.5 * (P_post + P_post.transpose(1, 2))
 
     def rollout(
-        self, actor: Any, rng: np.random.Generator, n: int
+        self, actor: Any, rng: np.random.Generator, n: int, horizon: int | None = None
     ) -> tuple[torch.Tensor, torch.Tensor]:
         """Return ``(traces, errors)``: each step's ``tr P(k|k)_11`` and squared position
         error ``||p_T(k) - p_hat_T(k|k)||^2`` (n, n_steps) of ``n`` episodes of the
         deterministic policy ``actor`` (a map from (rows, obs_dim) float64 observations to
         (rows, 2) float64 actions), differentiable in its parameters. The start, the
-        target's noise and the measurement noise are drawn from ``rng`` first."""
+        target's noise and the measurement noise are drawn from ``rng`` first.
+
+        ``horizon`` truncates the gradient: the loop's state (sensors, prediction) is
+        detached every ``horizon`` steps, so a step's trace is differentiated only through
+        the actions of its own window; 1 is the myopic (one-step) objective that GSR
+        optimizes by relaxation, None the whole episode. The values are unchanged."""
         s = self.start(rng, n)
         w = _t(rng.standard_normal((self.n_steps, n, 4)))
         e = _t(rng.standard_normal((self.n_steps, n, self.m, 2)))
         sensors, x_true, x_pred, P_pred = s["sensors"], s["x_true"], s["x_pred"], s["P_pred"]
         traces, errors = [], []
         for k in range(self.n_steps):
+            if horizon is not None and k % horizon == 0:
+                sensors, x_pred, P_pred = sensors.detach(), x_pred.detach(), P_pred.detach()
             obs = self.observe(sensors, x_pred, P_pred)
             actions = actor(obs.reshape(n * self.m, -1)).reshape(n, self.m, 2)
             sensors = self.move(actions, sensors, x_pred)
@@ -292,6 +299,8 @@ class PathwiseConfig:
         grad_clip: the gradient's largest global norm (0, 1e6].
         eval_every: validate every this many steps [1, 1e6] (and at the start and end).
         eval_episodes: validation episodes, seeds 500000, ... [1, 100000].
+        horizon: steps the gradient reaches back [1, 10000], or None for the whole episode
+            (see :meth:`LoopSimulator.rollout`).
         seed: the noise's and torch's seed [0, 2^63).
         threads: torch's CPU threads [1, 256].
     """
@@ -302,6 +311,7 @@ class PathwiseConfig:
     grad_clip: float = 1.0
     eval_every: int = 50
     eval_episodes: int = 200
+    horizon: int | None = None
     seed: int = 0
     threads: int = DEFAULT_THREADS
 
@@ -312,6 +322,8 @@ class PathwiseConfig:
         self.grad_clip = check_float("grad_clip", self.grad_clip, 0.0, 1e6, low_open=True)
         self.eval_every = check_int("eval_every", self.eval_every, 1, 10**6)
         self.eval_episodes = check_int("eval_episodes", self.eval_episodes, 1, 100_000)
+        if self.horizon is not None:
+            self.horizon = check_int("horizon", self.horizon, 1, 10_000)
         self.seed = check_int("seed", self.seed, 0, 2**63 - 1)
         self.threads = check_int("threads", self.threads, 1, 256)
 
@@ -366,8 +378,9 @@ def train_pathwise(
     of ``net`` (a :class:`~activetrack.train.networks.NetConfig`, default 2x256 tanh)
     seeded by ``config.seed``: then only the reward's gradient teaches it (no expert).
     Writes ``policy.zip`` (the best validated policy, kind ``"pathwise"``),
-    ``validation.json`` (the validation curve) and ``config.json`` into ``out_dir``, all
-    at the end (a folder holding them is refused unless ``overwrite``).
+    ``validation.json`` (the validation curve, and ``train_seconds``: the training time
+    at each of its points, validations excluded) and ``config.json`` into ``out_dir``,
+    all at the end (a folder holding them is refused unless ``overwrite``).
     """
     from tqdm.auto import tqdm
 
@@ -390,21 +403,26 @@ def train_pathwise(
         start = time.perf_counter()
         best = validation_trace(policy, sc, cfg.eval_episodes, batched=True)
         curve = [(0, best)]
+        clock = [0.0]  # training seconds at each validation (the validations' own excluded)
+        trained = 0.0
         best_state = {k: v.clone() for k, v in policy.state_dict().items()}
         best_it = 0
         bar = tqdm(range(1, cfg.iterations + 1), desc="pathwise", disable=not progress)
         for it in bar:
+            tick = time.perf_counter()
             actor = lambda o: mean_action(policy, o.float()).double()  # noqa: E731
-            traces, _ = sim.rollout(actor, rng, cfg.batch)
+            traces, _ = sim.rollout(actor, rng, cfg.batch, cfg.horizon)
             loss = traces.mean()
             opt.zero_grad()
             loss.backward()
             torch.nn.utils.clip_grad_norm_(params, cfg.grad_clip)
             opt.step()
+            trained += time.perf_counter() - tick
             bar.set_postfix(batch_trace=f"{float(loss.detach()):.3f}", best=f"{best:.4f}")
             if it % cfg.eval_every == 0 or it == cfg.iterations:
                 value = validation_trace(policy, sc, cfg.eval_episodes, batched=True)
                 curve.append((it, value))
+                clock.append(trained)
                 if value < best:  # strictly better on the same validation episodes
                     best, best_it = value, it
                     best_state = {k: v.clone() for k, v in policy.state_dict().items()}
@@ -423,7 +441,10 @@ def train_pathwise(
             seed=cfg.seed,
             train_config=train_config,
         )
-        outputs.write_json("validation.json", {"validation_seed": VALIDATION_SEED, "curve": curve})
+        outputs.write_json(
+            "validation.json",
+            {"validation_seed": VALIDATION_SEED, "curve": curve, "train_seconds": clock},
+        )
         outputs.write_json("config.json", {"scenario": sc.to_dict(), **train_config})
         path = outputs.commit()["policy.zip"]
     return PathwiseResult(Path(path), curve, best_it, seconds)

@@ -19,6 +19,7 @@ OPTIONS = (
     ("--grad-clip", "grad_clip", float),
     ("--eval-every", "eval_every", int),
     ("--eval-episodes", "eval_episodes", int),
+    ("--horizon", "horizon", int),
 )
 
 
@@ -41,8 +42,9 @@ def add_pathwise_parser(methods: argparse._SubParsersAction) -> None:
     q.add_argument("--seed", type=seed_int, default=0, help="training seed (default %(default)s)")
     add_output_arguments(q, None, required=True)
     for option, name, type_ in OPTIONS:
-        q.add_argument(option, dest=name, type=type_, default=None,
-                       help=f"(default {field_default(pw.PathwiseConfig, name)})")  # fmt: skip
+        default = field_default(pw.PathwiseConfig, name)  # None: the whole episode (horizon)
+        shown = "the whole episode" if default is None else default
+        q.add_argument(option, dest=name, type=type_, default=None, help=f"(default {shown})")
     q.add_argument("--threads", type=int, default=DEFAULT_THREADS,
                    help=f"torch threads, 1 to {MAX_THREADS} (default %(default)s)")  # fmt: skip
     q.add_argument("--no-progress", action="store_true", help="hide the progress bar")

@@ -4,6 +4,8 @@ against the world's, and training that measurably improves a policy."""
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 import torch
@@ -98,6 +100,38 @@ def test_episode_gradient_matches_finite_differences():
     assert torch.autograd.gradcheck(mean_trace, (W0.clone().requires_grad_(),), atol=1e-5)
 
 
+def test_truncated_gradient_is_the_windows_own():
+    # horizon h: each step's trace is differentiated through the actions of its own window
+    # only. Independently: the full gradient of a rollout whose policy uses the weights W
+    # from the window's first step on (the fixed W0 before it), summed over the windows.
+    sim = LoopSimulator(make_scenario("paper", n_steps=5))
+    obs_dim = 5 + 6 * SC.n_sensors
+    W0 = torch.from_numpy(np.random.default_rng(3).normal(0.0, 0.3, (obs_dim, 2)))
+    h = 2
+
+    def truncated(W: torch.Tensor) -> torch.Tensor:
+        traces, _ = sim.rollout(lambda o: o @ W, np.random.default_rng(6), 3, horizon=h)
+        return traces.mean()
+
+    def from_step(W: torch.Tensor, first: int) -> torch.Tensor:
+        calls = iter(range(sim.n_steps))
+        actor = lambda o: o @ (W if next(calls) >= first else W0)  # noqa: E731
+        traces, _ = sim.rollout(actor, np.random.default_rng(6), 3)
+        return traces[:, first : first + h].sum() / traces.numel()
+
+    W = W0.clone().requires_grad_()
+    (got,) = torch.autograd.grad(truncated(W), W)
+    windows = sum(from_step(W, s) for s in range(0, sim.n_steps, h))
+    (want,) = torch.autograd.grad(windows, W)
+    assert got.abs().max() > 1e-3  # a gradient to compare, not zeros
+    torch.testing.assert_close(got, want, rtol=1e-10, atol=1e-12)
+    full, _ = sim.rollout(lambda o: o @ W0, np.random.default_rng(6), 3)
+    torch.testing.assert_close(truncated(W0), full.mean())  # values unchanged
+    whole, _ = sim.rollout(lambda o: o @ W, np.random.default_rng(6), 3)
+    (untruncated,) = torch.autograd.grad(whole.mean(), W)
+    assert not torch.allclose(got, untruncated, rtol=1e-3)  # the truncation matters here
+
+
 def _toward_target(obs: torch.Tensor) -> torch.Tensor:
     """A fixed policy: every sensor heads for the predicted target (entries 5, 6: its
     position relative to it)."""
@@ -162,7 +196,8 @@ def test_only_the_papers_loop():
 
 
 @pytest.mark.parametrize(
-    ("field", "value"), [("batch", 0), ("lr", 0.0), ("iterations", -1), ("eval_episodes", 0)]
+    ("field", "value"),
+    [("batch", 0), ("lr", 0.0), ("iterations", -1), ("eval_episodes", 0), ("horizon", 0)],
 )
 def test_config_is_checked(field, value):
     with pytest.raises(ValueError, match=field):
@@ -185,6 +220,11 @@ def test_training_improves_a_policy_on_held_out_episodes(tmp_path):
     result = train_pathwise("paper", init, tmp_path / "run", cfg, progress=False)
     trained = load_policy(result.policy_path)
     assert trained.meta["kind"] == "pathwise" and result.validation[0][0] == 0
+    written = json.loads((tmp_path / "run" / "validation.json").read_text())
+    assert [it for it, _ in written["curve"]] == [0, 20, 40]
+    seconds = written["train_seconds"]  # the time axis of a time-to-level figure
+    assert len(seconds) == 3 and seconds[0] == 0.0 and seconds[1] > 0.0
+    assert seconds[2] > seconds[1]
 
     def actor(policy):
         return lambda o: mean_action(policy, o.float()).double()
@@ -248,6 +288,7 @@ def test_command_trains_and_evaluate_loads_the_policy(tmp_path, capsys):
         (["--hidden", "0"], "hidden"),
         (["--lr", "nan"], "lr"),
         (["--iterations", "0"], "iterations"),
+        (["--horizon", "0"], "horizon"),
         (["--init", "missing.zip"], "missing.zip"),
         (["--init", "missing.zip", "--hidden", "8"], "--hidden"),
     ],
