@@ -267,7 +267,10 @@ def test_stored_figures_are_the_library_s_and_their_statistics(env_id: str):
     assert set(episodes) == {"gsr", "rm"}
     # A few episodes re-run through the library give the stored per-episode figures
     # (mean trace, RMSE, return, NEES; the CPU time is the machine's). GSR's first episode
-    # is re-run by the page's usage example (test_usage_example_runs_...).
+    # is re-run by the page's usage example (test_usage_example_runs_...). The tolerance is
+    # rounding's: BLAS builds differ in the last bits (OpenBLAS picks its kernels by CPU),
+    # and GSR's iterative solves carry that over 50 steps to about 2e-9 (fixed_wing, AMD
+    # EPYC against the recording machine); any change of the model moves these far more.
     env = parallel_env(ALL_IDS[env_id])
     try:
         for policy, rerun in (("gsr", seeds[1:3]), ("rm", seeds[:1])):
@@ -275,7 +278,7 @@ def test_stored_figures_are_the_library_s_and_their_statistics(env_id: str):
                 j = episodes[policy]["seeds"].index(seed)
                 got = run_episode(env, resolve_policy(policy), seed)
                 stored = [episodes[policy][k][j] for k in ("mean_trace", "rmse", "return", "nees")]
-                np.testing.assert_allclose(got[:4], stored, rtol=1e-9, err_msg=f"{policy} {seed}")
+                np.testing.assert_allclose(got[:4], stored, rtol=1e-7, err_msg=f"{policy} {seed}")
     finally:
         env.close()
     # The summaries are the statistics of the stored episodes, recomputed here.
