@@ -32,6 +32,7 @@ from activetrack.files import RunOutputs, prepare_output_dir
 from activetrack.train import imitation as imitation_module
 from activetrack.train.action_targets import TARGETS
 from activetrack.train.bench_learn import add_parser as add_bench_learn_parser
+from activetrack.train.frames import FRAMES
 from activetrack.train.imitation import DAGGER_DEFAULTS, ImitationConfig, train_imitation
 from activetrack.train.networks import ACTIVATIONS, NetConfig
 from activetrack.train.pathwise_cli import add_pathwise_parser
@@ -116,6 +117,17 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
             "'none' for SB3's linear mean",
             NetConfig,
             "action_gain",
+        ),
+    )
+    common.add_argument(
+        "--frame",
+        choices=FRAMES,
+        default=None,
+        help=_help(
+            "the network's frame: 'sight' is each agent's line-of-sight frame (rotation-"
+            "equivariant; the paper's observation layout)",
+            NetConfig,
+            "frame",
         ),
     )
     common.add_argument(
@@ -397,6 +409,8 @@ def _net_config(args: argparse.Namespace) -> NetConfig:
         kw["action_gain"] = None if args.action_gain == _LINEAR else args.action_gain
     if getattr(args, "log_std_init", None) is not None:
         kw["log_std_init"] = args.log_std_init
+    if args.frame is not None:
+        kw["frame"] = args.frame
     return NetConfig(**kw)
 
 

@@ -13,6 +13,10 @@ gives the cost). :class:`TrackingPolicy` therefore saturates the mean radially, 
 Gaussian, PPO's sampling and the deterministic action all use ``s(m)``, which lies in the
 unit disk, so SB3's clipping to the box never bends it. ``action_gain=None`` restores
 SB3's plain linear mean.
+
+The frame. ``frame="sight"`` gives the network each agent's observation in its own
+line-of-sight frame and turns its move back (:mod:`activetrack.train.frames`): the policy is
+then exactly equivariant to rotations of the plane, as the paper's loop is.
 """
 
 from __future__ import annotations
@@ -25,6 +29,7 @@ import torch
 from stable_baselines3.common.policies import ActorCriticPolicy
 from torch import nn
 
+from activetrack.train.frames import FRAMES, SightFrame, from_frame
 from activetrack.train.utils import check_bool, check_choice, check_float, check_int
 
 ACTIVATIONS: dict[str, type[nn.Module]] = {"tanh": nn.Tanh, "relu": nn.ReLU, "elu": nn.ELU}
@@ -51,6 +56,9 @@ class NetConfig:
         ortho_init: SB3's orthogonal initialization.
         action_gain: the saturation gain K of the mean action (see the module docstring);
             None for SB3's linear mean.
+        frame: ``"world"`` (the observation as the env gives it) or ``"sight"`` (each
+            agent's line-of-sight frame, :mod:`activetrack.train.frames`: the paper's
+            observation layout and the shared view only).
     """
 
     hidden: tuple[int, ...] = (256, 256)
@@ -58,6 +66,7 @@ class NetConfig:
     log_std_init: float = -1.0
     ortho_init: bool = True
     action_gain: float | None = 100.0
+    frame: str = "world"
 
     def __post_init__(self) -> None:
         hidden = self.hidden
@@ -75,6 +84,7 @@ class NetConfig:
         if self.action_gain is not None:
             gain = check_float("action_gain", self.action_gain, 0, low_open=True)
             set_(self, "action_gain", gain)
+        set_(self, "frame", check_choice("frame", self.frame, FRAMES))
 
     def policy_kwargs(self) -> dict[str, Any]:
         """Return the ``policy_kwargs`` of ``PPO("MlpPolicy", ...)`` for this architecture."""
@@ -84,6 +94,7 @@ class NetConfig:
             "log_std_init": self.log_std_init,
             "ortho_init": self.ortho_init,
             "action_gain": self.action_gain,
+            "frame": self.frame,
         }
 
     def to_dict(self) -> dict[str, Any]:
@@ -153,23 +164,44 @@ class TrackingPolicy(ActorCriticPolicy):
         **kwargs: as for ``ActorCriticPolicy`` (no gSDE: a diagonal Gaussian).
     """
 
-    def __init__(self, *args: Any, action_gain: float | None = 100.0, **kwargs: Any) -> None:
+    def __init__(
+        self,
+        *args: Any,
+        action_gain: float | None = 100.0,
+        frame: str = "world",
+        **kwargs: Any,
+    ) -> None:
         if kwargs.get("use_sde"):
             raise ValueError("TrackingPolicy supports the diagonal Gaussian only (use_sde=False)")
         self.action_gain = action_gain
+        self.frame = check_choice("frame", frame, FRAMES)
+        if self.frame == "sight":
+            kwargs["features_extractor_class"] = SightFrame
+            kwargs["share_features_extractor"] = True  # one extractor: the head's frames
         super().__init__(*args, **kwargs)
         if action_gain is not None and self.action_space.shape[-1] % 2:
             raise ValueError("a saturated mean needs actions made of 2D moves")
+        if self.frame == "sight" and self.action_space.shape != (2,):
+            raise ValueError(
+                f"frame 'sight' needs one sensor's move a row (shared view, 2 actions),"
+                f" got actions of shape {self.action_space.shape}"
+            )
 
     def _get_constructor_parameters(self) -> dict[str, Any]:
         data = super()._get_constructor_parameters()
         data["action_gain"] = self.action_gain
+        data["frame"] = self.frame
         return data
 
     def action_mean(self, latent_pi: torch.Tensor) -> torch.Tensor:
-        """Return the (saturated) mean action of the actor's latent features."""
+        """Return the (saturated) mean action of the actor's latent features, in the world
+        frame (with ``frame="sight"``: turned back from the frames of the batch the
+        features extractor saw last, which is ``latent_pi``'s batch)."""
         mean = self.action_net(latent_pi)
-        return mean if self.action_gain is None else saturate(mean, self.action_gain)
+        mean = mean if self.action_gain is None else saturate(mean, self.action_gain)
+        if self.frame == "sight":
+            mean = from_frame(mean, self.features_extractor.rotation)
+        return mean
 
     def _get_action_dist_from_latent(self, latent_pi: torch.Tensor) -> Any:
         # Every SB3 path (rollouts, evaluate_actions, predict) builds its distribution here.

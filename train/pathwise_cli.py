@@ -8,6 +8,7 @@ from typing import Any
 
 from activetrack.cli import add_output_arguments, field_default, seed_int
 from activetrack.train import pathwise as pw
+from activetrack.train.frames import FRAMES
 from activetrack.train.networks import NetConfig
 from activetrack.train.utils import DEFAULT_THREADS, MAX_THREADS
 
@@ -39,6 +40,9 @@ def add_pathwise_parser(methods: argparse._SubParsersAction) -> None:
     )
     q.add_argument("--hidden", type=int, nargs="+", default=None,
                    help="a fresh network's MLP sizes (default 256 256)")  # fmt: skip
+    q.add_argument("--frame", choices=FRAMES, default=None,
+                   help="a fresh network's frame: world (default) or sight (each agent's "
+                   "line-of-sight frame, rotation-equivariant)")  # fmt: skip
     q.add_argument("--seed", type=seed_int, default=0, help="training seed (default %(default)s)")
     add_output_arguments(q, None, required=True)
     for option, name, type_ in OPTIONS:
@@ -57,9 +61,14 @@ def run_pathwise(args: argparse.Namespace) -> int:
         name: getattr(args, name) for _, name, _ in OPTIONS if getattr(args, name) is not None
     }
     cfg = pw.PathwiseConfig(**given, seed=args.seed, threads=args.threads)
-    if args.hidden is not None and args.init is not None:
-        raise ValueError("--hidden sets a fresh network's sizes: it cannot be combined with --init")
-    net = None if args.hidden is None else NetConfig(hidden=tuple(args.hidden))
+    fresh = {"hidden": args.hidden, "frame": args.frame}
+    for name, value in fresh.items():
+        if value is not None and args.init is not None:
+            raise ValueError(
+                f"--{name} sets a fresh network's {name}: it cannot be combined with --init"
+            )
+    given_net = {k: tuple(v) if k == "hidden" else v for k, v in fresh.items() if v is not None}
+    net = NetConfig(**given_net) if given_net else None
     result = pw.train_pathwise(
         args.scenario, args.init, args.out, cfg, progress=not args.no_progress,
         overwrite=args.overwrite, net=net,

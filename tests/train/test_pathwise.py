@@ -5,6 +5,7 @@ against the world's, and training that measurably improves a policy."""
 from __future__ import annotations
 
 import json
+import zipfile
 
 import numpy as np
 import pytest
@@ -264,9 +265,12 @@ def test_command_trains_and_evaluate_loads_the_policy(tmp_path, capsys):
 
     out = tmp_path / "pw"
     argv = ["train", "pathwise", "--iterations", "2", "--batch", "2", "--eval-every", "2"]
-    argv += ["--eval-episodes", "2", "--hidden", "8", "--no-progress", "--out", str(out)]
+    argv += ["--eval-episodes", "2", "--hidden", "8", "--frame", "sight", "--no-progress"]
+    argv += ["--out", str(out)]
     assert main(argv) == 0
     assert "pathwise: 2 iterations of 2 episodes" in capsys.readouterr().out
+    with zipfile.ZipFile(out / "policy.zip") as zf:
+        assert json.loads(zf.read("meta.json"))["net"]["frame"] == "sight"
     rows = evaluate([str(out / "policy.zip")], "paper", episodes=2, seed=5, progress=False)
     assert np.all(np.isfinite(rows[-1].mean_trace))
     # refused before training: a results folder, a scenario beyond the paper's loop, a
@@ -291,6 +295,7 @@ def test_command_trains_and_evaluate_loads_the_policy(tmp_path, capsys):
         (["--horizon", "0"], "horizon"),
         (["--init", "missing.zip"], "missing.zip"),
         (["--init", "missing.zip", "--hidden", "8"], "--hidden"),
+        (["--init", "missing.zip", "--frame", "sight"], "--frame"),
     ],
 )
 def test_command_refuses_bad_input_before_writing(tmp_path, capsys, argv, named):
