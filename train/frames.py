@@ -16,11 +16,19 @@ the frame's first axis ``e1 = c_i / |c_i|``, ``e2`` is ``e1`` turned by +90 degr
 ``R^T P R``, re-encoded as the layout's ``ln sigma_x, ln sigma_y, corr``. The network's
 move ``a'`` is turned back into the world frame, ``a = R a'``
 (:meth:`activetrack.train.networks.TrackingPolicy.action_mean`). The map from the
-observation to the action is then exactly rotation-equivariant (tests/train/test_frames.py
-rotates whole observations and compares).
+observation to the mean (deterministic) action is then exactly rotation-equivariant
+(tests/train/test_frames.py rotates whole worlds and compares): the policy that BC, DAgger,
+``train pathwise`` and ``evaluate`` use. PPO's exploration noise keeps one standard
+deviation per world axis, so its sampled actions are equivariant only while the two are
+equal (as they start).
+
+:func:`check_frame` is the check every trainer makes before it builds a network: the frame
+reads the paper's observation layout only, which a size alone does not identify.
 """
 
 from __future__ import annotations
+
+from typing import Any
 
 import gymnasium as gym
 import torch
@@ -28,6 +36,8 @@ from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 
 #: The frames a :class:`~activetrack.train.networks.NetConfig` may name.
 FRAMES = ("world", "sight")
+#: Smallest variance (in L^2) of the covariance in the frame: a standard deviation of 1e-6 L.
+_VAR_FLOOR = 1e-12
 
 
 def check_paper_layout(dim: int) -> int:
@@ -41,12 +51,37 @@ def check_paper_layout(dim: int) -> int:
     return (dim - 5) // 6
 
 
+def check_frame(frame: str, scenario: Any, **overrides: Any) -> None:
+    """Raise ValueError unless a network of frame ``frame`` can read the observations of
+    ``scenario`` (a preset name or a Scenario, with the scenario field ``overrides``):
+    ``"sight"`` needs the paper's layout with nothing appended (no kinematic features,
+    rays, route readings or flags)."""
+    if frame != "sight":
+        return
+    from activetrack.world.observation import layout_of
+    from activetrack.world.scenarios import make_scenario
+
+    sc = make_scenario(scenario, **overrides)
+    layout = layout_of(sc)
+    extra = layout.flags + layout.rays + layout.motion + layout.route + layout.tracks
+    if layout.extended or extra:
+        raise ValueError(
+            "frame 'sight' needs the paper's observation layout (one target, range-and-bearing"
+            f" sensors at known positions, nothing appended); scenario {sc.name!r} has "
+            + ("the extended layout" if layout.extended else f"{extra} appended entries")
+        )
+
+
 def sight_rotation(obs: torch.Tensor) -> torch.Tensor:
     """Return ``R = [e1 e2]`` (rows, 2, 2) of each observation row: ``e1`` along the agent's
-    line of sight (entries 5-6), ``e2`` a quarter turn counter-clockwise from it."""
+    line of sight (entries 5-6), ``e2`` a quarter turn counter-clockwise from it; the
+    identity where the line of sight has no direction (the agent on the prediction)."""
     c = obs[:, 5:7]
-    # |c_i| >= rho > 0 after every move (eq. 14); the floor only guards a degenerate input.
-    e1 = c / torch.linalg.vector_norm(c, dim=-1, keepdim=True).clamp_min(1e-9)
+    # |c_i| >= rho > 0 after every move (eq. 14); a zero c has no frame: the world's.
+    norm = torch.linalg.vector_norm(c, dim=-1, keepdim=True)
+    degenerate = norm < 1e-9
+    world_x = torch.tensor([1.0, 0.0], dtype=obs.dtype)
+    e1 = torch.where(degenerate, world_x, c / norm.clamp_min(1e-9))
     e2 = torch.stack([-e1[:, 1], e1[:, 0]], -1)
     return torch.stack([e1, e2], -1)
 
@@ -58,8 +93,11 @@ def to_frame(obs: torch.Tensor, rotation: torch.Tensor) -> torch.Tensor:
     sx, sy, corr = obs[:, 0].exp(), obs[:, 1].exp(), obs[:, 2]
     cov = torch.stack([sx * sx, corr * sx * sy, corr * sx * sy, sy * sy], -1).reshape(-1, 2, 2)
     cov = rotation.transpose(1, 2) @ cov @ rotation
-    vx, vy = cov[:, 0, 0], cov[:, 1, 1]
-    target = torch.stack([0.5 * vx.log(), 0.5 * vy.log(), cov[:, 0, 1] / (vx * vy).sqrt()], -1)
+    # A correlation of +-1 (a rounded or clipped input) makes P singular, and a frame axis
+    # along its null direction would have a zero variance: floored, so the log is finite.
+    vx, vy = cov[:, 0, 0].clamp_min(_VAR_FLOOR), cov[:, 1, 1].clamp_min(_VAR_FLOOR)
+    corr = (cov[:, 0, 1] / (vx * vy).sqrt()).clamp(-1.0, 1.0)
+    target = torch.stack([0.5 * vx.log(), 0.5 * vy.log(), corr], -1)
     velocity = (obs[:, None, 3:5] @ rotation)[:, 0]  # v^T R = (R^T v)^T
     seats = obs[:, 5:].reshape(-1, m, 6)
     positions = seats[..., :2] @ rotation  # each row c_j^T R
@@ -98,4 +136,12 @@ class SightFrame(BaseFeaturesExtractor):
         return to_frame(obs.double(), rotation).to(obs.dtype)
 
 
-__all__ = ["FRAMES", "SightFrame", "check_paper_layout", "from_frame", "sight_rotation", "to_frame"]
+__all__ = [
+    "FRAMES",
+    "SightFrame",
+    "check_frame",
+    "check_paper_layout",
+    "from_frame",
+    "sight_rotation",
+    "to_frame",
+]

@@ -45,6 +45,7 @@ from stable_baselines3.common.policies import ActorCriticPolicy
 from activetrack.baselines.rollout import MixedAgent, Recorder, Step, rollout
 from activetrack.kinematics.team import actions_to_reach
 from activetrack.train.action_targets import POSITION, PositionActions, check_target
+from activetrack.train.frames import check_frame
 from activetrack.train.networks import DEFAULT_NET, NetConfig, build_policy, mean_action
 from activetrack.train.utils import (
     DEFAULT_THREADS,
@@ -426,6 +427,7 @@ def train_imitation(
 
         expert = GSRPolicy()
     _check_batched(batched, workers, address, expert)
+    check_frame(cfg.net.frame, scenario, **overrides)
     configure_torch(threads)
     t0 = time.perf_counter()
     seed_everything(seed)

@@ -43,6 +43,7 @@ from stable_baselines3.common.logger import Logger
 from stable_baselines3.common.vec_env import VecEnv, VecMonitor, VecNormalize
 
 from activetrack.files import RunOutputs, atomic_path, prepare_output_dir
+from activetrack.train.frames import check_frame
 from activetrack.train.networks import DEFAULT_NET, LOG_STD_RANGE, NetConfig, TrackingPolicy
 from activetrack.train.policy_io import VIEWS, load_policy, save_policy
 from activetrack.train.sb3_vecenv import make_shared_vec_env
@@ -419,6 +420,7 @@ def train_ppo(
         with prepare_output_dir(out_dir, OUTPUTS, overwrite) as outputs:  # locked for the run
             return train_ppo(scenario, seed, cfg, outputs, init, progress, threads, **overrides)
     outputs = out_dir
+    check_frame(cfg.net.frame, scenario, **overrides)
     configure_torch(threads)
     seed_everything(seed)
     t0 = time.perf_counter()

@@ -49,6 +49,7 @@ from activetrack.baselines.distributed import (
     quiet_failure_handler,
 )
 from activetrack.files import RunOutputs, keep_signal_handlers, prepare_output_dir
+from activetrack.train.frames import check_frame
 from activetrack.train.networks import DEFAULT_NET, NetConfig, build_policy
 from activetrack.train.policy_io import save_policy
 from activetrack.train.utils import (
@@ -432,6 +433,7 @@ def train_rllib_ppo(
     iterations = check_int("iterations", iterations, 1, MAX_ITERATIONS)
     seed = check_int("seed", seed, 0, 2**31 - 1)
     address = check_address(address)
+    check_frame(cfg.net.frame, scenario, **overrides)
     if out_dir is not None and not isinstance(out_dir, RunOutputs):
         with prepare_output_dir(out_dir, OUTPUTS, overwrite) as outputs:  # locked for the run
             return train_rllib_ppo(

@@ -75,6 +75,26 @@ def test_the_sight_policy_turns_with_the_world_and_the_world_policy_does_not(loo
     assert errors["world"] > 1e-2  # the check can fail: a plain network is not equivariant
 
 
+def test_ppo_s_log_probabilities_turn_with_the_world_while_the_noise_is_isotropic(loop):
+    """evaluate_actions (PPO's loss) goes through the frame too: with equal standard
+    deviations (the start), a turned world and turned actions have the same log-density."""
+    state = _state(loop, seed=1)
+    obs, turned = _rotated(loop, state, 0.0), _rotated(loop, state, 1.1)
+    R = _rot(1.1).float()
+    policy = _policy("sight", seed=2)
+    actions = torch.as_tensor(np.random.default_rng(5).uniform(-0.7, 0.7, (obs.shape[0], 2)))
+    actions = actions.float()
+    with torch.no_grad():
+        _, logp, _ = policy.evaluate_actions(obs.float(), actions)
+        _, logp_turned, _ = policy.evaluate_actions(turned.float(), actions @ R.T)
+        # and the log-density is the Gaussian's about the turned-back mean
+        mean = mean_action(policy, obs.float())
+        std = policy.log_std.exp()
+        by_hand = torch.distributions.Normal(mean, std).log_prob(actions).sum(-1)
+    torch.testing.assert_close(logp_turned, logp, rtol=0, atol=1e-4)
+    torch.testing.assert_close(logp, by_hand, rtol=0, atol=1e-5)
+
+
 def test_the_frame_keeps_lengths_angles_and_the_covariance_s_invariants(loop):
     sensors, x, P = _state(loop, seed=3)
     obs = loop.observe(sensors, x, P).reshape(-1, 5 + 6 * loop.m)
@@ -103,6 +123,21 @@ def test_the_frame_keeps_lengths_angles_and_the_covariance_s_invariants(loop):
         torch.testing.assert_close(framed[:, constants], obs[:, constants])
 
 
+def test_degenerate_observations_stay_finite():
+    """A correlation of +-1 (a clipped input) with the line of sight along the covariance's
+    null direction, and an agent on the prediction: finite frames and actions."""
+    obs = torch.zeros(3, 23, dtype=torch.float64)
+    obs[:, 0:2] = 0.3  # equal sigmas: P's null direction is (1, -1) for corr = 1
+    obs[0, 2], obs[0, 5:7] = 1.0, torch.tensor([1.0, -1.0])
+    obs[1, 2], obs[1, 5:7] = -1.0, torch.tensor([2.0, 2.0])
+    obs[2, 2] = 0.5  # c_i = 0: the world's frame
+    framed = to_frame(obs, sight_rotation(obs))
+    assert torch.isfinite(framed).all()
+    torch.testing.assert_close(sight_rotation(obs)[2], torch.eye(2, dtype=torch.float64))
+    actions, _ = _policy("sight").predict(obs.float().numpy(), deterministic=True)
+    assert np.isfinite(actions).all()
+
+
 def test_a_sight_policy_file_keeps_its_frame(tmp_path):
     from activetrack.train.policy_io import load_policy, save_policy
 
@@ -117,11 +152,33 @@ def test_a_sight_policy_file_keeps_its_frame(tmp_path):
     np.testing.assert_array_equal(loaded.predict(obs), want)
 
 
-def test_the_frame_is_refused_where_it_does_not_apply():
+def test_a_file_without_a_frame_is_in_the_world_frame():
+    d = NetConfig(hidden=(8,)).to_dict()
+    del d["frame"]  # the files written before the frame existed
+    assert NetConfig.from_dict(d).frame == "world"
+
+
+def test_the_frame_is_refused_where_it_does_not_apply(tmp_path):
     import gymnasium as gym
+
+    from activetrack.train.frames import check_frame
+    from activetrack.train.imitation import ImitationConfig, train_imitation
 
     with pytest.raises(ValueError, match="frame must be one of"):
         NetConfig(frame="body")
+    check_frame("sight", "paper")  # the paper's layout
+    check_frame("world", "two_targets")
+    # five targets: the extended layout's 7K + 12M = 83 entries look like 5 + 6 * 13
+    five = {"n_targets": 5, "x0": tuple((10.0 * k, 0.0, 1.0, 0.0) for k in range(5))}
+    five["x0_hat"] = five["x0"]
+    with pytest.raises(ValueError, match="extended layout"):
+        check_frame("sight", "two_targets", **five)
+    with pytest.raises(ValueError, match="appended entries"):
+        check_frame("sight", "unicycle")  # the heading features after the paper's layout
+    # refused by a trainer before any label is collected
+    cfg = ImitationConfig(episodes=1, epochs=1, net=NetConfig(hidden=(8,), frame="sight"))
+    with pytest.raises(ValueError, match="paper's observation layout"):
+        train_imitation("two_targets", config=cfg, **five)
     box = gym.spaces.Box(-1, 1, (19,))
     with pytest.raises(ValueError, match="paper's observation layout"):
         SightFrame(box)
