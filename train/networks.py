@@ -15,8 +15,8 @@ unit disk, so SB3's clipping to the box never bends it. ``action_gain=None`` res
 SB3's plain linear mean.
 
 The frame. ``frame="sight"`` gives the network each agent's observation in its own
-line-of-sight frame and turns its move back (:mod:`activetrack.train.frames`): the policy is
-then exactly equivariant to rotations of the plane, as the paper's loop is.
+line-of-sight frame and turns its move back (:mod:`activetrack.train.frames`): the mean
+action is then exactly equivariant to rotations of the plane, as the paper's loop is.
 """
 
 from __future__ import annotations
