@@ -175,11 +175,21 @@ def make_planner(name: str, args: argparse.Namespace) -> tuple[Any, dict[str, An
 
 def format_table(summaries: dict[str, dict[str, Any]]) -> str:
     """Return the results as an aligned text table (means with 95% intervals)."""
-    head = ("planner", "mean trace (m^2) [95% CI]", "RMSE (m) [95% CI]", "NEES", "plan ms (median)")
+    head = (
+        "planner",
+        "mean trace (m^2) [95% CI]",
+        "IQM [95% CI]",
+        "median [95% CI]",
+        "RMSE (m) [95% CI]",
+        "NEES",
+        "plan ms (median)",
+        "ratio to GSR [paired 95% CI]",
+        "IQM ratio to GSR",
+    )
     rows = [head]
 
     def ci(s: dict[str, Any], key: str, digits: int) -> str:  # "-": none (no track held)
-        if s[key] is None:
+        if s.get(key) is None:
             return "-"
         lo, hi = s[f"{key}_ci95"]
         return f"{s[key]:.{digits}f} [{lo:.{digits}f}, {hi:.{digits}f}]"
@@ -187,7 +197,9 @@ def format_table(summaries: dict[str, dict[str, Any]]) -> str:
     for name, s in summaries.items():
         nees = "-" if s["nees"] is None else f"{s['nees']:.2f}"
         ms = f"{s['plan_time_ms_median']:.2f}"
-        rows.append((name, ci(s, "mean_trace", 4), ci(s, "rmse", 4), nees, ms))
+        traces = (ci(s, k, 4) for k in ("mean_trace", "iqm_trace", "median_trace"))
+        ratios = (ci(s, k, 4) for k in ("ratio_to_gsr", "iqm_ratio_to_gsr"))
+        rows.append((name, *traces, ci(s, "rmse", 4), nees, ms, *ratios))
     widths = [max(len(r[k]) for r in rows) for k in range(len(head))]
     lines = ["  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)) for r in rows]
     lines.insert(1, "  ".join("-" * w for w in widths))
@@ -226,7 +238,7 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
         )
         summaries = {}
         for name, res in results.items():
-            s = res.summary()
+            s = res.summary(results.get("gsr"))  # the paired ratios to GSR, if it ran
             s["seed"] = args.seed
             s["config"] = {"planner": configs[name], "scenario": scenario.to_dict()}
             summaries[name] = s

@@ -258,8 +258,17 @@ class MonteCarloResult:
     traces: FloatArray | None = None
     warmup_time: float | None = None
 
-    def summary(self) -> dict[str, Any]:
-        """Return JSON-friendly summary statistics with 95% intervals of the means."""
+    def summary(self, reference: MonteCarloResult | None = None) -> dict[str, Any]:
+        """Return JSON-friendly summary statistics with their 95% intervals.
+
+        The means' intervals are Student-t ones (:func:`mean_ci`). The reporting protocol's
+        statistics of the runs' mean traces (:mod:`activetrack.baselines.protocol`):
+        ``iqm_trace`` and ``median_trace`` with percentile bootstrap intervals and, given a
+        ``reference`` on the same seeds (GSR), ``ratio_to_gsr`` and ``iqm_ratio_to_gsr``
+        with paired bootstrap intervals (None where a run has no finite trace).
+        """
+        from activetrack.baselines import protocol
+
         out: dict[str, Any] = {"runs": len(self.seeds)}
         for key, values in (
             ("mean_trace", self.mean_trace),
@@ -273,6 +282,19 @@ class MonteCarloResult:
             mean, lo, hi = mean_ci(values)
             out[key] = mean
             out[f"{key}_ci95"] = [lo, hi]
+        traces = np.asarray(self.mean_trace, dtype=float)
+        finite = traces.size > 0 and bool(np.all(np.isfinite(traces)))
+        for stat in ("iqm", "median"):
+            point, lo, hi = protocol.interval(traces, stat) if finite else (None, None, None)
+            out[f"{stat}_trace"], out[f"{stat}_trace_ci95"] = point, [lo, hi]
+        for key, stat in (("ratio_to_gsr", "mean"), ("iqm_ratio_to_gsr", "iqm")):
+            out[key], out[f"{key}_ci95"] = None, [None, None]
+            if reference is None or not finite or reference.seeds != self.seeds:
+                continue
+            ref = np.asarray(reference.mean_trace, dtype=float)
+            if np.all(np.isfinite(ref)) and protocol.STATISTICS[stat](ref) > 0:
+                ratio, lo, hi = protocol.paired_ratio_interval(traces, ref, stat)
+                out[key], out[f"{key}_ci95"] = ratio, [lo, hi]
         out["plan_time_ms_median"] = float(np.median(self.plan_times) * 1e3)
         out["plan_time_ms_mean"] = float(np.mean(self.plan_times) * 1e3)
         out["plan_time_ms_max"] = float(np.max(self.plan_times) * 1e3)

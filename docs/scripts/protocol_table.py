@@ -3,6 +3,7 @@
 Usage (from the repository's root)::
 
     python docs/scripts/protocol_table.py runs/eval_urban runs/eval_urban_random
+    python docs/scripts/protocol_table.py --pooled-only --rmse-nees runs/eval_NAME
 
 For each run folder (its ``results.json`` and the scenario recorded in its
 ``episodes.json``), one row per policy: the IQM, median and mean trace with their 95%
@@ -12,7 +13,9 @@ GSR's (``docs/results/protocol.md``). A pooled row (``--pool``) names its number
 Runs of a task whose targets appear and leave (``births``: the results carry ``gospa``)
 get a second table, the multi-target census: GOSPA, the fraction of the time present
 each target was tracked, the time to first detection, the episodes in which every
-target was tracked, RMSE, NEES and the decision time.
+target was tracked, RMSE, NEES and the decision time. ``--pooled-only`` leaves out the
+rows of the runs a pool holds (the pool's row stands for them); ``--rmse-nees`` adds the
+mean RMSE and NEES columns.
 """
 
 from __future__ import annotations
@@ -45,18 +48,22 @@ def load(folder: Path) -> tuple[str, list[dict]]:
     return task, results
 
 
-def rows(folder: Path) -> list[str]:
+def rows(folder: Path, pooled_only: bool = False, rmse_nees: bool = False) -> list[str]:
     """Return the table rows of one ``activetrack evaluate`` output folder."""
     task, results = load(folder)
+    members = {p for r in results for p in r.get("pooled", ())} if pooled_only else set()
     out = []
     for r in results:
+        if r["policy"] in members:
+            continue
         name = r.get("label", r["policy"]) + (f" ({r['runs']} runs)" if "runs" in r else "")
         unseen = "-" if r.get("no_detection") is None else f"{r['no_detection']:.3f}"
+        extra = f" {value(r, 'rmse', '.3f')} | {value(r, 'nees', '.2f')} |" if rmse_nees else ""
         out.append(
             f"| `{task}` | {name} | {cell(r, 'iqm_trace', '.3f')} | "
             f"{cell(r, 'median_trace', '.3f')} | {cell(r, 'mean_trace', '.3f')} | "
             f"{cell(r, 'track_loss_rate', '.3f')} | {unseen} | "
-            f"{cell(r, 'iqm_ratio_to_gsr', '.3f')} | {cell(r, 'ratio_to_gsr', '.3f')} |"
+            f"{cell(r, 'iqm_ratio_to_gsr', '.3f')} | {cell(r, 'ratio_to_gsr', '.3f')} |{extra}"
         )
     return out
 
@@ -94,11 +101,15 @@ def main(argv: list[str]) -> int:
     if not argv:
         print(__doc__, file=sys.stderr)
         return 2
-    print(HEAD)
-    print("|" + "---|" * HEAD.count(" | ") + "---|")
-    for folder in argv:
-        print("\n".join(rows(Path(folder))))
-    census = [row for folder in argv for row in census_rows(Path(folder))]
+    flags = {"--pooled-only", "--rmse-nees"}
+    pooled_only, rmse_nees = "--pooled-only" in argv, "--rmse-nees" in argv
+    folders = [a for a in argv if a not in flags]
+    head = HEAD + (" RMSE (m) | NEES |" if rmse_nees else "")
+    print(head)
+    print("|" + "---|" * head.count(" | ") + "---|")
+    for folder in folders:
+        print("\n".join(rows(Path(folder), pooled_only, rmse_nees)))
+    census = [row for folder in folders for row in census_rows(Path(folder))]
     if census:
         print()
         print(CENSUS_HEAD)

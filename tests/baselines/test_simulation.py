@@ -100,6 +100,29 @@ def test_monte_carlo_pairs_seeds_and_summarizes():
         run_monte_carlo(sc, {"gsr": GSR()}, 0)
 
 
+def test_a_studys_summary_reports_the_protocols_statistics():
+    # The IQM against scipy's trimmed mean with the quarter cut (rliable's aggregate_iqm),
+    # the median against numpy's; each point inside its interval; the paired ratios to
+    # GSR are the ratios of the runs' means and IQMs, GSR's own exactly 1.
+    sc = make_scenario("paper", n_steps=6)
+    res = run_monte_carlo(sc, {"gsr": GSR(), "towards": _Towards()}, 9, seed=3, progress=False)
+    gsr, other = res["gsr"], res["towards"]
+    s, own = other.summary(gsr), gsr.summary(gsr)
+    x, y = other.mean_trace, gsr.mean_trace
+    assert s["iqm_trace"] == pytest.approx(stats.trim_mean(x, 0.25), rel=1e-12)
+    assert s["median_trace"] == pytest.approx(np.median(x), rel=1e-12)
+    for key in ("iqm_trace", "median_trace", "ratio_to_gsr", "iqm_ratio_to_gsr"):
+        lo, hi = s[f"{key}_ci95"]
+        assert lo <= s[key] <= hi, key
+    assert s["ratio_to_gsr"] == pytest.approx(np.mean(x) / np.mean(y), rel=1e-12)
+    iqm_ratio = stats.trim_mean(x, 0.25) / stats.trim_mean(y, 0.25)
+    assert s["iqm_ratio_to_gsr"] == pytest.approx(iqm_ratio, rel=1e-12)
+    assert own["ratio_to_gsr"] == own["iqm_ratio_to_gsr"] == 1.0
+    assert own["ratio_to_gsr_ci95"] == [1.0, 1.0]
+    alone = other.summary()  # no reference: no ratio
+    assert alone["ratio_to_gsr"] is None and alone["iqm_trace"] == s["iqm_trace"]
+
+
 def test_two_target_runs_record_every_target_and_plot(tmp_path):
     from activetrack.baselines import GSR
     from activetrack.baselines.plotting import plot_trajectories
