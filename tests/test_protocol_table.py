@@ -58,3 +58,23 @@ def test_rows_hold_the_results_and_pools_stand_for_their_members(folder, capsys)
     columns = {line.count("|") for line in pooled}
     assert columns == {every[0].count("|") + 2}  # header, rule and rows alike
     assert pooled[-1].endswith("| 0.500 | 2.00 |")
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        ([], "the following arguments are required: folders"),
+        (["--pooled"], "the following arguments are required: folders"),
+        (["--pooled-only", "--bogus", "FOLDER"], "unrecognized arguments: --bogus"),
+        (["EMPTY"], "not an activetrack evaluate folder (no results.json, episodes.json)"),
+    ],
+)
+def test_bad_arguments_are_refused_naming_them(argv, message, folder, tmp_path, capsys):
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    argv = [{"FOLDER": str(folder), "EMPTY": str(empty)}.get(a, a) for a in argv]
+    with pytest.raises(SystemExit) as exc:
+        _script().main(argv)
+    assert exc.value.code == 2
+    err = capsys.readouterr()
+    assert message in err.err and err.out == ""

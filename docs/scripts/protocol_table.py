@@ -20,6 +20,7 @@ mean RMSE and NEES columns.
 
 from __future__ import annotations
 
+import argparse
 import json
 import sys
 from pathlib import Path
@@ -98,18 +99,23 @@ def census_rows(folder: Path) -> list[str]:
 
 
 def main(argv: list[str]) -> int:
-    if not argv:
-        print(__doc__, file=sys.stderr)
-        return 2
-    flags = {"--pooled-only", "--rmse-nees"}
-    pooled_only, rmse_nees = "--pooled-only" in argv, "--rmse-nees" in argv
-    folders = [a for a in argv if a not in flags]
-    head = HEAD + (" RMSE (m) | NEES |" if rmse_nees else "")
+    """Print the tables of the folders in ``argv``; return the exit code."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("folders", nargs="+", type=Path, help="activetrack evaluate --out folders")
+    parser.add_argument("--pooled-only", action="store_true", help="leave out a pool's members")
+    parser.add_argument("--rmse-nees", action="store_true", help="add RMSE and NEES columns")
+    args = parser.parse_args(argv)
+    folders = args.folders
+    for folder in folders:
+        missing = [f for f in ("results.json", "episodes.json") if not (folder / f).is_file()]
+        if missing:
+            parser.error(f"{folder}: not an activetrack evaluate folder (no {', '.join(missing)})")
+    head = HEAD + (" RMSE (m) | NEES |" if args.rmse_nees else "")
     print(head)
     print("|" + "---|" * head.count(" | ") + "---|")
     for folder in folders:
-        print("\n".join(rows(Path(folder), pooled_only, rmse_nees)))
-    census = [row for folder in folders for row in census_rows(Path(folder))]
+        print("\n".join(rows(folder, args.pooled_only, args.rmse_nees)))
+    census = [row for folder in folders for row in census_rows(folder)]
     if census:
         print()
         print(CENSUS_HEAD)

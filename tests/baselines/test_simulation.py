@@ -121,6 +121,9 @@ def test_a_studys_summary_reports_the_protocols_statistics():
     assert own["ratio_to_gsr_ci95"] == [1.0, 1.0]
     alone = other.summary()  # no reference: no ratio
     assert alone["ratio_to_gsr"] is None and alone["iqm_trace"] == s["iqm_trace"]
+    shifted = run_monte_carlo(sc, {"gsr": GSR()}, 9, seed=4, progress=False)["gsr"]
+    unpaired = other.summary(shifted)  # other seeds: no paired ratio
+    assert unpaired["ratio_to_gsr"] is None and unpaired["iqm_ratio_to_gsr_ci95"] == [None, None]
 
 
 def test_two_target_runs_record_every_target_and_plot(tmp_path):
