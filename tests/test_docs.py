@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from scipy.stats import trim_mean
 
 pytest.importorskip("sphinx", reason="the [docs] extra (sphinx) is not installed")
 pytest.importorskip("myst_parser", reason="the [docs] extra (myst-parser) is not installed")
@@ -284,6 +285,7 @@ def test_stored_figures_are_the_library_s_and_their_statistics(env_id: str):
     # The summaries are the statistics of the stored episodes, recomputed here.
     summary = {r["policy"]: r for r in data["results"]}
     gsr_mean = np.mean(episodes["gsr"]["mean_trace"])
+    gsr_iqm = trim_mean(episodes["gsr"]["mean_trace"], 0.25)
     for policy, ep in episodes.items():
         r = summary[policy]
         assert ep["seeds"] == seeds and r["episodes"] == 100
@@ -299,9 +301,26 @@ def test_stored_figures_are_the_library_s_and_their_statistics(env_id: str):
             r["cpu_ms_per_decision"], np.mean(ep["cpu_ms_per_decision"]), rtol=1e-12
         )
         np.testing.assert_allclose(r["ratio_to_gsr"], np.mean(trace) / gsr_mean, rtol=1e-12)
+        # The protocol's statistics: the IQM is scipy's 25%-trimmed mean (100 episodes: the
+        # middle 50), its ratio to GSR's the ratio of the two trimmed means.
+        np.testing.assert_allclose(r["iqm_trace"], trim_mean(trace, 0.25), rtol=1e-12)
+        np.testing.assert_allclose(
+            r["iqm_ratio_to_gsr"], trim_mean(trace, 0.25) / gsr_iqm, rtol=1e-12
+        )
+        for key in ("iqm_trace", "median_trace", "ratio_to_gsr", "iqm_ratio_to_gsr"):
+            lo, hi = r[f"{key}_ci95"]
+            assert lo <= r[key] <= hi, key
+            assert (lo == hi) == (policy == "gsr" and "ratio" in key), key
         if "no_detection" in r:  # limited sensing: the mean fraction, the longest gap
             np.testing.assert_allclose(r["no_detection"], np.mean(ep["no_detection"]), rtol=1e-12)
             assert r["longest_gap"] == max(ep["longest_gap"])
+            # The track-loss rate: the episodes' mean rate, each a fraction; never above
+            # the fraction of steps without a detection (a loss is an unmeasured step).
+            loss = np.asarray(ep["track_loss"])
+            np.testing.assert_allclose(r["track_loss_rate"], np.mean(loss), rtol=1e-12)
+            assert np.all((0 <= loss) & (loss <= 1))
+            lo, hi = r["track_loss_rate_ci95"]
+            assert lo <= r["track_loss_rate"] <= hi
         # The bootstrap interval of the mean: around it, and within the episodes' range.
         lo, hi = r["mean_trace_ci95"]
         assert trace.min() <= lo < np.mean(trace) < hi <= trace.max()
@@ -314,16 +333,25 @@ def test_stored_figures_are_the_library_s_and_their_statistics(env_id: str):
             )
         else:  # plus the search term, search_weight times a non-negative expected count
             assert np.all(np.asarray(ep["return"]) <= -sc.reward_scale * sc.n_steps * trace)
-    # The page shows these figures: each row's mean trace and median, to 4 digits.
-    rows = {
-        row[0].strip("`"): row
-        for row in _table(_section(_page(env_id), "The expert and random motion"))
-    }
+    # The page shows these figures: each row's IQM, median and mean trace (4 digits), and
+    # the track-loss rate where sensing is limited (3 decimals).
+    section = _section(_page(env_id), "The expert and random motion")
+    head = next(line for line in section.splitlines() if line.startswith("|"))
+    columns = [c.strip() for c in head.split("|")[1:-1]]
+    rows = {row[0].strip("`"): dict(zip(columns, row, strict=True)) for row in _table(section)}
     assert set(rows) == {"gsr", "rm"}
+    shown_statistics = {
+        "IQM trace (m²) [95% CI]": lambda t: trim_mean(t, 0.25),
+        "median [95% CI]": np.median,
+        "mean [95% CI]": np.mean,
+    }
     for policy, ep in episodes.items():
-        shown = re.match(r"(\S+) \[(\S+), (\S+)\]", rows[policy][1]).groups()
-        assert float(shown[0]) == pytest.approx(np.mean(ep["mean_trace"]), rel=5e-4)
-        assert float(rows[policy][2]) == pytest.approx(np.median(ep["mean_trace"]), rel=5e-4)
+        for column, statistic in shown_statistics.items():
+            shown = re.match(r"(\S+) \[(\S+), (\S+)\]", rows[policy][column]).groups()
+            assert float(shown[0]) == pytest.approx(statistic(ep["mean_trace"]), rel=5e-4)
+        if "no_detection" in summary[policy]:
+            shown = rows[policy]["track loss [95% CI]"].split()[0]
+            assert float(shown) == pytest.approx(np.mean(ep["track_loss"]), abs=5e-4)
 
 
 def _out_of_range(accepted: str) -> list[object]:

@@ -198,31 +198,48 @@ def _sig(x: float, digits: int = 4) -> str:
     return f"{x:.{decimals}f}"
 
 
+def _with_ci(r: dict[str, Any], key: str, fmt: Any = _g) -> str:
+    """Return ``r[key]`` with its ``_ci95`` interval, formatted by ``fmt``."""
+    lo, hi = r[f"{key}_ci95"]
+    return f"{fmt(r[key])} [{fmt(lo)}, {fmt(hi)}]"
+
+
+def _ratio(x: float) -> str:
+    return f"{x:.3f}"
+
+
 def figures_table(data: dict[str, Any]) -> list[str]:
     """Return the figures of ``data`` (``render_env_media.py``'s JSON: ``activetrack
-    evaluate``'s summaries) as a Markdown table, one row per policy."""
+    evaluate``'s summaries) as a Markdown table in the reporting protocol's form, one row
+    per policy: the IQM, median and mean of the episodes' mean traces with their
+    intervals, the track-loss rate where sensing is limited, the paired ratios to GSR."""
     rows = data["results"]
     limited = any("no_detection" in r for r in rows)
-    head = ["policy", "mean trace (m²) [95% CI]", "median trace", "RMSE (m)", "NEES",
-            "CPU ms/decision", "return", "ratio to GSR [95% CI]"]  # fmt: skip
+    head = ["policy", "IQM trace (m²) [95% CI]", "median [95% CI]", "mean [95% CI]"]
     if limited:
-        head += ["steps without a detection (fraction)", "longest gap (steps, worst episode)"]
+        head += ["track loss [95% CI]", "steps without a detection (fraction)",
+                 "longest gap (steps, worst episode)"]  # fmt: skip
+    head += ["IQM ratio to GSR [paired 95% CI]", "mean ratio to GSR [paired 95% CI]",
+             "RMSE (m)", "NEES", "CPU ms/decision", "return"]  # fmt: skip
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in rows:
-        lo, hi = r["mean_trace_ci95"]
-        rlo, rhi = r["ratio_to_gsr_ci95"]
         cells = [
             _code(r["label"]),
-            f"{_g(r['mean_trace'])} [{_g(lo)}, {_g(hi)}]",
-            _g(r["median_trace"]),
+            _with_ci(r, "iqm_trace"),
+            _with_ci(r, "median_trace"),
+            _with_ci(r, "mean_trace"),
+        ]
+        if limited:
+            loss = "-" if "track_loss_rate" not in r else _with_ci(r, "track_loss_rate", _ratio)
+            cells += [loss, f"{r['no_detection']:.3f}", str(r["longest_gap"])]
+        cells += [
+            _with_ci(r, "iqm_ratio_to_gsr", _ratio),
+            _with_ci(r, "ratio_to_gsr", _ratio),
             f"{r['rmse']:.3f}",
             "-" if r["nees"] is None else f"{r['nees']:.2f}",
             _g(r["cpu_ms_per_decision"], 3),
             f"{r['mean_return']:.2f}",
-            f"{r['ratio_to_gsr']:.3f} [{rlo:.3f}, {rhi:.3f}]",
         ]
-        if limited:
-            cells += [f"{r['no_detection']:.3f}", str(r["longest_gap"])]
         lines.append("| " + " | ".join(cells) + " |")
     return lines
 
@@ -354,9 +371,15 @@ def page(env_id: str, config: Any = None, srcdir: str | os.PathLike[str] = DOCS)
         f"GSR (the expert, Section IV) and random motion (RM) on the task's {len(seeds)} held-out",
         f"episodes, seeds {seeds[0]}..{seeds[-1]}: `{data['evaluate']}` (made, with the GIF, by",
         f"`{MEDIA_COMMAND}`; every episode's figures are in `docs/{MEDIA_DIR}/{name}.json`).",
-        "The mean trace is the episodes' mean of the posterior position trace over steps",
-        "1..n_steps, with its BCa bootstrap 95% interval; CPU ms/decision was measured on the",
-        "machine that ran the script.",
+        "An episode's score is its mean trace, the mean of the posterior position trace over",
+        "steps 1..n_steps. The table gives, in the [reporting protocol's](../results/protocol.md)",
+        "form, the interquartile mean (IQM), the median and the mean of the episodes' scores",
+        "with bootstrap 95% intervals (percentile for the IQM and the median, BCa for the",
+        "mean), the ratios of the IQM and of the mean to GSR's with paired intervals on the same",
+        "episodes and, where sensing is limited, the track-loss rate (the fraction of (step,",
+        "target) pairs in which no sensor measured the target and its position trace was above",
+        "the trace of its prior, `tr P0[:2, :2]`). CPU ms/decision was measured on the machine",
+        "that ran the script.",
         "",
         *figures_table(data),
         "",
