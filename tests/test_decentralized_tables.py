@@ -5,22 +5,17 @@ the reference's episodes; the printed table shows the rows' figures."""
 
 from __future__ import annotations
 
-import importlib.util
-from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
 from scipy.stats import trim_mean
 
-SCRIPT = Path(__file__).resolve().parents[1] / "docs" / "scripts" / "decentralized_tables.py"
+from tests.doc_scripts import load
 
 
 def _script():
-    spec = importlib.util.spec_from_file_location("decentralized_tables", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load("decentralized_tables")
 
 
 def _run(policy: str, robots_trace: np.ndarray, central: float, ms: float) -> SimpleNamespace:

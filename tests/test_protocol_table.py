@@ -5,20 +5,16 @@ to the header and to every row alike."""
 
 from __future__ import annotations
 
-import importlib.util
 import json
 from pathlib import Path
 
 import pytest
 
-SCRIPT = Path(__file__).resolve().parents[1] / "docs" / "scripts" / "protocol_table.py"
+from tests.doc_scripts import load
 
 
 def _script():
-    spec = importlib.util.spec_from_file_location("protocol_table", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load("protocol_table")
 
 
 def _row(policy: str, trace: float, **extra: object) -> dict:
