@@ -29,6 +29,12 @@ def _pin_blas_kernels() -> None:
 
 _pin_blas_kernels()
 
+# Ray starts its workers at nice 15 (RAY_worker_niceness), so beside the other test
+# process on a 2-core machine they got a sliver of a core: a Ray test that does 5 s of
+# work waited minutes for its workers to import torch. The tests measure Ray's results,
+# not its scheduling priority; every Ray the suite starts inherits this.
+os.environ.setdefault("RAY_worker_niceness", "0")
+
 from hypothesis import settings  # noqa: E402 (after the BLAS kernels are pinned)
 
 settings.register_profile("ci", derandomize=True)
