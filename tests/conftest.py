@@ -54,10 +54,29 @@ import pytest  # noqa: E402
 def docs_site(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """Build the manual once per run, as ``make docs`` does (``-W --keep-going``), from a
     copy of ``docs/`` in a temporary folder (the generated pages are written there, not
-    into the checkout); return the HTML folder. Skips without the ``[docs]`` extra."""
+    into the checkout); return the HTML folder. Skips without the ``[docs]`` extra.
+
+    Under pytest-xdist the workers share one build (the folder common to their temporary
+    folders, under a file lock: the first builds, the others wait for it), as xdist's
+    documentation shows for a session fixture; the tests only read the site."""
     for module in ("sphinx", "myst_parser", "furo"):
         pytest.importorskip(module, reason="the [docs] extra is not installed")
-    tmp = tmp_path_factory.mktemp("docs")
+    if "PYTEST_XDIST_WORKER" not in os.environ:  # one process: nothing to share
+        return _build_docs(tmp_path_factory.mktemp("docs"))
+    from filelock import FileLock
+
+    shared = tmp_path_factory.getbasetemp().parent / "docs_site"
+    with FileLock(str(shared) + ".lock"):
+        if not (shared / "built").is_file():
+            shutil.rmtree(shared, ignore_errors=True)  # a build that failed part-way
+            shared.mkdir()
+            _build_docs(shared)
+            (shared / "built").touch()
+    return shared / "html"
+
+
+def _build_docs(tmp: Path) -> Path:
+    """Return the HTML folder of the manual built in ``tmp`` (asserts sphinx succeeded)."""
     root = Path(__file__).resolve().parents[1]
     src = Path(
         shutil.copytree(
